@@ -1,0 +1,108 @@
+"""Every DOLFINx version difference the package relies on (0.9 and 0.11).
+
+The rest of the package calls these functions and never tests versions itself.
+Each entry was checked on both stacks (``../shared/spec/environments.md``).
+
+The PyPI wheel ``dolfinx-solver-real`` requires ``import dolfinx_solver`` before
+``dolfinx``/``petsc4py``: this module does it, and ``dolfinx_nnqem/__init__.py``
+imports this module first.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import sys
+
+try:  # the PyPI wheel: loads MPI and its PETSc before dolfinx/petsc4py
+    import dolfinx_solver  # noqa: F401
+except ImportError:  # Debian's python3-dolfinx, or a source build
+    pass
+
+import dolfinx
+import dolfinx.fem.petsc
+import dolfinx.io
+import numpy as np
+from petsc4py import PETSc
+
+DOLFINX_VERSION: tuple[int, int] = tuple(int(v) for v in dolfinx.__version__.split(".")[:2])
+"""(major, minor) of the DOLFINx in use."""
+
+if DOLFINX_VERSION < (0, 9):
+    raise ImportError(
+        f"dolfinx_nnqem needs DOLFINx >= 0.9, found {dolfinx.__version__} at {dolfinx.__file__}"
+    )
+
+_NEW = DOLFINX_VERSION >= (0, 10)
+
+
+def assemble_matrix(a, bcs=(), diagonal: float = 1.0) -> PETSc.Mat:
+    """Assemble a bilinear form into a new PETSc AIJ matrix (``diag``/``diagonal`` keyword)."""
+    if _NEW:
+        return dolfinx.fem.petsc.assemble_matrix(a, bcs=list(bcs), diag=diagonal)
+    return dolfinx.fem.petsc.assemble_matrix(a, bcs=list(bcs), diagonal=diagonal)
+
+
+def create_vector(V) -> PETSc.Vec:
+    """A ghosted PETSc vector for the function space ``V``."""
+    if _NEW:
+        return dolfinx.fem.petsc.create_vector(V)
+    # 0.9 builds vectors from a dof layout (index map + block size)
+    return dolfinx.la.create_petsc_vector(V.dofmap.index_map, V.dofmap.index_map_bs)
+
+
+def model_to_mesh(model, comm, rank: int = 0, gdim: int = 3):
+    """gmsh model -> ``(mesh, cell_tags, facet_tags)`` (``io.gmshio`` in 0.9, ``io.gmsh`` after)."""
+    if _NEW:
+        data = dolfinx.io.gmsh.model_to_mesh(model, comm, rank, gdim=gdim)
+        return data.mesh, data.cell_tags, data.facet_tags
+    mesh, cell_tags, facet_tags = dolfinx.io.gmshio.model_to_mesh(model, comm, rank, gdim=gdim)
+    return mesh, cell_tags, facet_tags
+
+
+def read_from_msh(filename: str, comm, rank: int = 0, gdim: int = 3):
+    """Read a gmsh ``.msh`` file -> ``(mesh, cell_tags, facet_tags)``."""
+    if _NEW:
+        data = dolfinx.io.gmsh.read_from_msh(filename, comm, rank, gdim=gdim)
+        return data.mesh, data.cell_tags, data.facet_tags
+    mesh, cell_tags, facet_tags = dolfinx.io.gmshio.read_from_msh(filename, comm, rank, gdim=gdim)
+    return mesh, cell_tags, facet_tags
+
+
+def interpolation_points(V) -> np.ndarray:
+    """Reference interpolation points of the element of ``V`` (a method in 0.9, a property after)."""
+    points = V.element.interpolation_points
+    return points() if callable(points) else points
+
+
+def create_vector_wrap(x) -> PETSc.Vec:
+    """Wrap a ``dolfinx.la.Vector`` as a PETSc vector sharing its memory."""
+    if _NEW:
+        import dolfinx.la.petsc
+
+        return dolfinx.la.petsc.create_vector_wrap(x)
+    return dolfinx.la.create_petsc_vector_wrap(x)
+
+
+def mpiexec() -> list[str]:
+    """The ``mpiexec`` that belongs to this Python's MPI, as a command prefix.
+
+    The PyPI stack ships MPICH's ``mpiexec`` in the venv's ``bin``; Debian uses OpenMPI's,
+    which refuses to run as root unless told.
+    """
+    candidate = os.path.join(os.path.dirname(sys.executable), "mpiexec")
+    exe = candidate if os.path.exists(candidate) else shutil.which("mpiexec")
+    if exe is None:
+        raise RuntimeError("no mpiexec found next to the Python interpreter or on PATH")
+    return [exe]
+
+
+def mpi_environment() -> dict[str, str]:
+    """Environment for ``mpiexec`` subprocesses (OpenMPI as root needs explicit consent)."""
+    env = dict(os.environ)
+    env.setdefault("OMPI_ALLOW_RUN_AS_ROOT", "1")
+    env.setdefault("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+    env.setdefault("OMPI_MCA_btl", "self,sm")
+    env.setdefault("OMPI_MCA_rmaps_base_oversubscribe", "1")
+    return env
+
