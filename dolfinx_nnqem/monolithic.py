@@ -1,0 +1,254 @@
+"""Monolithic semismooth Newton on (u, z): the scalable solver (``formulation.md`` §5).
+
+Per iteration, with R = F_int(u) − ℓ F_ext − Bᵀλ(z) and H = H(Bu, z):
+
+    [ K_t(u)     −Bᵀ Λ' ] [du]     [ R ]
+    [ ∂_wH · B   ∂_zH   ] [dz] = − [ H ]
+
+solved by PETSc (MUMPS LU by default; any KSP/PC through ``petsc_options``). Globalisation:
+Armijo backtracking on Ψ = ½(‖R‖² + ‖H‖²) — both in force units, so no row scaling is
+needed — and a Levenberg–Marquardt step (JᵀJ + ν I) d = −JᵀF when the Newton step fails the
+line search or the factorisation (the polar law's (p_r, θ) parametrisation is singular at
+p_r = 0). Without contact this is Newton–Raphson with the consistent tangent.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from dolfinx_nnqem.block_system import contact_jacobian_blocks, monolithic_matrix
+from dolfinx_nnqem.convergence import IterationRecord, SolveReport, count_states, logger
+from dolfinx_nnqem.problem import ContactProblem, SolverOptions
+
+DEFAULT_PETSC_OPTIONS = {
+    "ksp_type": "preonly",
+    "pc_type": "lu",
+    "pc_factor_mat_solver_type": "mumps",
+}
+
+
+class MonolithicSolver:
+    """Semismooth Newton on the displacement and the pair unknowns together.
+
+    Parameters
+    ----------
+    problem
+        The problem to solve.
+    options
+        Tolerances and ``petsc_options`` (merged over :data:`DEFAULT_PETSC_OPTIONS`, applied
+        with the prefix ``nnqem_monolithic_``).
+    armijo
+        Sufficient-decrease constant of the line search.
+    min_step
+        Smallest line-search step before switching to Levenberg–Marquardt.
+    lm_c, lm_delta
+        ν = lm_c · ε^lm_delta · mean diag(JᵀJ), ε the relative residual.
+    """
+
+    name = "monolithic"
+
+    def __init__(self, problem: ContactProblem, options: SolverOptions | None = None, *,
+                 armijo: float = 1e-4, min_step: float = 1.0 / 64, lm_c: float = 1.0,
+                 lm_delta: float = 1.0):
+        self.problem = problem
+        self.options = options or SolverOptions()
+        self.armijo, self.min_step, self.lm_c, self.lm_delta = armijo, min_step, lm_c, lm_delta
+        self.prefix = f"nnqem_monolithic_{id(self)}_"
+        opts = PETSc.Options()
+        for key, value in {**DEFAULT_PETSC_OPTIONS, **self.options.petsc_options}.items():
+            opts[self.prefix + key] = value
+        self.ksp = PETSc.KSP().create(problem.comm)
+        self.ksp.setOptionsPrefix(self.prefix)
+        self.ksp.setFromOptions()
+        self._K = None
+        self.timings: dict[str, float] = {}
+
+    # -- residual and merit ----------------------------------------------------------------------
+    def _evaluate(self):
+        """R (full), free part, H, law evaluation, and the load scale at the current iterate."""
+        p = self.problem
+        t0 = time.perf_counter()
+        F_int = p.assemble_internal_force()
+        self._tick("assembly", t0)
+        R = p.residual(F_int=F_int)
+        R_free = p.free_residual(R)
+        ev = None
+        H = np.zeros((0, 3))
+        if p.has_contact:
+            t0 = time.perf_counter()
+            w = p.relative_displacement()
+            ev = p.evaluate_law(w, p.z)
+            H = ev.H
+            self._tick("contact", t0)
+        scale = self._load_scale(F_int)
+        return R, R_free, H, ev, scale
+
+    def _load_scale(self, F_int: PETSc.Vec) -> float:
+        p = self.problem
+        s = max(abs(p.load_factor) * p.F_ext.norm(), F_int.norm())
+        if p.has_contact:
+            s = max(s, p.pairs.global_force(p.contact_force()).norm())
+        return s
+
+    def _norm_H(self, H: np.ndarray) -> float:
+        return math.sqrt(self.problem.comm.allreduce(float(np.sum(H * H)), op=MPI.SUM))
+
+    # -- one increment --------------------------------------------------------------------------
+    def solve_increment(self, load_factor: float) -> SolveReport:
+        """Solve for the load factor ``load_factor`` from the last converged state."""
+        p = self.problem
+        opts = self.options
+        p.apply_prescribed_displacements(load_factor)
+        report = SolveReport(converged=False, iterations=0,
+                             system_order=p.V.dofmap.index_map.size_global * 3 + 3 * p.num_pairs)
+        R, R_free, H, ev, scale = self._evaluate()
+        step_length, kind = float("nan"), ""
+        for it in range(opts.max_iterations + 1):
+            normR, normH = R_free.norm(), self._norm_H(H)
+            if not (math.isfinite(normR) and math.isfinite(normH)):
+                report.message = f"NaN/inf residual at iteration {it} (|R| = {normR}, |H| = {normH})"
+                return report
+            ref = max(scale, opts.atol)
+            states = count_states(ev.state, p.comm) if ev is not None else (0, 0, 0)
+            record = IterationRecord(it, normR / ref, normH / ref, step_length, kind, states,
+                                     p.state.count_trial_plastic_points(p.u))
+            report.history.append(record)
+            logger.info(record.line(self.name))
+            report.iterations = it
+            if normR <= opts.rtol * scale + opts.atol and normH <= opts.rtol * scale + opts.atol:
+                report.converged = True
+                report.message = "converged"
+                return report
+            if it == opts.max_iterations:
+                break
+            du, dz = self._newton_direction(R_free, H, ev)
+            kind = "newton"
+            alpha = self._line_search(du, dz, normR, normH) if du is not None else None
+            if alpha is None:
+                kind = "lm"
+                self._restore_iterate()
+                du, dz = self._lm_direction(R_free, H, ev, ref)
+                alpha = self._line_search(du, dz, normR, normH, accept_any=True)
+            step_length = alpha
+            R, R_free, H, ev, scale = self._evaluate()
+        report.message = (f"no convergence in {opts.max_iterations} iterations "
+                          f"(|R|/F = {report.final.equilibrium:.3e}, |H|/F = {report.final.contact:.3e})")
+        return report
+
+    # -- directions ---------------------------------------------------------------------------------
+    def _jacobian(self, ev) -> PETSc.Mat:
+        p = self.problem
+        t0 = time.perf_counter()
+        self._K = p.assemble_tangent(self._K)
+        self._tick("assembly", t0)
+        if not p.has_contact:
+            return self._K
+        t0 = time.perf_counter()
+        _, dlam_dz = p.law.force(p.z)
+        rows = self._constrained_global_rows()
+        blocks = contact_jacobian_blocks(p.pairs, ev.dH_dw, ev.dH_dz, dlam_dz, rows)
+        J = monolithic_matrix(self._K, blocks)
+        self._tick("block_matrix", t0)
+        return J
+
+    def _constrained_global_rows(self) -> np.ndarray:
+        p = self.problem
+        imap = p.V.dofmap.index_map
+        start = imap.local_range[0] * 3
+        return (start + p.owned_bc_dofs()).astype(PETSc.IntType)
+
+    def _rhs(self, J: PETSc.Mat, R_free: PETSc.Vec, H: np.ndarray) -> PETSc.Vec:
+        b = J.createVecRight()
+        n_u = R_free.getLocalSize()
+        arr = b.getArray()
+        arr[:n_u] = -R_free.getArray()
+        arr[n_u:] = -H.reshape(-1)
+        return b
+
+    def _split(self, x: PETSc.Vec, n_u: int):
+        arr = x.getArray(readonly=True)
+        return arr[:n_u].copy(), arr[n_u:].reshape(-1, 3).copy()
+
+    def _newton_direction(self, R_free, H, ev):
+        """Solve J d = −F; returns (du, dz) as arrays, or (None, None) if the solve failed."""
+        J = self._jacobian(ev)
+        b = self._rhs(J, R_free, H)
+        x = b.duplicate()
+        t0 = time.perf_counter()
+        self.ksp.setOperators(J)
+        try:
+            self.ksp.solve(b, x)
+        except PETSc.Error:
+            return None, None
+        finally:
+            self._tick("solve", t0)
+        if self.ksp.getConvergedReason() <= 0 or not np.all(np.isfinite(x.getArray(readonly=True))):
+            return None, None
+        self._J = J
+        return self._split(x, R_free.getLocalSize())
+
+    def _lm_direction(self, R_free, H, ev, ref: float):
+        """Levenberg–Marquardt: (JᵀJ + ν I) d = −JᵀF."""
+        J = self._jacobian(ev)
+        F = self._rhs(J, R_free, H)  # = −F
+        JtJ = J.transposeMatMult(J)
+        diag = JtJ.getDiagonal()
+        mean_diag = diag.sum() / max(diag.getSize(), 1)
+        eps = math.sqrt(R_free.norm() ** 2 + self._norm_H(H) ** 2) / ref
+        JtJ.shift(self.lm_c * min(eps, 1.0) ** self.lm_delta * mean_diag)
+        rhs = JtJ.createVecRight()
+        J.multTranspose(F, rhs)
+        x = rhs.duplicate()
+        ksp = PETSc.KSP().create(self.problem.comm)
+        ksp.setOptionsPrefix(self.prefix)
+        ksp.setFromOptions()
+        ksp.setOperators(JtJ)
+        ksp.solve(rhs, x)
+        return self._split(x, R_free.getLocalSize())
+
+    # -- line search -----------------------------------------------------------------------------
+    def _set_iterate(self, u0, z0, du, dz, alpha):
+        p = self.problem
+        n_u = du.shape[0]
+        p.u.x.array[:n_u] = u0 + alpha * du
+        p.u.x.scatter_forward()
+        if p.has_contact:
+            p.z = z0 + alpha * dz
+
+    def _restore_iterate(self):
+        p = self.problem
+        n_u = self._u0.shape[0]
+        p.u.x.array[:n_u] = self._u0
+        p.u.x.scatter_forward()
+        if p.has_contact:
+            p.z = self._z0.copy()
+
+    def _line_search(self, du, dz, normR, normH, accept_any: bool = False) -> float | None:
+        """Armijo backtracking on Ψ; returns α, or None when α fell below ``min_step``."""
+        p = self.problem
+        n_u = du.shape[0]
+        self._u0 = p.u.x.array[:n_u].copy()
+        self._z0 = p.z.copy() if p.has_contact else None
+        psi0 = 0.5 * (normR ** 2 + normH ** 2)
+        alpha = 1.0
+        while True:
+            self._set_iterate(self._u0, self._z0, du, dz, alpha)
+            _, R_free, H, _, _ = self._evaluate()
+            psi = 0.5 * (R_free.norm() ** 2 + self._norm_H(H) ** 2)
+            if math.isfinite(psi) and psi <= (1.0 - 2.0 * self.armijo * alpha) * psi0:
+                return alpha
+            alpha *= 0.5
+            if alpha < self.min_step:
+                if accept_any:
+                    # LM direction is a descent direction; take the smallest tried step
+                    self._set_iterate(self._u0, self._z0, du, dz, alpha * 2)
+                    return alpha * 2
+                return None
+
+    def _tick(self, key: str, t0: float) -> None:
+        self.timings[key] = self.timings.get(key, 0.0) + time.perf_counter() - t0

@@ -1,0 +1,108 @@
+"""Load stepping with cutback (``formulation.md`` §6).
+
+The load factor ℓ rises from 0 to 1 in N equal increments. An increment that does not converge
+is halved and retried, at most ``max_cutbacks`` times in a row; then :class:`ConvergenceError`
+names the increment, the residuals and the pair states. Every converged increment is committed
+and handed to the callbacks (the writers) before the next one starts, so a run that dies later
+loses no converged increment.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+from dolfinx_nnqem.convergence import ConvergenceError, SolveReport, logger
+
+
+@dataclass
+class IncrementResult:
+    """A converged increment, as handed to the writers."""
+
+    index: int  #: 1-based count of converged increments
+    load_factor: float
+    report: SolveReport
+    plastic_points: int  #: Gauss points that yielded in this increment
+    wall_time_s: float
+    cutbacks: int  #: halvings needed before this increment converged
+
+    @property
+    def iterations(self) -> int:
+        return self.report.iterations
+
+
+def solve_load_steps(
+    problem,
+    solver,
+    increments: int = 15,
+    *,
+    max_cutbacks: int = 5,
+    callbacks: Sequence[Callable[[IncrementResult], None]] = (),
+    final_load_factor: float = 1.0,
+) -> list[IncrementResult]:
+    """Drive ``solver`` from the last converged load factor to ``final_load_factor``.
+
+    Parameters
+    ----------
+    problem
+        The :class:`~dolfinx_nnqem.problem.ContactProblem`.
+    solver
+        Any solver with ``solve_increment(load_factor) -> SolveReport``.
+    increments
+        Number of equal increments N (the seed: 15).
+    max_cutbacks
+        Halvings allowed in a row before giving up.
+    callbacks
+        Called with every converged :class:`IncrementResult`, in order.
+    """
+    if increments < 1:
+        raise ValueError(f"increments = {increments}; expected >= 1")
+    start = problem.load_factor_n
+    step = (final_load_factor - start) / increments
+    results: list[IncrementResult] = []
+    cutbacks = 0
+    ell = start
+    direction = 1.0 if final_load_factor >= start else -1.0  # unloading paths run downwards
+    span = abs(final_load_factor - start)
+    while direction * (final_load_factor - ell) > 1e-12 * span:
+        target = ell + step
+        if direction * (target - final_load_factor) > 0:
+            target = final_load_factor
+        t0 = time.perf_counter()
+        report = solver.solve_increment(target)
+        if not report.converged:
+            problem.restore()
+            if cutbacks >= max_cutbacks:
+                raise ConvergenceError(_failure_message(solver, target, report, cutbacks))
+            cutbacks += 1
+            step /= 2.0
+            logger.warning(f"[{solver.name}] increment to load factor {target:.6g} failed "
+                           f"({report.message}); cutback {cutbacks}, new step {step:.6g}")
+            continue
+        problem.commit()
+        ell = target
+        result = IncrementResult(
+            index=len(results) + 1, load_factor=target, report=report,
+            plastic_points=problem.state.count_plastic_points(),
+            wall_time_s=time.perf_counter() - t0, cutbacks=cutbacks,
+        )
+        results.append(result)
+        logger.info(f"[{solver.name}] increment {result.index}: load factor {target:.6g} converged in "
+                    f"{report.iterations} iterations, {result.plastic_points} plastic Gauss points")
+        for callback in callbacks:
+            callback(result)
+        if cutbacks:  # after a successful cut step, try the original step size again
+            step = direction * min(abs(2.0 * step), span / increments)
+            cutbacks = max(cutbacks - 1, 0)
+    return results
+
+
+def _failure_message(solver, target: float, report: SolveReport, cutbacks: int) -> str:
+    last = report.final
+    lines = [f"{solver.name}: the increment to load factor {target:.6g} did not converge after "
+             f"{cutbacks} cutbacks: {report.message}"]
+    if last is not None:
+        lines.append(f"  last iterate: |R|/F = {last.equilibrium:.3e}, |H|/F = {last.contact:.3e}, "
+                     f"open/stick/slip = {last.states}, plastic Gauss points = {last.plastic_points}")
+    return "\n".join(lines)

@@ -1,0 +1,30 @@
+"""Shared fixtures. ``dolfinx_nnqem`` is imported first (the PyPI wheel needs it before dolfinx)."""
+
+import dolfinx_nnqem  # noqa: F401  (must precede dolfinx / petsc4py)
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+
+def box_with_face_tags(n=(2, 2, 2), L=(1.0, 1.0, 1.0), cell="hexahedron"):
+    """A box [0,Lx]×[0,Ly]×[0,Lz] with facet tags 1..6 = x−, x+, y−, y+, z−, z+."""
+    import dolfinx.mesh as dmesh
+
+    cell_type = {"hexahedron": dmesh.CellType.hexahedron, "tetrahedron": dmesh.CellType.tetrahedron}[cell]
+    mesh = dmesh.create_box(MPI.COMM_WORLD, [np.zeros(3), np.asarray(L, float)], list(n), cell_type)
+    fdim = mesh.topology.dim - 1
+    facets, values = [], []
+    for tag, (axis, side) in enumerate([(0, 0), (0, 1), (1, 0), (1, 1), (2, 0), (2, 1)], start=1):
+        coord = 0.0 if side == 0 else L[axis]
+        f = dmesh.locate_entities_boundary(mesh, fdim, lambda x, a=axis, c=coord: np.isclose(x[a], c))
+        facets.append(f)
+        values.append(np.full(len(f), tag, dtype=np.int32))
+    facets, values = np.concatenate(facets), np.concatenate(values)
+    order = np.argsort(facets)
+    facet_tags = dmesh.meshtags(mesh, fdim, facets[order], values[order])
+    return mesh, facet_tags
+
+
+@pytest.fixture
+def box_factory():
+    return box_with_face_tags
