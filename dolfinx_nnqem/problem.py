@@ -208,6 +208,7 @@ class ContactProblem:
         """Unrolled dof indices and their unit-load target values; zero-valued DirichletBCs."""
         fdim = self.mesh.topology.dim - 1
         dofs_all, values_all, bcs = [], [], []
+        self.bc_dofs_by_tag: dict[int, np.ndarray] = {}
         for d in dirichlet:
             facets = self.facet_tags.find(d.tag)
             components = (0, 1, 2) if d.components is None else tuple(d.components)
@@ -223,6 +224,8 @@ class ContactProblem:
                 unrolled = bcs[-1].dof_indices()[0]
                 dofs_all.append(np.asarray(unrolled, dtype=np.int32))
                 values_all.append(np.full(len(unrolled), val))
+                previous = self.bc_dofs_by_tag.get(d.tag, np.zeros(0, np.int32))
+                self.bc_dofs_by_tag[d.tag] = np.union1d(previous, dofs_all[-1]).astype(np.int32)
         if dofs_all:
             dofs = np.concatenate(dofs_all)
             values = np.concatenate(values_all)
@@ -287,6 +290,8 @@ class ContactProblem:
         else:
             self.r = float(contact.r)
         self.z = np.zeros((nloc, 3))  # the law's unknowns (p_n, q1, q2) or (p_n, p_r, θ)
+        self.pair_states = np.zeros(nloc, dtype=np.int8)  # at the last converged increment
+        self.slip_increment = np.zeros((nloc, 2))  # tangential slip of the last converged increment
         self.z_n = np.zeros((nloc, 3))
         self.w_n = np.zeros((nloc, 3))  # converged w at the start of the increment
 
@@ -381,7 +386,11 @@ class ContactProblem:
         self.state.commit(self.u)
         self.load_factor_n = self.load_factor
         if self.has_contact:
-            self.w_n = self.relative_displacement()
+            w = self.relative_displacement()
+            # states and slip must be read before w_n moves on (slip is measured from w_n)
+            self.pair_states = self.evaluate_law(w, self.z).state.copy()
+            self.slip_increment = w[:, 1:3] - self.w_n[:, 1:3]
+            self.w_n = w
             self.z_n = self.z.copy()
 
     def restore(self) -> None:

@@ -1,0 +1,143 @@
+"""Quantities reported for a converged increment: pair tables, reactions, nodal displacements.
+
+Every function here is collective (call it on all ranks) and returns the same gathered,
+global data on every rank, in global pair order or in the order of the points asked for.
+Nothing here solves or writes files.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from mpi4py import MPI
+
+from dolfinx_nnqem.convergence import STATE_NAMES
+
+
+def values_at_blocks(problem, blocks: np.ndarray, vec=None) -> np.ndarray:
+    """Values of a blocked (3 per node) vector at global dof-block indices, on every rank.
+
+    Parameters
+    ----------
+    blocks
+        Global dof-block indices (n,), the same on every rank.
+    vec
+        A PETSc vector laid out like ``problem.V`` (default: the displacement).
+    """
+    V = problem.V
+    imap = V.dofmap.index_map
+    start, end = imap.local_range
+    array = (problem.u.x.petsc_vec if vec is None else vec).getArray(readonly=True)
+    blocks = np.asarray(blocks, dtype=np.int64)
+    out = np.zeros((len(blocks), 3))
+    mine = (blocks >= start) & (blocks < end)
+    local = blocks[mine] - start
+    out[mine] = array.reshape(-1, 3)[local]
+    total = np.zeros_like(out)
+    problem.comm.Allreduce(out, total, op=MPI.SUM)
+    return total
+
+
+def node_blocks_at_points(problem, points: np.ndarray, tol: float = 1e-8) -> np.ndarray:
+    """Global dof-block indices of the mesh nodes at ``points`` (n,3); error if a point is no node."""
+    V = problem.V
+    x = V.tabulate_dof_coordinates()
+    imap = V.dofmap.index_map
+    n_owned = imap.size_local
+    owned_global = imap.local_range[0] + np.arange(n_owned)
+    points = np.atleast_2d(np.asarray(points, dtype=float))
+    scale = max(np.ptp(problem.mesh.geometry.x, axis=0).max(), 1.0)
+    found = np.full(len(points), -1, dtype=np.int64)
+    for i, p in enumerate(points):
+        d = np.linalg.norm(x[:n_owned] - p, axis=1)
+        j = int(np.argmin(d)) if n_owned else -1
+        if j >= 0 and d[j] <= tol * scale:
+            found[i] = owned_global[j]
+    result = np.zeros_like(found)
+    problem.comm.Allreduce(found, result, op=MPI.MAX)
+    missing = np.flatnonzero(result < 0)
+    if len(missing):
+        raise ValueError(f"no mesh node at {points[missing].tolist()}")
+    return result
+
+
+def pair_table(problem) -> dict[str, np.ndarray]:
+    """Gathered pair data in global pair order (same arrays on every rank).
+
+    Keys: ``position`` (X_a), ``position_b`` (X_b), ``frame`` (R), ``state`` (0/1/2),
+    ``force_local_body1`` (−λ: normal, tangential 1, tangential 2 on body 1, N),
+    ``force_on_body1`` (global frame, N), ``u_body1``, ``u_body2`` (m), ``gap`` (m),
+    ``slip`` (tangential slip of the last increment, m), ``z`` (the law's unknowns).
+    """
+    pairs = problem.pairs
+    lam = problem.contact_force()
+    w = problem.relative_displacement()
+    local = np.hstack([
+        pairs.X_a, pairs.X_b, pairs.R.reshape(-1, 9), problem.pair_states[:, None].astype(float),
+        -lam, -np.einsum("nji,nj->ni", pairs.R, lam), (pairs.g0 + w[:, 0])[:, None],
+        problem.slip_increment, problem.z,
+        pairs.dofs_a[:, None].astype(float), pairs.dofs_b[:, None].astype(float),
+    ])
+    g = pairs.gather(local)
+    table = {
+        "position": g[:, 0:3], "position_b": g[:, 3:6], "frame": g[:, 6:15].reshape(-1, 3, 3),
+        "state": g[:, 15].astype(np.int8), "force_local_body1": g[:, 16:19],
+        "force_on_body1": g[:, 19:22], "gap": g[:, 22], "slip": g[:, 23:25], "z": g[:, 25:28],
+    }
+    blocks_a = g[:, 28].astype(np.int64)
+    blocks_b = g[:, 29].astype(np.int64)
+    table["u_body1"] = values_at_blocks(problem, blocks_a)
+    table["u_body2"] = values_at_blocks(problem, blocks_b)
+    table["state_name"] = np.array([STATE_NAMES[s] for s in table["state"]])
+    return table
+
+
+def reactions(problem, R=None) -> dict[int, np.ndarray]:
+    """Support reaction (force of the support on the body, N) summed per Dirichlet tag.
+
+    At constrained dofs the residual R = F_int − ℓ F_ext − Bᵀλ is exactly the support force.
+    Only constrained components are counted.
+    """
+    if R is None:
+        R = problem.residual()
+    n_owned = problem.V.dofmap.index_map.size_local * 3
+    arr = R.getArray(readonly=True)
+    out = {}
+    for tag, dofs in problem.bc_dofs_by_tag.items():
+        owned = dofs[dofs < n_owned]
+        local = np.zeros(3)
+        np.add.at(local, owned % 3, arr[owned])
+        total = np.zeros(3)
+        problem.comm.Allreduce(local, total, op=MPI.SUM)
+        out[int(tag)] = total
+    return out
+
+
+def applied_load(problem) -> np.ndarray:
+    """Resultant of the applied loads ℓ F_ext (N), global frame."""
+    arr = problem.F_ext.getArray(readonly=True).reshape(-1, 3)
+    local = problem.load_factor * arr.sum(axis=0)
+    total = np.zeros(3)
+    problem.comm.Allreduce(local, total, op=MPI.SUM)
+    return total
+
+
+def equilibrium_check(problem) -> dict:
+    """Global equilibrium: applied load + reactions = 0 (contact forces are internal).
+
+    Returns the applied load, the reactions per tag, their sum, the relative global imbalance
+    ‖F_applied + Σ reactions‖ / ‖F_applied‖ (or / Σ‖reactions‖ when nothing is applied), and
+    the relative free-dof residual ‖R_free‖ / ‖ℓ F_ext‖.
+    """
+    R = problem.residual()
+    react = reactions(problem, R)
+    applied = applied_load(problem)
+    total_reaction = sum(react.values(), np.zeros(3))
+    imbalance = applied + total_reaction
+    scale = max(np.linalg.norm(applied), sum(np.linalg.norm(r) for r in react.values()), 1e-300)
+    R_free = problem.free_residual(R)
+    F_scale = max(abs(problem.load_factor) * problem.F_ext.norm(), 1e-300)
+    return {
+        "applied_load": applied, "reactions": react, "reaction_sum": total_reaction,
+        "global_imbalance": float(np.linalg.norm(imbalance) / scale),
+        "residual_norm": float(R_free.norm() / F_scale),
+    }
