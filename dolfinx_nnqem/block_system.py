@@ -49,7 +49,8 @@ def contact_jacobian_blocks(pairs, dH_dw, dH_dz, dlam_dz, constrained_rows: np.n
     A11 : ∂_zH (block diagonal)
     """
     # Bᵀ Λ' = (Λ'ᵀ B)ᵀ, and Λ'ᵀ B has B's sparsity.
-    A01 = pairs.scaled_B(np.ascontiguousarray(np.transpose(dlam_dz, (0, 2, 1)))).transpose()
+    A01 = pairs.scaled_B(np.ascontiguousarray(np.transpose(dlam_dz, (0, 2, 1))))
+    A01.transpose()  # in place (petsc4py's transpose without an output matrix)
     A01.scale(-1.0)
     # constrained_rows are global unrolled indices of owned constrained dofs
     A01.zeroRows(constrained_rows, diag=0.0)
@@ -63,8 +64,8 @@ def monolithic_matrix(K: PETSc.Mat, blocks=None) -> PETSc.Mat:
     if blocks is None:
         return K
     A01, A10, A11 = blocks
-    nest = PETSc.Mat().createNest([[K, A01], [A10, A11]], comm=K.getComm())
-    nest.assemble()
-    J = nest.convert("aij")
-    nest.destroy()
+    J = PETSc.Mat().createNest([[K, A01], [A10, A11]], comm=K.getComm())
+    J.assemble()
+    # petsc4py converts in place (MAT_INPLACE_MATRIX) when no output matrix is given
+    J.convert("aij")
     return J

@@ -7,7 +7,8 @@ Per iteration, with R = F_int(u) − ℓ F_ext − Bᵀλ(z) and H = H(Bu, z):
 
 solved by PETSc (MUMPS LU by default; any KSP/PC through ``petsc_options``). Globalisation:
 Armijo backtracking on Ψ = ½(‖R‖² + ‖H‖²) — both in force units, so no row scaling is
-needed — and a Levenberg–Marquardt step (JᵀJ + ν I) d = −JᵀF when the Newton step fails the
+needed — with a watchdog that lets full Newton steps through when the pair states change, and a
+Levenberg–Marquardt step (JᵀJ + ν I) d = −JᵀF when the Newton step fails the
 line search or the factorisation (the polar law's (p_r, θ) parametrisation is singular at
 p_r = 0). Without contact this is Newton–Raphson with the consistent tangent.
 """
@@ -18,18 +19,12 @@ import math
 import time
 
 import numpy as np
-from mpi4py import MPI
 from petsc4py import PETSc
 
 from dolfinx_nnqem.block_system import contact_jacobian_blocks, monolithic_matrix
 from dolfinx_nnqem.convergence import IterationRecord, SolveReport, count_states, logger
+from dolfinx_nnqem.linalg import create_ksp, global_norm
 from dolfinx_nnqem.problem import ContactProblem, SolverOptions
-
-DEFAULT_PETSC_OPTIONS = {
-    "ksp_type": "preonly",
-    "pc_type": "lu",
-    "pc_factor_mat_solver_type": "mumps",
-}
 
 
 class MonolithicSolver:
@@ -40,31 +35,33 @@ class MonolithicSolver:
     problem
         The problem to solve.
     options
-        Tolerances and ``petsc_options`` (merged over :data:`DEFAULT_PETSC_OPTIONS`, applied
-        with the prefix ``nnqem_monolithic_``).
+        Tolerances and ``petsc_options`` (merged over MUMPS LU,
+        :data:`dolfinx_nnqem.linalg.DIRECT_SOLVER_OPTIONS`).
     armijo
         Sufficient-decrease constant of the line search.
     min_step
         Smallest line-search step before switching to Levenberg–Marquardt.
     lm_c, lm_delta
         ν = lm_c · ε^lm_delta · mean diag(JᵀJ), ε the relative residual.
+    watchdog
+        Full Newton steps accepted in a row although Ψ grows (Chamberlain's watchdog). A
+        change of pair state makes Ψ jump — an open pair's trial penetration enters H as
+        r·g — although the step is exactly the one semismooth Newton needs; after
+        ``watchdog`` such steps without a new best Ψ the solver returns to the best iterate
+        and takes monotone (line-searched) steps from there.
     """
 
     name = "monolithic"
 
     def __init__(self, problem: ContactProblem, options: SolverOptions | None = None, *,
                  armijo: float = 1e-4, min_step: float = 1.0 / 64, lm_c: float = 1.0,
-                 lm_delta: float = 1.0):
+                 lm_delta: float = 1.0, watchdog: int = 6):
         self.problem = problem
         self.options = options or SolverOptions()
         self.armijo, self.min_step, self.lm_c, self.lm_delta = armijo, min_step, lm_c, lm_delta
+        self.watchdog = watchdog
         self.prefix = f"nnqem_monolithic_{id(self)}_"
-        opts = PETSc.Options()
-        for key, value in {**DEFAULT_PETSC_OPTIONS, **self.options.petsc_options}.items():
-            opts[self.prefix + key] = value
-        self.ksp = PETSc.KSP().create(problem.comm)
-        self.ksp.setOptionsPrefix(self.prefix)
-        self.ksp.setFromOptions()
+        self.ksp = create_ksp(problem.comm, self.prefix, self.options.petsc_options)
         self._K = None
         self.timings: dict[str, float] = {}
 
@@ -96,7 +93,7 @@ class MonolithicSolver:
         return s
 
     def _norm_H(self, H: np.ndarray) -> float:
-        return math.sqrt(self.problem.comm.allreduce(float(np.sum(H * H)), op=MPI.SUM))
+        return global_norm(H, self.problem.comm)
 
     # -- one increment --------------------------------------------------------------------------
     def solve_increment(self, load_factor: float) -> SolveReport:
@@ -108,6 +105,8 @@ class MonolithicSolver:
                              system_order=p.V.dofmap.index_map.size_global * 3 + 3 * p.num_pairs)
         R, R_free, H, ev, scale = self._evaluate()
         step_length, kind = float("nan"), ""
+        best = None  # (Ψ, u, z) of the best iterate so far (watchdog)
+        nonmonotone = 0  # full steps accepted in a row without decreasing Ψ below the best
         for it in range(opts.max_iterations + 1):
             normR, normH = R_free.norm(), self._norm_H(H)
             if not (math.isfinite(normR) and math.isfinite(normH)):
@@ -126,19 +125,42 @@ class MonolithicSolver:
                 return report
             if it == opts.max_iterations:
                 break
+            psi = 0.5 * (normR ** 2 + normH ** 2)
+            if best is None or psi < (1.0 - 2.0 * self.armijo) * best[0]:
+                best = (psi, p.u.x.array.copy(), p.z.copy() if p.has_contact else None)
+                nonmonotone = 0
+            elif nonmonotone >= self.watchdog:
+                # the watchdog ran out: back to the best iterate, monotone steps from there
+                self._restore_snapshot(best)
+                R, R_free, H, ev, scale = self._evaluate()
+                normR, normH = R_free.norm(), self._norm_H(H)
+                nonmonotone = -1  # one monotone step before full steps are allowed again
+            self._u0 = p.u.x.array[:R_free.getLocalSize()].copy()  # the iterate the step starts from
+            self._z0 = p.z.copy() if p.has_contact else None
             du, dz = self._newton_direction(R_free, H, ev)
             kind = "newton"
-            alpha = self._line_search(du, dz, normR, normH) if du is not None else None
+            alpha = None
+            if du is not None:
+                alpha = self._line_search(du, dz, normR, normH, allow_increase=nonmonotone >= 0)
             if alpha is None:
                 kind = "lm"
                 self._restore_iterate()
                 du, dz = self._lm_direction(R_free, H, ev, ref)
                 alpha = self._line_search(du, dz, normR, normH, accept_any=True)
+            elif alpha < 0:  # a full step accepted without decrease
+                kind, alpha = "full", 1.0
+            nonmonotone += 1
             step_length = alpha
             R, R_free, H, ev, scale = self._evaluate()
         report.message = (f"no convergence in {opts.max_iterations} iterations "
                           f"(|R|/F = {report.final.equilibrium:.3e}, |H|/F = {report.final.contact:.3e})")
         return report
+
+    def _restore_snapshot(self, snapshot) -> None:
+        p = self.problem
+        p.u.x.array[:] = snapshot[1]
+        if p.has_contact:
+            p.z = snapshot[2].copy()
 
     # -- directions ---------------------------------------------------------------------------------
     def _jacobian(self, ev) -> PETSc.Mat:
@@ -204,9 +226,7 @@ class MonolithicSolver:
         rhs = JtJ.createVecRight()
         J.multTranspose(F, rhs)
         x = rhs.duplicate()
-        ksp = PETSc.KSP().create(self.problem.comm)
-        ksp.setOptionsPrefix(self.prefix)
-        ksp.setFromOptions()
+        ksp = create_ksp(self.problem.comm, self.prefix, self.options.petsc_options)
         ksp.setOperators(JtJ)
         ksp.solve(rhs, x)
         return self._split(x, R_free.getLocalSize())
@@ -228,12 +248,13 @@ class MonolithicSolver:
         if p.has_contact:
             p.z = self._z0.copy()
 
-    def _line_search(self, du, dz, normR, normH, accept_any: bool = False) -> float | None:
-        """Armijo backtracking on Ψ; returns α, or None when α fell below ``min_step``."""
-        p = self.problem
-        n_u = du.shape[0]
-        self._u0 = p.u.x.array[:n_u].copy()
-        self._z0 = p.z.copy() if p.has_contact else None
+    def _line_search(self, du, dz, normR, normH, accept_any: bool = False,
+                     allow_increase: bool = False) -> float | None:
+        """Armijo backtracking on Ψ; returns α, or None when α fell below ``min_step``.
+
+        With ``allow_increase`` a finite full step that fails the Armijo test is accepted
+        anyway and −1 is returned (the watchdog decides later whether to keep it).
+        """
         psi0 = 0.5 * (normR ** 2 + normH ** 2)
         alpha = 1.0
         while True:
@@ -242,6 +263,8 @@ class MonolithicSolver:
             psi = 0.5 * (R_free.norm() ** 2 + self._norm_H(H) ** 2)
             if math.isfinite(psi) and psi <= (1.0 - 2.0 * self.armijo * alpha) * psi0:
                 return alpha
+            if allow_increase and alpha == 1.0 and math.isfinite(psi):
+                return -1.0
             alpha *= 0.5
             if alpha < self.min_step:
                 if accept_any:
