@@ -101,6 +101,7 @@ class MonolithicSolver:
         p = self.problem
         opts = self.options
         p.apply_prescribed_displacements(load_factor)
+        p.predict_contact()
         report = SolveReport(converged=False, iterations=0,
                              system_order=p.V.dofmap.index_map.size_global * 3 + 3 * p.num_pairs)
         R, R_free, H, ev, scale = self._evaluate()

@@ -26,6 +26,7 @@ import time
 import numpy as np
 from petsc4py import PETSc
 
+from dolfinx_nnqem.contact.laws import pin_constrained_directions
 from dolfinx_nnqem.convergence import IterationRecord, SolveReport, count_states, logger
 from dolfinx_nnqem.linalg import create_ksp, global_norm
 from dolfinx_nnqem.nonsmooth import solve_nonsmooth
@@ -66,7 +67,9 @@ class NNEQM1Solver:
     def _gather_pairs(self):
         p = self.problem
         pairs = p.pairs
-        g = pairs.gather(np.hstack([p.w_n, p.pairs.g0[:, None], p.mu_f[:, None], p.z]))
+        g = pairs.gather(np.hstack([p.w_n, p.pairs.g0[:, None], p.mu_f[:, None], p.z,
+                                    p.constrained_directions.astype(float)]))
+        self._constrained = g[:, 8:11] > 0.5
         return g[:, 0:3], g[:, 3], g[:, 4], g[:, 5:8]
 
     def _local_rows(self, array_global: np.ndarray) -> np.ndarray:
@@ -114,6 +117,7 @@ class NNEQM1Solver:
         opts = self.options
         law = p.law
         p.apply_prescribed_displacements(load_factor)
+        p.predict_contact()
         nc = p.num_pairs
         report = SolveReport(converged=False, iterations=0, system_order=3 * nc)
         w_prev, g0, mu_f, _ = self._gather_pairs()
@@ -189,6 +193,7 @@ class NNEQM1Solver:
         are not scaled).
         """
         law, r, C = self.problem.law, self.problem.r, self._C
+        force_unit = r * self.problem.characteristic_length()
         nc = z_m.shape[0]
         F = max(tol / max(self.options.rtol, 1e-300), 1e-300)  # the load scale
         z_scale = np.tile(_unknown_scale(law, F), nc)
@@ -197,7 +202,8 @@ class NNEQM1Solver:
             z = (x * z_scale).reshape(nc, 3)
             lam, dlam_dz = law.force(z)
             w = (w_m + w_free + C @ (lam.reshape(-1) - lam_m)).reshape(nc, 3)
-            ev = law.evaluate(w, w_prev, z, g0, mu_f, r)
+            ev = pin_constrained_directions(law, law.evaluate(w, w_prev, z, g0, mu_f, r), z,
+                                            self._constrained, force_unit)
             # J = blockdiag(∂H/∂w) · C · blockdiag(∂λ/∂z) + blockdiag(∂H/∂z)
             DwC = np.einsum("nij,njk->nik", ev.dH_dw, C.reshape(nc, 3, 3 * nc))
             J = np.einsum("anj,njk->ank", DwC.reshape(3 * nc, nc, 3), dlam_dz)

@@ -141,7 +141,9 @@ class SummaryWriter:
     increments
         Number of increments asked for.
     probes
-        Named points (mesh nodes) whose displacement is reported, e.g. free-end corners.
+        Named mesh nodes whose displacement is reported, e.g. free-end corners:
+        ``{name: (x, y, z)}`` or ``{name: ((x, y, z), cell_tag)}`` to pick one body's node
+        where bodies have coincident nodes.
     extra
         Further JSON-serialisable data to include (e.g. the benchmark's parameters).
     """
@@ -160,9 +162,14 @@ class SummaryWriter:
         if extra:
             self.data.update(extra)
         self.probe_names = list(probes or {})
-        self.probe_points = np.array([probes[n] for n in self.probe_names]) if probes else np.zeros((0, 3))
-        self.probe_blocks = (res.node_blocks_at_points(problem, self.probe_points)
-                             if len(self.probe_points) else np.zeros(0, np.int64))
+        points, blocks = [], []
+        for name in self.probe_names:
+            spec = probes[name]
+            point, tag = (spec, None) if np.ndim(spec[0]) == 0 else spec
+            points.append(np.asarray(point, dtype=float))
+            blocks.append(res.node_blocks_at_points(problem, points[-1], cell_tag=tag)[0])
+        self.probe_points = np.array(points).reshape(-1, 3)
+        self.probe_blocks = np.array(blocks, dtype=np.int64)
 
     def __call__(self, result) -> None:
         p = self.problem

@@ -289,19 +289,39 @@ class ContactProblem:
             self.r = float(default_r(E_max, self.characteristic_length()))
         else:
             self.r = float(contact.r)
+        self.constrained_directions = self._constrained_directions()
         self.z = np.zeros((nloc, 3))  # the law's unknowns (p_n, q1, q2) or (p_n, p_r, θ)
         self.pair_states = np.zeros(nloc, dtype=np.int8)  # at the last converged increment
         self.slip_increment = np.zeros((nloc, 2))  # tangential slip of the last converged increment
         self.z_n = np.zeros((nloc, 3))
         self.w_n = np.zeros((nloc, 3))  # converged w at the start of the increment
 
+    def _constrained_directions(self) -> np.ndarray:
+        """(n_local_pairs, 3) bool: local directions whose relative motion the supports fix."""
+        from dolfinx_nnqem.results import values_at_blocks
+
+        flags = compat.create_vector(self.V)
+        with flags.localForm() as local:
+            local.set(0.0)
+            local.array[self.bc_dofs] = 1.0
+        blocks = self.pairs.gather(np.column_stack([self.pairs.dofs_a, self.pairs.dofs_b]).astype(float))
+        fixed_a = values_at_blocks(self, blocks[:, 0].astype(np.int64), flags) > 0.5
+        fixed_b = values_at_blocks(self, blocks[:, 1].astype(np.int64), flags) > 0.5
+        lo, hi = self.pairs.offset, self.pairs.offset + self.pairs.num_local
+        both = (fixed_a & fixed_b)[lo:hi]  # (n, 3) global components fixed at both nodes
+        involved = np.abs(self.pairs.R) > 1e-12  # (n, k, c): direction k involves component c
+        return np.all(~involved | both[:, None, :], axis=2)
+
     def characteristic_length(self) -> float:
         """Mean cell size h (cube root of the mean cell volume), over all ranks."""
+        if getattr(self, "_h", None) is not None:
+            return self._h
         tdim = self.mesh.topology.dim
         volume = fem.assemble_scalar(fem.form(fem.Constant(self.mesh, 1.0) * ufl.dx(domain=self.mesh)))
         volume = self.comm.allreduce(volume, op=MPI.SUM)
         ncells = self.mesh.topology.index_map(tdim).size_global
-        return (volume / ncells) ** (1.0 / 3.0)
+        self._h = (volume / ncells) ** (1.0 / 3.0)
+        return self._h
 
     # -- quantities solvers combine --------------------------------------------------------------
     @property
@@ -378,7 +398,25 @@ class ContactProblem:
 
     def evaluate_law(self, w: np.ndarray, z: np.ndarray):
         """The pair law at (w, z): ``LawEvaluation(H, dH_dw, dH_dz, state)`` for the owned pairs."""
-        return self.law.evaluate(w, self.w_n, z, self.pairs.g0, self.mu_f, self.r)
+        from dolfinx_nnqem.contact.laws import pin_constrained_directions
+
+        evaluation = self.law.evaluate(w, self.w_n, z, self.pairs.g0, self.mu_f, self.r)
+        return pin_constrained_directions(self.law, evaluation, z, self.constrained_directions,
+                                          self.r * self.characteristic_length())
+
+    def predict_contact(self) -> None:
+        """Starting active set: touching pairs (g ≤ 0) with p_n = 0 get a tiny p_n > 0.
+
+        At the tie p_n = r·g = 0 the laws take the open branch, so a body held only by
+        contact would have a singular first Jacobian. Starting on the closed branch is the
+        usual initial active set of semismooth Newton; a pair that should open does so in
+        the next iteration. The value (1e-12 · r · h) is far below any tolerance.
+        """
+        if not self.has_contact:
+            return
+        gap = self.pairs.g0 + self.relative_displacement()[:, 0]
+        touching = (gap <= 0.0) & (self.z[:, 0] <= 0.0)
+        self.z[touching, 0] = 1e-12 * self.r * self.characteristic_length()
 
     # -- increments --------------------------------------------------------------------------------
     def commit(self) -> None:

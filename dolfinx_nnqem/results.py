@@ -37,26 +37,38 @@ def values_at_blocks(problem, blocks: np.ndarray, vec=None) -> np.ndarray:
     return total
 
 
-def node_blocks_at_points(problem, points: np.ndarray, tol: float = 1e-8) -> np.ndarray:
-    """Global dof-block indices of the mesh nodes at ``points`` (n,3); error if a point is no node."""
+def node_blocks_at_points(problem, points: np.ndarray, cell_tag: int | None = None,
+                          tol: float = 1e-8) -> np.ndarray:
+    """Global dof-block indices of the mesh nodes at ``points`` (n,3).
+
+    ``cell_tag`` restricts the search to the nodes of that body: bodies in contact have
+    coincident nodes. Raises ValueError naming the points that are no node.
+    """
     V = problem.V
     x = V.tabulate_dof_coordinates()
     imap = V.dofmap.index_map
     n_owned = imap.size_local
-    owned_global = imap.local_range[0] + np.arange(n_owned)
+    candidates = np.arange(n_owned)
+    if cell_tag is not None:
+        cells = problem.cell_tags.find(cell_tag)
+        body_nodes = np.unique(V.dofmap.list[cells].reshape(-1))
+        candidates = body_nodes[body_nodes < n_owned]
     points = np.atleast_2d(np.asarray(points, dtype=float))
     scale = max(np.ptp(problem.mesh.geometry.x, axis=0).max(), 1.0)
     found = np.full(len(points), -1, dtype=np.int64)
     for i, p in enumerate(points):
-        d = np.linalg.norm(x[:n_owned] - p, axis=1)
-        j = int(np.argmin(d)) if n_owned else -1
-        if j >= 0 and d[j] <= tol * scale:
-            found[i] = owned_global[j]
+        if len(candidates) == 0:
+            break
+        d = np.linalg.norm(x[candidates] - p, axis=1)
+        j = int(np.argmin(d))
+        if d[j] <= tol * scale:
+            found[i] = imap.local_range[0] + candidates[j]
     result = np.zeros_like(found)
     problem.comm.Allreduce(found, result, op=MPI.MAX)
     missing = np.flatnonzero(result < 0)
     if len(missing):
-        raise ValueError(f"no mesh node at {points[missing].tolist()}")
+        where = "" if cell_tag is None else f" of the cells tagged {cell_tag}"
+        raise ValueError(f"no mesh node{where} at {points[missing].tolist()}")
     return result
 
 

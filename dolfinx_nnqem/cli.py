@@ -1,0 +1,111 @@
+"""The ``dolfinx-nnqem`` command (also ``python -m dolfinx_nnqem``).
+
+Exit codes: 0 success; 1 an increment did not converge (the converged ones are written);
+2 bad command line; 3 bad input (parameters, tags, mesh).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+from pathlib import Path
+
+EXIT_OK, EXIT_DIVERGED, EXIT_USAGE, EXIT_BAD_INPUT = 0, 1, 2, 3
+
+METHODS = ("monolithic", "nneqm1", "nneqm2")
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="dolfinx-nnqem",
+        description="Elastoplastic frictional contact in DOLFINx by nonsmooth equations (NNEQM).",
+        epilog="Exit codes: 0 ok, 1 an increment did not converge, 2 bad command line, 3 bad input.",
+    )
+    parser.add_argument("-v", "--verbose", action="count", default=0,
+                        help="more output (-v: a line per increment, -vv: a line per iteration)")
+    parser.add_argument("-q", "--quiet", action="store_true", help="only errors")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    tb = sub.add_parser("two-beams", help="the seed benchmark: two overlapping cantilevers",
+                        description="Solve the seed's two-beam benchmark and print its tables.")
+    tb.add_argument("--method", default="monolithic", choices=(*METHODS, "all"),
+                    help="solver (default monolithic); 'all' runs the three and compares them")
+    tb.add_argument("--increments", type=int, default=15, help="equal load increments (default 15)")
+    tb.add_argument("--law", choices=("polar", "alart-curnier"), default=None,
+                    help="pair law (default: polar for nneqm1/nneqm2, alart-curnier for monolithic)")
+    tb.add_argument("--refine", type=int, default=1, help="divide the 0.2 m elements by this factor")
+    tb.add_argument("--out", default="results/two_beams", help="output folder (default results/two_beams)")
+    tb.add_argument("--no-fields", action="store_true", help="skip the XDMF field output")
+    return parser
+
+
+def _configure_logging(verbose: int, quiet: bool) -> None:
+    from mpi4py import MPI
+
+    level = logging.ERROR if quiet else (logging.INFO if verbose >= 2 else logging.WARNING)
+    if MPI.COMM_WORLD.rank > 0:
+        level = logging.ERROR
+    logging.basicConfig(level=level, format="%(message)s")
+
+
+def _two_beams(args) -> int:
+    from mpi4py import MPI
+
+    from dolfinx_nnqem.two_beams import format_differences, format_tables, run_two_beams
+
+    rank0 = MPI.COMM_WORLD.rank == 0
+    methods = [m for m in METHODS if _available(m)] if args.method == "all" else [args.method]
+    summaries = []
+    for method in methods:
+        out = Path(args.out) / method if args.method == "all" else Path(args.out)
+
+        def progress(result, method=method):
+            if rank0 and args.verbose >= 1:
+                print(f"[{method}] increment {result.index}: load factor {result.load_factor:.4f}, "
+                      f"{result.iterations} iterations, {result.plastic_points} plastic Gauss points",
+                      flush=True)
+
+        summary = run_two_beams(method, args.increments, out, law=args.law, refine=args.refine,
+                                fields=not args.no_fields, progress=progress)
+        summaries.append(summary)
+        if rank0 and not args.quiet:
+            print(format_tables(summary), flush=True)
+            print(f"results in {out}/", flush=True)
+    if rank0 and not args.quiet and len(summaries) > 1:
+        print(format_differences(summaries))
+        (Path(args.out) / "comparison.json").write_text(json.dumps(
+            {"methods": [s["method"] for s in summaries]}, indent=1))
+    return EXIT_OK
+
+
+def _available(method: str) -> bool:
+    import importlib.util
+
+    return importlib.util.find_spec(f"dolfinx_nnqem.{method}") is not None
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    if args.command == "two-beams" and args.increments < 1:
+        print("dolfinx-nnqem: error: --increments must be >= 1", file=sys.stderr)
+        return EXIT_USAGE
+    _configure_logging(args.verbose, args.quiet)
+    import dolfinx_nnqem  # noqa: F401  (loads the PyPI wheel's MPI/PETSc first)
+    from dolfinx_nnqem.convergence import ConvergenceError
+
+    try:
+        if args.command == "two-beams":
+            return _two_beams(args)
+    except ConvergenceError as error:
+        print(f"dolfinx-nnqem: {error}", file=sys.stderr)
+        return EXIT_DIVERGED
+    except (ValueError, TypeError) as error:
+        print(f"dolfinx-nnqem: bad input: {error}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    return EXIT_USAGE
+
+
+if __name__ == "__main__":
+    sys.exit(main())
