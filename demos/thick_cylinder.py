@@ -13,7 +13,12 @@
 # $$ p_\mathrm{lim} = \frac{2}{\sqrt 3}\, \sigma_{y0} \ln\frac{b}{a}. $$
 #
 # We load past p_lim in equal increments; the load stepping halves the increment when Newton
-# fails and stops when it can no longer advance, which brackets the limit load. Outputs, in
+# fails or when the displacement leaves the small-displacement range (5 % of a: past the limit
+# load a small-displacement model keeps finding equilibria with ever larger displacements),
+# and stops when it can no longer advance, which brackets the limit load.
+#
+# Quadratic hexahedra (Q2, 3×3×3 Gauss points) are the default: trilinear hexahedra lock in
+# the isochoric plastic flow and keep a residual stiffness past p_lim (try `--degree 1`). Outputs, in
 # `--out` (default `results/thick_cylinder`):
 #
 # - `fields.xdmf`: displacement, von Mises stress, plastic strain per increment (ParaView);
@@ -47,8 +52,9 @@ from dolfinx_nnqem.stepping import solve_load_steps
 
 parser = argparse.ArgumentParser(description=__doc__)
 parser.add_argument("--out", default="results/thick_cylinder")
-parser.add_argument("--nr", type=int, default=8, help="elements through the wall")
-parser.add_argument("--nt", type=int, default=16, help="elements around the quarter")
+parser.add_argument("--nr", type=int, default=4, help="elements through the wall")
+parser.add_argument("--nt", type=int, default=12, help="elements around the quarter")
+parser.add_argument("--degree", type=int, default=2, help="displacement degree (1: Q1, 2: Q2)")
 parser.add_argument("--increments", type=int, default=12)
 args, _ = parser.parse_known_args()
 logging.basicConfig(level=logging.WARNING, format="%(message)s")
@@ -67,7 +73,7 @@ p_max = 1.05 * p_lim
 
 mesh, cell_tags, facet_tags = build_thick_cylinder(MPI.COMM_WORLD, a, b, 0.1, args.nr, args.nt)
 problem = ContactProblem(
-    mesh, cell_tags, facet_tags, materials=material,
+    mesh, cell_tags, facet_tags, materials=material, degree=args.degree,
     dirichlet=[Dirichlet(T.SYMMETRY_X, 0.0, [0]), Dirichlet(T.SYMMETRY_Y, 0.0, [1]),
                Dirichlet(T.FACES_Z, 0.0, [2])],
     tractions=[Pressure(T.INNER, p_max)],
@@ -94,7 +100,8 @@ def record(result):
 
 
 try:
-    solve_load_steps(problem, solver, args.increments, max_cutbacks=6, callbacks=[writer, record])
+    solve_load_steps(problem, solver, args.increments, max_cutbacks=6, callbacks=[writer, record],
+                     max_displacement=0.05 * a)
 except ConvergenceError as error:
     if MPI.COMM_WORLD.rank == 0:
         print("load stepping stopped near the limit load:", str(error).splitlines()[0])

@@ -1,6 +1,6 @@
 """Monolithic semismooth Newton on (u, z): the scalable solver (``formulation.md`` §5).
 
-Per iteration, with R = F_int(u) − ℓ F_ext − Bᵀλ(z) and H = H(Bu, z):
+Per iteration, with R = F_int(u) − F_ext(ℓ) − Bᵀλ(z) and H = H(Bu, z):
 
     [ K_t(u)     −Bᵀ Λ' ] [du]     [ R ]
     [ ∂_wH · B   ∂_zH   ] [dz] = − [ H ]
@@ -87,7 +87,7 @@ class MonolithicSolver:
 
     def _load_scale(self, F_int: PETSc.Vec) -> float:
         p = self.problem
-        s = max(abs(p.load_factor) * p.F_ext.norm(), F_int.norm())
+        s = max(p.external_force().norm(), F_int.norm())
         if p.has_contact:
             s = max(s, p.pairs.global_force(p.contact_force()).norm())
         return s

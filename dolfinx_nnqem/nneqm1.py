@@ -2,7 +2,7 @@
 
 For the load factor ℓ of an increment, outer iteration m (``formulation.md`` §5):
 
-1. r_m = ℓ F_ext − F_int(u_m) + Bᵀλ_m (constrained rows zero);
+1. r_m = F_ext(ℓ) − F_int(u_m) + Bᵀλ_m (constrained rows zero);
 2. one factorisation of the consistent tangent K_m; X = K_m⁻¹ Bᵀ (3NC right-hand sides
    solved together, KSPMatSolve), the contact flexibility C_m = B X (dense, 3NC × 3NC) and
    x_r = K_m⁻¹ r_m, w_free = B x_r;
@@ -131,7 +131,7 @@ class NNEQM1Solver:
             R_free = p.free_residual(R)
             w_local = p.relative_displacement()
             ev = p.evaluate_law(w_local, p.z)
-            scale = max(abs(p.load_factor) * p.F_ext.norm(), F_int.norm(),
+            scale = max(p.external_force().norm(), F_int.norm(),
                         p.pairs.global_force(p.contact_force()).norm())
             normR, normH = R_free.norm(), global_norm(ev.H, p.comm)
             if not (math.isfinite(normR) and math.isfinite(normH)):

@@ -47,6 +47,12 @@ class FieldWriter:
         self.q = fem.Function(self.Q0, name="von_mises")
         self.p = fem.Function(self.Q0, name="p")
         self.plastic = fem.Function(self.Q0, name="plastic")
+        # XDMF stores fields of the mesh's degree: a quadratic displacement is written at the
+        # vertices (interpolated to P1)
+        if problem.V.ufl_element().embedded_superdegree > 1:
+            self.u_out = fem.Function(fem.functionspace(mesh, ("Lagrange", 1, (3,))), name="u")
+        else:
+            self.u_out = None
         self.file = XDMFFile(mesh.comm, str(path), "w")
         self.file.write_mesh(mesh)
 
@@ -65,7 +71,11 @@ class FieldWriter:
     def __call__(self, result) -> None:
         self._cell_means()
         t = float(result.load_factor)
-        for f in (self.problem.u, self.q, self.p, self.plastic):
+        u = self.problem.u
+        if self.u_out is not None:
+            self.u_out.interpolate(u)
+            u = self.u_out
+        for f in (u, self.q, self.p, self.plastic):
             self.file.write_function(f, t)
 
     def close(self) -> None:

@@ -11,7 +11,9 @@ A user writes, in DOLFINx terms::
         contact=Contact(surface1=21, surface2=22, mu_f=0.5),
     )
 
-All loads and prescribed displacements are multiplied by the load factor ℓ of the increment.
+All loads and prescribed displacements are multiplied by the load factor ℓ of the increment,
+or by their own ``amplitude(ℓ)`` when one is given (e.g. a pressure held constant while a
+drag grows).
 The problem owns the unknowns (displacement ``u`` and the pair unknowns ``z``), the converged
 state, and the assembly of the pieces solvers combine: F_int(u), F_ext, K_t(u), K_e, B and the
 pair law. It never solves anything itself.
@@ -48,6 +50,7 @@ class Dirichlet:
     tag: int
     value: float | Sequence[float] = 0.0
     components: Sequence[int] | None = None
+    amplitude: Callable[[float], float] | None = None  #: a(ℓ) replacing ℓ (non-proportional paths)
 
 
 @dataclass(frozen=True)
@@ -56,6 +59,7 @@ class Traction:
 
     tag: int
     value: Sequence[float]
+    amplitude: Callable[[float], float] | None = None  #: a(ℓ) replacing ℓ
 
 
 @dataclass(frozen=True)
@@ -64,6 +68,7 @@ class Pressure:
 
     tag: int
     p: float
+    amplitude: Callable[[float], float] | None = None  #: a(ℓ) replacing ℓ
 
 
 @dataclass(frozen=True)
@@ -72,6 +77,7 @@ class BodyForce:
 
     value: Sequence[float]
     cell_tag: int | None = None
+    amplitude: Callable[[float], float] | None = None  #: a(ℓ) replacing ℓ
 
 
 @dataclass(frozen=True)
@@ -79,6 +85,7 @@ class Gravity:
     """Self-weight ``ℓ · ρ g`` with each body's density (from its :class:`VonMises`)."""
 
     g: Sequence[float] = (0.0, -9.81, 0.0)
+    amplitude: Callable[[float], float] | None = None  #: a(ℓ) replacing ℓ
 
 
 @dataclass(frozen=True)
@@ -147,9 +154,11 @@ class ContactProblem:
     contact
         A :class:`Contact`, or None.
     degree
-        Lagrange degree of the displacement (1: node-to-node contact needs vertex dofs).
+        Lagrange degree of the displacement: 1 (default; node-to-node contact needs it) or 2
+        (quadratic elements do not lock in isochoric plastic flow; trilinear hexahedra do).
     quadrature_degree
-        Degree of the Gauss rule (2: 2×2×2 points per hexahedron).
+        Degree of the Gauss rule; default 2·degree (2×2×2 points per Q1 hexahedron, 3×3×3
+        per Q2).
     """
 
     def __init__(
@@ -163,13 +172,20 @@ class ContactProblem:
         tractions: Sequence[Traction | Pressure] = (),
         body_forces: Sequence[BodyForce | Gravity] = (),
         contact: Contact | None = None,
-        quadrature_degree: int = 2,
+        degree: int = 1,
+        quadrature_degree: int | None = None,
     ):
         if mesh.geometry.dim != 3:
             raise ValueError(f"the mesh is {mesh.geometry.dim}D; dolfinx_nnqem solves 3D problems")
+        if degree not in (1, 2):
+            raise ValueError(f"degree = {degree!r}: the displacement is Lagrange of degree 1 or 2")
+        if contact is not None and degree != 1:
+            raise ValueError(f"degree = {degree}: node-to-node contact needs degree 1 (pairs are mesh vertices)")
+        if quadrature_degree is None:
+            quadrature_degree = 2 * degree  # 2×2×2 Gauss points for Q1, 3×3×3 for Q2
         self.mesh, self.cell_tags, self.facet_tags = mesh, cell_tags, facet_tags
         self.comm = mesh.comm
-        self.V = fem.functionspace(mesh, ("Lagrange", 1, (3,)))
+        self.V = fem.functionspace(mesh, ("Lagrange", degree, (3,)))
         self.u = fem.Function(self.V, name="u")
         self.state = PlasticState(self.V, materials, cell_tags, quadrature_degree)
 
@@ -181,7 +197,7 @@ class ContactProblem:
         self.F_int_form = fem.form(self.state.internal_force_form(self.u, v))
         self.K_t_form = fem.form(self.state.tangent_form(self.u, du, v))
         self.K_e_form = fem.form(self.state.elastic_stiffness_form(du, v))
-        self.F_ext = self._assemble_external_force(tractions, body_forces, v)
+        self.F_ext_parts = self._assemble_external_forces(tractions, body_forces, v)
 
         self.load_factor = 0.0  # ℓ of the current iterate
         self.load_factor_n = 0.0  # ℓ of the last converged increment
@@ -207,7 +223,7 @@ class ContactProblem:
     def _dirichlet_dofs(self, dirichlet: Sequence[Dirichlet]):
         """Unrolled dof indices and their unit-load target values; zero-valued DirichletBCs."""
         fdim = self.mesh.topology.dim - 1
-        dofs_all, values_all, bcs = [], [], []
+        dofs_all, values_all, bcs, amplitudes_all = [], [], [], []
         self.bc_dofs_by_tag: dict[int, np.ndarray] = {}
         for d in dirichlet:
             facets = self.facet_tags.find(d.tag)
@@ -224,8 +240,10 @@ class ContactProblem:
                 unrolled = bcs[-1].dof_indices()[0]
                 dofs_all.append(np.asarray(unrolled, dtype=np.int32))
                 values_all.append(np.full(len(unrolled), val))
+                amplitudes_all.append((d.amplitude, len(unrolled)))
                 previous = self.bc_dofs_by_tag.get(d.tag, np.zeros(0, np.int32))
                 self.bc_dofs_by_tag[d.tag] = np.union1d(previous, dofs_all[-1]).astype(np.int32)
+        self._bc_amplitudes = amplitudes_all  # [(amplitude, number of dofs)] in dof order
         if dofs_all:
             dofs = np.concatenate(dofs_all)
             values = np.concatenate(values_all)
@@ -233,38 +251,52 @@ class ContactProblem:
             dofs, values = np.zeros(0, np.int32), np.zeros(0)
         return dofs, values, bcs
 
-    def _assemble_external_force(self, tractions, body_forces, v) -> PETSc.Vec:
-        """F_ext for ℓ = 1 (tractions and body forces), assembled once."""
+    def _assemble_external_forces(self, tractions, body_forces, v) -> list:
+        """[(amplitude, F_k)]: each load's force vector for a unit amplitude, assembled once."""
         ds = ufl.Measure("ds", domain=self.mesh, subdomain_data=self.facet_tags)
         dx = ufl.Measure("dx", domain=self.mesh, subdomain_data=self.cell_tags)
         n = ufl.FacetNormal(self.mesh)
-        terms = []
+        parts = []
         for t in tractions:
             if isinstance(t, Pressure):
                 _check_finite(f"Pressure(tag={t.tag}).p", [t.p])
-                terms.append(-float(t.p) * ufl.dot(n, v) * ds(t.tag))
+                form = -float(t.p) * ufl.dot(n, v) * ds(t.tag)
             elif isinstance(t, Traction):
                 _check_finite(f"Traction(tag={t.tag}).value", t.value, 3)
-                terms.append(ufl.dot(ufl.as_vector([float(c) for c in t.value]), v) * ds(t.tag))
+                form = ufl.dot(ufl.as_vector([float(c) for c in t.value]), v) * ds(t.tag)
             else:
                 raise TypeError(f"tractions: {t!r} is neither a Traction nor a Pressure")
+            parts.append((t.amplitude, form))
         for b in body_forces:
             if isinstance(b, Gravity):
                 _check_finite("Gravity.g", b.g, 3)
                 g = ufl.as_vector([float(c) for c in b.g])
-                terms.append(self.state.density * ufl.dot(g, v) * dx)
+                form = self.state.density * ufl.dot(g, v) * dx
             elif isinstance(b, BodyForce):
                 _check_finite("BodyForce.value", b.value, 3)
                 f = ufl.as_vector([float(c) for c in b.value])
-                terms.append(ufl.dot(f, v) * (dx if b.cell_tag is None else dx(b.cell_tag)))
+                form = ufl.dot(f, v) * (dx if b.cell_tag is None else dx(b.cell_tag))
             else:
                 raise TypeError(f"body_forces: {b!r} is neither a BodyForce nor a Gravity")
-        F = compat.create_vector(self.V)
-        F.set(0.0)
-        if terms:
-            form = fem.form(sum(terms[1:], terms[0]))
-            dolfinx.fem.petsc.assemble_vector(F, form)
+            parts.append((b.amplitude, form))
+        assembled = []
+        for amplitude, form in parts:
+            F = compat.create_vector(self.V)
+            with F.localForm() as local:
+                local.set(0.0)
+            dolfinx.fem.petsc.assemble_vector(F, fem.form(form))
             F.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+            assembled.append((amplitude, F))
+        return assembled
+
+    def external_force(self, load_factor: float | None = None) -> PETSc.Vec:
+        """F_ext(ℓ) = Σ_k a_k(ℓ) F_k (a_k(ℓ) = ℓ unless the load has an amplitude)."""
+        ell = self.load_factor if load_factor is None else load_factor
+        F = compat.create_vector(self.V)
+        with F.localForm() as local:
+            local.set(0.0)
+        for amplitude, F_k in self.F_ext_parts:
+            F.axpy(_amplitude(amplitude, ell), F_k)
         return F
 
     def _setup_contact(self, contact: Contact) -> None:
@@ -338,8 +370,10 @@ class ContactProblem:
         return self.bc_dofs[self.bc_dofs < n_owned]
 
     def apply_prescribed_displacements(self, load_factor: float) -> None:
-        """Set ``u = ℓ · value`` at the constrained dofs (owned and ghost)."""
-        self.u.x.array[self.bc_dofs] = load_factor * self.bc_values
+        """Set ``u = a(ℓ) · value`` at the constrained dofs (owned and ghost); a(ℓ) = ℓ by default."""
+        factors = np.concatenate([np.full(n, _amplitude(a, load_factor)) for a, n in self._bc_amplitudes]
+                                 or [np.zeros(0)])
+        self.u.x.array[self.bc_dofs] = factors * self.bc_values
         self.load_factor = load_factor
 
     def assemble_internal_force(self, F: PETSc.Vec | None = None) -> PETSc.Vec:
@@ -384,7 +418,7 @@ class ContactProblem:
         At constrained dofs R holds the support reactions.
         """
         R = self.assemble_internal_force() if F_int is None else F_int.copy()
-        R.axpy(-self.load_factor, self.F_ext)
+        R.axpy(-1.0, self.external_force())
         if self.has_contact:
             R.axpy(-1.0, self.pairs.global_force(self.contact_force(z)))
         return R
@@ -437,6 +471,13 @@ class ContactProblem:
         self.load_factor = self.load_factor_n
         if self.has_contact:
             self.z = self.z_n.copy()
+
+
+def _amplitude(amplitude: Callable[[float], float] | None, load_factor: float) -> float:
+    value = load_factor if amplitude is None else float(amplitude(load_factor))
+    if not math.isfinite(value):
+        raise ValueError(f"a load amplitude gave {value} at load factor {load_factor}")
+    return value
 
 
 def _check_finite(name: str, values, length: int | None = None) -> None:

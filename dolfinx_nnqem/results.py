@@ -106,7 +106,7 @@ def pair_table(problem) -> dict[str, np.ndarray]:
 def reactions(problem, R=None) -> dict[int, np.ndarray]:
     """Support reaction (force of the support on the body, N) summed per Dirichlet tag.
 
-    At constrained dofs the residual R = F_int − ℓ F_ext − Bᵀλ is exactly the support force.
+    At constrained dofs the residual R = F_int − F_ext(ℓ) − Bᵀλ is exactly the support force.
     Only constrained components are counted.
     """
     if R is None:
@@ -125,9 +125,9 @@ def reactions(problem, R=None) -> dict[int, np.ndarray]:
 
 
 def applied_load(problem) -> np.ndarray:
-    """Resultant of the applied loads ℓ F_ext (N), global frame."""
-    arr = problem.F_ext.getArray(readonly=True).reshape(-1, 3)
-    local = problem.load_factor * arr.sum(axis=0)
+    """Resultant of the applied loads F_ext(ℓ) (N), global frame."""
+    arr = problem.external_force().getArray(readonly=True).reshape(-1, 3)
+    local = arr.sum(axis=0)
     total = np.zeros(3)
     problem.comm.Allreduce(local, total, op=MPI.SUM)
     return total
@@ -138,7 +138,7 @@ def equilibrium_check(problem) -> dict:
 
     Returns the applied load, the reactions per tag, their sum, the relative global imbalance
     ‖F_applied + Σ reactions‖ / ‖F_applied‖ (or / Σ‖reactions‖ when nothing is applied), and
-    the relative free-dof residual ‖R_free‖ / ‖ℓ F_ext‖.
+    the relative free-dof residual ‖R_free‖ / ‖F_ext(ℓ)‖.
     """
     R = problem.residual()
     react = reactions(problem, R)
@@ -147,7 +147,7 @@ def equilibrium_check(problem) -> dict:
     imbalance = applied + total_reaction
     scale = max(np.linalg.norm(applied), sum(np.linalg.norm(r) for r in react.values()), 1e-300)
     R_free = problem.free_residual(R)
-    F_scale = max(abs(problem.load_factor) * problem.F_ext.norm(), 1e-300)
+    F_scale = max(problem.external_force().norm(), 1e-300)
     return {
         "applied_load": applied, "reactions": react, "reaction_sum": total_reaction,
         "global_imbalance": float(np.linalg.norm(imbalance) / scale),

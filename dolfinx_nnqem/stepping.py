@@ -40,6 +40,7 @@ def solve_load_steps(
     max_cutbacks: int = 5,
     callbacks: Sequence[Callable[[IncrementResult], None]] = (),
     final_load_factor: float = 1.0,
+    max_displacement: float | None = None,
 ) -> list[IncrementResult]:
     """Drive ``solver`` from the last converged load factor to ``final_load_factor``.
 
@@ -55,6 +56,10 @@ def solve_load_steps(
         Halvings allowed in a row before giving up.
     callbacks
         Called with every converged :class:`IncrementResult`, in order.
+    max_displacement
+        Reject (and cut back) an increment whose largest displacement component exceeds this:
+        past a limit load a small-displacement model keeps finding equilibria with ever larger
+        displacements, so collapse is declared when the displacement leaves the small range.
     """
     if increments < 1:
         raise ValueError(f"increments = {increments}; expected >= 1")
@@ -71,6 +76,12 @@ def solve_load_steps(
             target = final_load_factor
         t0 = time.perf_counter()
         report = solver.solve_increment(target)
+        if report.converged and max_displacement is not None:
+            u_max = _max_displacement(problem)
+            if u_max > max_displacement:
+                report.converged = False
+                report.message = (f"largest displacement {u_max:.4g} exceeds max_displacement = "
+                                  f"{max_displacement:.4g} (collapse)")
         if not report.converged:
             problem.restore()
             if cutbacks >= max_cutbacks:
@@ -96,6 +107,14 @@ def solve_load_steps(
             step = direction * min(abs(2.0 * step), span / increments)
             cutbacks = max(cutbacks - 1, 0)
     return results
+
+
+def _max_displacement(problem) -> float:
+    n_owned = problem.V.dofmap.index_map.size_local * 3
+    local = float(abs(problem.u.x.array[:n_owned]).max(initial=0.0))
+    from mpi4py import MPI
+
+    return problem.comm.allreduce(local, op=MPI.MAX)
 
 
 def _failure_message(solver, target: float, report: SolveReport, cutbacks: int) -> str:
