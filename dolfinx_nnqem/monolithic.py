@@ -42,24 +42,29 @@ class MonolithicSolver:
     min_step
         Smallest line-search step before switching to Levenberg–Marquardt.
     lm_c, lm_delta
-        ν = lm_c · ε^lm_delta · mean diag(JᵀJ), ε the relative residual.
+        ν = lm_c · min(ε, 1)^lm_delta · mean diag(JᵀJ), ε the relative residual.
     watchdog
         Full Newton steps accepted in a row although Ψ grows (Chamberlain's watchdog). A
         change of pair state makes Ψ jump — an open pair's trial penetration enters H as
         r·g — although the step is exactly the one semismooth Newton needs; after
         ``watchdog`` such steps without a new best Ψ the solver returns to the best iterate
         and takes monotone (line-searched) steps from there.
+    max_increase
+        A full step is let through by the watchdog only if Ψ grows by at most this factor
+        (|H| by its square root): a penetration of a few element sizes' worth of r·g, not the
+        near-infinite step of a nearly singular Jacobian (the polar law at p_r = 0).
     """
 
     name = "monolithic"
 
     def __init__(self, problem: ContactProblem, options: SolverOptions | None = None, *,
                  armijo: float = 1e-4, min_step: float = 1.0 / 64, lm_c: float = 1.0,
-                 lm_delta: float = 1.0, watchdog: int = 6):
+                 lm_delta: float = 1.0, watchdog: int = 6, max_increase: float = 1e8):
         self.problem = problem
         self.options = options or SolverOptions()
         self.armijo, self.min_step, self.lm_c, self.lm_delta = armijo, min_step, lm_c, lm_delta
         self.watchdog = watchdog
+        self.max_increase = max_increase
         self.prefix = f"nnqem_monolithic_{id(self)}_"
         self.ksp = create_ksp(problem.comm, self.prefix, self.options.petsc_options)
         self._K = None
@@ -216,7 +221,7 @@ class MonolithicSolver:
         return self._split(x, R_free.getLocalSize())
 
     def _lm_direction(self, R_free, H, ev, ref: float):
-        """Levenberg–Marquardt: (JᵀJ + ν I) d = −JᵀF."""
+        """Levenberg–Marquardt: (JᵀJ + ν I) d = −JᵀF, ν = lm_c · min(ε, 1)^lm_delta · mean diag(JᵀJ)."""
         J = self._jacobian(ev)
         F = self._rhs(J, R_free, H)  # = −F
         JtJ = J.transposeMatMult(J)
@@ -230,6 +235,7 @@ class MonolithicSolver:
         ksp = create_ksp(self.problem.comm, self.prefix, self.options.petsc_options)
         ksp.setOperators(JtJ)
         ksp.solve(rhs, x)
+        ksp.destroy()
         return self._split(x, R_free.getLocalSize())
 
     # -- line search -----------------------------------------------------------------------------
@@ -264,7 +270,7 @@ class MonolithicSolver:
             psi = 0.5 * (R_free.norm() ** 2 + self._norm_H(H) ** 2)
             if math.isfinite(psi) and psi <= (1.0 - 2.0 * self.armijo * alpha) * psi0:
                 return alpha
-            if allow_increase and alpha == 1.0 and math.isfinite(psi):
+            if allow_increase and alpha == 1.0 and psi <= self.max_increase * psi0:
                 return -1.0
             alpha *= 0.5
             if alpha < self.min_step:

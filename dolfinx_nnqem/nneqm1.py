@@ -85,7 +85,13 @@ class NNEQM1Solver:
         self._tick("assembly", t0)
         t0 = time.perf_counter()
         self.ksp.setOperators(self._K)
-        self.ksp.setUp()
+        try:
+            self.ksp.setUp()
+        except PETSc.Error as error:
+            raise ValueError(
+                "NNEQM1 factorises the stiffness K, which is singular here: every body must be "
+                "held by its own Dirichlet conditions (a body held only by contact needs the "
+                "monolithic solver)") from error
         self._tick("factorisation", t0)
         t0 = time.perf_counter()
         Bt = p.pairs.B.transpose(PETSc.Mat())  # without an output matrix petsc4py transposes in place

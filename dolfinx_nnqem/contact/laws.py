@@ -1,0 +1,597 @@
+r"""Per-pair frictional contact laws written as nonsmooth equations H_i(w_i, z_i) = 0.
+
+The mathematics is ``formulation.md`` §2--§3. For ``nc`` node-to-node pairs:
+
+* ``w`` (nc, 3): relative displacement of the pair in its local frame, w = R (u_b - u_a);
+  ``w[:, 0]`` is normal, ``w[:, 1:3]`` tangential.
+* ``w_prev`` (nc, 3): the converged ``w`` at the start of the load step. The slip of the step is
+  s = w[:, 1:3] - w_prev[:, 1:3] (friction is incremental).
+* ``g0`` (nc,): initial gap; the gap is g = g0 + w[:, 0].
+* ``mu_f`` (nc,): Coulomb friction coefficient of each pair.
+* ``r`` > 0: scaling parameter in force/length (see :func:`default_r`).
+* ``z`` (nc, 3): the law's unknowns.
+
+  - Cartesian Alart--Curnier law: z = lambda = (p_n, q1, q2), the local contact force on
+    body 2 (p_n >= 0 is compression).
+  - Polar (seed) law: z = (p_n, p_r, theta), force lambda = (p_n, -p_r cos theta,
+    -p_r sin theta), p_r a SIGNED magnitude.
+
+Every kernel returns ``H`` (nc, 3), ``dH_dw`` (nc, 3, 3), ``dH_dz`` (nc, 3, 3) and ``state``
+(nc,) int8 (:data:`OPEN`, :data:`STICK`, :data:`SLIP`). All rows of H are in force units (the
+polar H3, a length, is multiplied by r).
+
+Generalized (B-)Jacobians and kink conventions
+----------------------------------------------
+Each kernel differentiates the active branch. Where two branches meet, one is picked by a fixed
+rule, the one ``formulation.md`` states for min: ``min(a, b)`` with a = b takes ``a``, the first
+argument *as the formula is written*; the same rule is used for max. Consequences:
+
+1. Signorini, both laws: ``min(p_n, r g)`` and ``p_n - max(0, p_n - r g)`` are the same function;
+   at p_n = r g both take the OPEN branch (H_n = p_n, dH_n/dp_n = 1) and the friction bound
+   rho = mu_f max(0, p_n - r g) takes its 0 branch (rho = 0, d rho = 0).
+2. Polar projection onto [-rho, rho], written ``max(-rho, min(rho, y))`` with
+   y = p_r + r s.d(theta): at y = rho, ``min`` takes rho; at y = -rho, ``max`` takes -rho. So
+   on both edges the BOUND (slip) branch is used: H2 = p_r -+ rho.
+3. Disc projection P_D (Cartesian): ``formulation.md`` defines it as "x if |x| <= rho, else
+   rho x/|x|", so at |x| = rho > 0 the INTERIOR (stick) branch is used: H_t = r s.
+4. rho = 0 (open pair, the tie p_n = r g, or mu_f = 0): the admissible set is the single point
+   {0}, whose projection is identically 0 and smooth in its argument; both laws use the bound
+   branch, H_t = q (Cartesian; at x = 0 this overrides rule 3, both branches being 0 there) and
+   H2 = p_r (polar; rule 2 gives the same for every y, the ties included). No division by |x|
+   happens, so x = 0 and s = 0 give no NaN. The polar H3 = r (s1 sin theta - s2 cos theta) is
+   smooth; at s = 0 its theta-derivative is simply 0.
+
+``state`` reports the branch that was differentiated: OPEN when p_n - r g <= 0, otherwise STICK
+on the interior branch of the friction projection and SLIP on its bound (including rho = 0 in
+contact, i.e. mu_f = 0, a frictionless pair sliding freely). A solution on the slip cone edge
+with s = 0 is therefore STICK for the Cartesian law (rule 3) and SLIP for the polar one
+(rule 2).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple, Protocol
+
+import numba
+import numpy as np
+import numpy.typing as npt
+
+__all__ = [
+    "OPEN",
+    "STICK",
+    "SLIP",
+    "STATE_NAMES",
+    "LawEvaluation",
+    "ContactLaw",
+    "AlartCurnierLaw",
+    "PolarLaw",
+    "get_law",
+    "alart_curnier_kernel",
+    "polar_kernel",
+    "force_from_unknowns",
+    "unknowns_from_force",
+    "default_r",
+]
+
+OPEN: int = 0
+"""Pair state: no contact (p_n - r g <= 0)."""
+STICK: int = 1
+"""Pair state: contact, interior branch of the friction projection (no slip)."""
+SLIP: int = 2
+"""Pair state: contact, bound branch of the friction projection (|q| = mu_f p_n)."""
+STATE_NAMES: tuple[str, str, str] = ("open", "stick", "slip")
+"""Names of the states, indexed by the state code."""
+
+
+class LawEvaluation(NamedTuple):
+    """Values and generalized Jacobians of a pair law at (w, z).
+
+    Attributes
+    ----------
+    H
+        (nc, 3) residuals, force units.
+    dH_dw
+        (nc, 3, 3) B-Jacobian with respect to the relative displacement w.
+    dH_dz
+        (nc, 3, 3) B-Jacobian with respect to the law's unknowns z.
+    state
+        (nc,) int8, :data:`OPEN`, :data:`STICK` or :data:`SLIP` (the differentiated branch).
+    """
+
+    H: np.ndarray
+    dH_dw: np.ndarray
+    dH_dz: np.ndarray
+    state: np.ndarray
+
+
+# ---------------------------------------------------------------------------------------------
+# numba kernels (one loop over pairs each; no Python loop over pairs anywhere)
+# ---------------------------------------------------------------------------------------------
+
+
+@numba.njit(cache=True)
+def alart_curnier_kernel(
+    w: np.ndarray,
+    w_prev: np.ndarray,
+    z: np.ndarray,
+    g0: np.ndarray,
+    mu_f: np.ndarray,
+    r: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Cartesian Alart--Curnier law, z = (p_n, q1, q2) (``formulation.md`` §3 B).
+
+    H_n = p_n - max(0, p_n - r g),  H_t = q - P_D(rho)(q - r s),  rho = mu_f max(0, p_n - r g).
+
+    Inputs are not validated (use :class:`AlartCurnierLaw`). Returns H, dH_dw, dH_dz, state;
+    see the module docstring for the kink conventions.
+    """
+    nc = w.shape[0]
+    H = np.zeros((nc, 3))
+    dH_dw = np.zeros((nc, 3, 3))
+    dH_dz = np.zeros((nc, 3, 3))
+    state = np.zeros(nc, dtype=np.int8)
+    for i in range(nc):
+        p_n = z[i, 0]
+        q1 = z[i, 1]
+        q2 = z[i, 2]
+        mu = mu_f[i]
+        gap = g0[i] + w[i, 0]
+        s1 = w[i, 1] - w_prev[i, 1]
+        s2 = w[i, 2] - w_prev[i, 2]
+        a = p_n - r * gap
+
+        # Normal row. a == 0 takes the open branch (rule 1): max(0, a) -> 0.
+        if a > 0.0:
+            H[i, 0] = r * gap
+            dH_dw[i, 0, 0] = r
+            rho = mu * a
+        else:
+            H[i, 0] = p_n
+            dH_dz[i, 0, 0] = 1.0
+            rho = 0.0
+
+        if rho > 0.0:
+            x1 = q1 - r * s1
+            x2 = q2 - r * s2
+            norm_x = math.sqrt(x1 * x1 + x2 * x2)
+            if norm_x <= rho:
+                # Stick (rule 3 at |x| = rho): P_D(x) = x, so H_t = q - x = r s.
+                H[i, 1] = r * s1
+                H[i, 2] = r * s2
+                dH_dw[i, 1, 1] = r
+                dH_dw[i, 2, 2] = r
+                state[i] = 1
+            else:
+                # Slip: P_D(x) = rho n, n = x/|x|; |x| > rho > 0 so the division is safe.
+                n1 = x1 / norm_x
+                n2 = x2 / norm_x
+                k = rho / norm_x
+                # T = I - n n^T is dP/dx * |x|/rho.
+                t11 = 1.0 - n1 * n1
+                t12 = -n1 * n2
+                t22 = 1.0 - n2 * n2
+                H[i, 1] = q1 - rho * n1
+                H[i, 2] = q2 - rho * n2
+                # dH_t/dq = I - k T
+                dH_dz[i, 1, 1] = 1.0 - k * t11
+                dH_dz[i, 1, 2] = -k * t12
+                dH_dz[i, 2, 1] = -k * t12
+                dH_dz[i, 2, 2] = 1.0 - k * t22
+                # dH_t/dw_t = -k T (-r I) = r k T
+                dH_dw[i, 1, 1] = r * k * t11
+                dH_dw[i, 1, 2] = r * k * t12
+                dH_dw[i, 2, 1] = r * k * t12
+                dH_dw[i, 2, 2] = r * k * t22
+                # rho = mu (p_n - r (g0 + w_n)): d rho/dp_n = mu, d rho/dw_n = -mu r.
+                dH_dz[i, 1, 0] = -mu * n1
+                dH_dz[i, 2, 0] = -mu * n2
+                dH_dw[i, 1, 0] = mu * r * n1
+                dH_dw[i, 2, 0] = mu * r * n2
+                state[i] = 2
+        else:
+            # rho = 0 (rule 4): projection onto {0}, H_t = q.
+            H[i, 1] = q1
+            H[i, 2] = q2
+            dH_dz[i, 1, 1] = 1.0
+            dH_dz[i, 2, 2] = 1.0
+            state[i] = 0 if a <= 0.0 else 2
+    return H, dH_dw, dH_dz, state
+
+
+@numba.njit(cache=True)
+def polar_kernel(
+    w: np.ndarray,
+    w_prev: np.ndarray,
+    z: np.ndarray,
+    g0: np.ndarray,
+    mu_f: np.ndarray,
+    r: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Polar (seed) law, z = (p_n, p_r, theta) (``formulation.md`` §3 A).
+
+    H1 = min(p_n, r g),  H2 = p_r - max(-rho, min(rho, p_r + r s.d)),
+    H3 = r (s1 sin theta - s2 cos theta),  d = (cos theta, sin theta),
+    rho = mu_f max(0, p_n - r g).
+
+    Inputs are not validated (use :class:`PolarLaw`). Returns H, dH_dw, dH_dz, state; see the
+    module docstring for the kink conventions.
+    """
+    nc = w.shape[0]
+    H = np.zeros((nc, 3))
+    dH_dw = np.zeros((nc, 3, 3))
+    dH_dz = np.zeros((nc, 3, 3))
+    state = np.zeros(nc, dtype=np.int8)
+    for i in range(nc):
+        p_n = z[i, 0]
+        p_r = z[i, 1]
+        theta = z[i, 2]
+        mu = mu_f[i]
+        c = math.cos(theta)
+        sn = math.sin(theta)
+        gap = g0[i] + w[i, 0]
+        s1 = w[i, 1] - w_prev[i, 1]
+        s2 = w[i, 2] - w_prev[i, 2]
+        a = p_n - r * gap
+
+        # H1 = min(p_n, r g); the tie takes p_n (rule 1).
+        if a > 0.0:
+            H[i, 0] = r * gap
+            dH_dw[i, 0, 0] = r
+            rho = mu * a
+        else:
+            H[i, 0] = p_n
+            dH_dz[i, 0, 0] = 1.0
+            rho = 0.0
+
+        s_d = s1 * c + s2 * sn  # s . d(theta)
+        s_dp = -s1 * sn + s2 * c  # s . d'(theta)
+        y = p_r + r * s_d
+
+        if rho > 0.0:
+            if y >= rho:
+                # Upper bound (rule 2: min(rho, y) takes rho at y = rho).
+                H[i, 1] = p_r - rho
+                dH_dz[i, 1, 1] = 1.0
+                dH_dz[i, 1, 0] = -mu
+                dH_dw[i, 1, 0] = mu * r
+                state[i] = 2
+            elif y <= -rho:
+                # Lower bound (rule 2: max(-rho, y) takes -rho at y = -rho).
+                H[i, 1] = p_r + rho
+                dH_dz[i, 1, 1] = 1.0
+                dH_dz[i, 1, 0] = mu
+                dH_dw[i, 1, 0] = -mu * r
+                state[i] = 2
+            else:
+                # Interior: H2 = p_r - y = -r s.d.
+                H[i, 1] = -r * s_d
+                dH_dz[i, 1, 2] = -r * s_dp
+                dH_dw[i, 1, 1] = -r * c
+                dH_dw[i, 1, 2] = -r * sn
+                state[i] = 1
+        else:
+            # rho = 0 (rule 4): projection onto {0}, H2 = p_r.
+            H[i, 1] = p_r
+            dH_dz[i, 1, 1] = 1.0
+            state[i] = 0 if a <= 0.0 else 2
+
+        # H3 = r (s x d): smooth; d/dtheta = r s.d, which is 0 (not NaN) at s = 0.
+        H[i, 2] = r * (s1 * sn - s2 * c)
+        dH_dz[i, 2, 2] = r * s_d
+        dH_dw[i, 2, 1] = r * sn
+        dH_dw[i, 2, 2] = -r * c
+    return H, dH_dw, dH_dz, state
+
+
+# ---------------------------------------------------------------------------------------------
+# Input validation shared by the laws
+# ---------------------------------------------------------------------------------------------
+
+
+def _as_pairs_array(name: str, value: npt.ArrayLike, shape: tuple[int, ...]) -> np.ndarray:
+    """``value`` as a C-contiguous float64 array of exactly ``shape`` (error names the array)."""
+    array = np.ascontiguousarray(value, dtype=np.float64)
+    if array.shape != shape:
+        raise ValueError(f"{name} must have shape {shape}, got {array.shape}")
+    return array
+
+
+def _check_r(r: float) -> float:
+    """r as a float; it must be finite and > 0 (force/length)."""
+    r = float(r)
+    if not (math.isfinite(r) and r > 0.0):
+        raise ValueError(f"r must be finite and > 0, got r = {r!r}")
+    return r
+
+
+def _check_mu_f(mu_f: npt.ArrayLike, nc: int) -> np.ndarray:
+    """mu_f broadcast to (nc,); every value must be finite and >= 0."""
+    mu = np.asarray(mu_f, dtype=np.float64)
+    if mu.ndim == 0:
+        mu = np.full(nc, float(mu))
+    elif mu.shape != (nc,):
+        raise ValueError(f"mu_f must be a scalar or have shape ({nc},), got {mu.shape}")
+    bad = ~(np.isfinite(mu) & (mu >= 0.0))
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise ValueError(
+            f"mu_f must be finite and >= 0, got mu_f = {float(mu[i])!r} (pair {i}, "
+            f"{int(bad.sum())} invalid value(s))"
+        )
+    return np.ascontiguousarray(mu)
+
+
+def _check_inputs(
+    w: npt.ArrayLike,
+    w_prev: npt.ArrayLike,
+    z: npt.ArrayLike,
+    g0: npt.ArrayLike,
+    mu_f: npt.ArrayLike,
+    r: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+    """Validated, contiguous float64 copies of the kernel arguments.
+
+    ``w``, ``w_prev`` and ``z`` are not checked for finiteness on purpose: a NaN iterate must
+    reach the nonlinear solver as a NaN residual, which reports the iteration it appeared in.
+    """
+    w = np.ascontiguousarray(w, dtype=np.float64)
+    if w.ndim != 2 or w.shape[1] != 3:
+        raise ValueError(f"w must have shape (nc, 3), got {w.shape}")
+    nc = w.shape[0]
+    w_prev = _as_pairs_array("w_prev", w_prev, (nc, 3))
+    z = _as_pairs_array("z", z, (nc, 3))
+    g0 = _as_pairs_array("g0", g0, (nc,))
+    if not np.isfinite(g0).all():
+        raise ValueError("g0 must be finite")
+    return w, w_prev, z, g0, _check_mu_f(mu_f, nc), _check_r(r)
+
+
+def _check_z(name: str, z: npt.ArrayLike) -> np.ndarray:
+    """``z`` as a float64 array of shape (nc, 3)."""
+    array = np.asarray(z, dtype=np.float64)
+    if array.ndim != 2 or array.shape[1] != 3:
+        raise ValueError(f"{name} must have shape (nc, 3), got {array.shape}")
+    return array
+
+
+# ---------------------------------------------------------------------------------------------
+# The laws as small objects
+# ---------------------------------------------------------------------------------------------
+
+
+class ContactLaw(Protocol):
+    """What the solvers need from a pair law."""
+
+    name: str
+
+    def evaluate(
+        self,
+        w: npt.ArrayLike,
+        w_prev: npt.ArrayLike,
+        z: npt.ArrayLike,
+        g0: npt.ArrayLike,
+        mu_f: npt.ArrayLike,
+        r: float,
+    ) -> LawEvaluation: ...
+
+    def force(self, z: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]: ...
+
+    def unknowns(self, lam: npt.ArrayLike) -> np.ndarray: ...
+
+
+class AlartCurnierLaw:
+    """Cartesian Alart--Curnier law; unknowns z = lambda = (p_n, q1, q2).
+
+    Regular wherever the polar form is singular: the robust default.
+    """
+
+    name: str = "alart-curnier"
+
+    def evaluate(
+        self,
+        w: npt.ArrayLike,
+        w_prev: npt.ArrayLike,
+        z: npt.ArrayLike,
+        g0: npt.ArrayLike,
+        mu_f: npt.ArrayLike,
+        r: float,
+    ) -> LawEvaluation:
+        """H, dH/dw, dH/dz and states of all pairs (shapes in the module docstring).
+
+        Parameters
+        ----------
+        w, w_prev, z
+            (nc, 3) relative displacement, its value at the start of the step, unknowns.
+        g0
+            (nc,) initial gaps.
+        mu_f
+            Friction coefficient, scalar or (nc,), finite and >= 0.
+        r
+            Scaling parameter (force/length), finite and > 0.
+        """
+        return LawEvaluation(*alart_curnier_kernel(*_check_inputs(w, w_prev, z, g0, mu_f, r)))
+
+    def force(self, z: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """Force lambda = z and d lambda/dz = I (nc, 3, 3)."""
+        z = _check_z("z", z)
+        return z.copy(), np.broadcast_to(np.eye(3), (z.shape[0], 3, 3)).copy()
+
+    def unknowns(self, lam: npt.ArrayLike) -> np.ndarray:
+        """Unknowns z = lambda."""
+        return _check_z("lam", lam).copy()
+
+    def __repr__(self) -> str:
+        return "AlartCurnierLaw()"
+
+
+class PolarLaw:
+    """Polar (seed) law; unknowns z = (p_n, p_r, theta), force (p_n, -p_r d(theta)).
+
+    Singular where p_r = 0 in stick (d q/d theta = 0) and where s = 0 in the open state (H3
+    vanishes identically in theta): solve it with the Levenberg--Marquardt fallback of
+    :func:`dolfinx_nnqem.nonsmooth.solve_nonsmooth`.
+    """
+
+    name: str = "polar"
+
+    def evaluate(
+        self,
+        w: npt.ArrayLike,
+        w_prev: npt.ArrayLike,
+        z: npt.ArrayLike,
+        g0: npt.ArrayLike,
+        mu_f: npt.ArrayLike,
+        r: float,
+    ) -> LawEvaluation:
+        """H, dH/dw, dH/dz and states of all pairs.
+
+        Parameters as in :meth:`AlartCurnierLaw.evaluate`.
+        """
+        return LawEvaluation(*polar_kernel(*_check_inputs(w, w_prev, z, g0, mu_f, r)))
+
+    def force(self, z: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """Force lambda = (p_n, -p_r cos theta, -p_r sin theta) and d lambda/dz (nc, 3, 3)."""
+        z = _check_z("z", z)
+        p_n, p_r, theta = z[:, 0], z[:, 1], z[:, 2]
+        c, sn = np.cos(theta), np.sin(theta)
+        lam = np.column_stack((p_n, -p_r * c, -p_r * sn))
+        dlam_dz = np.zeros((z.shape[0], 3, 3))
+        dlam_dz[:, 0, 0] = 1.0
+        dlam_dz[:, 1, 1] = -c
+        dlam_dz[:, 2, 1] = -sn
+        dlam_dz[:, 1, 2] = p_r * sn
+        dlam_dz[:, 2, 2] = -p_r * c
+        return lam, dlam_dz
+
+    def unknowns(self, lam: npt.ArrayLike) -> np.ndarray:
+        """(p_n, p_r, theta) with p_r = |q| >= 0, d(theta) = -q/|q|, theta = 0 where q = 0."""
+        lam = _check_z("lam", lam)
+        q1, q2 = lam[:, 1], lam[:, 2]
+        p_r = np.hypot(q1, q2)
+        # q = -p_r d  =>  d = -q/|q|; atan2 of -0.0 would give +-pi, hence the explicit 0.
+        theta = np.where(p_r > 0.0, np.arctan2(-q2, -q1), 0.0)
+        return np.column_stack((lam[:, 0], p_r, theta))
+
+    def __repr__(self) -> str:
+        return "PolarLaw()"
+
+
+_LAWS: dict[str, type] = {
+    "alart-curnier": AlartCurnierLaw,
+    "cartesian": AlartCurnierLaw,
+    "polar": PolarLaw,
+    "seed": PolarLaw,
+}
+
+
+def get_law(name: str | ContactLaw) -> ContactLaw:
+    """The law called ``name``: "alart-curnier"/"cartesian" or "polar"/"seed".
+
+    A law object is returned unchanged. Names are case-insensitive.
+    """
+    if not isinstance(name, str):
+        if all(hasattr(name, attr) for attr in ("name", "evaluate", "force", "unknowns")):
+            return name
+        raise TypeError(f"expected a law name or a law object, got {name!r}")
+    try:
+        return _LAWS[name.strip().lower()]()
+    except KeyError:
+        raise ValueError(
+            f"unknown contact law {name!r}; expected one of {sorted(_LAWS)}"
+        ) from None
+
+
+def force_from_unknowns(law: str | ContactLaw, z: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+    """Contact force lambda (nc, 3) of the unknowns ``z`` and d lambda/dz (nc, 3, 3)."""
+    return get_law(law).force(z)
+
+
+def unknowns_from_force(law: str | ContactLaw, lam: npt.ArrayLike) -> np.ndarray:
+    """Unknowns z (nc, 3) giving the force ``lam``; the inverse of :func:`force_from_unknowns`.
+
+    For the polar law p_r >= 0 and theta follows the tangential force direction (theta = 0 when
+    q = 0). Meant for initial guesses.
+    """
+    return get_law(law).unknowns(lam)
+
+
+def default_r(E: float, h: float) -> float:
+    """Default scaling parameter r = E h (force/length).
+
+    r converts the displacement-like arguments of the laws (the gap g, the slip s) into forces,
+    to be compared with p_n and q inside the max/projection. The solution of H = 0 does not
+    depend on r (every r > 0 gives exactly Coulomb's law); the convergence of the nonsmooth
+    Newton method does: r sets how far an iterate's force and displacement errors are traded
+    against each other when the active branch is chosen. A natural scale is the stiffness a node
+    of the surface has against a relative displacement, about E times the element size h (a
+    nodal force of order E h^2 eps, eps ~ w/h). With this r the rows H_n = r g and H_n = p_n are
+    of the same size and both terms of p_n - r g change comparably during the iteration.
+
+    Parameters
+    ----------
+    E
+        Young's modulus (of the softer body, or a representative value), > 0.
+    h
+        Representative element size at the contact surface, > 0.
+    """
+    E = float(E)
+    h = float(h)
+    if not (math.isfinite(E) and E > 0.0):
+        raise ValueError(f"E must be finite and > 0, got E = {E!r}")
+    if not (math.isfinite(h) and h > 0.0):
+        raise ValueError(f"h must be finite and > 0, got h = {h!r}")
+    return E * h
+
+
+def pin_constrained_directions(law: ContactLaw, evaluation: LawEvaluation, z: npt.ArrayLike,
+                               constrained: npt.ArrayLike, force_scale: float) -> LawEvaluation:
+    """Replace the rows of local directions whose relative motion the supports fix.
+
+    When both nodes of a pair are held by Dirichlet conditions in every global component a
+    local direction k involves, w_k cannot change and λ_k only feeds the support reactions:
+    it is statically indeterminate and its column in −Bᵀ vanishes (a singular Jacobian).
+    Such components are set to zero (the minimum-norm choice): row k of H becomes λ_k(z).
+
+    For the polar law, when both tangential directions are constrained, H2 = p_r and
+    H3 = force_scale · θ; when only t2 (t1) is, the slip-direction row becomes
+    H3 = force_scale · sin θ (cos θ), so the friction force acts along t1 (t2) only and H2
+    still enforces Coulomb's law along it.
+
+    Parameters
+    ----------
+    constrained
+        (nc, 3) bool: local directions (normal, t1, t2) fixed by the supports.
+    force_scale
+        Force unit used to scale the angle row of the polar law.
+    """
+    constrained = np.asarray(constrained, dtype=bool)
+    if not constrained.any():
+        return evaluation
+    H, dH_dw, dH_dz = evaluation.H.copy(), evaluation.dH_dw.copy(), evaluation.dH_dz.copy()
+    z = np.asarray(z, dtype=np.float64)
+    rows = np.zeros_like(constrained)
+    values = np.zeros_like(H)
+    derivatives = np.zeros_like(dH_dz)
+    rows[:, 0] = constrained[:, 0]
+    values[:, 0] = z[:, 0]
+    derivatives[:, 0, 0] = 1.0
+    if law.name == "polar":
+        theta = z[:, 2]
+        both = constrained[:, 1] & constrained[:, 2]
+        only_t2 = constrained[:, 2] & ~constrained[:, 1]
+        only_t1 = constrained[:, 1] & ~constrained[:, 2]
+        rows[:, 1] = both
+        rows[:, 2] = both | only_t1 | only_t2
+        values[:, 1] = z[:, 1]
+        derivatives[:, 1, 1] = 1.0
+        values[:, 2] = force_scale * np.where(both, theta, np.where(only_t2, np.sin(theta), np.cos(theta)))
+        derivatives[:, 2, 2] = force_scale * np.where(both, 1.0, np.where(only_t2, np.cos(theta), -np.sin(theta)))
+    else:
+        rows[:, 1:] = constrained[:, 1:]
+        values[:, 1:] = z[:, 1:]
+        derivatives[:, 1, 1] = derivatives[:, 2, 2] = 1.0
+    H[rows] = values[rows]
+    dH_dw[rows] = 0.0
+    dH_dz[rows] = derivatives[rows]
+    return LawEvaluation(H, dH_dw, dH_dz, evaluation.state)

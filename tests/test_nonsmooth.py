@@ -1,0 +1,191 @@
+"""Tests of the dense nonsmooth Newton / Levenberg--Marquardt solver (formulation.md §4)."""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import pytest
+
+from dolfinx_nnqem.nonsmooth import NonsmoothResult, solve_nonsmooth
+
+
+def _smooth_residual(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """H = (x0^2 + x1^2 - 5, x0 x1 - 2), roots (1, 2) and (2, 1)."""
+    H = np.array([x[0] ** 2 + x[1] ** 2 - 5.0, x[0] * x[1] - 2.0])
+    J = np.array([[2.0 * x[0], 2.0 * x[1]], [x[1], x[0]]])
+    return H, J
+
+
+def _convergence_orders(norms: list[float]) -> list[float]:
+    """p_k = log(e_{k+1}/e_k) / log(e_k/e_{k-1}) from consecutive residual norms."""
+    return [
+        math.log(norms[k + 1] / norms[k]) / math.log(norms[k] / norms[k - 1])
+        for k in range(1, len(norms) - 1)
+    ]
+
+
+def test_smooth_problem_converges_quadratically():
+    kinds: list[str] = []
+    result = solve_nonsmooth(
+        _smooth_residual,
+        np.array([1.3, 2.4]),
+        tol=1e-14,
+        log=lambda k, norm, t, kind: kinds.append(kind),
+    )
+    norms = result.residual_norms
+    print("\n|H| per iteration:", " ".join(f"{v:.3e}" for v in norms))
+    # orders from the iterates clearly above round-off (|H| > 1e-13)
+    usable = [v for v in norms if v > 1e-13]
+    orders = _convergence_orders(usable)
+    print("observed orders p_k:", " ".join(f"{p:.3f}" for p in orders))
+    assert result.converged, result.message
+    np.testing.assert_allclose(result.x, [1.0, 2.0], rtol=0, atol=1e-14)
+    assert result.lm_steps == 0 and result.line_search_steps == 0
+    assert kinds == ["initial"] + ["newton"] * result.iterations
+    assert len(norms) == result.iterations + 1
+    assert len(orders) >= 2
+    assert orders[-1] > 1.8, orders  # quadratic: p -> 2
+
+
+def _lcp(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """A random LCP with a symmetric positive definite (hence P-) matrix M."""
+    rng = np.random.default_rng(seed)
+    A = rng.normal(size=(n, n))
+    M = A @ A.T + 0.5 * np.eye(n)
+    q = rng.normal(size=n) * 3.0
+    return M, q
+
+
+def _lcp_by_enumeration(M: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """The unique solution of the P-matrix LCP by trying all 2^n active sets."""
+    n = q.size
+    for active in itertools.product((False, True), repeat=n):
+        a = np.array(active)  # a_i: x_i > 0, (Mx + q)_i = 0
+        x = np.zeros(n)
+        if a.any():
+            x[a] = np.linalg.solve(M[np.ix_(a, a)], -q[a])
+        y = M @ x + q
+        if (x >= -1e-12).all() and (y >= -1e-12).all():
+            return x
+    raise AssertionError("no solution found")
+
+
+def test_piecewise_linear_complementarity_solved_exactly():
+    M, q = _lcp(8, seed=4)
+
+    def residual(x):
+        y = M @ x + q
+        take_x = x <= y  # min(a, b) with a = b takes a (formulation.md)
+        H = np.where(take_x, x, y)
+        J = np.where(take_x[:, None], np.eye(q.size), M)
+        return H, J
+
+    result = solve_nonsmooth(residual, np.ones(q.size), tol=1e-13 * np.linalg.norm(q))
+    x_ref = _lcp_by_enumeration(M, q)
+    y = M @ result.x + q
+    print(
+        f"\nLCP n = 8: {result.message}; |x - x_enum| = "
+        f"{np.linalg.norm(result.x - x_ref):.2e}, x.y = {result.x @ y:.2e}, "
+        f"min x = {result.x.min():.2e}, min y = {y.min():.2e}\n|H| per iteration: "
+        + " ".join(f"{v:.2e}" for v in result.residual_norms)
+    )
+    assert result.converged, result.message
+    assert 2 <= result.iterations <= 15  # the active set changes along the way
+    # finite termination: once the active set is right, one Newton step solves it exactly
+    assert result.residual_norms[-2] > 1e-3 * np.linalg.norm(q)
+    np.testing.assert_allclose(result.x, x_ref, rtol=0, atol=1e-12 * np.abs(x_ref).max())
+    # exact complementarity up to round-off
+    assert np.abs(np.minimum(result.x, y)).max() <= 1e-13 * np.linalg.norm(q)
+
+
+def test_levenberg_marquardt_fallback_when_jacobian_singular_at_x0():
+    def residual(x):
+        # J = [[1, 1], [2 x0, 4 x1]] is singular on x0 = 2 x1, e.g. at x0 = (2, 1)
+        H = np.array([x[0] + x[1] - 3.0, x[0] ** 2 + 2.0 * x[1] ** 2 - 9.0])
+        J = np.array([[1.0, 1.0], [2.0 * x[0], 4.0 * x[1]]])
+        return H, J
+
+    x0 = np.array([2.0, 1.0])
+    assert np.linalg.matrix_rank(residual(x0)[1]) == 1
+    steps: list[tuple[int, float, float, str]] = []
+    result = solve_nonsmooth(
+        residual, x0, tol=1e-13, log=lambda *entry: steps.append(entry)
+    )
+    print(f"\n{result.message}")
+    for k, norm, t, kind in steps:
+        print(f"  {k:2d} {kind:8s} t = {t:.3g} |H| = {norm:.3e}")
+    assert result.converged, result.message
+    assert steps[1][3] == "lm"
+    assert result.lm_steps >= 1 and result.newton_steps >= 1
+    assert np.abs(residual(result.x)[0]).max() <= 1e-13
+    np.testing.assert_array_equal(x0, [2.0, 1.0])  # x0 not modified
+
+
+def test_reports_max_iter_without_raising():
+    result = solve_nonsmooth(_smooth_residual, np.array([3.0, 7.0]), tol=1e-14, max_iter=2)
+    print(f"\n{result.message}")
+    assert isinstance(result, NonsmoothResult)
+    assert not result.converged
+    assert result.iterations == 2 and len(result.residual_norms) == 3
+    assert "max_iter = 2" in result.message
+
+
+def test_reports_failure_when_there_is_no_root():
+    def residual(x):  # H = x^2 + 1 > 0: Psi is minimal at x = 0 with |H| = 1
+        return np.array([x[0] ** 2 + 1.0]), np.array([[2.0 * x[0]]])
+
+    result = solve_nonsmooth(residual, np.array([0.5]), tol=1e-10, max_iter=200)
+    print(f"\n{result.message}")
+    assert not result.converged
+    assert result.message.startswith(("stopped", "not converged"))
+    assert result.residual_norms[-1] >= 1.0
+    assert abs(result.x[0]) < 1e-3  # it did descend to the minimiser of Psi
+
+
+def test_nan_residual_raises_floating_point_error_naming_the_iteration():
+    def nan_at_start(x):
+        return np.array([np.nan]), np.array([[1.0]])
+
+    with pytest.raises(FloatingPointError, match="iteration 0"):
+        solve_nonsmooth(nan_at_start, np.array([0.0]), tol=1e-10)
+
+    def nan_beyond_two(x):  # root at 5, but H is NaN for x > 2: the first step hits it
+        value = x[0] - 5.0 if x[0] <= 2.0 else np.nan
+        return np.array([value]), np.array([[1.0]])
+
+    with pytest.raises(FloatingPointError, match="iteration 1"):
+        solve_nonsmooth(nan_beyond_two, np.array([0.0]), tol=1e-10)
+
+
+def test_merit_scale_scales_the_reported_norms():
+    def residual(x):  # one force-like row (1e6) and one length-like row
+        H = np.array([1e6 * (x[0] - 1.0), x[1] - 2.0])
+        return H, np.diag([1e6, 1.0])
+
+    result = solve_nonsmooth(residual, np.zeros(2), tol=1e-12, merit_scale=[1e-6, 1.0])
+    print(f"\n{result.message}; norms {result.residual_norms}")
+    assert result.converged
+    # D H(x0) = (1e-6 * -1e6, -2): |D H| = sqrt(5), not the unscaled 1e6
+    assert result.residual_norms[0] == pytest.approx(math.sqrt(5.0), rel=1e-15)
+
+
+@pytest.mark.parametrize(
+    "options, name",
+    [
+        ({"tol": 0.0}, "tol"),
+        ({"tol": 1e-8, "lm_delta": 3.0}, "lm_delta"),
+        ({"tol": 1e-8, "armijo": 0.7}, "armijo"),
+        ({"tol": 1e-8, "max_iter": -1}, "max_iter"),
+        ({"tol": 1e-8, "merit_scale": [1.0, -1.0]}, "merit_scale"),
+    ],
+)
+def test_invalid_options_raise(options, name):
+    with pytest.raises(ValueError, match=name):
+        solve_nonsmooth(_smooth_residual, np.array([1.3, 2.4]), **options)
+
+
+def test_wrong_residual_shape_raises():
+    with pytest.raises(ValueError, match="shape"):
+        solve_nonsmooth(lambda x: (np.zeros(3), np.eye(3)), np.zeros(2), tol=1e-8)
