@@ -23,12 +23,16 @@ def _parser() -> argparse.ArgumentParser:
         description="Elastoplastic frictional contact in DOLFINx by nonsmooth equations (NNEQM).",
         epilog="Exit codes: 0 ok, 1 an increment did not converge, 2 bad command line, 3 bad input.",
     )
-    parser.add_argument("-v", "--verbose", action="count", default=0,
+    # the logging flags work before or after the subcommand
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("-v", "--verbose", action="count", default=argparse.SUPPRESS,
                         help="more output (-v: a line per increment, -vv: a line per iteration)")
-    parser.add_argument("-q", "--quiet", action="store_true", help="only errors")
+    common.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS,
+                        help="only errors")
+    parser._add_container_actions(common)
     sub = parser.add_subparsers(dest="command", required=True)
 
-    tb = sub.add_parser("two-beams", help="the seed benchmark: two overlapping cantilevers",
+    tb = sub.add_parser("two-beams", parents=[common], help="the seed benchmark: two overlapping cantilevers",
                         description="Solve the seed's two-beam benchmark and print its tables.")
     tb.add_argument("--method", default="monolithic", choices=(*METHODS, "all"),
                     help="solver (default monolithic); 'all' runs the three and compares them")
@@ -88,6 +92,8 @@ def _available(method: str) -> bool:
 
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
+    args.verbose = getattr(args, "verbose", 0)
+    args.quiet = getattr(args, "quiet", False)
     if args.command == "two-beams" and args.increments < 1:
         print("dolfinx-nnqem: error: --increments must be >= 1", file=sys.stderr)
         return EXIT_USAGE

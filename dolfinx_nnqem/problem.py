@@ -452,11 +452,6 @@ class ContactProblem:
         gap = self.pairs.g0 + self.relative_displacement()[:, 0]
         touching = (gap <= 0.0) & (self.z[:, 0] <= 0.0)
         self.z[touching, 0] = tiny
-        if self.law.name == "polar":
-            # p_r = 0 makes ∂q/∂θ = 0: the polar Jacobian is singular in stick; θ is periodic,
-            # so the large first update of θ that a tiny p_r causes does no harm
-            closed = (gap <= 0.0) & (self.z[:, 1] == 0.0)
-            self.z[closed, 1] = tiny
 
     # -- increments --------------------------------------------------------------------------------
     def commit(self) -> None:

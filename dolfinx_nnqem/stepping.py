@@ -125,3 +125,28 @@ def _failure_message(solver, target: float, report: SolveReport, cutbacks: int) 
         lines.append(f"  last iterate: |R|/F = {last.equilibrium:.3e}, |H|/F = {last.contact:.3e}, "
                      f"open/stick/slip = {last.states}, plastic Gauss points = {last.plastic_points}")
     return "\n".join(lines)
+
+
+def solve_load_path(problem, solver, load_factors: Sequence[float], *,
+                    callbacks: Sequence[Callable[[IncrementResult], None]] = ()) -> list[IncrementResult]:
+    """Solve the increments ending at the given load factors, in order, without cutback.
+
+    For an explicit load path (e.g. to repeat the path another run took after cutbacks, since
+    friction makes the solution path dependent). Raises :class:`ConvergenceError` at the first
+    increment that does not converge.
+    """
+    results: list[IncrementResult] = []
+    for target in load_factors:
+        t0 = time.perf_counter()
+        report = solver.solve_increment(float(target))
+        if not report.converged:
+            problem.restore()
+            raise ConvergenceError(_failure_message(solver, float(target), report, 0))
+        problem.commit()
+        result = IncrementResult(index=len(results) + 1, load_factor=float(target), report=report,
+                                 plastic_points=problem.state.count_plastic_points(),
+                                 wall_time_s=time.perf_counter() - t0, cutbacks=0)
+        results.append(result)
+        for callback in callbacks:
+            callback(result)
+    return results
