@@ -106,3 +106,12 @@ def mpi_environment() -> dict[str, str]:
     env.setdefault("OMPI_MCA_rmaps_base_oversubscribe", "1")
     return env
 
+
+def geometry_dofmap(mesh) -> np.ndarray:
+    """Cell -> geometry node array ``(num_cells, nodes_per_cell)`` of a single-cell-type mesh.
+
+    ``geometry.dofmap`` in 0.9; deprecated in favour of the list ``geometry.dofmaps[0]`` after.
+    """
+    if _NEW:
+        return mesh.geometry.dofmaps[0]
+    return mesh.geometry.dofmap

@@ -116,7 +116,7 @@ def format_tables(summary: dict) -> str:
     """Tables like the seed's 1–3 for one method's summary."""
     lines = [f"== {summary['method']} (law {summary.get('law')}, {summary['increments']} increments, "
              f"system order {summary.get('system_order')}) =="]
-    lines.append("Pair forces on beam 1, local frame (N): normal, tangential x, tangential z")
+    lines.append("Pair forces on beam 1, local frame (N): normal n = +y, tangential t1 = +x, t2 = -z")
     lines.append(f"{'pair':>4} {'x':>5} {'z':>5} {'state':>6} {'normal':>11} {'tang. 1':>11} {'tang. 2':>11}")
     for i, pr in enumerate(summary.get("pairs", [])):
         f = pr["force_local_body1"]

@@ -1,0 +1,580 @@
+"""gmsh model builders returning distributed DOLFINx meshes with cell and facet tags.
+
+Every builder constructs its gmsh model on rank 0 only, optionally writes it to a ``.msh``
+file, and distributes it with :func:`dolfinx_nnqem.compat.model_to_mesh`. All meshes are
+structured 8-node hexahedra (transfinite curves, surfaces and volumes, recombined), because the
+node-to-node contact pairs need coincident (or facing) nodes and the seed uses trilinear bricks.
+
+Bodies that may come into contact are meshed WITHOUT shared nodes: their sub-boxes are
+fragmented body by body, never together, so gmsh keeps two copies of the interface (two
+surfaces, two sets of nodes) and DOLFINx sees two disconnected parts.
+
+The tag numbers of each model are the class attributes of :class:`TwoBeamsTags`,
+:class:`StackedBlocksTags` and :class:`ThickCylinderTags`.
+"""
+
+from __future__ import annotations
+
+import inspect
+import os
+from collections.abc import Callable
+from typing import NamedTuple
+
+from dolfinx_nnqem import compat  # noqa: I001  (first: loads MPI/PETSc for the PyPI wheel)
+
+import dolfinx
+import gmsh
+import numpy as np
+from mpi4py import MPI
+
+__all__ = [
+    "MeshAndTags",
+    "StackedBlocksTags",
+    "ThickCylinderTags",
+    "TwoBeamsTags",
+    "build_stacked_blocks",
+    "build_thick_cylinder",
+    "build_two_beams",
+]
+
+
+class MeshAndTags(NamedTuple):
+    """A distributed mesh with its cell and facet tags (as returned by every builder)."""
+
+    mesh: dolfinx.mesh.Mesh
+    cell_tags: dolfinx.mesh.MeshTags
+    facet_tags: dolfinx.mesh.MeshTags
+
+
+class TwoBeamsTags:
+    """Tags of :func:`build_two_beams` (the seed benchmark, ``benchmark-two-beams.md``).
+
+    Cells: ``BODY1`` = 1 (beam 1, lower), ``BODY2`` = 2 (beam 2, upper).
+    Facets: ``CLAMP1`` = 11 (beam 1, x = 0), ``CLAMP2`` = 12 (beam 2, x = 3.6),
+    ``LOAD`` = 13 (beam 2's top face, y = 0.8), ``CONTACT1`` = 21 (beam 1, y = 0.4,
+    x in [1.6, 2.0]), ``CONTACT2`` = 22 (beam 2, y = 0.4, x in [1.6, 2.0]).
+    """
+
+    BODY1 = 1
+    BODY2 = 2
+    CLAMP1 = 11
+    CLAMP2 = 12
+    LOAD = 13
+    CONTACT1 = 21
+    CONTACT2 = 22
+
+
+class StackedBlocksTags:
+    """Tags of :func:`build_stacked_blocks` (body 1 below, body 2 on top).
+
+    Cells: ``BODY1`` = 1, ``BODY2`` = 2.
+    Facets: ``BOTTOM`` = 11 (body 1's bottom), ``TOP`` = 13 (body 2's top),
+    ``CONTACT1`` = 21 (body 1's top), ``CONTACT2`` = 22 (body 2's bottom);
+    lateral faces of body 1: ``BODY1_XMIN`` = 31, ``BODY1_XMAX`` = 32, ``BODY1_ZMIN`` = 33,
+    ``BODY1_ZMAX`` = 34; of body 2: ``BODY2_XMIN`` = 41, ``BODY2_XMAX`` = 42,
+    ``BODY2_ZMIN`` = 43, ``BODY2_ZMAX`` = 44.
+    """
+
+    BODY1 = 1
+    BODY2 = 2
+    BOTTOM = 11
+    TOP = 13
+    CONTACT1 = 21
+    CONTACT2 = 22
+    BODY1_XMIN = 31
+    BODY1_XMAX = 32
+    BODY1_ZMIN = 33
+    BODY1_ZMAX = 34
+    BODY2_XMIN = 41
+    BODY2_XMAX = 42
+    BODY2_ZMIN = 43
+    BODY2_ZMAX = 44
+
+
+class ThickCylinderTags:
+    """Tags of :func:`build_thick_cylinder` (quarter of a thick-walled tube, one layer in z).
+
+    Cells: ``BODY`` = 1.
+    Facets: ``INNER`` = 1 (r = a), ``OUTER`` = 2 (r = b), ``SYMMETRY_X`` = 3 (plane x = 0),
+    ``SYMMETRY_Y`` = 4 (plane y = 0), ``FACES_Z`` = 5 (both faces z = 0 and z = t).
+    """
+
+    BODY = 1
+    INNER = 1
+    OUTER = 2
+    SYMMETRY_X = 3
+    SYMMETRY_Y = 4
+    FACES_Z = 5
+
+
+# --------------------------------------------------------------------------------------------
+# gmsh session handling and distribution
+# --------------------------------------------------------------------------------------------
+
+_EPS = 1e-7
+"""Relative tolerance for locating gmsh entities by their bounding boxes (OCC boxes are padded
+by its own tolerance of ~1e-7, so searches use this times the model size)."""
+
+
+def _initialize_gmsh() -> bool:
+    """Initialise gmsh unless it already is; return whether this call initialised it."""
+    if gmsh.isInitialized():
+        return False
+    # interruptible=False: gmsh must not install a SIGINT handler (that fails off the main
+    # thread, e.g. under pytest-xdist); older gmsh versions lack the keyword.
+    if "interruptible" in inspect.signature(gmsh.initialize).parameters:
+        gmsh.initialize(interruptible=False)
+    else:
+        gmsh.initialize()
+    return True
+
+
+def _mesh_from_gmsh(
+    comm: MPI.Comm,
+    name: str,
+    build: Callable[[], None],
+    msh_file: str | os.PathLike | None,
+) -> MeshAndTags:
+    """Run ``build`` (geometry, physical groups, meshing) on rank 0 and distribute the mesh.
+
+    gmsh is initialised if needed and finalised again only if this call initialised it; a
+    gmsh session opened by the caller keeps its current model (ours is added and removed).
+    An exception on rank 0 is broadcast and raised on every rank, so that no rank is left
+    waiting in the collective mesh creation.
+    """
+    if comm.rank != 0:
+        error = comm.bcast(None, root=0)
+        if error is not None:
+            raise RuntimeError(error)
+        mesh, cell_tags, facet_tags = compat.model_to_mesh(None, comm, 0, gdim=3)
+        return MeshAndTags(mesh, cell_tags, facet_tags)
+
+    initialised_here = False
+    previous_model = None
+    terminal = None
+    added_model = None
+    error = None
+    try:
+        try:
+            initialised_here = _initialize_gmsh()
+            if not initialised_here:
+                previous_model = gmsh.model.getCurrent()
+            terminal = gmsh.option.getNumber("General.Terminal")
+            gmsh.option.setNumber("General.Terminal", 0)
+            existing = set(gmsh.model.list())
+            while name in existing:  # never touch a model of the caller's with the same name
+                name += "_"
+            gmsh.model.add(name)
+            added_model = name
+            build()
+            if msh_file is not None:
+                gmsh.write(os.fspath(msh_file))
+        except Exception as exc:  # reported on every rank, below
+            error = f"building the gmsh model {name!r} failed: {type(exc).__name__}: {exc}"
+        comm.bcast(error, root=0)
+        if error is not None:
+            raise RuntimeError(error)
+        mesh, cell_tags, facet_tags = compat.model_to_mesh(gmsh.model, comm, 0, gdim=3)
+    finally:
+        if initialised_here:
+            gmsh.finalize()
+        elif gmsh.isInitialized():  # leave the caller's session as it was
+            if added_model is not None and added_model in gmsh.model.list():
+                gmsh.model.setCurrent(added_model)
+                gmsh.model.remove()
+            if previous_model is not None and previous_model in gmsh.model.list():
+                gmsh.model.setCurrent(previous_model)
+            if terminal is not None:
+                gmsh.option.setNumber("General.Terminal", terminal)
+    return MeshAndTags(mesh, cell_tags, facet_tags)
+
+
+# --------------------------------------------------------------------------------------------
+# Small gmsh helpers (current model, rank 0 only)
+# --------------------------------------------------------------------------------------------
+
+
+def _curves_of(volumes: list[int]) -> list[int]:
+    """Curve tags on the boundary of the given volumes."""
+    surfaces = gmsh.model.getBoundary([(3, v) for v in volumes], combined=False, oriented=False)
+    curves = gmsh.model.getBoundary(surfaces, combined=False, oriented=False)
+    return sorted({abs(tag) for _, tag in curves})
+
+
+def _surfaces_of(volumes: list[int]) -> set[int]:
+    """Surface tags on the boundary of the given volumes."""
+    dim_tags = gmsh.model.getBoundary([(3, v) for v in volumes], combined=False, oriented=False)
+    return {abs(tag) for _, tag in dim_tags}
+
+
+def _surfaces_in_box(
+    lower: tuple[float, float, float],
+    upper: tuple[float, float, float],
+    volumes: list[int],
+    size: float,
+) -> list[int]:
+    """Boundary surfaces of ``volumes`` lying entirely in the box ``[lower, upper]``.
+
+    Restricting to one body's boundary matters: the two contact surfaces occupy the same box.
+    """
+    pad = _EPS * size
+    inside = gmsh.model.getEntitiesInBoundingBox(
+        lower[0] - pad, lower[1] - pad, lower[2] - pad,
+        upper[0] + pad, upper[1] + pad, upper[2] + pad,
+        dim=2,
+    )  # fmt: skip
+    own = _surfaces_of(volumes)
+    found = sorted(tag for _, tag in inside if tag in own)
+    if not found:
+        raise RuntimeError(f"no boundary surface of volumes {volumes} in the box {lower}-{upper}")
+    return found
+
+
+def _add_group(dim: int, tags: list[int], tag: int, name: str) -> None:
+    gmsh.model.addPhysicalGroup(dim, tags, tag)
+    gmsh.model.setPhysicalName(dim, tag, name)
+
+
+def _box_curve_counts(volumes: list[int], count: Callable[[np.ndarray], int]) -> dict[int, int]:
+    """Element count of each (straight, axis-aligned) curve of ``volumes``.
+
+    ``count`` receives the curve's extent ``(dx, dy, dz)`` (from its bounding box).
+    """
+    counts = {}
+    for c in _curves_of(volumes):
+        box = np.array(gmsh.model.getBoundingBox(1, c))
+        counts[c] = count(box[3:] - box[:3])
+    return counts
+
+
+def _structured_hexahedra(curve_counts: dict[int, int]) -> None:
+    """Transfinite curves (``n`` elements each), surfaces and volumes, recombined: hexahedra."""
+    for c, n in curve_counts.items():
+        gmsh.model.mesh.setTransfiniteCurve(c, n + 1)
+    for _, s in gmsh.model.getEntities(2):
+        gmsh.model.mesh.setTransfiniteSurface(s)
+        gmsh.model.mesh.setRecombine(2, s)
+    for _, v in gmsh.model.getEntities(3):
+        gmsh.model.mesh.setTransfiniteVolume(v)
+
+
+def _round_node_coordinates(decimals: int = 12) -> None:
+    """Round all mesh node coordinates to ``decimals`` decimal places.
+
+    gmsh's transfinite interpolation leaves round-off of ~1e-16 in the nodes of box meshes
+    (0.39999999999999991 for 0.4), which would tilt the facet normals of flat contact
+    surfaces by as much. Rounding restores the exact grid coordinates (up to binary
+    representation) and moves no node by more than 0.5e-``decimals``.
+    """
+    tags, coords, _ = gmsh.model.mesh.getNodes()
+    coords = coords.reshape(-1, 3)
+    rounded = np.round(coords, decimals) + 0.0  # + 0.0 turns -0.0 into 0.0
+    for tag, x, y in zip(tags, coords, rounded):
+        if not np.array_equal(x, y):
+            gmsh.model.mesh.setNode(int(tag), y.tolist(), [])
+
+
+def _fragment_boxes(boxes: list[tuple[float, float, float, float, float, float]]) -> list[int]:
+    """Add boxes ``(x, y, z, dx, dy, dz)`` and fragment them with each other (one body).
+
+    Fragmenting makes the sub-boxes of ONE body conforming (shared interface nodes); calling
+    this once per body keeps different bodies' nodes separate.
+    """
+    occ = gmsh.model.occ
+    tags = [occ.addBox(*box) for box in boxes]
+    if len(tags) == 1:
+        return tags
+    out, _ = occ.fragment([(3, tags[0])], [(3, t) for t in tags[1:]])
+    return sorted(tag for dim, tag in out if dim == 3)
+
+
+# --------------------------------------------------------------------------------------------
+# The two beams of the seed benchmark
+# --------------------------------------------------------------------------------------------
+
+
+def build_two_beams(
+    comm: MPI.Comm = MPI.COMM_WORLD,
+    refine: int = 1,
+    msh_file: str | os.PathLike | None = None,
+) -> MeshAndTags:
+    """The seed benchmark's two overlapping cantilever beams (``benchmark-two-beams.md``).
+
+    Beam 1: x in [0, 2], y in [0, 0.4], z in [0, 0.4]; beam 2: x in [1.6, 3.6],
+    y in [0.4, 0.8], z in [0, 0.4]. Structured hexahedra of edge ``0.2 / refine`` m
+    (``refine = 1``: 10 x 2 x 2 = 40 per beam). Each beam is built from two boxes fragmented
+    with each other only (beam 1 split at x = 1.6, beam 2 at x = 2.0), so the contact surfaces
+    are exactly the overlap x in [1.6, 2.0] on y = 0.4 and the beams share no nodes
+    (``(2 refine + 1)**2`` coincident node pairs there).
+
+    Parameters
+    ----------
+    comm
+        Communicator of the mesh; the gmsh model is built on its rank 0.
+    refine
+        Positive integer dividing the element edge 0.2 m.
+    msh_file
+        If given, the gmsh model is also written to this ``.msh`` file (by rank 0).
+
+    Returns
+    -------
+    MeshAndTags
+        The mesh and its tags, numbered as in :class:`TwoBeamsTags`.
+    """
+    if int(refine) != refine or refine < 1:
+        raise ValueError(f"refine must be a positive integer, got {refine!r}")
+    h = 0.2 / int(refine)
+    width = 0.4  # beam height (y) and width (z)
+
+    def build() -> None:
+        beam1 = _fragment_boxes([(0.0, 0.0, 0.0, 1.6, width, width), (1.6, 0.0, 0.0, 0.4, width, width)])
+        beam2 = _fragment_boxes([(1.6, width, 0.0, 0.4, width, width), (2.0, width, 0.0, 1.6, width, width)])
+        gmsh.model.occ.synchronize()
+
+        counts = _box_curve_counts(beam1 + beam2, lambda d: max(1, round(float(d.max()) / h)))
+        _structured_hexahedra(counts)
+
+        size = 3.6
+        _add_group(3, beam1, TwoBeamsTags.BODY1, "beam1")
+        _add_group(3, beam2, TwoBeamsTags.BODY2, "beam2")
+        _add_group(
+            2, _surfaces_in_box((0, 0, 0), (0, width, width), beam1, size),
+            TwoBeamsTags.CLAMP1, "clamp1",
+        )  # fmt: skip
+        _add_group(
+            2, _surfaces_in_box((3.6, width, 0), (3.6, 2 * width, width), beam2, size),
+            TwoBeamsTags.CLAMP2, "clamp2",
+        )  # fmt: skip
+        _add_group(
+            2, _surfaces_in_box((1.6, 2 * width, 0), (3.6, 2 * width, width), beam2, size),
+            TwoBeamsTags.LOAD, "load",
+        )  # fmt: skip
+        _add_group(
+            2, _surfaces_in_box((1.6, width, 0), (2.0, width, width), beam1, size),
+            TwoBeamsTags.CONTACT1, "contact1",
+        )  # fmt: skip
+        _add_group(
+            2, _surfaces_in_box((1.6, width, 0), (2.0, width, width), beam2, size),
+            TwoBeamsTags.CONTACT2, "contact2",
+        )  # fmt: skip
+        gmsh.model.mesh.generate(3)
+        _round_node_coordinates()
+
+    return _mesh_from_gmsh(comm, "two_beams", build, msh_file)
+
+
+# --------------------------------------------------------------------------------------------
+# Two stacked blocks (patch tests, Hertz-type verification)
+# --------------------------------------------------------------------------------------------
+
+
+def build_stacked_blocks(
+    comm: MPI.Comm = MPI.COMM_WORLD,
+    Lx: float = 1.0,
+    Ly1: float = 0.5,
+    Ly2: float = 0.5,
+    Lz: float = 1.0,
+    nx: int = 4,
+    ny1: int = 2,
+    ny2: int = 2,
+    nz: int = 4,
+    *,
+    y_interface: float | None = None,
+    centred: bool = False,
+    gap: float = 0.0,
+    nx2: int | None = None,
+    nz2: int | None = None,
+    msh_file: str | os.PathLike | None = None,
+) -> MeshAndTags:
+    """Body 1, a block below the plane y = ``y_interface``; body 2, a block on top of it.
+
+    Body 1 spans y in [y_interface - Ly1, y_interface], body 2 y in [y_interface + gap,
+    y_interface + gap + Ly2]; both span x in [0, Lx] and z in [0, Lz] (or, with ``centred``,
+    [-Lx/2, Lx/2] and [-Lz/2, Lz/2]). Structured hexahedra, ``nx x ny1 x nz`` in body 1 and
+    ``nx2 x ny2 x nz2`` in body 2 (``nx2 = nx``, ``nz2 = nz`` by default, so that the
+    interface nodes coincide when ``gap = 0``). The blocks share no nodes.
+
+    Parameters
+    ----------
+    comm
+        Communicator of the mesh; the gmsh model is built on its rank 0.
+    Lx, Ly1, Ly2, Lz
+        Block sizes: common width (x) and depth (z), heights of body 1 and body 2.
+    nx, ny1, ny2, nz
+        Element counts per direction (body 1: nx, ny1, nz; body 2: nx2, ny2, nz2).
+    y_interface
+        Height of body 1's top face; default ``Ly1`` (body 1 rests on y = 0).
+    centred
+        Centre both blocks at x = z = 0 (axisymmetric set-ups such as Hertz contact).
+    gap
+        Initial distance between the blocks (negative: overlapping; for tests of the pair
+        search only).
+    nx2, nz2
+        Body 2's element counts in x and z when they differ from body 1's (non-matching
+        interface meshes).
+    msh_file
+        If given, the gmsh model is also written to this ``.msh`` file (by rank 0).
+
+    Returns
+    -------
+    MeshAndTags
+        The mesh and its tags, numbered as in :class:`StackedBlocksTags`.
+    """
+    nx2 = nx if nx2 is None else nx2
+    nz2 = nz if nz2 is None else nz2
+    for label, n in (("nx", nx), ("ny1", ny1), ("ny2", ny2), ("nz", nz), ("nx2", nx2), ("nz2", nz2)):
+        if int(n) != n or n < 1:
+            raise ValueError(f"{label} must be a positive integer, got {n!r}")
+    for label, length in (("Lx", Lx), ("Ly1", Ly1), ("Ly2", Ly2), ("Lz", Lz)):
+        if not length > 0:
+            raise ValueError(f"{label} must be positive, got {length!r}")
+    y_i = Ly1 if y_interface is None else float(y_interface)
+    x0 = -Lx / 2 if centred else 0.0
+    z0 = -Lz / 2 if centred else 0.0
+    y2 = y_i + gap
+
+    def build() -> None:
+        body1 = _fragment_boxes([(x0, y_i - Ly1, z0, Lx, Ly1, Lz)])
+        body2 = _fragment_boxes([(x0, y2, z0, Lx, Ly2, Lz)])
+        gmsh.model.occ.synchronize()
+
+        def counts_for(volumes: list[int], n_x: int, n_y: int, n_z: int) -> dict[int, int]:
+            # the curve's direction is the axis of its (only) non-zero extent
+            return _box_curve_counts(volumes, lambda d: (n_x, n_y, n_z)[int(np.argmax(d))])
+
+        _structured_hexahedra(counts_for(body1, nx, ny1, nz) | counts_for(body2, nx2, ny2, nz2))
+
+        size = float(np.linalg.norm([Lx, Ly1 + Ly2 + abs(gap), Lz]))
+        x1, z1 = x0 + Lx, z0 + Lz
+        T = StackedBlocksTags
+        _add_group(3, body1, T.BODY1, "body1")
+        _add_group(3, body2, T.BODY2, "body2")
+        faces = [
+            (body1, (x0, y_i - Ly1, z0), (x1, y_i - Ly1, z1), T.BOTTOM, "bottom"),
+            (body2, (x0, y2 + Ly2, z0), (x1, y2 + Ly2, z1), T.TOP, "top"),
+            (body1, (x0, y_i, z0), (x1, y_i, z1), T.CONTACT1, "contact1"),
+            (body2, (x0, y2, z0), (x1, y2, z1), T.CONTACT2, "contact2"),
+        ]
+        for body, lo_y, hi_y, base, label in (
+            (body1, y_i - Ly1, y_i, T.BODY1_XMIN, "body1"),
+            (body2, y2, y2 + Ly2, T.BODY2_XMIN, "body2"),
+        ):
+            faces += [
+                (body, (x0, lo_y, z0), (x0, hi_y, z1), base, f"{label}_xmin"),
+                (body, (x1, lo_y, z0), (x1, hi_y, z1), base + 1, f"{label}_xmax"),
+                (body, (x0, lo_y, z0), (x1, hi_y, z0), base + 2, f"{label}_zmin"),
+                (body, (x0, lo_y, z1), (x1, hi_y, z1), base + 3, f"{label}_zmax"),
+            ]
+        for body, lower, upper, tag, label in faces:
+            _add_group(2, _surfaces_in_box(lower, upper, body, size), tag, label)
+        gmsh.model.mesh.generate(3)
+        _round_node_coordinates()
+
+    return _mesh_from_gmsh(comm, "stacked_blocks", build, msh_file)
+
+
+# --------------------------------------------------------------------------------------------
+# Thick-walled cylinder under internal pressure (plane strain, elastoplastic verification)
+# --------------------------------------------------------------------------------------------
+
+
+def build_thick_cylinder(
+    comm: MPI.Comm = MPI.COMM_WORLD,
+    a: float = 1.0,
+    b: float = 2.0,
+    t: float = 0.1,
+    n_radial: int = 8,
+    n_circumferential: int = 12,
+    *,
+    radial_progression: float = 1.0,
+    msh_file: str | os.PathLike | None = None,
+) -> MeshAndTags:
+    """A quarter of a thick-walled tube, a <= r <= b in the x-y plane, one hexahedron layer thick.
+
+    The quarter annulus (x >= 0, y >= 0) is meshed with ``n_radial x n_circumferential``
+    quadrilaterals and extruded by ``t`` in z with a single element layer; plane strain is then
+    imposed by u_z = 0 on both z faces (tag 5).
+
+    Parameters
+    ----------
+    comm
+        Communicator of the mesh; the gmsh model is built on its rank 0.
+    a, b
+        Inner and outer radius.
+    t
+        Thickness (z) of the single element layer.
+    n_radial, n_circumferential
+        Element counts across the wall and along the quarter circle.
+    radial_progression
+        Ratio of consecutive radial element sizes from r = a outwards (1: uniform; > 1 refines
+        towards the inner surface, where the plastic zone starts).
+    msh_file
+        If given, the gmsh model is also written to this ``.msh`` file (by rank 0).
+
+    Returns
+    -------
+    MeshAndTags
+        The mesh and its tags, numbered as in :class:`ThickCylinderTags`.
+    """
+    if not 0 < a < b:
+        raise ValueError(f"need 0 < a < b, got a = {a!r}, b = {b!r}")
+    if not t > 0 or not radial_progression > 0:
+        raise ValueError(f"t and radial_progression must be positive, got {t!r}, {radial_progression!r}")
+    for label, n in (("n_radial", n_radial), ("n_circumferential", n_circumferential)):
+        if int(n) != n or n < 1:
+            raise ValueError(f"{label} must be a positive integer, got {n!r}")
+
+    def build() -> None:
+        occ = gmsh.model.occ
+        centre = occ.addPoint(0, 0, 0)
+        p_ax, p_bx = occ.addPoint(a, 0, 0), occ.addPoint(b, 0, 0)
+        p_ay, p_by = occ.addPoint(0, a, 0), occ.addPoint(0, b, 0)
+        # both radial lines run from r = a to r = b, so one progression grades them alike
+        line_y0 = occ.addLine(p_ax, p_bx)
+        line_x0 = occ.addLine(p_ay, p_by)
+        arc_b = occ.addCircleArc(p_bx, centre, p_by)
+        arc_a = occ.addCircleArc(p_ay, centre, p_ax)
+        loop = occ.addCurveLoop([line_y0, arc_b, line_x0, arc_a])
+        base = occ.addPlaneSurface([loop])
+        occ.remove([(0, centre)])
+        out = occ.extrude([(2, base)], 0, 0, t, numElements=[1], recombine=True)
+        occ.synchronize()
+        volumes = [tag for dim, tag in out if dim == 3]
+
+        for line in (line_y0, line_x0):
+            gmsh.model.mesh.setTransfiniteCurve(line, n_radial + 1, "Progression", radial_progression)
+        for arc in (arc_a, arc_b):
+            gmsh.model.mesh.setTransfiniteCurve(arc, n_circumferential + 1)
+        gmsh.model.mesh.setTransfiniteSurface(base, cornerTags=[p_ax, p_bx, p_by, p_ay])
+        gmsh.model.mesh.setRecombine(2, base)
+
+        T = ThickCylinderTags
+        names = {
+            T.INNER: "inner", T.OUTER: "outer", T.SYMMETRY_X: "symmetry_x",
+            T.SYMMETRY_Y: "symmetry_y", T.FACES_Z: "faces_z",
+        }  # fmt: skip
+        groups: dict[int, list[int]] = {tag: [] for tag in names}
+        tol = _EPS * 10 * b
+        for s in sorted(_surfaces_of(volumes)):
+            lo = np.array(gmsh.model.getBoundingBox(2, s)[:3])
+            hi = np.array(gmsh.model.getBoundingBox(2, s)[3:])
+            if hi[2] - lo[2] < tol:
+                groups[T.FACES_Z].append(s)
+            elif hi[0] < tol:
+                groups[T.SYMMETRY_X].append(s)
+            elif hi[1] < tol:
+                groups[T.SYMMETRY_Y].append(s)
+            elif abs(hi[0] - a) < 1e-3 * a:
+                groups[T.INNER].append(s)
+            elif abs(hi[0] - b) < 1e-3 * b:
+                groups[T.OUTER].append(s)
+            else:
+                raise RuntimeError(f"cannot classify surface {s} with bounding box {lo}-{hi}")
+        for tag, surfaces in groups.items():
+            if not surfaces:
+                raise RuntimeError(f"no surface found for tag {tag} ({names[tag]})")
+            _add_group(2, surfaces, tag, names[tag])
+        _add_group(3, volumes, T.BODY, "tube")
+        gmsh.model.mesh.generate(3)
+
+    return _mesh_from_gmsh(comm, "thick_cylinder", build, msh_file)

@@ -1,0 +1,59 @@
+"""Write the project's gmsh meshes (``.msh``) with the builders of ``dolfinx_nnqem.meshing``.
+
+    python meshes/generate.py                 # all models, default parameters, into meshes/
+    python meshes/generate.py two_beams --refine 2 --output-dir /tmp
+
+Written files: ``two_beams.msh`` (the seed benchmark, ``benchmark-two-beams.md``; with
+``--refine n``: ``two_beams_refine{n}.msh``), ``stacked_blocks.msh`` and
+``thick_cylinder.msh``. They hold the physical groups (tags) documented in
+``TwoBeamsTags``, ``StackedBlocksTags`` and ``ThickCylinderTags``; read them back with
+``dolfinx_nnqem.compat.read_from_msh``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import pathlib
+
+import dolfinx_nnqem  # noqa: F401  (first: the PyPI wheel loads MPI/PETSc before dolfinx)
+from dolfinx_nnqem import meshing
+from mpi4py import MPI
+
+MODELS = ("two_beams", "stacked_blocks", "thick_cylinder")
+
+
+def main(argv: list[str] | None = None) -> list[pathlib.Path]:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("models", nargs="*", metavar="MODEL",
+                        help=f"models to write, of {', '.join(MODELS)} (default: all)")
+    parser.add_argument("--output-dir", type=pathlib.Path, default=pathlib.Path(__file__).parent,
+                        help="directory of the .msh files (default: this script's directory)")
+    parser.add_argument("--refine", type=int, default=1,
+                        help="two beams: element edge 0.2/refine m (default 1)")
+    args = parser.parse_args(argv)
+    unknown = sorted(set(args.models) - set(MODELS))
+    if unknown:
+        parser.error(f"unknown model(s) {', '.join(unknown)}; choose from {', '.join(MODELS)}")
+
+    comm = MPI.COMM_SELF  # a file writer: no need to distribute the mesh
+    args.output_dir.mkdir(parents=True, exist_ok=True)
+    written = []
+    for model in args.models or MODELS:
+        if model == "two_beams":
+            name = "two_beams.msh" if args.refine == 1 else f"two_beams_refine{args.refine}.msh"
+            path = args.output_dir / name
+            mesh, _, _ = meshing.build_two_beams(comm, refine=args.refine, msh_file=path)
+        elif model == "stacked_blocks":
+            path = args.output_dir / "stacked_blocks.msh"
+            mesh, _, _ = meshing.build_stacked_blocks(comm, msh_file=path)
+        else:
+            path = args.output_dir / "thick_cylinder.msh"
+            mesh, _, _ = meshing.build_thick_cylinder(comm, msh_file=path)
+        num_cells = mesh.topology.index_map(mesh.topology.dim).size_global
+        print(f"{path}: {num_cells} hexahedra, {mesh.geometry.x.shape[0]} nodes")
+        written.append(path)
+    return written
+
+
+if __name__ == "__main__":
+    main()
