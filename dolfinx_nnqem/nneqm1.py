@@ -221,7 +221,7 @@ class NNEQM1Solver:
 
         t0 = time.perf_counter()
         result = solve_nonsmooth(residual, z_m.reshape(-1) / z_scale, tol=tol / F,
-                                 max_iter=self.inner_max_iterations)
+                                 max_iter=self.inner_max_iterations, watchdog=6)
         result.x = result.x * z_scale
         self._tick("contact", t0)
         return result

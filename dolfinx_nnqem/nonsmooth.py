@@ -196,6 +196,8 @@ def solve_nonsmooth(
     min_step: float = 1e-10,
     rcond_min: float = 1e-12,
     log: LogFunction | None = None,
+    watchdog: int = 0,
+    max_increase: float = 1e8,
 ) -> NonsmoothResult:
     """Solve H(x) = 0 by damped generalized Newton with a Levenberg--Marquardt fallback.
 
@@ -227,6 +229,13 @@ def solve_nonsmooth(
     log
         Optional ``log(iteration, norm_H, step_length, kind)``, called once for the initial
         iterate (kind "initial", step 0) and after every step (kind "newton" or "lm").
+    watchdog
+        Chamberlain's watchdog: up to this many full Newton steps in a row are accepted even
+        when Psi does not decrease (each may grow Psi at most ``max_increase``-fold); after
+        them, if no iterate improved on the best one, the iteration returns to the best
+        iterate and continues with line-searched steps. A change of active branch (a pair
+        opening or closing) makes Psi jump although the full step is the right one; 0 (the
+        default) is the plain monotone method.
 
     Returns
     -------
@@ -271,13 +280,29 @@ def solve_nonsmooth(
     if log is not None:
         log(0, norm, 0.0, "initial")
 
+    best = (norm, x, F, A)  # watchdog: best iterate so far
+    free_steps = 0  # full steps accepted in a row without a new best
     for k in range(1, max_iter + 1):
         if norm <= tol:
             break
+        if norm < (1.0 - armijo) * best[0]:
+            best, free_steps = (norm, x, F, A), 0
+        elif free_steps >= watchdog > 0:
+            norm, x, F, A = best  # back to the best iterate; monotone steps from there
+            free_steps = -1
         # 1. generalized Newton step, if J is regular enough
         dx = _newton_direction(A, F, rcond_min)
-        step, rejections = _line_search(residual, x, F, A, dx, scale, k, armijo, min_step)
-        result.line_search_steps += rejections
+        step = None
+        if dx is not None and watchdog > 0 and free_steps >= 0:
+            x_full = x + dx
+            F_full, A_full = _evaluate(residual, x_full, scale, k)
+            if float(F_full @ F_full) <= max_increase * float(F @ F):
+                step = (1.0, x_full, F_full, A_full)
+                free_steps += 1
+        if step is None:
+            step, rejections = _line_search(residual, x, F, A, dx, scale, k, armijo, min_step)
+            result.line_search_steps += rejections
+            free_steps = max(free_steps, 0)
         kind = "newton"
         if step is None:
             # 2. Levenberg-Marquardt fallback
