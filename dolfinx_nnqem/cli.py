@@ -12,9 +12,9 @@ import logging
 import sys
 from pathlib import Path
 
-EXIT_OK, EXIT_DIVERGED, EXIT_USAGE, EXIT_BAD_INPUT = 0, 1, 2, 3
+from dolfinx_nnqem.solvers import METHODS
 
-METHODS = ("monolithic", "nneqm1", "nneqm2")
+EXIT_OK, EXIT_DIVERGED, EXIT_USAGE, EXIT_BAD_INPUT = 0, 1, 2, 3
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -42,6 +42,15 @@ def _parser() -> argparse.ArgumentParser:
     tb.add_argument("--refine", type=int, default=1, help="divide the 0.2 m elements by this factor")
     tb.add_argument("--out", default="results/two_beams", help="output folder (default results/two_beams)")
     tb.add_argument("--no-fields", action="store_true", help="skip the XDMF field output")
+
+    run = sub.add_parser("run", parents=[common], help="solve a problem file (TOML)",
+                         description="Solve the problem described in a TOML problem file "
+                                     "(format: docs/problem-file.md; example: demos/two_beams.toml).")
+    run.add_argument("problem", help="the problem file (.toml)")
+    run.add_argument("--out", default=None, help="output folder (default: [output].folder of the file)")
+    run.add_argument("--method", choices=METHODS, default=None, help="override [solver].method")
+    run.add_argument("--increments", type=int, default=None, help="override [solver].increments")
+    run.add_argument("--check", action="store_true", help="only check the file and build the problem")
     return parser
 
 
@@ -84,6 +93,71 @@ def _two_beams(args) -> int:
     return EXIT_OK
 
 
+def _progress_bar(total: int, method: str):
+    """A one-line progress bar on stderr (only on a terminal, only on rank 0)."""
+    from mpi4py import MPI
+
+    if MPI.COMM_WORLD.rank != 0 or not sys.stderr.isatty():
+        return None
+
+    def show(result):
+        width = 30
+        done = min(result.load_factor, 1.0)
+        bar = "#" * int(round(width * done)) + "." * (width - int(round(width * done)))
+        sys.stderr.write(f"\r[{bar}] {method}: increment {result.index} (load factor {result.load_factor:.3f}),"
+                         f" {result.iterations} iterations ")
+        if done >= 1.0:
+            sys.stderr.write("\n")
+        sys.stderr.flush()
+
+    return show
+
+
+def _run(args) -> int:
+    from mpi4py import MPI
+
+    from dolfinx_nnqem.output import ResultsWriter
+    from dolfinx_nnqem.problem import SolverOptions
+    from dolfinx_nnqem.problem_file import build_problem, load_problem_file
+    from dolfinx_nnqem.solvers import make_solver
+    from dolfinx_nnqem.stepping import solve_load_steps
+
+    spec = load_problem_file(args.problem)
+    solver_spec = spec.solver
+    method = args.method or solver_spec["method"]
+    increments = args.increments or solver_spec["increments"]
+    comm = MPI.COMM_WORLD
+    problem = build_problem(spec, comm)
+    rank0 = comm.rank == 0
+    if rank0 and not args.quiet:
+        print(f"{args.problem}: {problem.V.dofmap.index_map.size_global * 3} displacement dofs, "
+              f"{problem.num_pairs} contact pairs, {problem.state.num_gauss_points()} Gauss points, "
+              f"method {method}, {increments} increments", flush=True)
+    if args.check:
+        return EXIT_OK
+    options = SolverOptions(rtol=solver_spec["rtol"], atol=solver_spec["atol"],
+                            max_iterations=solver_spec["max_iterations"],
+                            petsc_options=solver_spec["petsc_options"])
+    solver = make_solver(method, problem, options)
+    out = Path(args.out or spec.output["folder"])
+    writer = ResultsWriter(problem, method, out, increments, probes=spec.output["probes"] or None,
+                           fields=spec.output["fields"], extra={"problem_file": str(args.problem)})
+    callbacks = [writer]
+    bar = None if args.quiet else _progress_bar(increments, method)
+    if bar is not None:
+        callbacks.append(bar)
+    try:
+        solve_load_steps(problem, solver, increments, max_cutbacks=solver_spec["max_cutbacks"],
+                         callbacks=callbacks)
+    finally:
+        writer.close()
+    if rank0 and not args.quiet:
+        s = writer.summary.data
+        print(f"converged: {s['converged']}; iterations {s['iterations']}; global equilibrium "
+              f"{s.get('equilibrium_residual', float('nan')):.2e}; results in {out}/", flush=True)
+    return EXIT_OK
+
+
 def _available(method: str) -> bool:
     import importlib.util
 
@@ -94,7 +168,7 @@ def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     args.verbose = getattr(args, "verbose", 0)
     args.quiet = getattr(args, "quiet", False)
-    if args.command == "two-beams" and args.increments < 1:
+    if getattr(args, "increments", None) is not None and args.increments < 1:
         print("dolfinx-nnqem: error: --increments must be >= 1", file=sys.stderr)
         return EXIT_USAGE
     _configure_logging(args.verbose, args.quiet)
@@ -104,10 +178,12 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if args.command == "two-beams":
             return _two_beams(args)
+        if args.command == "run":
+            return _run(args)
     except ConvergenceError as error:
         print(f"dolfinx-nnqem: {error}", file=sys.stderr)
         return EXIT_DIVERGED
-    except (ValueError, TypeError) as error:
+    except (ValueError, TypeError, OSError) as error:
         print(f"dolfinx-nnqem: bad input: {error}", file=sys.stderr)
         return EXIT_BAD_INPUT
     return EXIT_USAGE

@@ -20,6 +20,7 @@ from dolfinx_nnqem.material import VonMises
 from dolfinx_nnqem.meshing import TwoBeamsTags as T
 from dolfinx_nnqem.meshing import build_two_beams
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Gravity, SolverOptions, Traction
+from dolfinx_nnqem.solvers import make_solver
 
 MATERIAL = VonMises(E=2.0e10, nu=0.17, sigma_y0=5.0e5, H=2.0e10, density=2400.0)
 MU_F = 0.5
@@ -55,24 +56,6 @@ def two_beams_problem(comm: MPI.Comm = MPI.COMM_WORLD, *, law: str = "alart-curn
         body_forces=[Gravity(GRAVITY)],
         contact=Contact(T.CONTACT1, T.CONTACT2, mu_f=MU_F, law=law, r=r),
     )
-
-
-def make_solver(method: str, problem: ContactProblem, options: SolverOptions | None = None, **kwargs):
-    """The solver called ``method``: "monolithic", "nneqm1" or "nneqm2"."""
-    method = method.lower()
-    if method == "monolithic":
-        from dolfinx_nnqem.monolithic import MonolithicSolver
-
-        return MonolithicSolver(problem, options, **kwargs)
-    if method == "nneqm1":
-        from dolfinx_nnqem.nneqm1 import NNEQM1Solver
-
-        return NNEQM1Solver(problem, options, **kwargs)
-    if method == "nneqm2":
-        from dolfinx_nnqem.nneqm2 import NNEQM2Solver
-
-        return NNEQM2Solver(problem, options, **kwargs)
-    raise ValueError(f"unknown method {method!r}; expected 'monolithic', 'nneqm1' or 'nneqm2'")
 
 
 def run_two_beams(method: str = "monolithic", increments: int = 15, out: str | Path = "results/two_beams",

@@ -1,0 +1,356 @@
+"""Problem files (TOML) for ``dolfinx-nnqem run PROBLEM.toml``.
+
+A problem file names a mesh with physical tags and everything :class:`ContactProblem` takes::
+
+    [mesh]
+    file = "../meshes/two_beams.msh"      # gmsh .msh, or .xdmf (see below); relative to this file
+
+    [materials.1]                         # cell tag → material
+    E = 2.0e10
+    nu = 0.17
+    sigma_y0 = 5.0e5                      # omit for an elastic material
+    H = 2.0e10
+    density = 2400.0
+
+    [contact]
+    surface1 = 21                         # facet tags
+    surface2 = 22
+    mu_f = 0.5
+    law = "alart-curnier"                 # or "polar"
+
+    [[dirichlet]]
+    tag = 11                              # u = 0 (all components) on facets tagged 11
+    [[dirichlet]]
+    tag = 31
+    value = 0.001                         # u_x = ℓ · 1 mm
+    components = [0]
+
+    [[traction]]
+    tag = 13
+    value = [1.0e5, -1.0e5, 0.5e5]        # Pa
+    [[pressure]]
+    tag = 5
+    p = 1.0e6
+    [[body_force]]
+    value = [0.0, -1.0e4, 0.0]            # N/m³
+    cell_tag = 2                          # optional
+    [gravity]
+    g = [0.0, -9.81, 0.0]                 # uses each material's density
+
+    [solver]
+    method = "monolithic"                 # "nneqm1", "nneqm2"
+    increments = 15
+    max_cutbacks = 5
+    rtol = 1e-10
+    max_iterations = 30
+    [solver.petsc_options]
+    pc_factor_mat_solver_type = "mumps"
+
+    [output]
+    folder = "results/my_run"             # relative to the current directory
+    fields = true
+    [output.probes]
+    "tip" = [2.0, 0.0, 0.0]
+
+An XDMF mesh takes ``file = "mesh.xdmf"``, ``mesh_name = "mesh"``, ``cell_tags = "cell_tags"``
+and ``facet_tags = "facet_tags"`` (the names of the grids in the file).
+Every key is checked: an unknown or malformed one raises :class:`ProblemFileError` naming it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10
+    import tomli as tomllib  # type: ignore[no-redef]
+
+
+class ProblemFileError(ValueError):
+    """A problem file is malformed or inconsistent; the message names the key."""
+
+
+SECTIONS = {"mesh", "materials", "contact", "dirichlet", "traction", "pressure", "body_force",
+            "gravity", "solver", "output"}
+METHODS = ("monolithic", "nneqm1", "nneqm2")
+
+
+@dataclass
+class ProblemSpec:
+    """The checked content of a problem file (paths resolved)."""
+
+    path: Path
+    mesh: dict
+    materials: dict
+    contact: dict | None
+    dirichlet: list
+    traction: list
+    pressure: list
+    body_force: list
+    gravity: dict | None
+    solver: dict
+    output: dict = field(default_factory=dict)
+
+
+def load_problem_file(path: str | Path) -> ProblemSpec:
+    """Read and check a problem file; raises :class:`ProblemFileError` on the first problem."""
+    path = Path(path)
+    if not path.is_file():
+        raise ProblemFileError(f"{path}: no such file")
+    try:
+        data = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as error:
+        raise ProblemFileError(f"{path}: not valid TOML: {error}") from None
+    unknown = sorted(set(data) - SECTIONS)
+    if unknown:
+        raise ProblemFileError(f"{path}: unknown section(s) {unknown}; expected some of {sorted(SECTIONS)}")
+    where = str(path)
+    mesh = _mesh_section(_table(data, "mesh", where, required=True), path.parent, where)
+    materials = _materials_section(_table(data, "materials", where, required=True), where)
+    contact = _contact_section(data.get("contact"), where)
+    dirichlet = [_dirichlet_entry(e, f"{where}: dirichlet[{i}]") for i, e in enumerate(_array(data, "dirichlet", where))]
+    traction = [_traction_entry(e, f"{where}: traction[{i}]") for i, e in enumerate(_array(data, "traction", where))]
+    pressure = [_pressure_entry(e, f"{where}: pressure[{i}]") for i, e in enumerate(_array(data, "pressure", where))]
+    body_force = [_body_force_entry(e, f"{where}: body_force[{i}]")
+                  for i, e in enumerate(_array(data, "body_force", where))]
+    gravity = data.get("gravity")
+    if gravity is not None:
+        gravity = _checked_keys(gravity, {"g"}, {"g"}, f"{where}: [gravity]")
+        gravity["g"] = _vector(gravity["g"], f"{where}: gravity.g")
+    solver = _solver_section(data.get("solver", {}), where)
+    output = _output_section(data.get("output", {}), where)
+    if not dirichlet:
+        raise ProblemFileError(f"{where}: no [[dirichlet]] entry; a quasi-static problem needs supports")
+    if solver["method"] != "monolithic" and contact is None:
+        raise ProblemFileError(f"{where}: solver.method = {solver['method']!r} needs a [contact] section")
+    return ProblemSpec(path, mesh, materials, contact, dirichlet, traction, pressure, body_force,
+                       gravity, solver, output)
+
+
+# -- sections ---------------------------------------------------------------------------------
+def _table(data: dict, key: str, where: str, required: bool = False) -> dict:
+    if key not in data:
+        if required:
+            raise ProblemFileError(f"{where}: missing section [{key}]")
+        return {}
+    if not isinstance(data[key], dict):
+        raise ProblemFileError(f"{where}: [{key}] must be a table, got {type(data[key]).__name__}")
+    return data[key]
+
+
+def _array(data: dict, key: str, where: str) -> list:
+    value = data.get(key, [])
+    if not isinstance(value, list) or not all(isinstance(e, dict) for e in value):
+        raise ProblemFileError(f"{where}: {key} must be an array of tables ([[{key}]] entries)")
+    return value
+
+
+def _checked_keys(table: dict, allowed: set, required: set, where: str) -> dict:
+    if not isinstance(table, dict):
+        raise ProblemFileError(f"{where}: must be a table")
+    unknown = sorted(set(table) - allowed)
+    if unknown:
+        raise ProblemFileError(f"{where}: unknown key(s) {unknown}; allowed: {sorted(allowed)}")
+    missing = sorted(required - set(table))
+    if missing:
+        raise ProblemFileError(f"{where}: missing key(s) {missing}")
+    return dict(table)
+
+
+def _number(value, where: str, *, positive=False, nonnegative=False, integer=False) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ProblemFileError(f"{where} = {value!r}: expected a number")
+    if integer and not isinstance(value, int):
+        raise ProblemFileError(f"{where} = {value!r}: expected an integer")
+    if not math.isfinite(value):
+        raise ProblemFileError(f"{where} = {value!r}: expected a finite number")
+    if positive and value <= 0:
+        raise ProblemFileError(f"{where} = {value!r}: expected a value > 0")
+    if nonnegative and value < 0:
+        raise ProblemFileError(f"{where} = {value!r}: expected a value >= 0")
+    return value
+
+
+def _tag(value, where: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+        raise ProblemFileError(f"{where} = {value!r}: expected a non-negative integer tag")
+    return value
+
+
+def _vector(value, where: str, length: int = 3) -> list:
+    if not isinstance(value, list) or len(value) != length:
+        raise ProblemFileError(f"{where} = {value!r}: expected a list of {length} numbers")
+    return [_number(v, f"{where}[{i}]") for i, v in enumerate(value)]
+
+
+def _mesh_section(mesh: dict, folder: Path, where: str) -> dict:
+    mesh = _checked_keys(mesh, {"file", "mesh_name", "cell_tags", "facet_tags"}, {"file"}, f"{where}: [mesh]")
+    file = folder / mesh["file"]
+    if not file.is_file():
+        raise ProblemFileError(f"{where}: mesh.file = {mesh['file']!r}: no such file ({file})")
+    if file.suffix not in (".msh", ".xdmf"):
+        raise ProblemFileError(f"{where}: mesh.file = {mesh['file']!r}: expected a gmsh .msh or an .xdmf file")
+    mesh["file"] = file
+    mesh.setdefault("mesh_name", "mesh")
+    mesh.setdefault("cell_tags", "cell_tags")
+    mesh.setdefault("facet_tags", "facet_tags")
+    return mesh
+
+
+def _materials_section(materials: dict, where: str) -> dict:
+    from dolfinx_nnqem.material import VonMises
+
+    if not materials:
+        raise ProblemFileError(f"{where}: [materials] is empty; give [materials.TAG] per cell tag")
+    out = {}
+    for key, params in materials.items():
+        w = f"{where}: [materials.{key}]"
+        try:
+            tag = int(key)
+        except ValueError:
+            raise ProblemFileError(f"{w}: the key must be a cell tag (an integer)") from None
+        params = _checked_keys(params, {"E", "nu", "sigma_y0", "H", "density"}, {"E", "nu"}, w)
+        for name, value in params.items():
+            _number(value, f"{w}.{name}")
+        try:
+            out[tag] = VonMises(**{k: float(v) for k, v in params.items()})
+        except ValueError as error:
+            raise ProblemFileError(f"{w}: {error}") from None
+    return out
+
+
+def _contact_section(contact, where: str) -> dict | None:
+    if contact is None:
+        return None
+    w = f"{where}: [contact]"
+    contact = _checked_keys(contact, {"surface1", "surface2", "mu_f", "law", "r", "tolerance", "search_distance"},
+                            {"surface1", "surface2", "mu_f"}, w)
+    contact["surface1"] = _tag(contact["surface1"], f"{w}.surface1")
+    contact["surface2"] = _tag(contact["surface2"], f"{w}.surface2")
+    if contact["surface1"] == contact["surface2"]:
+        raise ProblemFileError(f"{w}: surface1 and surface2 are both tag {contact['surface1']}")
+    contact["mu_f"] = float(_number(contact["mu_f"], f"{w}.mu_f", nonnegative=True))
+    if contact.get("law", "alart-curnier") not in ("alart-curnier", "cartesian", "polar", "seed"):
+        raise ProblemFileError(f"{w}.law = {contact['law']!r}: expected 'alart-curnier' or 'polar'")
+    for key in ("r", "tolerance", "search_distance"):
+        if key in contact:
+            contact[key] = float(_number(contact[key], f"{w}.{key}", positive=True))
+    return contact
+
+
+def _dirichlet_entry(entry: dict, where: str) -> dict:
+    entry = _checked_keys(entry, {"tag", "value", "components"}, {"tag"}, where)
+    entry["tag"] = _tag(entry["tag"], f"{where}.tag")
+    components = entry.get("components")
+    if components is not None:
+        if (not isinstance(components, list) or not components
+                or any(c not in (0, 1, 2) or isinstance(c, bool) for c in components)):
+            raise ProblemFileError(f"{where}.components = {components!r}: expected a list of 0, 1, 2")
+    n = 3 if components is None else len(components)
+    value = entry.get("value", 0.0)
+    if isinstance(value, list):
+        entry["value"] = _vector(value, f"{where}.value", n)
+    else:
+        entry["value"] = float(_number(value, f"{where}.value"))
+    return entry
+
+
+def _traction_entry(entry: dict, where: str) -> dict:
+    entry = _checked_keys(entry, {"tag", "value"}, {"tag", "value"}, where)
+    entry["tag"] = _tag(entry["tag"], f"{where}.tag")
+    entry["value"] = _vector(entry["value"], f"{where}.value")
+    return entry
+
+
+def _pressure_entry(entry: dict, where: str) -> dict:
+    entry = _checked_keys(entry, {"tag", "p"}, {"tag", "p"}, where)
+    entry["tag"] = _tag(entry["tag"], f"{where}.tag")
+    entry["p"] = float(_number(entry["p"], f"{where}.p"))
+    return entry
+
+
+def _body_force_entry(entry: dict, where: str) -> dict:
+    entry = _checked_keys(entry, {"value", "cell_tag"}, {"value"}, where)
+    entry["value"] = _vector(entry["value"], f"{where}.value")
+    if "cell_tag" in entry:
+        entry["cell_tag"] = _tag(entry["cell_tag"], f"{where}.cell_tag")
+    return entry
+
+
+def _solver_section(solver: dict, where: str) -> dict:
+    w = f"{where}: [solver]"
+    solver = _checked_keys(solver, {"method", "increments", "max_cutbacks", "rtol", "atol", "max_iterations",
+                                    "petsc_options"}, set(), w)
+    solver.setdefault("method", "monolithic")
+    if solver["method"] not in METHODS:
+        raise ProblemFileError(f"{w}.method = {solver['method']!r}: expected one of {list(METHODS)}")
+    solver["increments"] = int(_number(solver.get("increments", 15), f"{w}.increments", positive=True, integer=True))
+    solver["max_cutbacks"] = int(_number(solver.get("max_cutbacks", 5), f"{w}.max_cutbacks",
+                                         nonnegative=True, integer=True))
+    solver["max_iterations"] = int(_number(solver.get("max_iterations", 30), f"{w}.max_iterations",
+                                           positive=True, integer=True))
+    for key, default in (("rtol", 1e-10), ("atol", 1e-12)):
+        solver[key] = float(_number(solver.get(key, default), f"{w}.{key}", positive=True))
+    options = solver.get("petsc_options", {})
+    if not isinstance(options, dict) or not all(isinstance(v, (str, int, float, bool)) for v in options.values()):
+        raise ProblemFileError(f"{w}.petsc_options must be a table of PETSc option = value")
+    solver["petsc_options"] = {k: (str(v).lower() if isinstance(v, bool) else v) for k, v in options.items()}
+    return solver
+
+
+def _output_section(output: dict, where: str) -> dict:
+    w = f"{where}: [output]"
+    output = _checked_keys(output, {"folder", "fields", "probes"}, set(), w)
+    output.setdefault("folder", "results/" + Path(where).stem)
+    if not isinstance(output["folder"], str):
+        raise ProblemFileError(f"{w}.folder must be a string")
+    if not isinstance(output.setdefault("fields", True), bool):
+        raise ProblemFileError(f"{w}.fields must be true or false")
+    probes = output.setdefault("probes", {})
+    if not isinstance(probes, dict):
+        raise ProblemFileError(f"{w}.probes must be a table name = [x, y, z]")
+    output["probes"] = {name: _vector(x, f"{w}.probes.{name}") for name, x in probes.items()}
+    return output
+
+
+# -- building ---------------------------------------------------------------------------------
+def read_mesh(spec: ProblemSpec, comm):
+    """The mesh and its tags from ``spec.mesh`` (gmsh .msh or XDMF)."""
+    from dolfinx_nnqem import compat
+
+    file = spec.mesh["file"]
+    if file.suffix == ".msh":
+        mesh, cell_tags, facet_tags = compat.read_from_msh(str(file), comm, 0, gdim=3)
+    else:
+        from dolfinx.io import XDMFFile
+
+        with XDMFFile(comm, str(file), "r") as xdmf:
+            mesh = xdmf.read_mesh(name=spec.mesh["mesh_name"])
+            mesh.topology.create_connectivity(mesh.topology.dim - 1, mesh.topology.dim)
+            cell_tags = xdmf.read_meshtags(mesh, name=spec.mesh["cell_tags"])
+            facet_tags = xdmf.read_meshtags(mesh, name=spec.mesh["facet_tags"])
+    return mesh, cell_tags, facet_tags
+
+
+def build_problem(spec: ProblemSpec, comm):
+    """The :class:`ContactProblem` of a checked problem file."""
+    from dolfinx_nnqem.problem import (BodyForce, Contact, ContactProblem, Dirichlet, Gravity, Pressure,
+                                       Traction)
+
+    mesh, cell_tags, facet_tags = read_mesh(spec, comm)
+    contact = None
+    if spec.contact is not None:
+        contact = Contact(**spec.contact)
+    loads = [Traction(e["tag"], e["value"]) for e in spec.traction]
+    loads += [Pressure(e["tag"], e["p"]) for e in spec.pressure]
+    body = [BodyForce(e["value"], e.get("cell_tag")) for e in spec.body_force]
+    if spec.gravity is not None:
+        body.append(Gravity(spec.gravity["g"]))
+    return ContactProblem(
+        mesh, cell_tags, facet_tags, materials=spec.materials,
+        dirichlet=[Dirichlet(e["tag"], e.get("value", 0.0), e.get("components")) for e in spec.dirichlet],
+        tractions=loads, body_forces=body, contact=contact,
+    )

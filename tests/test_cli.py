@@ -1,0 +1,87 @@
+"""The command line and problem files: a real run, every malformed field named, exit codes."""
+
+import json
+from pathlib import Path
+
+import pytest
+
+from dolfinx_nnqem.cli import EXIT_BAD_INPUT, EXIT_OK, EXIT_USAGE, main
+from dolfinx_nnqem.problem_file import ProblemFileError, load_problem_file
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLE = ROOT / "demos" / "two_beams.toml"
+
+
+def test_run_two_beams_problem_file(tmp_path):
+    assert main(["-q", "run", str(EXAMPLE), "--out", str(tmp_path)]) == EXIT_OK
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    print(f"\n  iterations {summary['iterations']}; equilibrium {summary['equilibrium_residual']:.2e}; "
+          f"states {[p['state'] for p in summary['pairs']]}")
+    assert summary["converged"] and len(summary["pairs"]) == 9
+    assert summary["equilibrium_residual"] < 1e-8
+    assert (tmp_path / "fields.xdmf").is_file() and (tmp_path / "pairs.pvd").is_file()
+    assert len(list((tmp_path / "pairs").glob("pairs_*.csv"))) == 15
+
+
+def _write(tmp_path, text):
+    mesh = (ROOT / "meshes" / "two_beams.msh").as_posix()
+    path = tmp_path / "p.toml"
+    path.write_text(text.replace("MESH", mesh))
+    return path
+
+
+GOOD = """
+[mesh]
+file = "MESH"
+[materials.1]
+E = 1.0e9
+nu = 0.3
+[materials.2]
+E = 1.0e9
+nu = 0.3
+[contact]
+surface1 = 21
+surface2 = 22
+mu_f = 0.3
+[[dirichlet]]
+tag = 11
+[[dirichlet]]
+tag = 12
+"""
+
+
+@pytest.mark.parametrize("change, named", [
+    (("[mesh]\nfile = \"MESH\"", "[mesh]\nfile = \"nope.msh\""), "mesh.file"),
+    (("nu = 0.3", "nu = 0.6"), "nu"),
+    (("E = 1.0e9", "E = \"stiff\""), "E"),
+    (("mu_f = 0.3", "mu_f = -0.1"), "mu_f"),
+    (("surface2 = 22", "surface2 = 21"), "surface1 and surface2"),
+    (("[[dirichlet]]\ntag = 11", "[[dirichlet]]\ntag = 11\ncomponents = [3]"), "components"),
+    (("[contact]", "[solver]\nmethod = \"newton\"\n[contact]"), "method"),
+    (("[contact]", "[typo]\nx = 1\n[contact]"), "unknown section"),
+    (("mu_f = 0.3", "mu_f = 0.3\nfriction = 1"), "unknown key"),
+    (("[materials.1]", "[materials.one]"), "cell tag"),
+])
+def test_malformed_problem_files_name_the_key(tmp_path, change, named):
+    old, new = change
+    assert old in GOOD
+    path = _write(tmp_path, GOOD.replace(old, new, 1))
+    with pytest.raises(ProblemFileError) as error:
+        load_problem_file(path)
+    print(f"\n  {error.value}")
+    assert named in str(error.value)
+
+
+def test_inconsistent_tags_are_reported_with_exit_code_3(tmp_path, capsys):
+    path = _write(tmp_path, GOOD.replace("tag = 12", "tag = 99"))
+    assert main(["run", str(path), "--check"]) == EXIT_BAD_INPUT
+    err = capsys.readouterr().err
+    print(f"\n  {err.strip()}")
+    assert "99" in err
+
+
+def test_usage_errors_exit_with_code_2(capsys):
+    assert main(["run", str(EXAMPLE), "--increments", "0"]) == EXIT_USAGE
+    with pytest.raises(SystemExit) as error:
+        main(["two-beams", "--method", "fastest"])
+    assert error.value.code == EXIT_USAGE
