@@ -14,6 +14,7 @@ autodoc_member_order = "bysource"
 autodoc_typehints = "none"
 napoleon_numpy_docstring = True
 napoleon_google_docstring = False
+napoleon_use_ivar = True  # "Attributes" sections as fields: NamedTuple fields are documented once
 html_theme = "alabaster"
 suppress_warnings = ["myst.header"]
 
