@@ -135,7 +135,7 @@ def plot_deformed(problem, path: str | os.PathLike, *, field: str = "von_mises",
                                    render_points_as_spheres=True)
     plotter.add_text(f"{title}  (displacements x {scale:.3g})", font_size=10)
     views = {"iso": plotter.view_isometric, "xy": plotter.view_xy, "xz": plotter.view_xz,
-             "yz": plotter.view_yz}
+             "yz": plotter.view_yz, "front": lambda: plotter.view_vector((0.4, 0.5, 1.0), viewup=(0, 1, 0))}
     if camera is not None:
         if camera not in views:
             raise ValueError(f"camera {camera!r}: expected one of {sorted(views)} or None")
