@@ -102,8 +102,10 @@ class NNEQM1Solver:
         X = Bt_dense.duplicate()
         self.ksp.matSolve(Bt_dense, X)
         C_local_rows = p.pairs.B.matMult(X)
-        C = p.pairs.gather(C_local_rows.getDenseArray().reshape(p.pairs.num_local, -1)).reshape(
-            3 * p.num_pairs, 3 * p.num_pairs)
+        nc = p.num_pairs
+        # (3 rows per owned pair) × 3NC, regrouped per pair for the gather (a rank may own none)
+        C_rows = C_local_rows.getDenseArray().reshape(p.pairs.num_local, 9 * nc)
+        C = p.pairs.gather(C_rows).reshape(3 * nc, 3 * nc)
         self._X = X.getDenseArray().copy()  # (owned u rows, 3NC)
         self._C = C
         self._tick("flexibility", t0)

@@ -85,3 +85,21 @@ def test_v10_polar_and_cartesian_laws_agree_on_two_beams():
           f"Cartesian {[r.iterations for r in cartesian]}")
     assert list(tp["state"]) == list(tc["state"])
     assert max(df, du) < 1e-8
+
+
+@pytest.mark.mpi
+def test_v9_nneqm1_on_two_ranks_matches_serial(tmp_path):
+    """NNEQM1 gathers the dense contact problem on every rank; a rank may own no pair."""
+    serial = run_two_beams("nneqm1", 15, tmp_path / "serial", law="alart-curnier", fields=False)
+    cmd = compat.mpiexec() + ["-n", "2", sys.executable, "-m", "dolfinx_nnqem", "-q", "two-beams",
+                              "--method", "nneqm1", "--law", "alart-curnier", "--out", str(tmp_path / "mpi"),
+                              "--no-fields"]
+    run = subprocess.run(cmd, env=compat.mpi_environment(), capture_output=True, text=True, timeout=600)
+    assert run.returncode == 0, run.stderr[-3000:]
+    parallel = json.loads((tmp_path / "mpi" / "summary.json").read_text())
+    f0, u0 = _pair_arrays(serial)
+    f, u = _pair_arrays(parallel)
+    df = np.abs(f - f0).max() / np.abs(f0).max()
+    du = np.abs(u - u0).max() / np.abs(u0).max()
+    print(f"\n  NNEQM1, 2 ranks vs serial: forces {df:.2e}, displacements {du:.2e} (tolerance 1e-8)")
+    assert max(df, du) < 1e-8
