@@ -105,6 +105,8 @@ class MonolithicSolver:
         """Solve for the load factor ``load_factor`` from the last converged state."""
         p = self.problem
         opts = self.options
+        if opts.extrapolate:
+            p.extrapolate(load_factor)
         p.apply_prescribed_displacements(load_factor)
         p.predict_contact()
         report = SolveReport(converged=False, iterations=0,

@@ -137,6 +137,7 @@ class SolverOptions:
     atol: float = 1e-12
     max_iterations: int = 30
     petsc_options: dict = field(default_factory=dict)
+    extrapolate: bool = True  #: start each increment from the secant extrapolation of the last two
 
 
 # -- the problem ------------------------------------------------------------------------------
@@ -438,6 +439,26 @@ class ContactProblem:
         return pin_constrained_directions(self.law, evaluation, z, self.constrained_directions,
                                           self.r * self.characteristic_length())
 
+    def extrapolate(self, load_factor: float) -> None:
+        """Secant predictor: u ← u_n + β (u_n − u_{n−1}), z likewise, β = Δℓ / Δℓ_previous.
+
+        Starts Newton from the linear extrapolation of the last two converged increments
+        instead of from the last one (constrained dofs are set afterwards by
+        :meth:`apply_prescribed_displacements`). Nothing happens before two increments exist.
+        """
+        previous = getattr(self, "_previous", None)
+        if previous is None:
+            return
+        ell_prev, u_prev, z_prev = previous
+        step_prev = self.load_factor_n - ell_prev
+        if step_prev == 0.0:
+            return
+        beta = (load_factor - self.load_factor_n) / step_prev
+        u_n = self.state.u_n.x.array
+        self.u.x.array[:] = u_n + beta * (u_n - u_prev)
+        if self.has_contact:
+            self.z = self.z_n + beta * (self.z_n - z_prev)
+
     def predict_contact(self) -> None:
         """Starting active set: touching pairs (g ≤ 0) with p_n = 0 get a tiny p_n > 0.
 
@@ -456,6 +477,8 @@ class ContactProblem:
     # -- increments --------------------------------------------------------------------------------
     def commit(self) -> None:
         """Accept the current iterate as the converged end of the increment."""
+        self._previous = (self.load_factor_n, self.state.u_n.x.array.copy(),
+                          self.z_n.copy() if self.has_contact else None)
         self.state.commit(self.u)
         self.load_factor_n = self.load_factor
         if self.has_contact:

@@ -26,6 +26,8 @@ class IncrementResult:
     plastic_points: int  #: Gauss points that yielded in this increment
     wall_time_s: float
     cutbacks: int  #: halvings needed before this increment converged
+    commit_time_s: float = 0.0  #: state update (Gauss-point stresses) after convergence
+    output_time_s: float = 0.0  #: time spent in the callbacks (writers)
 
     @property
     def iterations(self) -> int:
@@ -91,18 +93,22 @@ def solve_load_steps(
             logger.warning(f"[{solver.name}] increment to load factor {target:.6g} failed "
                            f"({report.message}); cutback {cutbacks}, new step {step:.6g}")
             continue
+        t_commit = time.perf_counter()
         problem.commit()
         ell = target
         result = IncrementResult(
             index=len(results) + 1, load_factor=target, report=report,
             plastic_points=problem.state.count_plastic_points(),
             wall_time_s=time.perf_counter() - t0, cutbacks=cutbacks,
+            commit_time_s=time.perf_counter() - t_commit,
         )
         results.append(result)
         logger.info(f"[{solver.name}] increment {result.index}: load factor {target:.6g} converged in "
                     f"{report.iterations} iterations, {result.plastic_points} plastic Gauss points")
+        t_out = time.perf_counter()
         for callback in callbacks:
             callback(result)
+        result.output_time_s = time.perf_counter() - t_out
         if cutbacks:  # after a successful cut step, try the original step size again
             step = direction * min(abs(2.0 * step), span / increments)
             cutbacks = max(cutbacks - 1, 0)
