@@ -107,15 +107,19 @@ def reactions(problem, R=None) -> dict[int, np.ndarray]:
     """Support reaction (force of the support on the body, N) summed per Dirichlet tag.
 
     At constrained dofs the residual R = F_int − F_ext(ℓ) − Bᵀλ is exactly the support force.
-    Only constrained components are counted.
+    Only constrained components are counted, each dof once: a dof on two tagged faces (an edge)
+    belongs to the first Dirichlet condition that lists it.
     """
     if R is None:
         R = problem.residual()
     n_owned = problem.V.dofmap.index_map.size_local * 3
     arr = R.getArray(readonly=True)
     out = {}
+    counted = np.zeros(0, dtype=np.int32)
     for tag, dofs in problem.bc_dofs_by_tag.items():
-        owned = dofs[dofs < n_owned]
+        # a dof on two tagged faces (an edge) is counted once, with the first tag listing it
+        owned = np.setdiff1d(dofs[dofs < n_owned], counted)
+        counted = np.union1d(counted, owned)
         local = np.zeros(3)
         np.add.at(local, owned % 3, arr[owned])
         total = np.zeros(3)

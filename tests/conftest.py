@@ -28,3 +28,13 @@ def box_with_face_tags(n=(2, 2, 2), L=(1.0, 1.0, 1.0), cell="hexahedron"):
 @pytest.fixture
 def box_factory():
     return box_with_face_tags
+
+
+def pytest_collection_modifyitems(config, items):
+    """Tests marked ``slow`` run only when asked for (``-m slow``); the default run deselects them."""
+    if "slow" in (config.getoption("markexpr") or ""):
+        return
+    slow = [item for item in items if "slow" in item.keywords]
+    if slow:
+        config.hook.pytest_deselected(items=slow)
+        items[:] = [item for item in items if "slow" not in item.keywords]

@@ -140,3 +140,19 @@ def test_v10_polar_law_on_the_sliding_block_where_it_converges():
     print(f"  polar law converged on {len(polar)} of {len(cartesian)} increments; worst difference "
           f"{worst:.2e} (tolerance 1e-8)" + (f"; stopped: {stopped}" if stopped else ""))
     assert worst < 1e-8
+
+
+def test_reactions_count_a_dof_on_two_tagged_faces_once():
+    """Global equilibrium closes when supports share edges (regression: double-counted reactions)."""
+    from dolfinx_nnqem.results import equilibrium_check
+
+    mesh, ct, ft = build_stacked_blocks(MPI.COMM_WORLD, 1.0, 0.5, 0.5, 1.0, 2, 1, 1, 2)
+    problem = ContactProblem(
+        mesh, ct, ft, materials={T.BODY1: ELASTIC, T.BODY2: ELASTIC},
+        dirichlet=[Dirichlet(T.BOTTOM), Dirichlet(T.BODY1_ZMIN, 0.0, [2]),
+                   Dirichlet(T.BODY2_XMIN, 0.0, [0]), Dirichlet(T.BODY2_ZMIN, 0.0, [2])],
+        tractions=[Pressure(T.TOP, P)], contact=Contact(T.CONTACT1, T.CONTACT2, mu_f=0.3))
+    solve_load_steps(problem, MonolithicSolver(problem, SolverOptions(rtol=1e-12)), 1)
+    check = equilibrium_check(problem)
+    print(f"\n  global imbalance {check['global_imbalance']:.2e}, free-dof residual {check['residual_norm']:.2e}")
+    assert check["global_imbalance"] < 1e-10
