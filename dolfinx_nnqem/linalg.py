@@ -16,10 +16,11 @@ DIRECT_SOLVER_OPTIONS = {
 """Default: MUMPS LU. User ``petsc_options`` are merged over these."""
 
 
-def create_ksp(comm, prefix: str, petsc_options: dict | None = None) -> PETSc.KSP:
-    """A KSP configured from ``DIRECT_SOLVER_OPTIONS`` updated by ``petsc_options`` under ``prefix``."""
+def create_ksp(comm, prefix: str, petsc_options: dict | None = None, defaults: bool = True) -> PETSc.KSP:
+    """A KSP configured under ``prefix`` from ``DIRECT_SOLVER_OPTIONS`` (if ``defaults``) updated
+    by ``petsc_options``."""
     opts = PETSc.Options()
-    for key, value in {**DIRECT_SOLVER_OPTIONS, **(petsc_options or {})}.items():
+    for key, value in {**(DIRECT_SOLVER_OPTIONS if defaults else {}), **(petsc_options or {})}.items():
         opts[prefix + key] = value
     ksp = PETSc.KSP().create(comm)
     ksp.setOptionsPrefix(prefix)
@@ -30,3 +31,81 @@ def create_ksp(comm, prefix: str, petsc_options: dict | None = None) -> PETSc.KS
 def global_norm(array: np.ndarray, comm) -> float:
     """2-norm of an array distributed over ``comm`` (each rank holds its own rows)."""
     return math.sqrt(comm.allreduce(float(np.sum(np.asarray(array) ** 2)), op=MPI.SUM))
+
+
+ITERATIVE_SOLVER_OPTIONS = {
+    # Newton matrix [[K, −BᵀΛ'], [∂_wH·B, ∂_zH]]: FGMRES, Schur-complement fieldsplit
+    "ksp_type": "fgmres",
+    "ksp_rtol": 1e-9,
+    "ksp_atol": 1e-50,
+    "ksp_max_it": 1000,
+    "ksp_gmres_restart": 200,
+    "pc_type": "fieldsplit",
+    "pc_fieldsplit_type": "schur",
+    "pc_fieldsplit_schur_fact_type": "lower",
+    "pc_fieldsplit_schur_precondition": "selfp",
+    "fieldsplit_u_ksp_type": "preonly",
+    "fieldsplit_u_pc_type": "gamg",
+    "fieldsplit_u_pc_gamg_threshold": 0.01,
+    "fieldsplit_u_mg_levels_ksp_type": "chebyshev",
+    "fieldsplit_u_mg_levels_pc_type": "jacobi",
+    "fieldsplit_z_ksp_type": "preonly",
+    "fieldsplit_z_pc_type": "lu",
+}
+"""For large meshes (``SolverOptions(linear_solver="iterative")``): nothing factorises K. The
+u block gets one V-cycle of smoothed-aggregation AMG (GAMG) with the rigid-body near-nullspace;
+the small Schur complement on the pair unknowns is approximated by A11 − A10 diag(K)⁻¹ A01
+("selfp") and factorised (it has 3 rows per pair)."""
+
+ITERATIVE_NO_CONTACT_OPTIONS = {
+    "ksp_type": "cg",
+    "ksp_rtol": 1e-9,
+    "ksp_max_it": 1000,
+    "pc_type": "gamg",
+    "pc_gamg_threshold": 0.01,
+    "mg_levels_ksp_type": "chebyshev",
+    "mg_levels_pc_type": "jacobi",
+}
+"""Without contact: CG + GAMG on K_t (symmetric: associated plasticity, consistent tangent)."""
+
+
+def set_options(prefix: str, options: dict) -> None:
+    """Write ``options`` into the PETSc options database under ``prefix``."""
+    opts = PETSc.Options()
+    for key, value in options.items():
+        opts[prefix + key] = value
+
+
+def rigid_body_modes(V) -> PETSc.NullSpace:
+    """The six rigid-body displacements of a 3D vector space, as an orthonormal PETSc near-nullspace.
+
+    Built from the dof coordinates (translations and infinitesimal rotations about the centroid),
+    orthonormalised across ranks, for smoothed-aggregation AMG.
+    """
+    from dolfinx_nnqem import compat
+
+    imap = V.dofmap.index_map
+    n = imap.size_local
+    x = V.tabulate_dof_coordinates()[:n]
+    centre = np.asarray(V.mesh.comm.allreduce(x.sum(axis=0), op=MPI.SUM)) / max(imap.size_global, 1)
+    x = x - centre
+    modes = []
+    for k in range(6):
+        v = compat.create_vector(V)
+        a = v.getArray().reshape(-1, 3)
+        a[:] = 0.0
+        if k < 3:
+            a[:, k] = 1.0
+        elif k == 3:  # rotation about z: (−y, x, 0)
+            a[:, 0], a[:, 1] = -x[:, 1], x[:, 0]
+        elif k == 4:  # about x: (0, −z, y)
+            a[:, 1], a[:, 2] = -x[:, 2], x[:, 1]
+        else:  # about y: (z, 0, −x)
+            a[:, 0], a[:, 2] = x[:, 2], -x[:, 0]
+        modes.append(v)
+    # Gram–Schmidt (PETSc's NullSpace wants an orthonormal basis)
+    for i, v in enumerate(modes):
+        for w in modes[:i]:
+            v.axpy(-v.dot(w), w)
+        v.normalize()
+    return PETSc.NullSpace().create(vectors=modes, comm=V.mesh.comm)

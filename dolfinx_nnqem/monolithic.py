@@ -23,7 +23,8 @@ from petsc4py import PETSc
 
 from dolfinx_nnqem.block_system import contact_jacobian_blocks, monolithic_matrix
 from dolfinx_nnqem.convergence import IterationRecord, SolveReport, count_states, logger
-from dolfinx_nnqem.linalg import create_ksp, global_norm
+from dolfinx_nnqem.linalg import (ITERATIVE_NO_CONTACT_OPTIONS, ITERATIVE_SOLVER_OPTIONS, create_ksp,
+                                  global_norm, rigid_body_modes, set_options)
 from dolfinx_nnqem.problem import ContactProblem, SolverOptions
 
 
@@ -66,9 +67,43 @@ class MonolithicSolver:
         self.watchdog = watchdog
         self.max_increase = max_increase
         self.prefix = f"nnqem_monolithic_{id(self)}_"
-        self.ksp = create_ksp(problem.comm, self.prefix, self.options.petsc_options)
+        self.iterative = self._use_iterative()
+        if self.iterative:
+            defaults = ITERATIVE_SOLVER_OPTIONS if problem.has_contact else ITERATIVE_NO_CONTACT_OPTIONS
+            set_options(self.prefix, defaults)
+        self.ksp = create_ksp(problem.comm, self.prefix, self.options.petsc_options,
+                              defaults=not self.iterative)
+        self._fieldsplit_ready = False
         self._K = None
         self.timings: dict[str, float] = {}
+
+    def _use_iterative(self) -> bool:
+        choice = self.options.linear_solver
+        if choice not in ("direct", "iterative", "auto"):
+            raise ValueError(f"linear_solver = {choice!r}: expected 'direct', 'iterative' or 'auto'")
+        if choice == "auto":
+            return self.problem.V.dofmap.index_map.size_global * 3 >= self.options.auto_iterative_dofs
+        return choice == "iterative"
+
+    def _configure_iterative(self, J: PETSc.Mat) -> None:
+        """Field split (u, z) and the rigid-body near-nullspace for GAMG, once."""
+        p = self.problem
+        nullspace = rigid_body_modes(p.V)
+        if not p.has_contact:
+            J.setNearNullSpace(nullspace)
+            return
+        if self._fieldsplit_ready:
+            return
+        start, _ = J.getOwnershipRange()
+        n_u = p.V.dofmap.index_map.size_local * 3
+        n_z = 3 * p.pairs.num_local
+        is_u = PETSc.IS().createStride(n_u, first=start, step=1, comm=p.comm)
+        is_z = PETSc.IS().createStride(n_z, first=start + n_u, step=1, comm=p.comm)
+        is_u.compose("nearnullspace", nullspace)  # PCFIELDSPLIT passes it to the u block's GAMG
+        pc = self.ksp.getPC()
+        pc.setFieldSplitIS(("u", is_u), ("z", is_z))
+        self._fieldsplit_ready = True
+        self._keep = (is_u, is_z, nullspace)
 
     # -- residual and merit ----------------------------------------------------------------------
     def _evaluate(self):
@@ -211,6 +246,8 @@ class MonolithicSolver:
         x = b.duplicate()
         t0 = time.perf_counter()
         self.ksp.setOperators(J)
+        if self.iterative:
+            self._configure_iterative(J)
         try:
             self.ksp.solve(b, x)
         except PETSc.Error:
@@ -234,7 +271,8 @@ class MonolithicSolver:
         rhs = JtJ.createVecRight()
         J.multTranspose(F, rhs)
         x = rhs.duplicate()
-        ksp = create_ksp(self.problem.comm, self.prefix, self.options.petsc_options)
+        # LM solves JᵀJ directly (MUMPS) whatever the Newton solver: it is the rare fallback
+        ksp = create_ksp(self.problem.comm, self.prefix + "lm_", {})
         ksp.setOperators(JtJ)
         ksp.solve(rhs, x)
         ksp.destroy()

@@ -138,6 +138,8 @@ class SolverOptions:
     max_iterations: int = 30
     petsc_options: dict = field(default_factory=dict)
     extrapolate: bool = True  #: start each increment from the secant extrapolation of the last two
+    linear_solver: str = "direct"  #: "direct" (MUMPS LU), "iterative" (Krylov + GAMG), or "auto"
+    auto_iterative_dofs: int = 300_000  #: with "auto": iterative from this many displacement dofs
 
 
 # -- the problem ------------------------------------------------------------------------------

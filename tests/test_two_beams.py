@@ -103,3 +103,21 @@ def test_v9_nneqm1_on_two_ranks_matches_serial(tmp_path):
     du = np.abs(u - u0).max() / np.abs(u0).max()
     print(f"\n  NNEQM1, 2 ranks vs serial: forces {df:.2e}, displacements {du:.2e} (tolerance 1e-8)")
     assert max(df, du) < 1e-8
+
+
+def test_iterative_linear_solver_gives_the_direct_answer(serial_monolithic):
+    """linear_solver="iterative" (FGMRES, Schur fieldsplit, GAMG on K): the same Newton iterates."""
+    from dolfinx_nnqem.monolithic import MonolithicSolver
+    from dolfinx_nnqem.problem import SolverOptions
+    from dolfinx_nnqem.results import pair_table
+    from dolfinx_nnqem.stepping import solve_load_steps
+    from dolfinx_nnqem.two_beams import two_beams_problem
+
+    problem = two_beams_problem()
+    results = solve_load_steps(problem, MonolithicSolver(problem, SolverOptions(linear_solver="iterative")), 15)
+    f = pair_table(problem)["force_on_body1"]
+    f0, _ = _pair_arrays(serial_monolithic)
+    diff = np.abs(f - f0).max() / np.abs(f0).max()
+    print(f"\n  iterative vs direct: pair forces {diff:.2e} (tolerance 1e-8); Newton iterations "
+          f"{[r.iterations for r in results]} vs {serial_monolithic['iterations']}")
+    assert diff < 1e-8
