@@ -235,6 +235,34 @@ class PlasticState:
         for f in (self.sigma_n, self.p_n, self.dp_n, self.u_n):
             f.x.scatter_forward()
 
+    def commit_values(self, u: fem.Function, sigma: np.ndarray, dp: np.ndarray) -> None:
+        """Accept ``u`` as converged with Gauss-point values computed by the caller.
+
+        For solvers whose stress update is not this class's radial return (NNEQM2 integrates
+        the flow with directions frozen over the increment): σ_n ← ``sigma``,
+        Δp_n ← ``dp``, p_n ← p_n + ``dp``, u_n ← ``u``.
+
+        Parameters
+        ----------
+        sigma
+            Stresses at this rank's OWNED Gauss points, shape ``(n_owned, 3, 3)`` (or flat),
+            in the order of :attr:`W_tensor`'s owned dofs.
+        dp
+            Equivalent plastic strain increments at the owned Gauss points, shape ``(n_owned,)``.
+        """
+        n = self.W_scalar.dofmap.index_map.size_local
+        sigma = np.asarray(sigma, dtype=float).reshape(-1)
+        dp = np.asarray(dp, dtype=float).reshape(-1)
+        if sigma.size != 9 * n or dp.size != n:
+            raise ValueError(f"commit_values: expected {n} owned Gauss points, got sigma of size "
+                             f"{sigma.size} (9 per point) and dp of size {dp.size}")
+        self.sigma_n.x.array[:9 * n] = sigma
+        self.dp_n.x.array[:n] = dp
+        self.p_n.x.array[:n] += dp
+        self.u_n.x.array[:] = u.x.array
+        for f in (self.sigma_n, self.p_n, self.dp_n, self.u_n):
+            f.x.scatter_forward()
+
     def count_plastic_points(self) -> int:
         """Number of Gauss points (over all ranks) that yielded in the last converged increment."""
         imap = self.W_scalar.dofmap.index_map

@@ -34,7 +34,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from dolfinx_nnqem import compat
-from dolfinx_nnqem.material import PlasticState, VonMises
+from dolfinx_nnqem.material import PlasticState
 
 
 # -- problem data ---------------------------------------------------------------------------
@@ -202,6 +202,7 @@ class ContactProblem:
         self.K_e_form = fem.form(self.state.elastic_stiffness_form(du, v))
         self.F_ext_parts = self._assemble_external_forces(tractions, body_forces, v)
 
+        self.pending_gauss_values = None  # (u array, σ, Δp) a solver hands to the next commit
         self.load_factor = 0.0  # ℓ of the current iterate
         self.load_factor_n = 0.0  # ℓ of the last converged increment
         self.contact = contact
@@ -478,10 +479,20 @@ class ContactProblem:
 
     # -- increments --------------------------------------------------------------------------------
     def commit(self) -> None:
-        """Accept the current iterate as the converged end of the increment."""
+        """Accept the current iterate as the converged end of the increment.
+
+        The Gauss-point state is updated by the radial return at ``u``, unless the solver left
+        its own values in :attr:`pending_gauss_values` for exactly this ``u`` (NNEQM2, whose
+        flow directions are frozen within the increment, is not the radial return).
+        """
         self._previous = (self.load_factor_n, self.state.u_n.x.array.copy(),
                           self.z_n.copy() if self.has_contact else None)
-        self.state.commit(self.u)
+        pending, self.pending_gauss_values = self.pending_gauss_values, None
+        if pending is not None and np.array_equal(pending[0], self.u.x.array):
+            # a solver that integrates the flow itself (NNEQM2) left its Gauss-point values
+            self.state.commit_values(self.u, pending[1], pending[2])
+        else:
+            self.state.commit(self.u)
         self.load_factor_n = self.load_factor
         if self.has_contact:
             w = self.relative_displacement()
@@ -495,6 +506,7 @@ class ContactProblem:
         """Return to the last converged increment (after a failed attempt)."""
         self.u.x.array[:] = self.state.u_n.x.array
         self.load_factor = self.load_factor_n
+        self.pending_gauss_values = None
         if self.has_contact:
             self.z = self.z_n.copy()
 
