@@ -94,7 +94,7 @@ def hertz_mesh(h: float, half: bool):
 
 
 def hertz_problem(h: float, *, half: bool = False, mu_f: float = 0.0, drag: float = 0.0,
-                  normal=None, tangential=None):
+                  normal=None, tangential=None, law: str = "alart-curnier"):
     """The V6/V7 problem; ``normal``/``tangential`` are the amplitudes of δ and of the drag."""
     mesh, cell_tags, facet_tags = hertz_mesh(h, half)
     dirichlet = [
@@ -109,7 +109,7 @@ def hertz_problem(h: float, *, half: bool = False, mu_f: float = 0.0, drag: floa
     return ContactProblem(
         mesh, cell_tags, facet_tags, materials={T.BODY1: MATERIAL, T.BODY2: MATERIAL},
         dirichlet=dirichlet,
-        contact=Contact(T.CONTACT1, T.CONTACT2, mu_f=mu_f,
+        contact=Contact(T.CONTACT1, T.CONTACT2, mu_f=mu_f, law=law,
                         initial_gap=lambda x: (x[0] ** 2 + x[2] ** 2) / (2.0 * R_SPHERE)),
     )
 
@@ -332,3 +332,46 @@ def test_v7_cattaneo_mindlin_demo_mesh():
     """Half model, h = a/4 (the demo mesh), Q/(μ_f P) up to about 0.85 in 6 increments."""
     h = A_NOMINAL / 4
     check_v7(run_v7(h, drag=0.0055, tangential_increments=6), h)
+
+
+def test_v10_polar_law_on_v6_v7_where_it_converges():
+    """V10 on V6/V7 (half model, h = a/3): the polar law along its own load path (with cutbacks)
+    and the Cartesian law along the same path give the same pair forces where the polar law
+    converges; the printout says where it needs Levenberg–Marquardt steps or stops."""
+    from dolfinx_nnqem.convergence import ConvergenceError
+    from dolfinx_nnqem.stepping import solve_load_path
+
+    h, increments = A_NOMINAL / 3, 3
+    n = 1 + increments
+    paths = dict(half=True, mu_f=MU_F, drag=0.004,
+                 normal=lambda ell: min(n * ell, 1.0),
+                 tangential=lambda ell: max(n * ell - 1.0, 0.0) / increments)
+    polar = hertz_problem(h, law="polar", **paths)
+    done = []
+
+    def record(result):
+        done.append((result.load_factor, pair_table(polar)["force_local_body1"].copy(), result.report))
+
+    try:
+        # no cutbacks, 25 iterations: enough to show where the polar form stops, cheap to run
+        solve_load_steps(polar, MonolithicSolver(polar, SolverOptions(rtol=1e-12, max_iterations=25)), n,
+                         callbacks=[record], max_cutbacks=0)
+        stopped = None
+    except ConvergenceError as error:
+        stopped = str(error).splitlines()[0]
+    assert done, "the polar law did not converge on the normal load"
+    cartesian = hertz_problem(h, law="alart-curnier", **paths)
+    forces = []
+    solve_load_path(cartesian, MonolithicSolver(cartesian, SolverOptions(rtol=1e-12, max_iterations=40)),
+                    [ell for ell, _, _ in done],
+                    callbacks=[lambda r: forces.append(pair_table(cartesian)["force_local_body1"].copy())])
+    worst = 0.0
+    for (ell, f_p, report), f_c in zip(done, forces):
+        diff = np.abs(f_p - f_c).max() / np.abs(f_c[:, 0]).max()
+        worst = max(worst, diff)
+        lm = sum(1 for rec in report.history if rec.kind == "lm")
+        print(f"  ℓ = {ell:.3f}: max |Δ pair force| / max p_n = {diff:.2e}; polar iterations {report.iterations} "
+              f"({lm} LM)")
+    print(f"  polar law converged on {len(done)} increments (of {n} asked for); worst {worst:.2e} "
+          f"(tolerance 1e-8)" + (f"; stopped: {stopped}" if stopped else ""))
+    assert worst < 1e-8
