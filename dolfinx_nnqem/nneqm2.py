@@ -138,6 +138,8 @@ class NNEQM2Solver:
         solve from the previous increment's unknowns (the seed's procedure; slow and often cut
         back on the two-beam benchmark).
 
+    Notes
+    -----
     Reporting: ``SolveReport.system_order`` = 3NC + NG; ``iterations`` counts the dense
     nonsmooth iterations (all passes, Cartesian warm starts included); in ``history`` the
     ``contact`` field holds the norm of the whole scaled system [H/F; H4] and ``equilibrium``
