@@ -103,7 +103,10 @@ def mpi_environment() -> dict[str, str]:
     env.setdefault("OMPI_ALLOW_RUN_AS_ROOT", "1")
     env.setdefault("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
     env.setdefault("OMPI_MCA_btl", "self,sm")
+    # more ranks than cores (the MPI tests use 3): OpenMPI 4 reads the first, OpenMPI 5 (PRRTE,
+    # Debian 13) only the second; MPICH ignores both
     env.setdefault("OMPI_MCA_rmaps_base_oversubscribe", "1")
+    env.setdefault("PRTE_MCA_rmaps_default_mapping_policy", ":oversubscribe")
     return env
 
 

@@ -219,11 +219,14 @@ def test_fclib_solutions_are_pair_law_solutions(tmp_path):
 # -- a real NNEQM1 inner problem ------------------------------------------------------------------
 def _two_beams_nneqm1(law):
     from dolfinx_nnqem.stepping import solve_load_steps
-    from dolfinx_nnqem.two_beams import make_solver, two_beams_problem
+    from dolfinx_nnqem.solvers import make_solver
+    from dolfinx_nnqem.two_beams import two_beams_problem
 
     p = two_beams_problem(law=law)
     s = make_solver("nneqm1", p)
-    solve_load_steps(p, s, 3)
+    # 12 increments: the polar law's inner solve with 3 large ones is sensitive to rounding (it
+    # fails on Debian's reference BLAS, converges with OpenBLAS)
+    solve_load_steps(p, s, 12)
     return p, s
 
 
