@@ -28,6 +28,18 @@ def create_ksp(comm, prefix: str, petsc_options: dict | None = None, defaults: b
     return ksp
 
 
+def factorise(ksp: PETSc.KSP, A: PETSc.Mat, solver: str, what: str) -> None:
+    """Set ``A`` on ``ksp`` and factorise it; a singular stiffness becomes a clear ValueError."""
+    ksp.setOperators(A)
+    try:
+        ksp.setUp()
+    except PETSc.Error as error:
+        raise ValueError(
+            f"{solver} factorises {what}, which is singular here: every body must be held by its "
+            "own Dirichlet conditions (a body held only by contact needs the monolithic solver)"
+        ) from error
+
+
 def global_norm(array: np.ndarray, comm) -> float:
     """2-norm of an array distributed over ``comm`` (each rank holds its own rows)."""
     return math.sqrt(comm.allreduce(float(np.sum(np.asarray(array) ** 2)), op=MPI.SUM))

@@ -215,17 +215,11 @@ class MonolithicSolver:
             return self._K
         t0 = time.perf_counter()
         _, dlam_dz = p.law.force(p.z)
-        rows = self._constrained_global_rows()
+        rows = p.constrained_rows()
         blocks = contact_jacobian_blocks(p.pairs, ev.dH_dw, ev.dH_dz, dlam_dz, rows)
         J = monolithic_matrix(self._K, blocks)
         self._tick("block_matrix", t0)
         return J
-
-    def _constrained_global_rows(self) -> np.ndarray:
-        p = self.problem
-        imap = p.V.dofmap.index_map
-        start = imap.local_range[0] * 3
-        return (start + p.owned_bc_dofs()).astype(PETSc.IntType)
 
     def _rhs(self, J: PETSc.Mat, R_free: PETSc.Vec, H: np.ndarray) -> PETSc.Vec:
         b = J.createVecRight()

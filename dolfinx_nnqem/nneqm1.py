@@ -28,7 +28,7 @@ from petsc4py import PETSc
 
 from dolfinx_nnqem.contact.laws import pin_constrained_directions
 from dolfinx_nnqem.convergence import IterationRecord, SolveReport, count_states, logger
-from dolfinx_nnqem.linalg import create_ksp, global_norm
+from dolfinx_nnqem.linalg import create_ksp, factorise, global_norm
 from dolfinx_nnqem.nonsmooth import solve_nonsmooth
 from dolfinx_nnqem.problem import ContactProblem, SolverOptions
 
@@ -84,20 +84,10 @@ class NNEQM1Solver:
         self._K = p.assemble_tangent(self._K)
         self._tick("assembly", t0)
         t0 = time.perf_counter()
-        self.ksp.setOperators(self._K)
-        try:
-            self.ksp.setUp()
-        except PETSc.Error as error:
-            raise ValueError(
-                "NNEQM1 factorises the stiffness K, which is singular here: every body must be "
-                "held by its own Dirichlet conditions (a body held only by contact needs the "
-                "monolithic solver)") from error
+        factorise(self.ksp, self._K, "NNEQM1", "the stiffness K")
         self._tick("factorisation", t0)
         t0 = time.perf_counter()
-        Bt = p.pairs.B.transpose(PETSc.Mat())  # without an output matrix petsc4py transposes in place
-        imap = p.V.dofmap.index_map
-        rows = (imap.local_range[0] * 3 + p.owned_bc_dofs()).astype(PETSc.IntType)
-        Bt.zeroRows(rows, diag=0.0)  # du = 0 at constrained dofs
+        Bt = p.transposed_B()
         Bt_dense = Bt.convert("dense")
         X = Bt_dense.duplicate()
         self.ksp.matSolve(Bt_dense, X)

@@ -87,7 +87,7 @@ from petsc4py import PETSc
 from dolfinx_nnqem import compat
 from dolfinx_nnqem.contact.laws import pin_constrained_directions
 from dolfinx_nnqem.convergence import IterationRecord, SolveReport, logger
-from dolfinx_nnqem.linalg import create_ksp
+from dolfinx_nnqem.linalg import create_ksp, factorise
 from dolfinx_nnqem.material import strain
 from dolfinx_nnqem.nneqm1 import _unknown_scale
 from dolfinx_nnqem.nonsmooth import solve_nonsmooth
@@ -230,27 +230,14 @@ class NNEQM2Solver:
         self._Ke = p.assemble_elastic_stiffness()
         self._tick("assembly", t0)
         t0 = time.perf_counter()
-        self.ksp.setOperators(self._Ke)
-        try:
-            self.ksp.setUp()
-        except PETSc.Error as error:
-            raise ValueError(
-                "NNEQM2 factorises the elastic stiffness K_e, which is singular here: every body "
-                "must be held by its own Dirichlet conditions (a body held only by contact needs "
-                "the monolithic solver)") from error
+        factorise(self.ksp, self._Ke, "NNEQM2", "the elastic stiffness K_e")
         self._tick("factorisation", t0)
         if p.has_contact:
             t0 = time.perf_counter()
-            Bt = p.pairs.B.transpose(PETSc.Mat())  # without an output matrix petsc4py transposes in place
-            Bt.zeroRows(self._bc_rows(), diag=0.0)
+            Bt = p.transposed_B()
             self._YB, self._SB, self._WBB = self._influence(Bt)
             Bt.destroy()
             self._tick("flexibility", t0)
-
-    def _bc_rows(self) -> np.ndarray:
-        p = self.problem
-        imap = p.V.dofmap.index_map
-        return (imap.local_range[0] * 3 + p.owned_bc_dofs()).astype(PETSc.IntType)
 
     def _influence(self, rhs_aij: PETSc.Mat):
         """Y = K_e⁻¹ R (owned rows), S = dev ε(Y) gathered (NG, 5, m), B Y gathered (3NC, m)."""
@@ -324,7 +311,7 @@ class NNEQM2Solver:
         G.assemble()
         Q = self._A.transposeMatMult(G)
         G.destroy()
-        Q.zeroRows(self._bc_rows(), diag=0.0)
+        Q.zeroRows(self.problem.constrained_rows(), diag=0.0)
         return Q
 
     def _z_scale(self, F: float, law=None) -> np.ndarray:

@@ -368,6 +368,17 @@ class ContactProblem:
     def num_pairs(self) -> int:
         return 0 if self.pairs is None else self.pairs.num_global
 
+    def constrained_rows(self) -> np.ndarray:
+        """Global (unrolled) PETSc row indices of the constrained dofs this rank owns."""
+        start = self.V.dofmap.index_map.local_range[0] * 3
+        return (start + self.owned_bc_dofs()).astype(PETSc.IntType)
+
+    def transposed_B(self) -> PETSc.Mat:
+        """Bᵀ (a new matrix) with the rows of constrained dofs zeroed: du = 0 there."""
+        Bt = self.pairs.B.transpose(PETSc.Mat())  # without an output matrix petsc4py transposes in place
+        Bt.zeroRows(self.constrained_rows(), diag=0.0)
+        return Bt
+
     def owned_bc_dofs(self) -> np.ndarray:
         """Unrolled bc dofs owned by this rank (indices into the owned part of the vector)."""
         n_owned = self.V.dofmap.index_map.size_local * self.V.dofmap.index_map_bs
