@@ -57,7 +57,7 @@ from scipy.optimize import minimize_scalar
 from dolfinx_nnqem import compat
 from dolfinx_nnqem.material import VonMises
 from dolfinx_nnqem.meshing import StackedBlocksTags as T
-from dolfinx_nnqem.meshing import build_stacked_blocks
+from dolfinx_nnqem.meshing import build_graded_contact_blocks
 from dolfinx_nnqem.monolithic import MonolithicSolver
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, SolverOptions
 from dolfinx_nnqem.results import pair_table, reactions, values_at_blocks
@@ -81,8 +81,8 @@ if comm.rank == 0:
 # along x respects) we model half of the contact: x in [−6, 6] mm, z in [0, 6] mm, each block
 # 6 mm high, so the blocks are 12 a wide — half-spaces to a few tenths of a per cent.
 #
-# `build_stacked_blocks` makes two structured hexahedral blocks with unit elements; we map
-# their integer node coordinates onto a graded grid: elements of size h = a/4 over
+# `build_graded_contact_blocks` maps the unit-element blocks of `build_stacked_blocks` onto a
+# graded grid: elements of size h = a/4 over
 # |x|, z ≤ 1.25 a and 0.5 a deep on both sides of the interface, growing by 1.3 per element
 # beyond. The same map for both bodies keeps the interface nodes coincident.
 
@@ -95,28 +95,8 @@ A_NOMINAL, BLOCK = 1.0, 6.0
 h = A_NOMINAL / args.elements_per_a
 
 
-def graded_nodes(h, n_fine, length, ratio=1.3):
-    """Node positions 0 ≤ s ≤ length: n_fine elements of size h, then sizes growing by ``ratio``."""
-    nodes = list(h * np.arange(n_fine + 1))
-    size = h
-    while nodes[-1] < length - 1e-12:
-        size *= ratio
-        nodes.append(nodes[-1] + size)
-    nodes = np.array(nodes)
-    s0 = nodes[n_fine]
-    nodes[n_fine:] = s0 + (nodes[n_fine:] - s0) * (length - s0) / (nodes[-1] - s0)
-    return nodes
-
-
-s = graded_nodes(h, round(1.25 * A_NOMINAL / h), BLOCK)
-t = graded_nodes(h, round(0.5 * A_NOMINAL / h), BLOCK)
-xs, ys, zs = np.concatenate([-s[:0:-1], s]), np.concatenate([-t[:0:-1], t]), s
-nx, ny, nz = len(xs) - 1, len(t) - 1, len(zs) - 1
-mesh, cell_tags, facet_tags = build_stacked_blocks(comm, nx, ny, ny, nz, nx, ny, ny, nz)
-index = np.rint(mesh.geometry.x).astype(np.int64)
-mesh.geometry.x[:, 0] = xs[index[:, 0]]
-mesh.geometry.x[:, 1] = ys[index[:, 1]]
-mesh.geometry.x[:, 2] = zs[index[:, 2]]
+mesh, cell_tags, facet_tags = build_graded_contact_blocks(
+    comm, h, fine_width=1.25 * A_NOMINAL, fine_depth=0.5 * A_NOMINAL, block=BLOCK, half=True)
 
 # %% [markdown]
 # ## Supports, loads and contact

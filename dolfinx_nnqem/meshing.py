@@ -578,3 +578,43 @@ def build_thick_cylinder(
         gmsh.model.mesh.generate(3)
 
     return _mesh_from_gmsh(comm, "thick_cylinder", build, msh_file)
+
+
+def graded_nodes(h: float, n_fine: int, length: float, ratio: float = 1.3) -> np.ndarray:
+    """Node positions 0 ≤ s ≤ length: ``n_fine`` elements of size ``h``, then sizes growing by
+    ``ratio``, the last ones stretched so that the grid ends exactly at ``length``."""
+    nodes = list(h * np.arange(n_fine + 1))
+    size = h
+    while nodes[-1] < length - 1e-12:
+        size *= ratio
+        nodes.append(nodes[-1] + size)
+    nodes = np.array(nodes)
+    s0 = nodes[n_fine]
+    nodes[n_fine:] = s0 + (nodes[n_fine:] - s0) * (length - s0) / (nodes[-1] - s0)
+    return nodes
+
+
+def build_graded_contact_blocks(comm: MPI.Comm = MPI.COMM_WORLD, h: float = 0.25, *, fine_width: float = 1.25,
+                                fine_depth: float = 0.5, block: float = 6.0, half: bool = False,
+                                ratio: float = 1.3) -> MeshAndTags:
+    """Two blocks meeting at y = 0, graded towards the contact point x = z = 0 (Hertz-type tests).
+
+    Elements of size ``h`` over |x|, z ≤ ``fine_width`` and ``fine_depth`` on both sides of the
+    interface, growing by ``ratio`` beyond, out to ``block`` (half width, depth and height of each
+    block). Quarter model (x, z ≥ 0) or, with ``half``, half model (z ≥ 0). The structured mesh of
+    :func:`build_stacked_blocks` (unit elements) is mapped onto the graded grid; the same map for
+    both bodies keeps the interface nodes coincident. Tags as :class:`StackedBlocksTags`.
+    """
+    s = graded_nodes(h, round(fine_width / h), block, ratio)
+    t = graded_nodes(h, round(fine_depth / h), block, ratio)
+    xs = np.concatenate([-s[:0:-1], s]) if half else s
+    ys = np.concatenate([-t[:0:-1], t])  # body 1 below y = 0, body 2 above
+    zs = s
+    nx, ny, nz = len(xs) - 1, len(t) - 1, len(zs) - 1
+    mesh, cell_tags, facet_tags = build_stacked_blocks(comm, nx, ny, ny, nz, nx, ny, ny, nz)
+    x = mesh.geometry.x
+    index = np.rint(x).astype(np.int64)
+    if not np.allclose(x, index, atol=1e-9):
+        raise RuntimeError("build_graded_contact_blocks: the unit block mesh has non-integer nodes")
+    x[:, 0], x[:, 1], x[:, 2] = xs[index[:, 0]], ys[index[:, 1]], zs[index[:, 2]]
+    return MeshAndTags(mesh, cell_tags, facet_tags)

@@ -42,7 +42,7 @@ from scipy.optimize import minimize_scalar
 from dolfinx_nnqem import compat
 from dolfinx_nnqem.material import VonMises
 from dolfinx_nnqem.meshing import StackedBlocksTags as T
-from dolfinx_nnqem.meshing import build_stacked_blocks
+from dolfinx_nnqem.meshing import build_graded_contact_blocks
 from dolfinx_nnqem.monolithic import MonolithicSolver
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, SolverOptions
 from dolfinx_nnqem.results import pair_table, reactions, values_at_blocks
@@ -59,38 +59,10 @@ MU_F = 0.3
 
 
 # -- the model ---------------------------------------------------------------------------------
-def graded_nodes(h: float, n_fine: int, length: float, ratio: float = 1.3) -> np.ndarray:
-    """Node positions 0 ≤ s ≤ length: n_fine elements of size h, then sizes growing by ``ratio``."""
-    nodes = list(h * np.arange(n_fine + 1))
-    size = h
-    while nodes[-1] < length - 1e-12:
-        size *= ratio
-        nodes.append(nodes[-1] + size)
-    nodes = np.array(nodes)
-    s0 = nodes[n_fine]
-    nodes[n_fine:] = s0 + (nodes[n_fine:] - s0) * (length - s0) / (nodes[-1] - s0)  # end at length
-    return nodes
-
-
 def hertz_mesh(h: float, half: bool):
-    """Two stacked blocks meeting at y = 0, graded towards the contact point at x = z = 0.
-
-    Quarter model (x, z ≥ 0) or, with ``half``, half model (z ≥ 0). The builder's structured
-    box mesh has unit element size; its integer node coordinates are mapped onto graded ones
-    (the same map for both bodies, so the interface nodes still coincide).
-    """
-    s = graded_nodes(h, round(1.25 * A_NOMINAL / h), BLOCK)
-    t = graded_nodes(h, round(0.5 * A_NOMINAL / h), BLOCK)
-    xs = np.concatenate([-s[:0:-1], s]) if half else s
-    ys = np.concatenate([-t[:0:-1], t])  # body 1 below y = 0, body 2 above
-    zs = s
-    nx, ny, nz = len(xs) - 1, len(t) - 1, len(zs) - 1
-    mesh, cell_tags, facet_tags = build_stacked_blocks(MPI.COMM_WORLD, nx, ny, ny, nz, nx, ny, ny, nz)
-    x = mesh.geometry.x
-    index = np.rint(x).astype(np.int64)
-    assert np.allclose(x, index, atol=1e-9)
-    x[:, 0], x[:, 1], x[:, 2] = xs[index[:, 0]], ys[index[:, 1]], zs[index[:, 2]]
-    return mesh, cell_tags, facet_tags
+    """Two blocks meeting at y = 0, graded towards x = z = 0 (quarter model, or half with ``half``)."""
+    return build_graded_contact_blocks(MPI.COMM_WORLD, h, fine_width=1.25 * A_NOMINAL,
+                                       fine_depth=0.5 * A_NOMINAL, block=BLOCK, half=half)
 
 
 def hertz_problem(h: float, *, half: bool = False, mu_f: float = 0.0, drag: float = 0.0,
