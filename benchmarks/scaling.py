@@ -27,6 +27,7 @@ from dolfinx_nnqem.monolithic import MonolithicSolver
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Pressure, SolverOptions
 from dolfinx_nnqem.stepping import solve_load_steps
 
+MU_F = 0.3
 MATERIAL = VonMises(E=2.0e10, nu=0.2, sigma_y0=2.0e7, H=2.0e9)
 
 
@@ -39,7 +40,7 @@ def blocks_problem(level: int, comm) -> ContactProblem:
                    Dirichlet(T.BODY1_ZMIN, 0.0, [2]), Dirichlet(T.BODY1_ZMAX, 0.0, [2]),
                    Dirichlet(T.BODY2_ZMIN, 0.0, [2]), Dirichlet(T.BODY2_ZMAX, 0.0, [2])],
         tractions=[Pressure(T.TOP, 3.0e7, amplitude=lambda ell: min(2 * ell, 1.0))],
-        contact=Contact(T.CONTACT1, T.CONTACT2, mu_f=0.3),
+        contact=Contact(T.CONTACT1, T.CONTACT2, mu_f=MU_F),
     )
 
 

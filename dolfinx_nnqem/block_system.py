@@ -69,3 +69,94 @@ def monolithic_matrix(K: PETSc.Mat, blocks=None) -> PETSc.Mat:
     # petsc4py converts in place (MAT_INPLACE_MATRIX) when no output matrix is given
     J.convert("aij")
     return J
+
+
+class AugmentedSystem:
+    """The Newton system with its u rows augmented, for the iterative solver.
+
+    Adding Bᵀ W times the pair rows to the u rows (W_i = c D_wᵢᵀ, c = ``augmentation`` / r,
+    D_w = ∂_wH) gives the equivalent system
+
+        [ K_t + Bᵀ P B    Bᵀ (−Λ' + c D_wᵀ D_z) ] [du]     [ R + c Bᵀ D_wᵀ H ]
+        [ D_w B           D_z                    ] [dz] = − [ H               ],
+
+    P = c D_wᵀ D_w (per pair, symmetric positive semidefinite), D_z = ∂_zH. It has the same
+    solution, but its u block is the stiffness plus a penalty of order ``augmentation`` · r on
+    every closed pair direction: positive definite even for a body held only by contact, and
+    a good fit for AMG, while the pair-block Schur complement becomes close to diagonal (the
+    augmented-Lagrangian preconditioning idea). B here has its constrained columns zeroed
+    (B_free): du = 0 at constrained dofs, so the system is unchanged, and the u block stays
+    symmetric with identity rows and columns there.
+
+    The matrix is a MatNest (no copy of K into one AIJ matrix), laid out like the direct
+    solver's: on every rank the owned u rows, then the owned pair rows. The u block keeps one
+    sparsity pattern over the iterations (K's plus the 6×6 pair couplings of all pairs), so
+    PETSc can reuse its symbolic work.
+    """
+
+    def __init__(self, pairs, constrained_rows: np.ndarray, r: float, augmentation: float):
+        self.pairs = pairs
+        self.c = augmentation / r
+        B = pairs.B
+        mask = B.createVecRight()
+        mask.set(1.0)
+        start, _ = mask.getOwnershipRange()
+        with mask as m:  # constrained_rows are global indices of owned dofs
+            m[np.asarray(constrained_rows, dtype=np.int64) - start] = 0.0
+        self._mask = mask
+        self.B_free = B.copy()
+        self.B_free.diagonalScale(R=mask)
+        self.Bt_free = self.B_free.transpose(PETSc.Mat())
+        n = pairs.num_local
+        self._P = block_diagonal_matrix(np.zeros((n, 3, 3)), pairs.offset, pairs.num_global,
+                                        pairs.comm)
+        self._csr = self._P.getValuesCSR()[:2]
+        self._BtPB = None
+        self.A00 = None
+
+    def _u_block(self, K: PETSc.Mat, dH_dw: np.ndarray) -> PETSc.Mat:
+        """K + B_freeᵀ P B_free in the persistent matrix ``A00``."""
+        P = self.c * np.einsum("nki,nkj->nij", dH_dw, dH_dw)
+        self._P.setValuesCSR(*self._csr, np.ascontiguousarray(P.reshape(-1)))
+        self._P.assemble()
+        if self._BtPB is None:
+            self._BtPB = self._P.PtAP(self.B_free)
+        else:
+            self._P.PtAP(self.B_free, self._BtPB)
+        if self.A00 is None:
+            self.A00 = K.copy()
+            self.A00.axpy(1.0, self._BtPB, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+        else:
+            self.A00.zeroEntries()
+            self.A00.axpy(1.0, K, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
+            self.A00.axpy(1.0, self._BtPB, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
+        return self.A00
+
+    def matrix(self, K: PETSc.Mat, dH_dw: np.ndarray, dH_dz: np.ndarray,
+               dlam_dz: np.ndarray) -> PETSc.Mat:
+        """The augmented Newton matrix (MatNest) at the current law evaluation."""
+        pairs = self.pairs
+        A00 = self._u_block(K, dH_dw)
+        # A01 = B_freeᵀ M, M = −Λ' + c D_wᵀ D_z; Bᵀ Mᵀᵀ = (Mᵀ B)ᵀ has B's sparsity
+        M = -dlam_dz + self.c * np.einsum("nki,nkj->nij", dH_dw, dH_dz)
+        A01 = pairs.scaled_B(np.ascontiguousarray(np.transpose(M, (0, 2, 1))))
+        A01.diagonalScale(R=self._mask)
+        A01.transpose()  # in place
+        A10 = pairs.scaled_B(dH_dw)
+        A11 = block_diagonal_matrix(dH_dz, pairs.offset, pairs.num_global, pairs.comm)
+        J = PETSc.Mat().createNest([[A00, A01], [A10, A11]], comm=K.getComm())
+        J.assemble()
+        return J
+
+    def rhs(self, R_free: PETSc.Vec, H: np.ndarray, dH_dw: np.ndarray) -> PETSc.Vec:
+        """−(R + c B_freeᵀ D_wᵀ H, H) in the nest's layout (a plain vector)."""
+        g = self.pairs.create_lambda_vector()
+        g.getArray()[:] = np.einsum("nki,nk->ni", dH_dw, H).reshape(-1)
+        Btg = self.B_free.createVecRight()
+        self.B_free.multTranspose(g, Btg)
+        n_u = R_free.getLocalSize()
+        b = PETSc.Vec().createMPI((n_u + H.size, PETSc.DECIDE), comm=R_free.getComm())
+        arr = b.getArray()
+        arr[:n_u] = -R_free.getArray(readonly=True) - self.c * Btg.getArray(readonly=True)
+        arr[n_u:] = -H.reshape(-1)
+        return b

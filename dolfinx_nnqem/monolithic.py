@@ -19,9 +19,10 @@ import math
 import time
 
 import numpy as np
+from mpi4py import MPI
 from petsc4py import PETSc
 
-from dolfinx_nnqem.block_system import contact_jacobian_blocks, monolithic_matrix
+from dolfinx_nnqem.block_system import AugmentedSystem, contact_jacobian_blocks, monolithic_matrix
 from dolfinx_nnqem.convergence import IterationRecord, SolveReport, count_states, logger
 from dolfinx_nnqem.linalg import (ITERATIVE_NO_CONTACT_OPTIONS, ITERATIVE_SOLVER_OPTIONS, create_ksp,
                                   global_norm, rigid_body_modes, set_options)
@@ -54,13 +55,21 @@ class MonolithicSolver:
         A full step is let through by the watchdog only if Ψ grows by at most this factor
         (|H| by its square root): a penetration of a few element sizes' worth of r·g, not the
         near-infinite step of a nearly singular Jacobian (the polar law at p_r = 0).
+    augmentation
+        Iterative solver only: the penalty added to the u block on closed pair directions, in
+        units of r (:class:`dolfinx_nnqem.block_system.AugmentedSystem`). It changes the
+        preconditioner, not the Newton step.
+    lag_preconditioner
+        Iterative solver with contact: keep the u block's AMG hierarchy over the Newton
+        iterations of an increment (rebuilt when a solve converges poorly).
     """
 
     name = "monolithic"
 
     def __init__(self, problem: ContactProblem, options: SolverOptions | None = None, *,
                  armijo: float = 1e-4, min_step: float = 1.0 / 64, lm_c: float = 1.0,
-                 lm_delta: float = 1.0, watchdog: int = 6, max_increase: float = 1e8):
+                 lm_delta: float = 1.0, watchdog: int = 6, max_increase: float = 1e8,
+                 augmentation: float = 1.0, lag_preconditioner: bool = True):
         self.problem = problem
         self.options = options or SolverOptions()
         self.armijo, self.min_step, self.lm_c, self.lm_delta = armijo, min_step, lm_c, lm_delta
@@ -73,9 +82,18 @@ class MonolithicSolver:
             set_options(self.prefix, defaults)
         self.ksp = create_ksp(problem.comm, self.prefix, self.options.petsc_options,
                               defaults=not self.iterative)
+        self._ksp_rtol_floor, _, _, self._ksp_max_it = self.ksp.getTolerances()
         self._fieldsplit_ready = False
         self._K = None
+        self._augmented = None
+        self._lagging = self.iterative and problem.has_contact and lag_preconditioner
+        self._refresh_u_pc = True
+        self._lag_state = None
+        if self.iterative and problem.has_contact:
+            self._augmented = AugmentedSystem(problem.pairs, problem.constrained_rows(), problem.r,
+                                              augmentation)
         self.timings: dict[str, float] = {}
+        self.linear_iterations = 0  # Krylov iterations over all Newton steps (iterative solver)
 
     def _use_iterative(self) -> bool:
         choice = self.options.linear_solver
@@ -88,17 +106,15 @@ class MonolithicSolver:
     def _configure_iterative(self, J: PETSc.Mat) -> None:
         """Field split (u, z) and the rigid-body near-nullspace for GAMG, once."""
         p = self.problem
+        if self._fieldsplit_ready:
+            return
         nullspace = rigid_body_modes(p.V)
         if not p.has_contact:
             J.setNearNullSpace(nullspace)
+            self._fieldsplit_ready = True  # K is assembled into the same matrix every iteration
+            self._keep = (nullspace,)
             return
-        if self._fieldsplit_ready:
-            return
-        start, _ = J.getOwnershipRange()
-        n_u = p.V.dofmap.index_map.size_local * 3
-        n_z = 3 * p.pairs.num_local
-        is_u = PETSc.IS().createStride(n_u, first=start, step=1, comm=p.comm)
-        is_z = PETSc.IS().createStride(n_z, first=start + n_u, step=1, comm=p.comm)
+        (is_u, is_z), _ = J.getNestISs()
         is_u.compose("nearnullspace", nullspace)  # PCFIELDSPLIT passes it to the u block's GAMG
         pc = self.ksp.getPC()
         pc.setFieldSplitIS(("u", is_u), ("z", is_z))
@@ -147,6 +163,7 @@ class MonolithicSolver:
         report = SolveReport(converged=False, iterations=0,
                              system_order=p.V.dofmap.index_map.size_global * 3 + 3 * p.num_pairs)
         R, R_free, H, ev, scale = self._evaluate()
+        self._refresh_u_pc = True  # a new increment: a fresh AMG hierarchy for the u block
         step_length, kind = float("nan"), ""
         best = None  # (Ψ, u, z) of the best iterate so far (watchdog)
         nonmonotone = 0  # full steps accepted in a row without decreasing Ψ below the best
@@ -180,6 +197,8 @@ class MonolithicSolver:
                 nonmonotone = -1  # one monotone step before full steps are allowed again
             self._u0 = p.u.x.array[:R_free.getLocalSize()].copy()  # the iterate the step starts from
             self._z0 = p.z.copy() if p.has_contact else None
+            if self.iterative:
+                self._set_forcing(math.sqrt(normR ** 2 + normH ** 2) / ref)
             du, dz = self._newton_direction(R_free, H, ev)
             kind = "newton"
             alpha = None
@@ -230,27 +249,105 @@ class MonolithicSolver:
         return b
 
     def _split(self, x: PETSc.Vec, n_u: int):
+        """(du, dz) from the solution vector, du = 0 exactly at the constrained dofs.
+
+        The matrix has identity rows there and the right-hand side zeros, but a Krylov solve
+        (and an inexact one above all) returns them only to its tolerance; left alone, the
+        prescribed values would drift, unseen by the free residual.
+        """
         arr = x.getArray(readonly=True)
-        return arr[:n_u].copy(), arr[n_u:].reshape(-1, 3).copy()
+        du = arr[:n_u].copy()
+        du[self.problem.owned_bc_dofs()] = 0.0
+        return du, arr[n_u:].reshape(-1, 3).copy()
+
+    def _lag_u_preconditioner(self) -> None:
+        """Keep the u block's AMG hierarchy over the Newton iterations of an increment.
+
+        GAMG's setup (aggregation and Galerkin products) costs several Krylov iterations; the
+        hierarchy of the increment's first Newton matrix stays a good preconditioner for the
+        next ones (FGMRES still solves with the current matrix). It is rebuilt at each
+        increment and whenever a lagged solve converges poorly.
+        """
+        if not self._lagging:
+            return
+        state = self._pair_state
+        if self._lag_state is None or self._lag_state.shape != state.shape or \
+                self.problem.comm.allreduce(bool(np.any(state != self._lag_state)), op=MPI.LOR):
+            self._refresh_u_pc = True  # the penalty BᵀPB changed where pairs changed state
+        ksp_u = self.ksp.getPC().getFieldSplitSubKSP()[0]
+        ksp_u.getPC().setReusePreconditioner(not self._refresh_u_pc)
+        if self._refresh_u_pc:
+            self._fresh_its = None
+            self._lag_state = state.copy()
+            self.ksp.setTolerances(max_it=self._ksp_max_it)
+        else:
+            # a lagged solve that is no longer good is cut short and redone fresh
+            self.ksp.setTolerances(max_it=4 * self._fresh_its + 10)
+        self._lag_refreshed = self._refresh_u_pc
+        self._refresh_u_pc = False
+
+    def _lagged_solve_is_poor(self, b: PETSc.Vec) -> bool:
+        """True if this solve used a lagged hierarchy and did not converge within its budget."""
+        if self._lag_refreshed:
+            self._fresh_its = max(self.ksp.getIterationNumber(), 1)
+            return False
+        return self.ksp.getConvergedReason() <= 0
+
+    def _set_forcing(self, eps: float) -> None:
+        """Inexact Newton: Krylov tolerance η = min(max(ε², 0.1·rtol/ε), 1e-2), ε the relative residual.
+
+        η = O(ε) keeps Newton's local order (Dembo–Eisenstat–Steihaug); ε² leaves the step as
+        good as an exact one where the quadratic term dominates, and 0.1·rtol/ε is just the
+        accuracy that lets the step reach the tolerance. Early iterations, far from the
+        solution, are not solved to full accuracy. Never below ``ksp_rtol`` of the options.
+        """
+        eta = min(max(eps * eps, 0.1 * self.options.rtol / max(eps, 1e-300)), 1e-2)
+        self.ksp.setTolerances(rtol=max(eta, self._ksp_rtol_floor))
+
+    def _augmented_system(self, R_free, H, ev):
+        """The augmented Newton system (iterative solver with contact): (MatNest, rhs)."""
+        p = self.problem
+        self._pair_state = ev.state
+        t0 = time.perf_counter()
+        self._K = p.assemble_tangent(self._K)
+        self._tick("assembly", t0)
+        t0 = time.perf_counter()
+        _, dlam_dz = p.law.force(p.z)
+        J = self._augmented.matrix(self._K, ev.dH_dw, ev.dH_dz, dlam_dz)
+        b = self._augmented.rhs(R_free, H, ev.dH_dw)
+        self._tick("block_matrix", t0)
+        return J, b
 
     def _newton_direction(self, R_free, H, ev):
         """Solve J d = −F; returns (du, dz) as arrays, or (None, None) if the solve failed."""
-        J = self._jacobian(ev)
-        b = self._rhs(J, R_free, H)
+        if self._augmented is not None:
+            J, b = self._augmented_system(R_free, H, ev)
+        else:
+            J = self._jacobian(ev)
+            b = self._rhs(J, R_free, H)
         x = b.duplicate()
         t0 = time.perf_counter()
         self.ksp.setOperators(J)
         if self.iterative:
             self._configure_iterative(J)
         try:
+            self.ksp.setUp()
+            self._lag_u_preconditioner()
+            self._tick("setup", t0)
+            t0 = time.perf_counter()
             self.ksp.solve(b, x)
         except PETSc.Error:
             return None, None
         finally:
             self._tick("solve", t0)
+        self.linear_iterations += self.ksp.getIterationNumber()
+        if self._lagging and not self._refresh_u_pc and self._lagged_solve_is_poor(b):
+            # the lagged AMG hierarchy no longer fits K + BᵀPB: rebuild it and solve again
+            self._refresh_u_pc = True
+            return self._newton_direction(R_free, H, ev)
         if self.ksp.getConvergedReason() <= 0 or not np.all(np.isfinite(x.getArray(readonly=True))):
+            logger.info(f"{self.name}: linear solve failed, KSP reason {self.ksp.getConvergedReason()}")
             return None, None
-        self._J = J
         return self._split(x, R_free.getLocalSize())
 
     def _lm_direction(self, R_free, H, ev, ref: float):

@@ -1,0 +1,27 @@
+"""MPI helper of tests/test_iterative.py: the pressed blocks (level 2) solved by the monolithic solver.
+
+    mpiexec -n N python pressed_blocks.py LINEAR_SOLVER OUT.npz
+
+Rank 0 writes the pair positions, the pair forces on body 1 and the displacements of body 2's
+pair nodes (gathered, in the global pair order) and the Newton iterations per increment.
+"""
+
+import sys
+
+import dolfinx_nnqem  # noqa: F401  (first: the PyPI wheel loads MPI/PETSc before dolfinx)
+import numpy as np
+from mpi4py import MPI
+
+from dolfinx_nnqem.monolithic import MonolithicSolver
+from dolfinx_nnqem.pressed_blocks import pressed_blocks_problem
+from dolfinx_nnqem.problem import SolverOptions
+from dolfinx_nnqem.results import pair_table
+from dolfinx_nnqem.stepping import solve_load_steps
+
+linear_solver, out = sys.argv[1], sys.argv[2]
+problem = pressed_blocks_problem(2, MPI.COMM_WORLD)
+results = solve_load_steps(problem, MonolithicSolver(problem, SolverOptions(linear_solver=linear_solver)), 6)
+table = pair_table(problem)
+if MPI.COMM_WORLD.rank == 0:
+    np.savez(out, position=table["position"], force_on_body1=table["force_on_body1"],
+             u_body2=table["u_body2"], iterations=[r.iterations for r in results])

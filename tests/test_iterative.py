@@ -1,0 +1,80 @@
+"""The iterative linear solver of the monolithic method (augmented u block, Schur fieldsplit, GAMG).
+
+The pressed blocks (``dolfinx_nnqem.pressed_blocks``): body 2 is held in y by contact alone, so
+its stiffness is singular without the augmentation; plastic yielding, then slip. The iterative
+solver must give the direct solver's answer, keep the prescribed displacements exact, and give
+the same answer on 2 ranks.
+"""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from dolfinx_nnqem import compat
+from dolfinx_nnqem.monolithic import MonolithicSolver
+from dolfinx_nnqem.pressed_blocks import pressed_blocks_problem
+from dolfinx_nnqem.problem import SolverOptions
+from dolfinx_nnqem.results import pair_table
+from dolfinx_nnqem.stepping import solve_load_steps
+
+SCRIPTS = Path(__file__).parent / "mpi_scripts"
+
+
+def _solve(linear_solver: str):
+    problem = pressed_blocks_problem(2, MPI.COMM_SELF)
+    solver = MonolithicSolver(problem, SolverOptions(linear_solver=linear_solver))
+    results = solve_load_steps(problem, solver, 6)
+    return problem, solver, results
+
+
+@pytest.fixture(scope="module")
+def direct():
+    problem, _, results = _solve("direct")
+    table = pair_table(problem)
+    return {"force_on_body1": table["force_on_body1"], "u_body2": table["u_body2"],
+            "position": table["position"], "u": problem.u.x.array.copy(),
+            "iterations": [r.iterations for r in results], "states": table["state"]}
+
+
+def test_iterative_solver_matches_direct_on_a_body_held_by_contact(direct):
+    problem, solver, results = _solve("iterative")
+    table = pair_table(problem)
+    f0 = direct["force_on_body1"]
+    df = np.abs(table["force_on_body1"] - f0).max() / np.abs(f0).max()
+    du = np.abs(problem.u.x.array - direct["u"]).max() / np.abs(direct["u"]).max()
+    its = [r.iterations for r in results]
+    slipping = [r.report.final.states[2] for r in results]
+    print(f"\n  iterative vs direct: forces {df:.1e}, displacements {du:.1e}; Newton iterations {its} "
+          f"vs {direct['iterations']}; {solver.linear_iterations} Krylov iterations; slipping pairs "
+          f"per increment {slipping}")
+    assert max(df, du) < 1e-8
+    # the load path goes through slip and plasticity (else the case tests little)
+    assert max(slipping) > 0 and problem.state.count_plastic_points() > 0
+    # the prescribed values are exact (the Krylov solution is zeroed there, not trusted)
+    u_bc = problem.u.x.array[problem.bc_dofs].copy()
+    problem.apply_prescribed_displacements(results[-1].load_factor)
+    assert np.array_equal(problem.u.x.array[problem.bc_dofs], u_bc)
+    # inexact Newton: fewer than 30 Krylov iterations per Newton step on average
+    assert solver.linear_iterations < 30 * sum(its)
+
+
+@pytest.mark.mpi
+def test_iterative_solver_on_two_ranks_matches_serial(direct, tmp_path):
+    out = tmp_path / "blocks.npz"
+    cmd = [*compat.mpiexec(), "-n", "2", sys.executable, str(SCRIPTS / "pressed_blocks.py"), "iterative", str(out)]
+    result = subprocess.run(cmd, capture_output=True, text=True, timeout=300, env=compat.mpi_environment())
+    assert result.returncode == 0, f"{' '.join(cmd)} failed:\n{result.stdout}\n{result.stderr}"
+    got = np.load(out)
+    # pairs are numbered by owning rank: compare in the order of their positions
+    order = lambda x: np.lexsort((x[:, 2], x[:, 1], x[:, 0]))  # noqa: E731
+    i, j = order(got["position"].round(9)), order(direct["position"].round(9))
+    f0, u0 = direct["force_on_body1"][j], direct["u_body2"][j]
+    df = np.abs(got["force_on_body1"][i] - f0).max() / np.abs(f0).max()
+    du = np.abs(got["u_body2"][i] - u0).max() / np.abs(u0).max()
+    print(f"\n  iterative on 2 ranks vs direct serial: forces {df:.1e}, displacements {du:.1e}; "
+          f"Newton iterations {got['iterations'].tolist()}")
+    assert max(df, du) < 1e-8
