@@ -1,79 +1,181 @@
-"""Scaling of the monolithic solver: two elastoplastic blocks pressed together, refined ×k.
+"""Scaling of the monolithic solver on the pressed blocks (``dolfinx_nnqem.pressed_blocks``).
 
-    python benchmarks/scaling.py --levels 1 2 4 --linear-solver direct iterative
-    mpiexec -n 2 python benchmarks/scaling.py --levels 4
+    python benchmarks/scaling.py --levels 1 2 4 8 --linear-solver direct iterative
+    mpiexec -n 2 python benchmarks/scaling.py --levels 10 --linear-solver iterative --save run2.npz
+    python benchmarks/scaling.py --compare run1.npz run2.npz
+    mpiexec -n 2 python benchmarks/scaling.py --levels 17 --linear-solver iterative --increments 4
 
-Body 1 (1 × 0.5 × 1, bottom clamped) carries body 2 (1 × 0.5 × 1), pressed on top by a pressure
-above the yield stress and dragged sideways by a prescribed displacement of its top (u_z = 0 on the
-z faces); node-to-node pairs on the whole interface (the V5 set-up, elastoplastic). The pressure
-rises over the first half of the load factor, the drag over the second. Level k has 4k × 2k × 4k hexahedra per
-block. Prints, per level and linear solver: displacement dofs, pairs, Newton iterations, time per
-iteration, the time split, peak memory, and the ratio time / (iterations × one Newton solve).
+Two elastoplastic blocks pressed together, then dragged; level k has 4k × 2k × 4k hexahedra
+per block (level 17: 1.0e6 displacement dofs). Per level and linear solver it prints the
+displacement dofs, pairs, Newton iterations per increment, Krylov iterations, seconds per
+Newton iteration (and per iteration and 10⁵ dofs, to judge linearity), the time split, the
+peak memory (largest rank and the sum over ranks), and the ratio
+
+    solve time / (Newton iterations × one Newton-matrix build + preconditioner set-up + solve)
+
+with that one solve measured in the same run (MUMPS: a factorisation; iterative: a fresh
+AMG hierarchy and a Krylov solve to 1e-8). JIT warm-up (FFCx forms, numba kernels; both cached
+on disk, so a second run pays only the cache loading) is measured first, on level 1, and
+reported separately. ``--save`` writes the pair forces and displacements (gathered, with
+positions) so that runs on different numbers of ranks can be compared with ``--compare``.
 Asserts nothing.
 """
 
 import argparse
+import json
+import platform
 import resource
 import time
 
 import dolfinx_nnqem  # noqa: F401  (before dolfinx)
+import dolfinx
+import numba
 import numpy as np
 from mpi4py import MPI
+from petsc4py import PETSc
 
-from dolfinx_nnqem.material import VonMises
-from dolfinx_nnqem.meshing import StackedBlocksTags as T
-from dolfinx_nnqem.meshing import build_stacked_blocks
 from dolfinx_nnqem.monolithic import MonolithicSolver
-from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Pressure, SolverOptions
+from dolfinx_nnqem.pressed_blocks import pressed_blocks_problem
+from dolfinx_nnqem.problem import SolverOptions
+from dolfinx_nnqem.results import pair_table
 from dolfinx_nnqem.stepping import solve_load_steps
 
-MU_F = 0.3
-MATERIAL = VonMises(E=2.0e10, nu=0.2, sigma_y0=2.0e7, H=2.0e9)
+
+def peak_memory_mb(comm) -> tuple[float, float]:
+    """(largest rank, sum over ranks) of the peak resident memory, MB."""
+    mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    return comm.allreduce(mb, op=MPI.MAX), comm.allreduce(mb, op=MPI.SUM)
 
 
-def blocks_problem(level: int, comm) -> ContactProblem:
-    n = 4 * level
-    mesh, ct, ft = build_stacked_blocks(comm, 1.0, 0.5, 0.5, 1.0, n, 2 * level, 2 * level, n)
-    return ContactProblem(
-        mesh, ct, ft, materials={T.BODY1: MATERIAL, T.BODY2: MATERIAL},
-        dirichlet=[Dirichlet(T.BOTTOM), Dirichlet(T.TOP, 2.0e-3, [0], amplitude=lambda ell: max(2 * ell - 1, 0.0)),
-                   Dirichlet(T.BODY1_ZMIN, 0.0, [2]), Dirichlet(T.BODY1_ZMAX, 0.0, [2]),
-                   Dirichlet(T.BODY2_ZMIN, 0.0, [2]), Dirichlet(T.BODY2_ZMAX, 0.0, [2])],
-        tractions=[Pressure(T.TOP, 3.0e7, amplitude=lambda ell: min(2 * ell, 1.0))],
-        contact=Contact(T.CONTACT1, T.CONTACT2, mu_f=MU_F),
-    )
+def one_newton_solve(problem, solver) -> float:
+    """Seconds for one Newton matrix build, a fresh preconditioner (or factorisation) and one solve.
+
+    Uses the solver's own matrix and a new KSP with its options (iterative: to rtol 1e-8).
+    """
+    comm = problem.comm
+    comm.Barrier()
+    t0 = time.perf_counter()
+    ev = problem.evaluate_law(problem.relative_displacement(), problem.z)
+    R_free = problem.free_residual(problem.residual())
+    if solver._augmented is not None:
+        J, b = solver._augmented_system(R_free, ev.H, ev)
+    else:
+        J = solver._jacobian(ev)
+        b = solver._rhs(J, R_free, ev.H)
+    prefix = solver.prefix
+    ksp = PETSc.KSP().create(comm)
+    ksp.setOptionsPrefix(prefix)  # the solver's options (MUMPS, or FGMRES + fieldsplit + GAMG)
+    ksp.setFromOptions()
+    ksp.setOperators(J)
+    if solver.iterative:
+        ksp.setTolerances(rtol=1e-8)
+        if problem.has_contact:
+            (is_u, is_z), _ = J.getNestISs()
+            is_u.compose("nearnullspace", solver._keep[2])
+            ksp.getPC().setFieldSplitIS(("u", is_u), ("z", is_z))
+    x = b.duplicate()
+    ksp.solve(b, x)
+    comm.Barrier()
+    elapsed = time.perf_counter() - t0
+    ksp.destroy()
+    return elapsed
+
+
+def run(level: int, linear_solver: str, increments: int, final_load_factor: float, comm) -> dict:
+    comm.Barrier()
+    t0 = time.perf_counter()
+    problem = pressed_blocks_problem(level, comm)
+    t_setup = time.perf_counter() - t0
+    solver = MonolithicSolver(problem, SolverOptions(linear_solver=linear_solver, max_iterations=40))
+    comm.Barrier()
+    t0 = time.perf_counter()
+    results = solve_load_steps(problem, solver, increments, final_load_factor=final_load_factor)
+    t_total = time.perf_counter() - t0
+    t_commit = sum(r.commit_time_s for r in results)
+    iterations = [r.iterations for r in results]
+    t_one = one_newton_solve(problem, solver)
+    mem_max, mem_sum = peak_memory_mb(comm)
+    table = pair_table(problem)
+    dofs = problem.V.dofmap.index_map.size_global * 3
+    its = max(sum(iterations), 1)
+    return {
+        "level": level, "ranks": comm.size, "linear_solver": linear_solver, "dofs": dofs,
+        "pairs": problem.num_pairs, "iterations": iterations, "krylov": solver.linear_iterations,
+        "setup_s": t_setup, "total_s": t_total, "commit_s": t_commit,
+        "split_s": {k: comm.allreduce(v, op=MPI.MAX) for k, v in solver.timings.items()},
+        "s_per_iteration": t_total / its, "s_per_iteration_per_1e5_dofs": t_total / its / (dofs / 1e5),
+        "one_newton_solve_s": t_one, "ratio": (t_total - t_commit) / (its * t_one),
+        "memory_mb_max_rank": mem_max, "memory_mb_sum": mem_sum,
+        "slipping_pairs": int(np.count_nonzero(table["state"] == 2)),
+        "plastic_points": problem.state.count_plastic_points(),
+        "_table": {"position": table["position"], "force_on_body1": table["force_on_body1"],
+                   "u_body2": table["u_body2"]},
+    }
+
+
+def compare(file_a: str, file_b: str) -> None:
+    """Largest relative differences of pair forces and displacements between two saved runs."""
+    a, b = np.load(file_a), np.load(file_b)
+    order = lambda x: np.lexsort((x[:, 2], x[:, 1], x[:, 0]))  # noqa: E731  (pairs by position)
+    i, j = order(a["position"].round(9)), order(b["position"].round(9))
+    for key in ("force_on_body1", "u_body2"):
+        ref = a[key][i]
+        print(f"{key}: max |{file_b} − {file_a}| / max |{file_a}| = "
+              f"{np.abs(b[key][j] - ref).max() / np.abs(ref).max():.2e}")
 
 
 def main():
-    parser = argparse.ArgumentParser()
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--levels", type=int, nargs="+", default=[1, 2, 4])
     parser.add_argument("--linear-solver", nargs="+", default=["direct", "iterative"])
     parser.add_argument("--increments", type=int, default=6)
+    parser.add_argument("--final-load-factor", type=float, default=1.0)
+    parser.add_argument("--save", help="write the last run's pair forces and displacements (.npz)")
+    parser.add_argument("--json", help="append the figures of every run to this JSON-lines file")
+    parser.add_argument("--compare", nargs=2, metavar=("A.npz", "B.npz"))
     args = parser.parse_args()
+    if args.compare:
+        compare(*args.compare)
+        return
     comm = MPI.COMM_WORLD
     rank0 = comm.rank == 0
+
+    # JIT warm-up on level 1: FFCx forms and numba kernels (both cached on disk)
+    t0 = time.perf_counter()
+    warm = pressed_blocks_problem(1, comm)
+    t_build = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    solve_load_steps(warm, MonolithicSolver(warm), 1, final_load_factor=1.0 / args.increments)
+    t_first = time.perf_counter() - t0
     if rank0:
-        print(f"{comm.size} rank(s); {args.increments} increments per run")
-        print(f"{'level':>5} {'solver':>9} {'dofs':>9} {'pairs':>6} {'its':>4} {'s/it':>7} {'total s':>8} "
-              f"{'assembly':>8} {'contact':>8} {'blocks':>8} {'solve':>8} {'MB':>6}")
+        print(f"machine: {platform.machine()}, {comm.size} rank(s); DOLFINx {dolfinx.__version__}, "
+              f"PETSc {'.'.join(map(str, PETSc.Sys.getVersion()))}, numba {numba.__version__}")
+        print(f"JIT warm-up (level 1): problem build {t_build:.2f} s, first increment {t_first:.2f} s")
+        print(f"{args.increments} increments to load factor {args.final_load_factor}")
+    last = None
     for level in args.levels:
         for linear_solver in args.linear_solver:
-            t0 = time.perf_counter()
-            problem = blocks_problem(level, comm)
-            t_setup = time.perf_counter() - t0
-            solver = MonolithicSolver(problem, SolverOptions(linear_solver=linear_solver, max_iterations=40))
-            t0 = time.perf_counter()
-            results = solve_load_steps(problem, solver, args.increments)
-            total = time.perf_counter() - t0
-            its = sum(r.iterations for r in results)
-            mb = comm.allreduce(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, op=MPI.MAX)
-            t = solver.timings
-            if rank0:
-                print(f"{level:>5} {linear_solver:>9} {problem.V.dofmap.index_map.size_global * 3:>9} "
-                      f"{problem.num_pairs:>6} {its:>4} {total / max(its, 1):>7.2f} {total:>8.2f} "
-                      f"{t.get('assembly', 0):>8.2f} {t.get('contact', 0):>8.2f} {t.get('block_matrix', 0):>8.2f} "
-                      f"{t.get('solve', 0):>8.2f} {mb:>6.0f}   (setup {t_setup:.1f} s, "
-                      f"iterations {[r.iterations for r in results]})", flush=True)
+            r = run(level, linear_solver, args.increments, args.final_load_factor, comm)
+            last = r
+            if not rank0:
+                continue
+            split = ", ".join(f"{k} {v:.1f}" for k, v in sorted(r["split_s"].items()))
+            print(f"\nlevel {level}, {linear_solver}, {comm.size} rank(s): {r['dofs']} dofs, {r['pairs']} pairs; "
+                  f"set-up {r['setup_s']:.1f} s")
+            print(f"  Newton iterations {r['iterations']} (total {sum(r['iterations'])}), Krylov {r['krylov']}; "
+                  f"slipping pairs at the end {r['slipping_pairs']}, plastic Gauss points {r['plastic_points']}")
+            print(f"  total {r['total_s']:.1f} s (state commit {r['commit_s']:.1f} s); {r['s_per_iteration']:.2f} s "
+                  f"per Newton iteration = {r['s_per_iteration_per_1e5_dofs']:.2f} s per 1e5 dofs")
+            print(f"  split (s): {split}")
+            print(f"  one Newton solve {r['one_newton_solve_s']:.2f} s; ratio solve / (iterations × one) "
+                  f"= {r['ratio']:.2f}")
+            print(f"  peak memory: {r['memory_mb_max_rank']:.0f} MB (largest rank), "
+                  f"{r['memory_mb_sum']:.0f} MB (all ranks)", flush=True)
+            if args.json:
+                with open(args.json, "a") as f:
+                    f.write(json.dumps({k: v for k, v in r.items() if k != "_table"}) + "\n")
+    if args.save and rank0 and last is not None:
+        np.savez(args.save, **last["_table"])
 
 
 if __name__ == "__main__":

@@ -137,6 +137,7 @@ def _run(args) -> int:
         return EXIT_OK
     options = SolverOptions(rtol=solver_spec["rtol"], atol=solver_spec["atol"],
                             max_iterations=solver_spec["max_iterations"],
+                            linear_solver=solver_spec["linear_solver"],
                             petsc_options=solver_spec["petsc_options"])
     solver = make_solver(method, problem, options)
     out = Path(args.out or spec.output["folder"])

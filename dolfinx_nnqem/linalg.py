@@ -64,10 +64,11 @@ ITERATIVE_SOLVER_OPTIONS = {
     "fieldsplit_z_ksp_type": "preonly",
     "fieldsplit_z_pc_type": "lu",
 }
-"""For large meshes (``SolverOptions(linear_solver="iterative")``): nothing factorises K. The
-u block gets one V-cycle of smoothed-aggregation AMG (GAMG) with the rigid-body near-nullspace;
-the small Schur complement on the pair unknowns is approximated by A11 − A10 diag(K)⁻¹ A01
-("selfp") and factorised (it has 3 rows per pair)."""
+"""For large meshes (``SolverOptions(linear_solver="iterative")``), on the augmented Newton
+matrix of :class:`dolfinx_nnqem.block_system.AugmentedSystem`: nothing factorises the u block.
+It gets one V-cycle of smoothed-aggregation AMG (GAMG) with the rigid-body near-nullspace; the
+Schur complement on the pair unknowns is approximated by A11 − A10 diag(A00)⁻¹ A01 ("selfp")
+and factorised (3 rows per pair). ``ksp_rtol`` is the floor of the inexact-Newton tolerance."""
 
 ITERATIVE_NO_CONTACT_OPTIONS = {
     "ksp_type": "cg",

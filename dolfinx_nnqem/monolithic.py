@@ -213,7 +213,7 @@ class MonolithicSolver:
                 kind, alpha = "full", 1.0
             nonmonotone += 1
             step_length = alpha
-            R, R_free, H, ev, scale = self._evaluate()
+            R, R_free, H, ev, scale = self._accepted or self._evaluate()
         report.message = (f"no convergence in {opts.max_iterations} iterations "
                           f"(|R|/F = {report.final.equilibrium:.3e}, |H|/F = {report.final.contact:.3e})")
         return report
@@ -395,13 +395,17 @@ class MonolithicSolver:
         """
         psi0 = 0.5 * (normR ** 2 + normH ** 2)
         alpha = 1.0
+        self._accepted = None  # the evaluation at the accepted iterate, reused by the caller
         while True:
             self._set_iterate(self._u0, self._z0, du, dz, alpha)
-            _, R_free, H, _, _ = self._evaluate()
+            evaluation = self._evaluate()
+            _, R_free, H, _, _ = evaluation
             psi = 0.5 * (R_free.norm() ** 2 + self._norm_H(H) ** 2)
             if math.isfinite(psi) and psi <= (1.0 - 2.0 * self.armijo * alpha) * psi0:
+                self._accepted = evaluation
                 return alpha
             if allow_increase and alpha == 1.0 and psi <= self.max_increase * psi0:
+                self._accepted = evaluation
                 return -1.0
             alpha *= 0.5
             if alpha < self.min_step:

@@ -43,6 +43,7 @@ A problem file names a mesh with physical tags and everything :class:`ContactPro
     max_cutbacks = 5
     rtol = 1e-10
     max_iterations = 30
+    linear_solver = "direct"              # monolithic: "iterative" (GAMG), "auto" (by size)
     [solver.petsc_options]
     pc_factor_mat_solver_type = "mumps"
 
@@ -283,7 +284,7 @@ def _body_force_entry(entry: dict, where: str) -> dict:
 def _solver_section(solver: dict, where: str) -> dict:
     w = f"{where}: [solver]"
     solver = _checked_keys(solver, {"method", "increments", "max_cutbacks", "rtol", "atol", "max_iterations",
-                                    "petsc_options"}, set(), w)
+                                    "linear_solver", "petsc_options"}, set(), w)
     solver.setdefault("method", "monolithic")
     if solver["method"] not in METHODS:
         raise ProblemFileError(f"{w}.method = {solver['method']!r}: expected one of {list(METHODS)}")
@@ -294,6 +295,13 @@ def _solver_section(solver: dict, where: str) -> dict:
                                            positive=True, integer=True))
     for key, default in (("rtol", 1e-10), ("atol", 1e-12)):
         solver[key] = float(_number(solver.get(key, default), f"{w}.{key}", positive=True))
+    solver.setdefault("linear_solver", "direct")
+    if solver["linear_solver"] not in ("direct", "iterative", "auto"):
+        raise ProblemFileError(f"{w}.linear_solver = {solver['linear_solver']!r}: expected \"direct\", "
+                               "\"iterative\" or \"auto\"")
+    if solver["linear_solver"] != "direct" and solver["method"] != "monolithic":
+        raise ProblemFileError(f"{w}.linear_solver = {solver['linear_solver']!r} needs method = \"monolithic\" "
+                               f"({solver['method']} factorises the stiffness)")
     options = solver.get("petsc_options", {})
     if not isinstance(options, dict) or not all(isinstance(v, (str, int, float, bool)) for v in options.values()):
         raise ProblemFileError(f"{w}.petsc_options must be a table of PETSc option = value")

@@ -59,6 +59,8 @@ tag = 12
     (("[[dirichlet]]\ntag = 11", "[[dirichlet]]\ntag = 11\ncomponents = [3]"), "components"),
     (("[contact]", "[solver]\nmethod = \"newton\"\n[contact]"), "method"),
     (("[contact]", "[typo]\nx = 1\n[contact]"), "unknown section"),
+    (("[contact]", "[solver]\nlinear_solver = \"gmres\"\n[contact]"), "linear_solver"),
+    (("[contact]", "[solver]\nmethod = \"nneqm1\"\nlinear_solver = \"iterative\"\n[contact]"), "linear_solver"),
     (("mu_f = 0.3", "mu_f = 0.3\nfriction = 1"), "unknown key"),
     (("[materials.1]", "[materials.one]"), "cell tag"),
 ])
