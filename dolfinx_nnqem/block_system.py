@@ -89,9 +89,9 @@ class AugmentedSystem:
     symmetric with identity rows and columns there.
 
     The matrix is a MatNest (no copy of K into one AIJ matrix), laid out like the direct
-    solver's: on every rank the owned u rows, then the owned pair rows. The u block keeps one
-    sparsity pattern over the iterations (K's plus the 6×6 pair couplings of all pairs), so
-    PETSc can reuse its symbolic work.
+    solver's: on every rank the owned u rows, then the owned pair rows. The u block is K's own
+    matrix, widened once to K's pattern plus the 6×6 couplings of all pairs and kept so over
+    the iterations: no second copy of K, and PETSc reuses its symbolic work.
     """
 
     def __init__(self, pairs, constrained_rows: np.ndarray, r: float, augmentation: float):
@@ -115,7 +115,12 @@ class AugmentedSystem:
         self.A00 = None
 
     def _u_block(self, K: PETSc.Mat, dH_dw: np.ndarray) -> PETSc.Mat:
-        """K + B_freeᵀ P B_free in the persistent matrix ``A00``."""
+        """K + B_freeᵀ P B_free, added in place to ``K``.
+
+        The first call widens K's sparsity to include the pair couplings (K then keeps that
+        pattern: the caller assembles the next tangent into the same matrix, whose extra
+        entries are zeroed by the assembly), so there is never a second copy of K.
+        """
         P = self.c * np.einsum("nki,nkj->nij", dH_dw, dH_dw)
         self._P.setValuesCSR(*self._csr, np.ascontiguousarray(P.reshape(-1)))
         self._P.assemble()
@@ -124,13 +129,15 @@ class AugmentedSystem:
         else:
             self._P.PtAP(self.B_free, self._BtPB)
         if self.A00 is None:
-            self.A00 = K.copy()
-            self.A00.axpy(1.0, self._BtPB, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+            lgmap = K.getLGMap()  # the new pattern comes without DOLFINx's local-to-global maps
+            K.axpy(1.0, self._BtPB, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+            K.setLGMap(*lgmap)
+            self.A00 = K
+        elif K is not self.A00:
+            raise ValueError("AugmentedSystem: assemble the tangent into the matrix returned before")
         else:
-            self.A00.zeroEntries()
-            self.A00.axpy(1.0, K, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
-            self.A00.axpy(1.0, self._BtPB, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
-        return self.A00
+            K.axpy(1.0, self._BtPB, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
+        return K
 
     def matrix(self, K: PETSc.Mat, dH_dw: np.ndarray, dH_dz: np.ndarray,
                dlam_dz: np.ndarray) -> PETSc.Mat:

@@ -156,18 +156,33 @@ class MonolithicSolver:
         """Solve for the load factor ``load_factor`` from the last converged state."""
         p = self.problem
         opts = self.options
-        if opts.extrapolate:
-            p.extrapolate(load_factor)
+        extrapolated = opts.extrapolate and p.extrapolate(load_factor)
+        u_bc = p.u.x.array[p.bc_dofs].copy()
         p.apply_prescribed_displacements(load_factor)
         p.predict_contact()
         report = SolveReport(converged=False, iterations=0,
                              system_order=p.V.dofmap.index_map.size_global * 3 + 3 * p.num_pairs)
-        R, R_free, H, ev, scale = self._evaluate()
         self._refresh_u_pc = True  # a new increment: a fresh AMG hierarchy for the u block
         step_length, kind = float("nan"), ""
+        delta_bc = p.u.x.array[p.bc_dofs] - u_bc
+        moved = p.comm.allreduce(bool(np.any(delta_bc != 0.0)), op=MPI.LOR)
+        first = 0
+        if moved and not extrapolated:
+            # prescribed displacements jump: take the first step with the jump lifted
+            p.u.x.array[p.bc_dofs] = u_bc
+            R, R_free, H, ev, scale = self._evaluate()
+            record = IterationRecord(0, R_free.norm() / max(scale, opts.atol), self._norm_H(H) / max(scale, opts.atol),
+                                     step_length, kind, count_states(ev.state, p.comm) if ev is not None else (0, 0, 0),
+                                     p.state.count_trial_plastic_points(p.u))
+            logger.info(record.line(self.name) + "  (before the prescribed displacements move)")
+            if self._lifted_step(R_free, H, ev, delta_bc, scale):
+                kind, step_length, first = "lifted", 1.0, 1
+            else:
+                p.apply_prescribed_displacements(load_factor)  # fall back to plain Newton
+        R, R_free, H, ev, scale = self._evaluate()
         best = None  # (Ψ, u, z) of the best iterate so far (watchdog)
         nonmonotone = 0  # full steps accepted in a row without decreasing Ψ below the best
-        for it in range(opts.max_iterations + 1):
+        for it in range(first, opts.max_iterations + 1):
             normR, normH = R_free.norm(), self._norm_H(H)
             if not (math.isfinite(normR) and math.isfinite(normH)):
                 report.message = f"NaN/inf residual at iteration {it} (|R| = {normR}, |H| = {normH})"
@@ -217,6 +232,48 @@ class MonolithicSolver:
         report.message = (f"no convergence in {opts.max_iterations} iterations "
                           f"(|R|/F = {report.final.equilibrium:.3e}, |H|/F = {report.final.contact:.3e})")
         return report
+
+    def _lifted_step(self, R_free, H, ev, delta_bc: np.ndarray, scale: float) -> bool:
+        """Newton step from the converged state that moves the constrained dofs by ``delta_bc``.
+
+        J du = −F − J_c Δu_D with du = Δu_D at the constrained dofs: the tangent (and the pair
+        laws) evaluated where the solution is, not at a state whose boundary layer alone has been
+        moved (which, in a plastic body, yields spuriously and misleads the first step). The
+        step is taken in full, without line search (its start is not an admissible state).
+        Returns False if the linear solve failed.
+        """
+        p = self.problem
+        delta = np.zeros_like(p.u.x.array)
+        delta[p.bc_dofs] = delta_bc
+        K_delta = p.tangent_action(delta)
+        R_lifted = self._free(R_free, K_delta)
+        H_lifted = H
+        if p.has_contact:
+            dw = p.pairs.relative_displacement(self._as_vec(delta))
+            H_lifted = H + np.einsum("nij,nj->ni", ev.dH_dw, dw)
+        if self.iterative:
+            self._set_forcing(1.0)
+        self._u0 = p.u.x.array[:R_free.getLocalSize()].copy()
+        self._z0 = p.z.copy() if p.has_contact else None
+        du, dz = self._newton_direction(R_lifted, H_lifted, ev)
+        if du is None:
+            return False
+        self._set_iterate(self._u0, self._z0, du, dz, 1.0)
+        p.u.x.array[p.bc_dofs] += delta_bc
+        return True
+
+    def _free(self, R_free: PETSc.Vec, K_delta: PETSc.Vec) -> PETSc.Vec:
+        """R_free + K_δ with the constrained rows zeroed."""
+        out = self.problem.free_residual(K_delta)
+        out.axpy(1.0, R_free)
+        return out
+
+    def _as_vec(self, array: np.ndarray) -> PETSc.Vec:
+        p = self.problem
+        v = p.u.x.petsc_vec.duplicate()
+        with v.localForm() as local:
+            local.array[:] = array
+        return v
 
     def _restore_snapshot(self, snapshot) -> None:
         p = self.problem

@@ -438,6 +438,24 @@ class ContactProblem:
             R.axpy(-1.0, self.pairs.global_force(self.contact_force(z)))
         return R
 
+    def tangent_action(self, delta: np.ndarray) -> PETSc.Vec:
+        """K_t(u) δ without any constrained row or column removed (δ: local array, ghosts included).
+
+        The lifting of a prescribed-displacement increment: the Newton matrix has identity rows
+        and columns at constrained dofs, so a step that moves them needs this product on the
+        right-hand side. The form is compiled on first use.
+        """
+        if getattr(self, "_tangent_action", None) is None:
+            self._delta = fem.Function(self.V)
+            self._tangent_action = fem.form(self.state.tangent_form(self.u, self._delta, ufl.TestFunction(self.V)))
+        self._delta.x.array[:] = delta
+        F = compat.create_vector(self.V)
+        with F.localForm() as local:
+            local.set(0.0)
+        dolfinx.fem.petsc.assemble_vector(F, self._tangent_action)
+        F.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        return F
+
     def free_residual(self, R: PETSc.Vec) -> PETSc.Vec:
         """A copy of ``R`` with the constrained rows zeroed (what equilibrium must satisfy)."""
         Rf = R.copy()
@@ -453,25 +471,40 @@ class ContactProblem:
         return pin_constrained_directions(self.law, evaluation, z, self.constrained_directions,
                                           self.r * self.characteristic_length())
 
-    def extrapolate(self, load_factor: float) -> None:
-        """Secant predictor: u ← u_n + β (u_n − u_{n−1}), z likewise, β = Δℓ / Δℓ_previous.
+    def amplitudes(self, load_factor: float) -> np.ndarray:
+        """The amplitudes of every load and every Dirichlet condition at ``load_factor``."""
+        return np.array([_amplitude(a, load_factor) for a, _ in self.F_ext_parts]
+                        + [_amplitude(a, load_factor) for a, _ in self._bc_amplitudes])
+
+    def extrapolate(self, load_factor: float) -> bool:
+        """Secant predictor: u ← u_n + β (u_n − u_{n−1}), z likewise; True if it was applied.
 
         Starts Newton from the linear extrapolation of the last two converged increments
         instead of from the last one (constrained dofs are set afterwards by
-        :meth:`apply_prescribed_displacements`). Nothing happens before two increments exist.
+        :meth:`apply_prescribed_displacements`). β is the ratio of this increment's change of
+        the load amplitudes to the last one's (Δℓ / Δℓ_previous when every load follows ℓ).
+        Nothing happens before two increments exist, or where the load path turns (the
+        changes of the amplitudes are not parallel: e.g. a pressure stops rising and a drag
+        starts), since the last increment's response then says little about this one's.
         """
         previous = getattr(self, "_previous", None)
         if previous is None:
-            return
+            return False
         ell_prev, u_prev, z_prev = previous
-        step_prev = self.load_factor_n - ell_prev
-        if step_prev == 0.0:
-            return
-        beta = (load_factor - self.load_factor_n) / step_prev
+        a_n = self.amplitudes(self.load_factor_n)
+        d_prev = a_n - self.amplitudes(ell_prev)
+        d_new = self.amplitudes(load_factor) - a_n
+        norm_prev = float(d_prev @ d_prev)
+        if norm_prev == 0.0:
+            return False
+        beta = float(d_new @ d_prev) / norm_prev
+        if np.linalg.norm(d_new - beta * d_prev) > 1e-3 * np.linalg.norm(d_new):
+            return False  # the load path turns here
         u_n = self.state.u_n.x.array
         self.u.x.array[:] = u_n + beta * (u_n - u_prev)
         if self.has_contact:
             self.z = self.z_n + beta * (self.z_n - z_prev)
+        return True
 
     def predict_contact(self) -> None:
         """Starting active set: touching pairs (g ≤ 0) with p_n = 0 get a tiny p_n > 0.
