@@ -51,7 +51,7 @@ ITERATIVE_SOLVER_OPTIONS = {
     "ksp_rtol": 1e-12,  # the floor; each Newton step sets its own tolerance (inexact Newton)
     "ksp_atol": 1e-50,
     "ksp_max_it": 1000,
-    "ksp_gmres_restart": 200,
+    "ksp_gmres_restart": 30,  # FGMRES keeps 2 vectors per iteration: bounded memory on large meshes
     "pc_type": "fieldsplit",
     "pc_fieldsplit_type": "schur",
     "pc_fieldsplit_schur_fact_type": "lower",

@@ -156,29 +156,12 @@ class MonolithicSolver:
         """Solve for the load factor ``load_factor`` from the last converged state."""
         p = self.problem
         opts = self.options
-        extrapolated = opts.extrapolate and p.extrapolate(load_factor)
-        u_bc = p.u.x.array[p.bc_dofs].copy()
-        p.apply_prescribed_displacements(load_factor)
-        p.predict_contact()
         report = SolveReport(converged=False, iterations=0,
                              system_order=p.V.dofmap.index_map.size_global * 3 + 3 * p.num_pairs)
         self._refresh_u_pc = True  # a new increment: a fresh AMG hierarchy for the u block
-        step_length, kind = float("nan"), ""
-        delta_bc = p.u.x.array[p.bc_dofs] - u_bc
-        moved = p.comm.allreduce(bool(np.any(delta_bc != 0.0)), op=MPI.LOR)
-        first = 0
-        if moved and not extrapolated:
-            # prescribed displacements jump: take the first step with the jump lifted
-            p.u.x.array[p.bc_dofs] = u_bc
-            R, R_free, H, ev, scale = self._evaluate()
-            record = IterationRecord(0, R_free.norm() / max(scale, opts.atol), self._norm_H(H) / max(scale, opts.atol),
-                                     step_length, kind, count_states(ev.state, p.comm) if ev is not None else (0, 0, 0),
-                                     p.state.count_trial_plastic_points(p.u))
-            logger.info(record.line(self.name) + "  (before the prescribed displacements move)")
-            if self._lifted_step(R_free, H, ev, delta_bc, scale):
-                kind, step_length, first = "lifted", 1.0, 1
-            else:
-                p.apply_prescribed_displacements(load_factor)  # fall back to plain Newton
+        lifted = self._predict(load_factor)
+        step_length, kind = (1.0, "lifted") if lifted else (float("nan"), "")
+        first = 1 if lifted else 0
         R, R_free, H, ev, scale = self._evaluate()
         best = None  # (Ψ, u, z) of the best iterate so far (watchdog)
         nonmonotone = 0  # full steps accepted in a row without decreasing Ψ below the best
@@ -233,7 +216,29 @@ class MonolithicSolver:
                           f"(|R|/F = {report.final.equilibrium:.3e}, |H|/F = {report.final.contact:.3e})")
         return report
 
-    def _lifted_step(self, R_free, H, ev, delta_bc: np.ndarray, scale: float) -> bool:
+    def _predict(self, load_factor: float) -> bool:
+        """The increment's starting point; True if it was reached by a lifted Newton step.
+
+        The secant predictor when the load path goes on in the same direction; otherwise, if
+        prescribed displacements move, a Newton step from the converged state with their jump
+        lifted (:meth:`_lifted_step`); otherwise the converged state.
+        """
+        p = self.problem
+        extrapolated = self.options.extrapolate and p.extrapolate(load_factor)
+        u_bc = p.u.x.array[p.bc_dofs].copy()
+        p.apply_prescribed_displacements(load_factor)
+        p.predict_contact()
+        delta_bc = p.u.x.array[p.bc_dofs] - u_bc
+        if extrapolated or not p.comm.allreduce(bool(np.any(delta_bc != 0.0)), op=MPI.LOR):
+            return False
+        p.u.x.array[p.bc_dofs] = u_bc
+        _, R_free, H, ev, _ = self._evaluate()
+        if self._lifted_step(R_free, H, ev, delta_bc):
+            return True
+        p.apply_prescribed_displacements(load_factor)  # the solve failed: plain Newton from here
+        return False
+
+    def _lifted_step(self, R_free, H, ev, delta_bc: np.ndarray) -> bool:
         """Newton step from the converged state that moves the constrained dofs by ``delta_bc``.
 
         J du = −F − J_c Δu_D with du = Δu_D at the constrained dofs: the tangent (and the pair

@@ -37,7 +37,17 @@ def direct():
     table = pair_table(problem)
     return {"force_on_body1": table["force_on_body1"], "u_body2": table["u_body2"],
             "position": table["position"], "u": problem.u.x.array.copy(),
-            "iterations": [r.iterations for r in results], "states": table["state"]}
+            "iterations": [r.iterations for r in results], "states": table["state"],
+            "lifted": ["lifted" in [h.kind for h in r.report.history] for r in results]}
+
+
+def test_the_drag_onset_starts_with_a_lifted_step(direct):
+    """Where the load path turns (pressure stops, drag starts) the secant predictor is skipped and
+    the prescribed jump is lifted into the first Newton step: a few iterations, not ~20."""
+    its, lifted = direct["iterations"], direct["lifted"]
+    print(f"\n  Newton iterations {its}; lifted first step {lifted}")
+    assert lifted == [False, False, False, True, False, False]  # increment 4: the drag starts
+    assert its[3] <= 8
 
 
 def test_iterative_solver_matches_direct_on_a_body_held_by_contact(direct):
