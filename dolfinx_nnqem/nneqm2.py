@@ -91,7 +91,7 @@ from dolfinx_nnqem.linalg import create_ksp, factorise
 from dolfinx_nnqem.material import strain
 from dolfinx_nnqem.nneqm1 import _unknown_scale
 from dolfinx_nnqem.nonsmooth import solve_nonsmooth
-from dolfinx_nnqem.problem import ContactProblem, SolverOptions
+from dolfinx_nnqem.problem import ContactProblem, SolverOptions, assemble_vector
 
 # Orthonormal basis of the symmetric deviatoric 3×3 tensors (rows: the 9 components, row-major).
 _S2, _S6 = 1.0 / math.sqrt(2.0), 1.0 / math.sqrt(6.0)
@@ -345,11 +345,7 @@ class NNEQM2Solver:
         du_D = np.zeros_like(p.u.x.array)
         du_D[p.bc_dofs] = p.u.x.array[p.bc_dofs] - st.u_n.x.array[p.bc_dofs]
         self._lift_fn.x.array[:] = du_D
-        lift = compat.create_vector(p.V)
-        with lift.localForm() as local:
-            local.set(0.0)
-        dolfinx.fem.petsc.assemble_vector(lift, self._lift_form)
-        lift.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        lift = assemble_vector(self._lift_form, p.V)
         b = F_ext.copy()
         b.axpy(-1.0, F_n)
         b.axpy(-1.0, lift)

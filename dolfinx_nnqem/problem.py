@@ -283,15 +283,7 @@ class ContactProblem:
             else:
                 raise TypeError(f"body_forces: {b!r} is neither a BodyForce nor a Gravity")
             parts.append((b.amplitude, form))
-        assembled = []
-        for amplitude, form in parts:
-            F = compat.create_vector(self.V)
-            with F.localForm() as local:
-                local.set(0.0)
-            dolfinx.fem.petsc.assemble_vector(F, fem.form(form))
-            F.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-            assembled.append((amplitude, F))
-        return assembled
+        return [(amplitude, assemble_vector(fem.form(form), self.V)) for amplitude, form in parts]
 
     def external_force(self, load_factor: float | None = None) -> PETSc.Vec:
         """F_ext(ℓ) = Σ_k a_k(ℓ) F_k (a_k(ℓ) = ℓ unless the load has an amplitude)."""
@@ -393,13 +385,7 @@ class ContactProblem:
 
     def assemble_internal_force(self, F: PETSc.Vec | None = None) -> PETSc.Vec:
         """F_int(u) = ∫ σ(u) : ε(v) dx with the return map from the converged state."""
-        if F is None:
-            F = compat.create_vector(self.V)
-        with F.localForm() as local:
-            local.set(0.0)
-        dolfinx.fem.petsc.assemble_vector(F, self.F_int_form)
-        F.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-        return F
+        return assemble_vector(self.F_int_form, self.V, F)
 
     def assemble_tangent(self, A: PETSc.Mat | None = None) -> PETSc.Mat:
         """K_t(u), the consistent tangent, with identity rows and columns at constrained dofs."""
@@ -449,12 +435,7 @@ class ContactProblem:
             self._delta = fem.Function(self.V)
             self._tangent_action = fem.form(self.state.tangent_form(self.u, self._delta, ufl.TestFunction(self.V)))
         self._delta.x.array[:] = delta
-        F = compat.create_vector(self.V)
-        with F.localForm() as local:
-            local.set(0.0)
-        dolfinx.fem.petsc.assemble_vector(F, self._tangent_action)
-        F.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-        return F
+        return assemble_vector(self._tangent_action, self.V)
 
     def free_residual(self, R: PETSc.Vec) -> PETSc.Vec:
         """A copy of ``R`` with the constrained rows zeroed (what equilibrium must satisfy)."""
@@ -553,6 +534,18 @@ class ContactProblem:
         self.pending_gauss_values = None
         if self.has_contact:
             self.z = self.z_n.copy()
+
+
+def assemble_vector(form, V, F: PETSc.Vec | None = None) -> PETSc.Vec:
+    """Assemble the linear ``form`` into ``F`` (a new ghosted vector of ``V`` if None), owned
+    entries summed over ranks."""
+    if F is None:
+        F = compat.create_vector(V)
+    with F.localForm() as local:
+        local.set(0.0)
+    dolfinx.fem.petsc.assemble_vector(F, form)
+    F.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+    return F
 
 
 def _amplitude(amplitude: Callable[[float], float] | None, load_factor: float) -> float:
