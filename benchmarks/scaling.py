@@ -78,6 +78,7 @@ def run(level: int, linear_solver: str, increments: int, final_load_factor: floa
     t_total = time.perf_counter() - t0
     t_commit = sum(r.commit_time_s for r in results)
     iterations = [r.iterations for r in results]
+    amg_setups = solver.amg_setups
     t_one = one_newton_solve(problem, solver)
     mem_max, mem_sum = peak_memory_mb(comm)
     table = pair_table(problem)
@@ -87,6 +88,7 @@ def run(level: int, linear_solver: str, increments: int, final_load_factor: floa
         "level": level, "ranks": comm.size, "linear_solver": linear_solver, "dofs": dofs,
         "pairs": problem.num_pairs, "iterations": iterations, "krylov": solver.linear_iterations,
         "lm_steps": sum(h.kind == "lm" for r in results for h in r.report.history),
+        "amg_setups": amg_setups,
         "setup_s": t_setup, "total_s": t_total, "commit_s": t_commit,
         "split_s": {k: comm.allreduce(v, op=MPI.MAX) for k, v in solver.timings.items()},
         "s_per_iteration": t_total / its, "s_per_iteration_per_1e5_dofs": t_total / its / (dofs / 1e5),
@@ -149,7 +151,7 @@ def main():
             print(f"\nlevel {level}, {linear_solver}, {comm.size} rank(s): {r['dofs']} dofs, {r['pairs']} pairs; "
                   f"set-up {r['setup_s']:.1f} s")
             print(f"  Newton iterations {r['iterations']} (total {sum(r['iterations'])}, {r['lm_steps']} LM steps), "
-                  f"Krylov {r['krylov']}; "
+                  f"Krylov {r['krylov']}, AMG set-ups {r['amg_setups']}; "
                   f"slipping pairs at the end {r['slipping_pairs']}, plastic Gauss points {r['plastic_points']}")
             print(f"  total {r['total_s']:.1f} s (state commit {r['commit_s']:.1f} s); {r['s_per_iteration']:.2f} s "
                   f"per Newton iteration = {r['s_per_iteration_per_1e5_dofs']:.2f} s per 1e5 dofs")

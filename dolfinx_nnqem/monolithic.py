@@ -60,8 +60,8 @@ class MonolithicSolver:
         units of r (:class:`dolfinx_nnqem.block_system.AugmentedSystem`). It changes the
         preconditioner, not the Newton step.
     lag_preconditioner
-        Iterative solver with contact: keep the u block's AMG hierarchy over the Newton
-        iterations of an increment (rebuilt when a solve converges poorly).
+        Iterative solver with contact: keep the u block's AMG hierarchy while it works
+        (rebuilt when 5 % of the pairs changed state, or a solve converges poorly).
     """
 
     name = "monolithic"
@@ -87,6 +87,8 @@ class MonolithicSolver:
         self._K = None
         self._augmented = None
         self._lagging = self.iterative and problem.has_contact and lag_preconditioner
+        self.refresh_fraction = 0.05
+        self.amg_setups = 0  # AMG hierarchies built (iterative solver with contact)
         self._refresh_u_pc = True
         self._lag_state = None
         if self.iterative and problem.has_contact:
@@ -158,7 +160,6 @@ class MonolithicSolver:
         opts = self.options
         report = SolveReport(converged=False, iterations=0,
                              system_order=p.V.dofmap.index_map.size_global * 3 + 3 * p.num_pairs)
-        self._refresh_u_pc = True  # a new increment: a fresh AMG hierarchy for the u block
         lifted = self._predict(load_factor)
         step_length, kind = (1.0, "lifted") if lifted else (float("nan"), "")
         first = 1 if lifted else 0
@@ -323,35 +324,43 @@ class MonolithicSolver:
         return du, arr[n_u:].reshape(-1, 3).copy()
 
     def _lag_u_preconditioner(self) -> None:
-        """Keep the u block's AMG hierarchy over the Newton iterations of an increment.
+        """Keep the u block's AMG hierarchy over Newton iterations and increments while it works.
 
-        GAMG's setup (aggregation and Galerkin products) costs several Krylov iterations; the
-        hierarchy of the increment's first Newton matrix stays a good preconditioner for the
-        next ones (FGMRES still solves with the current matrix). It is rebuilt at each
-        increment and whenever a lagged solve converges poorly.
+        GAMG's set-up (aggregation and Galerkin products) costs many Krylov iterations; the
+        hierarchy of an earlier Newton matrix stays a good preconditioner for the next ones
+        (FGMRES still solves with the current matrix). It is rebuilt when more than
+        ``refresh_fraction`` of the pairs changed state since it was built (the penalty BᵀPB
+        changes there), and when a lagged solve needs more than twice the iterations the last
+        fresh hierarchy's convergence rate predicts (that solve is then cut short and redone).
         """
         if not self._lagging:
             return
         state = self._pair_state
-        if self._lag_state is None or self._lag_state.shape != state.shape or \
-                self.problem.comm.allreduce(bool(np.any(state != self._lag_state)), op=MPI.LOR):
-            self._refresh_u_pc = True  # the penalty BᵀPB changed where pairs changed state
+        if self._lag_state is None or self._lag_state.shape != state.shape:
+            self._refresh_u_pc = True
+        else:
+            changed = self.problem.comm.allreduce(int(np.count_nonzero(state != self._lag_state)), op=MPI.SUM)
+            if changed > self.refresh_fraction * self.problem.num_pairs:
+                self._refresh_u_pc = True
         ksp_u = self.ksp.getPC().getFieldSplitSubKSP()[0]
         ksp_u.getPC().setReusePreconditioner(not self._refresh_u_pc)
         if self._refresh_u_pc:
-            self._fresh_its = None
             self._lag_state = state.copy()
+            self.amg_setups += 1
             self.ksp.setTolerances(max_it=self._ksp_max_it)
         else:
-            # a lagged solve that is no longer good is cut short and redone fresh
-            self.ksp.setTolerances(max_it=4 * self._fresh_its + 10)
+            rtol = self.ksp.getTolerances()[0]
+            expected = math.log(rtol) / math.log(self._fresh_rate)
+            self.ksp.setTolerances(max_it=int(2 * expected) + 5)
         self._lag_refreshed = self._refresh_u_pc
         self._refresh_u_pc = False
 
     def _lagged_solve_is_poor(self, b: PETSc.Vec) -> bool:
         """True if this solve used a lagged hierarchy and did not converge within its budget."""
         if self._lag_refreshed:
-            self._fresh_its = max(self.ksp.getIterationNumber(), 1)
+            its = max(self.ksp.getIterationNumber(), 1)
+            reduction = self.ksp.getResidualNorm() / max(b.norm(), 1e-300)
+            self._fresh_rate = min(max(reduction ** (1.0 / its), 1e-3), 0.95)
             return False
         return self.ksp.getConvergedReason() <= 0
 
