@@ -1,9 +1,11 @@
 """Scaling of the monolithic solver on the pressed blocks (``dolfinx_nnqem.pressed_blocks``).
 
-    python benchmarks/scaling.py --levels 1 2 4 8 --linear-solver direct iterative
+    python benchmarks/scaling.py --levels 1 2 4 --linear-solver direct iterative
+    python benchmarks/scaling.py --levels 10 --linear-solver iterative --save run1.npz
     mpiexec -n 2 python benchmarks/scaling.py --levels 10 --linear-solver iterative --save run2.npz
     python benchmarks/scaling.py --compare run1.npz run2.npz
-    mpiexec -n 2 python benchmarks/scaling.py --levels 17 --linear-solver iterative --increments 4
+    mpiexec -n 2 python benchmarks/scaling.py --levels 17 --linear-solver iterative
+    mpiexec -n 2 python benchmarks/scaling.py --levels 17 --linear-solver iterative --increments 2 --final-load-factor 0.5
 
 Two elastoplastic blocks pressed together, then dragged; level k has 4k × 2k × 4k hexahedra
 per block (level 17: 1.0e6 displacement dofs). Per level and linear solver it prints the

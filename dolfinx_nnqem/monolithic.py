@@ -75,6 +75,9 @@ class MonolithicSolver:
         self.armijo, self.min_step, self.lm_c, self.lm_delta = armijo, min_step, lm_c, lm_delta
         self.watchdog = watchdog
         self.max_increase = max_increase
+        if not (math.isfinite(augmentation) and augmentation > 0):
+            raise ValueError(f"MonolithicSolver: augmentation = {augmentation!r}; expected a finite value > 0 "
+                             "(the u block's penalty on closed pair directions, in units of r)")
         self.prefix = f"nnqem_monolithic_{id(self)}_"
         self.iterative = self._use_iterative()
         if self.iterative:
@@ -91,6 +94,7 @@ class MonolithicSolver:
         self.amg_setups = 0  # AMG hierarchies built (iterative solver with contact)
         self._refresh_u_pc = True
         self._lag_state = None
+        self._fresh_rate = None  # Krylov convergence rate right after the last AMG set-up
         if self.iterative and problem.has_contact:
             self._augmented = AugmentedSystem(problem.pairs, problem.constrained_rows(), problem.r,
                                               augmentation)
@@ -336,7 +340,7 @@ class MonolithicSolver:
         if not self._lagging:
             return
         state = self._pair_state
-        if self._lag_state is None or self._lag_state.shape != state.shape:
+        if self._lag_state is None or self._lag_state.shape != state.shape or self._fresh_rate is None:
             self._refresh_u_pc = True
         else:
             changed = self.problem.comm.allreduce(int(np.count_nonzero(state != self._lag_state)), op=MPI.SUM)
@@ -397,10 +401,25 @@ class MonolithicSolver:
             J = self._jacobian(ev)
             b = self._rhs(J, R_free, H)
         x = b.duplicate()
-        t0 = time.perf_counter()
         self.ksp.setOperators(J)
         if self.iterative:
             self._configure_iterative(J)
+        if not self._krylov_solve(b, x):
+            return None, None
+        if self._lagging and self._lagged_solve_is_poor(b):
+            # the lagged AMG hierarchy no longer fits K + BᵀPB: rebuild it, solve the same system again
+            self._refresh_u_pc = True
+            if not self._krylov_solve(b, x):
+                return None, None
+            self._lagged_solve_is_poor(b)  # records the fresh hierarchy's convergence rate
+        if self.ksp.getConvergedReason() <= 0 or not np.all(np.isfinite(x.getArray(readonly=True))):
+            logger.info(f"{self.name}: linear solve failed, KSP reason {self.ksp.getConvergedReason()}")
+            return None, None
+        return self._split(x, R_free.getLocalSize())
+
+    def _krylov_solve(self, b: PETSc.Vec, x: PETSc.Vec) -> bool:
+        """Set up (lagging the u block's AMG where it may) and solve; False on a PETSc error."""
+        t0 = time.perf_counter()
         try:
             self.ksp.setUp()
             self._lag_u_preconditioner()
@@ -408,18 +427,12 @@ class MonolithicSolver:
             t0 = time.perf_counter()
             self.ksp.solve(b, x)
         except PETSc.Error:
-            return None, None
+            self._refresh_u_pc = True  # whatever failed, do not lag from it
+            return False
         finally:
             self._tick("solve", t0)
         self.linear_iterations += self.ksp.getIterationNumber()
-        if self._lagging and not self._refresh_u_pc and self._lagged_solve_is_poor(b):
-            # the lagged AMG hierarchy no longer fits K + BᵀPB: rebuild it and solve again
-            self._refresh_u_pc = True
-            return self._newton_direction(R_free, H, ev)
-        if self.ksp.getConvergedReason() <= 0 or not np.all(np.isfinite(x.getArray(readonly=True))):
-            logger.info(f"{self.name}: linear solve failed, KSP reason {self.ksp.getConvergedReason()}")
-            return None, None
-        return self._split(x, R_free.getLocalSize())
+        return True
 
     def _lm_direction(self, R_free, H, ev, ref: float):
         """Levenberg–Marquardt: (JᵀJ + ν I) d = −JᵀF, ν = lm_c · min(ε, 1)^lm_delta · mean diag(JᵀJ)."""

@@ -44,8 +44,8 @@ def drag_amplitude(load_factor: float) -> float:
 
 def pressed_blocks_problem(level: int, comm: MPI.Comm = MPI.COMM_WORLD, mu_f: float = 0.1) -> ContactProblem:
     """The problem of level ``level`` (see the module docstring)."""
-    if level < 1:
-        raise ValueError(f"level = {level}; expected an integer >= 1")
+    if isinstance(level, bool) or not isinstance(level, int) or level < 1:
+        raise ValueError(f"level = {level!r}; expected an integer >= 1")
     n = 4 * level
     mesh, cell_tags, facet_tags = build_stacked_blocks(comm, 1.0, 0.5, 0.5, 1.0, n, 2 * level, 2 * level, n)
     return ContactProblem(

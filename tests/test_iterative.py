@@ -88,3 +88,16 @@ def test_iterative_solver_on_two_ranks_matches_serial(direct, tmp_path):
     print(f"\n  iterative on 2 ranks vs direct serial: forces {df:.1e}, displacements {du:.1e}; "
           f"Newton iterations {got['iterations'].tolist()}")
     assert max(df, du) < 1e-8
+
+
+@pytest.mark.parametrize("augmentation", [0.0, -1.0, float("nan"), float("inf")])
+def test_unphysical_augmentation_is_refused(augmentation):
+    problem = pressed_blocks_problem(1, MPI.COMM_SELF)
+    with pytest.raises(ValueError, match="augmentation"):
+        MonolithicSolver(problem, SolverOptions(linear_solver="iterative"), augmentation=augmentation)
+
+
+@pytest.mark.parametrize("level", [0, 1.5, True])
+def test_bad_level_is_refused(level):
+    with pytest.raises(ValueError, match="level"):
+        pressed_blocks_problem(level, MPI.COMM_SELF)
