@@ -25,7 +25,7 @@ from petsc4py import PETSc
 from dolfinx_nnqem.block_system import AugmentedSystem, contact_jacobian_blocks, monolithic_matrix
 from dolfinx_nnqem.convergence import IterationRecord, SolveReport, count_states, logger
 from dolfinx_nnqem.linalg import (ITERATIVE_NO_CONTACT_OPTIONS, ITERATIVE_SOLVER_OPTIONS, create_ksp,
-                                  global_norm, rigid_body_modes, set_options)
+                                  free_dropped_objects, global_norm, rigid_body_modes, set_options)
 from dolfinx_nnqem.problem import ContactProblem, SolverOptions
 
 
@@ -171,6 +171,7 @@ class MonolithicSolver:
         best = None  # (Ψ, u, z) of the best iterate so far (watchdog)
         nonmonotone = 0  # full steps accepted in a row without decreasing Ψ below the best
         for it in range(first, opts.max_iterations + 1):
+            free_dropped_objects(p.comm)
             normR, normH = R_free.norm(), self._norm_H(H)
             if not (math.isfinite(normR) and math.isfinite(normH)):
                 report.message = f"NaN/inf residual at iteration {it} (|R| = {normR}, |H| = {normH})"

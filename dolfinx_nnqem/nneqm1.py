@@ -28,7 +28,7 @@ from petsc4py import PETSc
 
 from dolfinx_nnqem.contact.laws import pin_constrained_directions
 from dolfinx_nnqem.convergence import IterationRecord, SolveReport, count_states, logger
-from dolfinx_nnqem.linalg import create_ksp, factorise, global_norm
+from dolfinx_nnqem.linalg import create_ksp, factorise, free_dropped_objects, global_norm
 from dolfinx_nnqem.nonsmooth import solve_nonsmooth
 from dolfinx_nnqem.problem import ContactProblem, SolverOptions
 
@@ -121,6 +121,7 @@ class NNEQM1Solver:
         w_prev, g0, mu_f, _ = self._gather_pairs()
         step_length, inner_its = float("nan"), 0
         for it in range(opts.max_iterations + 1):
+            free_dropped_objects(p.comm)
             # residuals at the current iterate
             t0 = time.perf_counter()
             F_int = p.assemble_internal_force()

@@ -87,7 +87,7 @@ from petsc4py import PETSc
 from dolfinx_nnqem import compat
 from dolfinx_nnqem.contact.laws import pin_constrained_directions
 from dolfinx_nnqem.convergence import IterationRecord, SolveReport, logger
-from dolfinx_nnqem.linalg import create_ksp, factorise
+from dolfinx_nnqem.linalg import create_ksp, factorise, free_dropped_objects
 from dolfinx_nnqem.material import strain
 from dolfinx_nnqem.nneqm1 import _unknown_scale
 from dolfinx_nnqem.nonsmooth import solve_nonsmooth
@@ -407,6 +407,7 @@ class NNEQM2Solver:
         flow_updates, change = 0, float("nan")
         total_its = 0
         while True:
+            free_dropped_objects(self.problem.comm)
             # -- Q, K_e⁻¹Q and its strains/relative displacements for the current N
             t0 = time.perf_counter()
             Q = self._flow_matrix(self._local_gp(N))

@@ -14,6 +14,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from dolfinx_nnqem.convergence import ConvergenceError, SolveReport, logger
+from dolfinx_nnqem.linalg import free_dropped_objects
 
 
 @dataclass
@@ -76,6 +77,7 @@ def solve_load_steps(
         target = ell + step
         if direction * (target - final_load_factor) > 0:
             target = final_load_factor
+        free_dropped_objects(problem.comm)
         t0 = time.perf_counter()
         report = solver.solve_increment(target)
         if report.converged and max_displacement is not None:
