@@ -29,7 +29,7 @@ import numpy as np
 import ufl
 from mpi4py import MPI
 
-from dolfinx_nnqem import compat
+from dolfinx_nnqem import compat, jit
 
 
 @dataclass(frozen=True)
@@ -220,8 +220,8 @@ class PlasticState:
             rm = self.return_map(u)
             self._commit_u = u
             self._commit_expressions = (
-                fem.Expression(rm.sigma, self._points),
-                fem.Expression(rm.dp, self._points),
+                jit.expression(rm.sigma, self._points),
+                jit.expression(rm.dp, self._points),
             )
         elif u is not self._commit_u:
             raise ValueError("PlasticState.commit must always be given the same displacement Function")
@@ -274,7 +274,7 @@ class PlasticState:
         """Number of Gauss points (over all ranks) where the return map at ``u`` is plastic."""
         if getattr(self, "_trial_dp", None) is None or self._trial_u is not u:
             self._trial_u = u
-            self._trial_dp = (fem.Expression(self.return_map(u).dp, self._points), fem.Function(self.W_scalar))
+            self._trial_dp = (jit.expression(self.return_map(u).dp, self._points), fem.Function(self.W_scalar))
         expression, dp = self._trial_dp
         dp.interpolate(expression)
         n_local = self.W_scalar.dofmap.index_map.size_local * self.W_scalar.dofmap.index_map_bs

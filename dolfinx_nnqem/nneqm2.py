@@ -84,7 +84,7 @@ import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from dolfinx_nnqem import compat
+from dolfinx_nnqem import compat, jit
 from dolfinx_nnqem.contact.laws import pin_constrained_directions
 from dolfinx_nnqem.convergence import IterationRecord, SolveReport, logger
 from dolfinx_nnqem.linalg import create_ksp, factorise, free_dropped_objects
@@ -186,10 +186,10 @@ class NNEQM2Solver:
         V, Wt, Ws = p.V, st.W_tensor, st.W_scalar
         # A: rows (j, kl) of the owned Gauss points, A u = w_j ε_j(u)_kl
         du, tau = ufl.TrialFunction(V), ufl.TestFunction(Wt)
-        self._A = dolfinx.fem.petsc.assemble_matrix(fem.form(ufl.inner(strain(du), tau) * st.dx))
+        self._A = dolfinx.fem.petsc.assemble_matrix(jit.form(ufl.inner(strain(du), tau) * st.dx))
         self._A.assemble()
         phi = ufl.TestFunction(Ws)
-        wv = dolfinx.fem.petsc.assemble_vector(fem.form(phi * st.dx))
+        wv = dolfinx.fem.petsc.assemble_vector(jit.form(phi * st.dx))
         wv.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         imap = Ws.dofmap.index_map
         self.n_gp = imap.size_local
@@ -203,7 +203,7 @@ class NNEQM2Solver:
 
         def at_points(expr):
             f = fem.Function(Ws)
-            f.interpolate(fem.Expression(expr, points))
+            f.interpolate(jit.expression(expr, points))
             return f.x.array[:self.n_gp].copy()
 
         self._mu = at_points(st.mu)
@@ -216,12 +216,12 @@ class NNEQM2Solver:
         # ∫ σ : ε(v) for a quadrature stress (NNEQM2's own internal force)
         v = ufl.TestFunction(V)
         self._sig_fn = fem.Function(Wt)
-        self._Fsig_form = fem.form(ufl.inner(self._sig_fn, strain(v)) * st.dx)
+        self._Fsig_form = jit.form(ufl.inner(self._sig_fn, strain(v)) * st.dx)
         # lifting: K_e g (all rows) for a displacement g carrying the prescribed increments
         self._lift_fn = fem.Function(V)
-        self._lift_form = fem.form(ufl.inner(st.elastic_stress(strain(self._lift_fn)), strain(v)) * st.dx)
+        self._lift_form = jit.form(ufl.inner(st.elastic_stress(strain(self._lift_fn)), strain(v)) * st.dx)
         # radial return of the current u from the converged state (for the report only)
-        self._rm_expr = fem.Expression(st.return_map(p.u).sigma, compat.interpolation_points(Wt))
+        self._rm_expr = jit.expression(st.return_map(p.u).sigma, compat.interpolation_points(Wt))
         self._tick("setup", t0)
 
     def _factorise(self) -> None:

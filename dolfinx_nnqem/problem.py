@@ -33,7 +33,7 @@ import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from dolfinx_nnqem import compat
+from dolfinx_nnqem import compat, jit
 from dolfinx_nnqem.material import PlasticState
 
 
@@ -197,9 +197,9 @@ class ContactProblem:
         self.bc_dofs, self.bc_values, self.bcs = self._dirichlet_dofs(self.dirichlet)
 
         v, du = ufl.TestFunction(self.V), ufl.TrialFunction(self.V)
-        self.F_int_form = fem.form(self.state.internal_force_form(self.u, v))
-        self.K_t_form = fem.form(self.state.tangent_form(self.u, du, v))
-        self.K_e_form = fem.form(self.state.elastic_stiffness_form(du, v))
+        self.F_int_form = jit.form(self.state.internal_force_form(self.u, v))
+        self.K_t_form = jit.form(self.state.tangent_form(self.u, du, v))
+        self.K_e_form = jit.form(self.state.elastic_stiffness_form(du, v))
         self.F_ext_parts = self._assemble_external_forces(tractions, body_forces, v)
 
         self.pending_gauss_values = None  # (u array, σ, Δp) a solver hands to the next commit
@@ -283,7 +283,7 @@ class ContactProblem:
             else:
                 raise TypeError(f"body_forces: {b!r} is neither a BodyForce nor a Gravity")
             parts.append((b.amplitude, form))
-        return [(amplitude, assemble_vector(fem.form(form), self.V)) for amplitude, form in parts]
+        return [(amplitude, assemble_vector(jit.form(form), self.V)) for amplitude, form in parts]
 
     def external_force(self, load_factor: float | None = None) -> PETSc.Vec:
         """F_ext(ℓ) = Σ_k a_k(ℓ) F_k (a_k(ℓ) = ℓ unless the load has an amplitude)."""
@@ -345,7 +345,7 @@ class ContactProblem:
         if getattr(self, "_h", None) is not None:
             return self._h
         tdim = self.mesh.topology.dim
-        volume = fem.assemble_scalar(fem.form(fem.Constant(self.mesh, 1.0) * ufl.dx(domain=self.mesh)))
+        volume = fem.assemble_scalar(jit.form(fem.Constant(self.mesh, 1.0) * ufl.dx(domain=self.mesh)))
         volume = self.comm.allreduce(volume, op=MPI.SUM)
         ncells = self.mesh.topology.index_map(tdim).size_global
         self._h = (volume / ncells) ** (1.0 / 3.0)
@@ -433,7 +433,7 @@ class ContactProblem:
         """
         if getattr(self, "_tangent_action", None) is None:
             self._delta = fem.Function(self.V)
-            self._tangent_action = fem.form(self.state.tangent_form(self.u, self._delta, ufl.TestFunction(self.V)))
+            self._tangent_action = jit.form(self.state.tangent_form(self.u, self._delta, ufl.TestFunction(self.V)))
         self._delta.x.array[:] = delta
         return assemble_vector(self._tangent_action, self.V)
 
