@@ -16,17 +16,25 @@ DIRECT_SOLVER_OPTIONS = {
 """Default: MUMPS LU. User ``petsc_options`` are merged over these."""
 
 
-def free_dropped_objects(comm) -> None:
-    """Destroy the PETSc objects dropped on ``comm`` since the last call (collective).
+def free_dropped_objects(comms) -> None:
+    """Destroy the PETSc objects dropped on each of ``comms`` since the last call (collective).
 
     On more than one rank, petsc4py does not destroy a Vec or Mat when its last Python reference
-    goes: destruction is collective, so the object waits on a garbage list until every rank
-    calls ``PETSc.garbage_cleanup``. A Newton loop drops a few vectors and the block matrices
-    at every iteration; without this call they pile up (about 2 GB over the 1e6-dof benchmark).
-    Every rank must call it at the same point of the loop.
+    goes: destruction is collective, so the object waits on its communicator's garbage list
+    until every rank calls ``PETSc.garbage_cleanup`` on that communicator. The list belongs to
+    the object's own communicator (DOLFINx duplicates the mesh's for index maps, hence
+    vectors). A Newton loop drops a few vectors and the block matrices at every iteration;
+    without this call they pile up. Every rank must call it at the same point of the loop.
+
+    Parameters
+    ----------
+    comms
+        The communicators (mpi4py or PETSc) of the objects that may have been dropped, e.g.
+        :attr:`dolfinx_nnqem.problem.ContactProblem.petsc_comms`.
     """
-    if comm.size > 1:
-        PETSc.garbage_cleanup(comm)
+    for comm in comms:
+        if comm.size > 1:
+            PETSc.garbage_cleanup(comm)
 
 
 def create_ksp(comm, prefix: str, petsc_options: dict | None = None, defaults: bool = True) -> PETSc.KSP:

@@ -171,7 +171,7 @@ class MonolithicSolver:
         best = None  # (Ψ, u, z) of the best iterate so far (watchdog)
         nonmonotone = 0  # full steps accepted in a row without decreasing Ψ below the best
         for it in range(first, opts.max_iterations + 1):
-            free_dropped_objects(p.comm)
+            free_dropped_objects(p.petsc_comms)
             normR, normH = R_free.norm(), self._norm_H(H)
             if not (math.isfinite(normR) and math.isfinite(normH)):
                 report.message = f"NaN/inf residual at iteration {it} (|R| = {normR}, |H| = {normH})"

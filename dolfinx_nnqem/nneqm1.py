@@ -121,7 +121,7 @@ class NNEQM1Solver:
         w_prev, g0, mu_f, _ = self._gather_pairs()
         step_length, inner_its = float("nan"), 0
         for it in range(opts.max_iterations + 1):
-            free_dropped_objects(p.comm)
+            free_dropped_objects(p.petsc_comms)
             # residuals at the current iterate
             t0 = time.perf_counter()
             F_int = p.assemble_internal_force()

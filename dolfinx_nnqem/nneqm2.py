@@ -407,7 +407,7 @@ class NNEQM2Solver:
         flow_updates, change = 0, float("nan")
         total_its = 0
         while True:
-            free_dropped_objects(self.problem.comm)
+            free_dropped_objects(self.problem.petsc_comms)
             # -- Q, K_e⁻¹Q and its strains/relative displacements for the current N
             t0 = time.perf_counter()
             Q = self._flow_matrix(self._local_gp(N))

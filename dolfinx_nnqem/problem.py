@@ -211,6 +211,23 @@ class ContactProblem:
         if contact is not None:
             self._setup_contact(contact)
 
+    @property
+    def petsc_comms(self) -> list:
+        """The communicators the problem's PETSc objects live on (mesh, dof layout, pairs).
+
+        DOLFINx gives index maps, hence vectors and matrices, their own duplicate of the mesh
+        communicator; :func:`dolfinx_nnqem.linalg.free_dropped_objects` needs each of them.
+        """
+        if getattr(self, "_petsc_comms", None) is None:
+            comms = [self.comm, self.u.x.petsc_vec.getComm()]
+            probe = compat.create_vector(self.V)
+            comms.append(probe.getComm())
+            probe.destroy()
+            if self.pairs is not None:
+                comms.append(self.pairs.B.getComm())
+            self._petsc_comms = comms
+        return self._petsc_comms
+
     # -- set-up helpers ---------------------------------------------------------------------
     def _check_facet_tags(self, tags: Sequence[int]) -> None:
         if not tags:

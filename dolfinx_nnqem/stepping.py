@@ -77,7 +77,7 @@ def solve_load_steps(
         target = ell + step
         if direction * (target - final_load_factor) > 0:
             target = final_load_factor
-        free_dropped_objects(problem.comm)
+        free_dropped_objects(problem.petsc_comms)
         t0 = time.perf_counter()
         report = solver.solve_increment(target)
         if report.converged and max_displacement is not None:

@@ -3,7 +3,9 @@
     mpiexec -n N python pressed_blocks.py LINEAR_SOLVER OUT.npz
 
 Rank 0 writes the pair positions, the pair forces on body 1 and the displacements of body 2's
-pair nodes (gathered, in the global pair order) and the Newton iterations per increment.
+pair nodes (gathered, in the global pair order) and the Newton iterations per increment. At the
+end every rank prints PETSc's garbage list of each of the problem's communicators ("Total
+entries: N"): objects dropped by the solver and never destroyed would be listed there.
 """
 
 import sys
@@ -11,6 +13,7 @@ import sys
 import dolfinx_nnqem  # noqa: F401  (first: the PyPI wheel loads MPI/PETSc before dolfinx)
 import numpy as np
 from mpi4py import MPI
+from petsc4py import PETSc
 
 from dolfinx_nnqem.monolithic import MonolithicSolver
 from dolfinx_nnqem.pressed_blocks import pressed_blocks_problem
@@ -25,3 +28,5 @@ table = pair_table(problem)
 if MPI.COMM_WORLD.rank == 0:
     np.savez(out, position=table["position"], force_on_body1=table["force_on_body1"],
              u_body2=table["u_body2"], iterations=[r.iterations for r in results])
+for comm in problem.petsc_comms:
+    PETSc.garbage_view(comm)
