@@ -95,6 +95,7 @@ class MonolithicSolver:
         self._refresh_u_pc = True
         self._lag_state = None
         self._fresh_rate = None  # Krylov convergence rate right after the last AMG set-up
+        self._last_forcing = None  # (ε, η) of the last inexact Newton step (iterative solver)
         if self.iterative and problem.has_contact:
             self._augmented = AugmentedSystem(problem.pairs, problem.constrained_rows(), problem.r,
                                               augmentation)
@@ -164,6 +165,7 @@ class MonolithicSolver:
         opts = self.options
         report = SolveReport(converged=False, iterations=0,
                              system_order=p.V.dofmap.index_map.size_global * 3 + 3 * p.num_pairs)
+        self._last_forcing = None  # (ε, η) of the last Newton step of this increment
         lifted = self._predict(load_factor)
         step_length, kind = (1.0, "lifted") if lifted else (float("nan"), "")
         first = 1 if lifted else 0
@@ -263,7 +265,7 @@ class MonolithicSolver:
             dw = p.pairs.relative_displacement(self._as_vec(delta))
             H_lifted = H + np.einsum("nij,nj->ni", ev.dH_dw, dw)
         if self.iterative:
-            self._set_forcing(1.0)
+            self._set_forcing(1.0, record=False)  # the lifted system's residual is not the iterate's
         self._u0 = p.u.x.array[:R_free.getLocalSize()].copy()
         self._z0 = p.z.copy() if p.has_contact else None
         du, dz = self._newton_direction(R_lifted, H_lifted, ev)
@@ -369,16 +371,28 @@ class MonolithicSolver:
             return False
         return self.ksp.getConvergedReason() <= 0
 
-    def _set_forcing(self, eps: float) -> None:
+    def _set_forcing(self, eps: float, record: bool = True) -> None:
         """Inexact Newton: Krylov tolerance η = min(max(ε², 0.1·rtol/ε), 1e-2), ε the relative residual.
 
         η = O(ε) keeps Newton's local order (Dembo–Eisenstat–Steihaug); ε² leaves the step as
         good as an exact one where the quadratic term dominates, and 0.1·rtol/ε is just the
         accuracy that lets the step reach the tolerance. Early iterations, far from the
         solution, are not solved to full accuracy. Never below ``ksp_rtol`` of the options.
+
+        If the last step (``record``-ed, in this increment) cut the residual by no less than its
+        Krylov tolerance allowed (ε ≤ 2 η_prev ε_prev), the problem behaves linearly here (an
+        elastic increment, no pair changing state): η = 0.1·rtol/ε, so that this step finishes
+        the increment instead of taking ε² and one more Newton iteration for the same Krylov work.
         """
-        eta = min(max(eps * eps, 0.1 * self.options.rtol / max(eps, 1e-300)), 1e-2)
-        self.ksp.setTolerances(rtol=max(eta, self._ksp_rtol_floor))
+        rtol = self.options.rtol
+        eta = min(max(eps * eps, 0.1 * rtol / max(eps, 1e-300)), 1e-2)
+        if self._last_forcing is not None:
+            eps_prev, eta_prev = self._last_forcing
+            if eps <= 2.0 * eta_prev * eps_prev:
+                eta = min(eta, 0.1 * rtol / max(eps, 1e-300))
+        eta = max(eta, self._ksp_rtol_floor)
+        self._last_forcing = (eps, eta) if record else None
+        self.ksp.setTolerances(rtol=eta)
 
     def _augmented_system(self, R_free, H, ev):
         """The augmented Newton system (iterative solver with contact): (MatNest, rhs)."""

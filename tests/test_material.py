@@ -151,3 +151,31 @@ def test_material_parameters_are_validated():
                          (dict(E=float("nan"), nu=0.3), "E"), (dict(E=1.0, nu=-1.0), "nu")]:
         with pytest.raises(ValueError, match=name):
             VonMises(**kwargs)
+
+
+def test_vectorised_kernels_agree_with_dolfinx_default_flags(monkeypatch):
+    """The package compiles its forms with reassociable sums (dolfinx_nnqem.jit); that may change
+    only the last bits against DOLFINx's default flags, here on a plastic state of the pressed
+    blocks (tangent, internal force, and the Gauss-point stresses of the state commit)."""
+    from mpi4py import MPI
+
+    from dolfinx_nnqem import jit
+    from dolfinx_nnqem.pressed_blocks import pressed_blocks_problem
+
+    def plastic_fields(compile_args):
+        monkeypatch.setattr(jit, "KERNEL_COMPILE_ARGS", compile_args)
+        problem = pressed_blocks_problem(1, MPI.COMM_SELF)
+        rng = np.random.default_rng(0)
+        problem.u.x.array[:] = 2e-3 * rng.standard_normal(problem.u.x.array.size)
+        K = problem.assemble_tangent()
+        F = problem.assemble_internal_force()
+        plastic = problem.state.count_trial_plastic_points(problem.u)
+        problem.state.commit(problem.u)
+        return K.convert("dense").getDenseArray(), F.getArray().copy(), problem.state.sigma_n.x.array.copy(), plastic
+
+    fast, default = plastic_fields(jit.KERNEL_COMPILE_ARGS), plastic_fields(None)
+    assert fast[3] == default[3] and fast[3] > 0  # the same Gauss points yield, and some do
+    for name, a, b in zip(("tangent", "internal force", "stress"), fast[:3], default[:3]):
+        rel = np.abs(a - b).max() / np.abs(b).max()
+        print(f"\n  {name}: max relative difference {rel:.1e}")
+        assert rel < 1e-12, name
