@@ -166,7 +166,7 @@ def test_vectorised_kernels_agree_with_dolfinx_default_flags(monkeypatch):
         monkeypatch.setattr(jit, "KERNEL_COMPILE_ARGS", compile_args)
         problem = pressed_blocks_problem(1, MPI.COMM_SELF)
         rng = np.random.default_rng(0)
-        problem.u.x.array[:] = 2e-3 * rng.standard_normal(problem.u.x.array.size)
+        problem.u.x.array[:] = 1e-4 * rng.standard_normal(problem.u.x.array.size)  # 149 of 512 points yield
         K = problem.assemble_tangent()
         F = problem.assemble_internal_force()
         plastic = problem.state.count_trial_plastic_points(problem.u)
@@ -174,7 +174,7 @@ def test_vectorised_kernels_agree_with_dolfinx_default_flags(monkeypatch):
         return K.convert("dense").getDenseArray(), F.getArray().copy(), problem.state.sigma_n.x.array.copy(), plastic
 
     fast, default = plastic_fields(jit.KERNEL_COMPILE_ARGS), plastic_fields(None)
-    assert fast[3] == default[3] and fast[3] > 0  # the same Gauss points yield, and some do
+    assert fast[3] == default[3] and 0 < fast[3] < 512  # the same Gauss points yield: some, not all
     for name, a, b in zip(("tangent", "internal force", "stress"), fast[:3], default[:3]):
         rel = np.abs(a - b).max() / np.abs(b).max()
         print(f"\n  {name}: max relative difference {rel:.1e}")
