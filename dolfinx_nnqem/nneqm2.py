@@ -189,8 +189,7 @@ class NNEQM2Solver:
         self._A = dolfinx.fem.petsc.assemble_matrix(jit.form(ufl.inner(strain(du), tau) * st.dx))
         self._A.assemble()
         phi = ufl.TestFunction(Ws)
-        wv = dolfinx.fem.petsc.assemble_vector(jit.form(phi * st.dx))
-        wv.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        wv = assemble_vector(jit.form(phi * st.dx), Ws)
         imap = Ws.dofmap.index_map
         self.n_gp = imap.size_local
         self.gp_offset = imap.local_range[0]

@@ -219,10 +219,7 @@ class ContactProblem:
         communicator; :func:`dolfinx_nnqem.linalg.free_dropped_objects` needs each of them.
         """
         if getattr(self, "_petsc_comms", None) is None:
-            comms = [self.comm, self.u.x.petsc_vec.getComm()]
-            probe = compat.create_vector(self.V)
-            comms.append(probe.getComm())
-            probe.destroy()
+            comms = [self.comm, self.u.x.petsc_vec.getComm()]  # the second: every vector of V
             if self.pairs is not None:
                 comms.append(self.pairs.B.getComm())
             self._petsc_comms = comms
