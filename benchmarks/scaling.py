@@ -38,7 +38,7 @@ from petsc4py import PETSc
 
 from dolfinx_nnqem.monolithic import MonolithicSolver
 from dolfinx_nnqem.pressed_blocks import pressed_blocks_problem
-from dolfinx_nnqem.problem import SolverOptions
+from dolfinx_nnqem.solver import MonolithicOptions, SolverOptions
 from dolfinx_nnqem.results import pair_table
 from dolfinx_nnqem.stepping import solve_load_steps
 
@@ -55,7 +55,7 @@ def one_newton_solve(problem, solver) -> float:
     Uses the solver's own KSP (no second AMG hierarchy in memory); iterative: to rtol 1e-8.
     """
     comm = problem.comm
-    ev = problem.evaluate_law(problem.relative_displacement(), problem.z) if problem.has_contact else None
+    ev = problem.contact.evaluate(problem.relative_displacement()) if problem.has_contact else None
     H = ev.H if ev is not None else np.zeros((0, 3))
     R_free = problem.free_residual(problem.residual())
     solver._refresh_u_pc = True
@@ -73,7 +73,7 @@ def run(level: int, linear_solver: str, increments: int, final_load_factor: floa
     t0 = time.perf_counter()
     problem = pressed_blocks_problem(level, comm)
     t_setup = time.perf_counter() - t0
-    solver = MonolithicSolver(problem, SolverOptions(linear_solver=linear_solver, max_iterations=40))
+    solver = MonolithicSolver(problem, SolverOptions(max_iterations=40), MonolithicOptions(linear_solver=linear_solver))
     comm.Barrier()
     t0 = time.perf_counter()
     results = solve_load_steps(problem, solver, increments, final_load_factor=final_load_factor)

@@ -22,7 +22,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from dolfinx_nnqem.output import ResultsWriter
-from dolfinx_nnqem.solvers import make_solver
+from dolfinx_nnqem.solver import make_solver
 from dolfinx_nnqem.stepping import solve_load_steps
 from dolfinx_nnqem.two_beams import DEFAULT_LAW, FREE_END_CORNERS, two_beams_problem
 
@@ -32,7 +32,7 @@ def one_tangent_solve(problem, solver) -> float:
     t0 = time.perf_counter()
     if solver.name == "monolithic":
         w = problem.relative_displacement()
-        ev = problem.evaluate_law(w, problem.z)
+        ev = problem.contact.evaluate(w)
         J = solver._jacobian(ev)
     else:
         J = problem.assemble_tangent()

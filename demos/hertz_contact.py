@@ -59,7 +59,8 @@ from dolfinx_nnqem.material import VonMises
 from dolfinx_nnqem.meshing import StackedBlocksTags as T
 from dolfinx_nnqem.meshing import build_graded_contact_blocks
 from dolfinx_nnqem.monolithic import MonolithicSolver
-from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, SolverOptions
+from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet
+from dolfinx_nnqem.solver import SolverOptions
 from dolfinx_nnqem.results import pair_table, reactions, values_at_blocks
 from dolfinx_nnqem.stepping import solve_load_steps
 
@@ -147,7 +148,8 @@ x = ufl.SpatialCoordinate(mesh)
 a_c, p0_c = fem.Constant(mesh, PETSc.ScalarType(1.0)), fem.Constant(mesh, PETSc.ScalarType(1.0))
 hertz_form = fem.form(p0_c * ufl.sqrt(ufl.max_value(1.0 - (x[0] ** 2 + x[2] ** 2) / a_c ** 2, 0.0))
                       * v[1] * ds(T.CONTACT1))
-blocks_a = problem.pairs.gather(problem.pairs.dofs_a.astype(np.int64))
+pairs = problem.contact.interfaces[0].pairs  # node-to-node: the body-1 nodes a_i
+blocks_a = pairs.gather(pairs.dofs_a.astype(np.int64))
 
 
 def per_pair(form):

@@ -46,7 +46,8 @@ from dolfinx_nnqem.meshing import build_thick_cylinder
 from dolfinx_nnqem.monolithic import MonolithicSolver
 from dolfinx_nnqem.output import ResultsWriter
 from dolfinx_nnqem.plots import plot_convergence, plot_curve, plot_deformed
-from dolfinx_nnqem.problem import ContactProblem, Dirichlet, Pressure, SolverOptions
+from dolfinx_nnqem.problem import ContactProblem, Dirichlet, Pressure
+from dolfinx_nnqem.solver import SolverOptions
 from dolfinx_nnqem.results import node_blocks_at_points, values_at_blocks
 from dolfinx_nnqem.stepping import solve_load_steps
 

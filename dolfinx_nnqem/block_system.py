@@ -1,12 +1,19 @@
-"""The semismooth Newton matrix of the monolithic solver as one PETSc system.
+r"""The semismooth Newton matrix of the monolithic solver as PETSc objects, created once and refilled.
 
-    J = [ K_t        −Bᵀ Λ' ]      u rows: equilibrium (constrained rows: identity)
-        [ ∂_wH · B   ∂_zH   ]      z rows: the pair laws H(Bu, z) = 0
+    J = [ K_t        −B_freeᵀ Λ' ]      u rows: equilibrium (constrained rows: identity)
+        [ ∂_wH · B    ∂_zH       ]      z rows: the pair laws H(Bu + m, z) = 0
 
 Λ' = ∂λ/∂z is the identity for the Cartesian law and the polar → Cartesian derivative for the
-seed's polar law. The four blocks are put in a MatNest and converted to one AIJ matrix, whose
-local rows are [owned u rows, owned pair rows] on every rank (the nest's layout), so that MUMPS
-(or any PETSc preconditioner) sees an ordinary sparse matrix.
+seed's polar law; B_free is B with the columns of constrained dofs zeroed (du = 0 there, so the
+rows of constrained dofs in the u block are exactly the identity). The contact blocks have B's
+sparsity (blockdiag(D) B) and a 3×3 block diagonal, all fixed over the run: every block, the
+nest and its AIJ conversion are made at the first iteration and refilled in place afterwards
+(PETSc then reuses its symbolic work, MUMPS's analysis included).
+
+* :class:`MonolithicMatrix`: the direct solver's J, the nest converted to one AIJ matrix whose
+  local rows are [owned u rows, owned pair rows] on every rank (the nest's layout).
+* :class:`AugmentedSystem`: the iterative solver's equivalent system with the augmented u block,
+  as a MatNest.
 """
 
 from __future__ import annotations
@@ -14,61 +21,124 @@ from __future__ import annotations
 import numpy as np
 from petsc4py import PETSc
 
+from dolfinx_nnqem.contact.pairset import PairRows, rows_matrix
 
-def block_diagonal_matrix(D: np.ndarray, offset: int, num_global: int, comm) -> PETSc.Mat:
-    """AIJ matrix with the 3×3 blocks ``D[i]`` on the diagonal (rows of the owned pairs).
+__all__ = ["AugmentedSystem", "BlockDiagonal", "MonolithicMatrix", "free_rows"]
+
+
+class BlockDiagonal:
+    """An AIJ matrix of 3×3 blocks on the diagonal (one per owned pair), refilled in place."""
+
+    def __init__(self, num_local: int, offset: int, num_global: int, comm):
+        n = num_local
+        self.indptr = np.arange(0, 9 * n + 1, 3, dtype=PETSc.IntType)
+        cols = 3 * (offset + np.repeat(np.arange(n), 3))[:, None] + np.arange(3)[None, :]
+        self.columns = cols.reshape(-1).astype(PETSc.IntType)
+        self.matrix = PETSc.Mat().createAIJWithArrays(
+            size=((3 * n, 3 * num_global), (3 * n, 3 * num_global)),
+            csr=(self.indptr, self.columns, np.zeros(9 * n)), comm=comm)
+        self.matrix.assemble()
+
+    def fill(self, D: np.ndarray) -> PETSc.Mat:
+        """The matrix with the blocks ``D`` (n, 3, 3)."""
+        self.matrix.setValuesCSR(self.indptr, self.columns, np.ascontiguousarray(D, dtype=np.float64).reshape(-1))
+        self.matrix.assemble()
+        return self.matrix
+
+    def destroy(self) -> None:
+        self.matrix.destroy()
+
+
+def free_rows(model, free_mask: PETSc.Vec) -> PairRows:
+    """B_free's rows: B's rows with the columns of constrained dofs zeroed (same sparsity).
+
+    ``free_mask`` is laid out like V's owned dofs: 0 at constrained dofs, 1 elsewhere.
+    """
+    B = model.B.copy()
+    B.diagonalScale(R=free_mask)
+    indptr, columns, values = B.getValuesCSR()
+    B.destroy()
+    if not (np.array_equal(indptr, model.rows.indptr) and np.array_equal(columns, model.rows.columns)):
+        raise RuntimeError("B lost entries when its constrained columns were zeroed")
+    return PairRows(model.rows.indptr, model.rows.columns, values)
+
+
+def free_mask(problem) -> PETSc.Vec:
+    """A vector laid out like V: 0 at the constrained dofs, 1 elsewhere."""
+    mask = problem.contact.B.createVecRight()
+    mask.set(1.0)
+    start, _ = mask.getOwnershipRange()
+    with mask as m:  # constrained_rows are global indices of owned dofs
+        m[np.asarray(problem.constrained_rows(), dtype=np.int64) - start] = 0.0
+    return mask
+
+
+class _ContactBlocks:
+    """A01 = B_freeᵀ M (M per pair), A10 = ∂_wH B and A11 = ∂_zH, kept and refilled."""
+
+    def __init__(self, model, rows_free: PairRows):
+        self.model = model
+        self.rows_free = rows_free
+        self._MtB = None
+        self.A01 = None
+        self.A10 = None
+        self._A11 = BlockDiagonal(model.num_local, model.offset, model.num_global, model.comm)
+
+    def fill(self, M: np.ndarray, dH_dw: np.ndarray, dH_dz: np.ndarray) -> tuple[PETSc.Mat, PETSc.Mat, PETSc.Mat]:
+        """The three blocks for the per-pair matrices M (A01 = B_freeᵀ M), ∂H/∂w and ∂H/∂z."""
+        model = self.model
+        # Bᵀ M = (Mᵀ B)ᵀ, and Mᵀ B has B's sparsity
+        values = self.rows_free.scaled(np.ascontiguousarray(np.transpose(M, (0, 2, 1))))
+        if self._MtB is None:
+            self._MtB = rows_matrix(model.comm, self.rows_free, model.num_global, model.V.dofmap.index_map, values)
+            self.A01 = self._MtB.transpose(PETSc.Mat())
+        else:
+            self._MtB.setValuesCSR(self.rows_free.indptr, self.rows_free.columns, values)
+            self._MtB.assemble()
+            self._MtB.transpose(self.A01)  # MAT_REUSE_MATRIX
+        self.A10 = model.scaled_B(dH_dw, out=self.A10)
+        return self.A01, self.A10, self._A11.fill(dH_dz)
+
+    def destroy(self) -> None:
+        for m in (self._MtB, self.A01, self.A10):
+            if m is not None:
+                m.destroy()
+        self._A11.destroy()
+
+
+class MonolithicMatrix:
+    """The direct solver's Newton matrix J as one AIJ matrix, refilled every iteration.
 
     Parameters
     ----------
-    D
-        (n_local, 3, 3) blocks of the owned pairs.
-    offset
-        Global index of the first owned pair.
-    num_global
-        Number of pairs over all ranks.
+    model
+        The contact model.
+    free_mask
+        0 at constrained dofs, 1 elsewhere (laid out like V).
     """
-    n = D.shape[0]
-    indptr = np.arange(0, 9 * n + 1, 3, dtype=PETSc.IntType)
-    cols = 3 * (offset + np.repeat(np.arange(n), 3))[:, None] + np.arange(3)[None, :]
-    M = PETSc.Mat().createAIJWithArrays(
-        size=((3 * n, 3 * num_global), (3 * n, 3 * num_global)),
-        csr=(indptr, cols.reshape(-1).astype(PETSc.IntType), np.ascontiguousarray(D.reshape(-1))),
-        comm=comm,
-    )
-    M.assemble()
-    return M
 
+    def __init__(self, model, free_mask: PETSc.Vec):
+        self._blocks = _ContactBlocks(model, free_rows(model, free_mask))
+        self._nest = None
+        self.J = None
 
-def contact_jacobian_blocks(pairs, dH_dw, dH_dz, dlam_dz, constrained_rows: np.ndarray):
-    """The three contact blocks of J.
+    def assemble(self, K: PETSc.Mat, dH_dw: np.ndarray, dH_dz: np.ndarray, dlam_dz: np.ndarray) -> PETSc.Mat:
+        """J at the current law evaluation; ``K`` is the tangent, assembled into the same matrix each time."""
+        A01, A10, A11 = self._blocks.fill(-dlam_dz, dH_dw, dH_dz)
+        if self._nest is None:
+            self._nest = PETSc.Mat().createNest([[K, A01], [A10, A11]], comm=K.getComm())
+        self._nest.assemble()
+        if self.J is None:
+            self.J = self._nest.convert("aij", out=PETSc.Mat())
+        else:
+            self._nest.convert("aij", out=self.J)  # MAT_REUSE_MATRIX: the same pattern, new values
+        return self.J
 
-    Returns
-    -------
-    A01 : −Bᵀ Λ' (u rows × z columns), constrained rows zeroed
-    A10 : ∂_wH · B (z rows × u columns)
-    A11 : ∂_zH (block diagonal)
-    """
-    # Bᵀ Λ' = (Λ'ᵀ B)ᵀ, and Λ'ᵀ B has B's sparsity.
-    A01 = pairs.scaled_B(np.ascontiguousarray(np.transpose(dlam_dz, (0, 2, 1))))
-    A01.transpose()  # in place (petsc4py's transpose without an output matrix)
-    A01.scale(-1.0)
-    # constrained_rows are global unrolled indices of owned constrained dofs
-    A01.zeroRows(constrained_rows, diag=0.0)
-    A10 = pairs.scaled_B(dH_dw)
-    A11 = block_diagonal_matrix(dH_dz, pairs.offset, pairs.num_global, A10.getComm().tompi4py())
-    return A01, A10, A11
-
-
-def monolithic_matrix(K: PETSc.Mat, blocks=None) -> PETSc.Mat:
-    """J as one AIJ matrix; ``K`` alone when there is no contact."""
-    if blocks is None:
-        return K
-    A01, A10, A11 = blocks
-    J = PETSc.Mat().createNest([[K, A01], [A10, A11]], comm=K.getComm())
-    J.assemble()
-    # petsc4py converts in place (MAT_INPLACE_MATRIX) when no output matrix is given
-    J.convert("aij")
-    return J
+    def destroy(self) -> None:
+        self._blocks.destroy()
+        for m in (self._nest, self.J):
+            if m is not None:
+                m.destroy()
 
 
 class AugmentedSystem:
@@ -91,27 +161,22 @@ class AugmentedSystem:
     The matrix is a MatNest (no copy of K into one AIJ matrix), laid out like the direct
     solver's: on every rank the owned u rows, then the owned pair rows. The u block is K's own
     matrix, widened once to K's pattern plus the 6×6 couplings of all pairs and kept so over
-    the iterations: no second copy of K, and PETSc reuses its symbolic work.
+    the iterations: no second copy of K, and PETSc reuses its symbolic work. With several
+    interfaces, c = ``augmentation`` / max r.
     """
 
-    def __init__(self, pairs, constrained_rows: np.ndarray, r: float, augmentation: float):
-        self.pairs = pairs
+    def __init__(self, model, free_mask: PETSc.Vec, r: float, augmentation: float):
+        self.model = model
         self.c = augmentation / r
-        B = pairs.B
-        mask = B.createVecRight()
-        mask.set(1.0)
-        start, _ = mask.getOwnershipRange()
-        with mask as m:  # constrained_rows are global indices of owned dofs
-            m[np.asarray(constrained_rows, dtype=np.int64) - start] = 0.0
-        self._mask = mask
-        self.B_free = B.copy()
-        self.B_free.diagonalScale(R=mask)
-        self.Bt_free = self.B_free.transpose(PETSc.Mat())
-        n = pairs.num_local
-        self._P = block_diagonal_matrix(np.zeros((n, 3, 3)), pairs.offset, pairs.num_global,
-                                        pairs.comm)
-        self._csr = self._P.getValuesCSR()[:2]
+        self._mask = free_mask
+        rows = free_rows(model, free_mask)
+        self.B_free = rows_matrix(model.comm, rows, model.num_global, model.V.dofmap.index_map)
+        self._blocks = _ContactBlocks(model, rows)
+        self._P = BlockDiagonal(model.num_local, model.offset, model.num_global, model.comm)
         self._BtPB = None
+        self._nest = None
+        self._g = model.create_lambda_vector()
+        self._Btg = self.B_free.createVecRight()
         self.A00 = None
 
     def _u_block(self, K: PETSc.Mat, dH_dw: np.ndarray) -> PETSc.Mat:
@@ -121,13 +186,11 @@ class AugmentedSystem:
         pattern: the caller assembles the next tangent into the same matrix, whose extra
         entries are zeroed by the assembly), so there is never a second copy of K.
         """
-        P = self.c * np.einsum("nki,nkj->nij", dH_dw, dH_dw)
-        self._P.setValuesCSR(*self._csr, np.ascontiguousarray(P.reshape(-1)))
-        self._P.assemble()
+        P = self._P.fill(self.c * np.einsum("nki,nkj->nij", dH_dw, dH_dw))
         if self._BtPB is None:
-            self._BtPB = self._P.PtAP(self.B_free)
+            self._BtPB = P.PtAP(self.B_free)
         else:
-            self._P.PtAP(self.B_free, self._BtPB)
+            P.PtAP(self.B_free, self._BtPB)
         if self.A00 is None:
             lgmap = K.getLGMap()  # the new pattern comes without DOLFINx's local-to-global maps
             K.axpy(1.0, self._BtPB, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
@@ -139,31 +202,30 @@ class AugmentedSystem:
             K.axpy(1.0, self._BtPB, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
         return K
 
-    def matrix(self, K: PETSc.Mat, dH_dw: np.ndarray, dH_dz: np.ndarray,
-               dlam_dz: np.ndarray) -> PETSc.Mat:
+    def matrix(self, K: PETSc.Mat, dH_dw: np.ndarray, dH_dz: np.ndarray, dlam_dz: np.ndarray) -> PETSc.Mat:
         """The augmented Newton matrix (MatNest) at the current law evaluation."""
-        pairs = self.pairs
         A00 = self._u_block(K, dH_dw)
-        # A01 = B_freeᵀ M, M = −Λ' + c D_wᵀ D_z; Bᵀ Mᵀᵀ = (Mᵀ B)ᵀ has B's sparsity
         M = -dlam_dz + self.c * np.einsum("nki,nkj->nij", dH_dw, dH_dz)
-        A01 = pairs.scaled_B(np.ascontiguousarray(np.transpose(M, (0, 2, 1))))
-        A01.diagonalScale(R=self._mask)
-        A01.transpose()  # in place
-        A10 = pairs.scaled_B(dH_dw)
-        A11 = block_diagonal_matrix(dH_dz, pairs.offset, pairs.num_global, pairs.comm)
-        J = PETSc.Mat().createNest([[A00, A01], [A10, A11]], comm=K.getComm())
-        J.assemble()
-        return J
+        A01, A10, A11 = self._blocks.fill(M, dH_dw, dH_dz)
+        if self._nest is None:
+            self._nest = PETSc.Mat().createNest([[A00, A01], [A10, A11]], comm=K.getComm())
+        self._nest.assemble()
+        return self._nest
 
     def rhs(self, R_free: PETSc.Vec, H: np.ndarray, dH_dw: np.ndarray) -> PETSc.Vec:
         """−(R + c B_freeᵀ D_wᵀ H, H) in the nest's layout (a plain vector)."""
-        g = self.pairs.create_lambda_vector()
-        g.getArray()[:] = np.einsum("nki,nk->ni", dH_dw, H).reshape(-1)
-        Btg = self.B_free.createVecRight()
-        self.B_free.multTranspose(g, Btg)
+        self._g.getArray()[:] = np.einsum("nki,nk->ni", dH_dw, H).reshape(-1)
+        self.B_free.multTranspose(self._g, self._Btg)
         n_u = R_free.getLocalSize()
         b = PETSc.Vec().createMPI((n_u + H.size, PETSc.DECIDE), comm=R_free.getComm())
         arr = b.getArray()
-        arr[:n_u] = -R_free.getArray(readonly=True) - self.c * Btg.getArray(readonly=True)
+        arr[:n_u] = -R_free.getArray(readonly=True) - self.c * self._Btg.getArray(readonly=True)
         arr[n_u:] = -H.reshape(-1)
         return b
+
+    def destroy(self) -> None:
+        self._blocks.destroy()
+        self._P.destroy()
+        for m in (self.B_free, self._BtPB, self._nest, self._g, self._Btg):
+            if m is not None:
+                m.destroy()

@@ -12,7 +12,7 @@ import logging
 import sys
 from pathlib import Path
 
-from dolfinx_nnqem.solvers import METHODS
+from dolfinx_nnqem.solver import METHODS
 
 EXIT_OK, EXIT_DIVERGED, EXIT_USAGE, EXIT_BAD_INPUT = 0, 1, 2, 3
 
@@ -117,9 +117,8 @@ def _run(args) -> int:
     from mpi4py import MPI
 
     from dolfinx_nnqem.output import ResultsWriter
-    from dolfinx_nnqem.problem import SolverOptions
-    from dolfinx_nnqem.problem_file import build_problem, load_problem_file
-    from dolfinx_nnqem.solvers import make_solver
+    from dolfinx_nnqem.problem_file import build_problem, load_problem_file, solver_options
+    from dolfinx_nnqem.solver import make_solver
     from dolfinx_nnqem.stepping import solve_load_steps
 
     spec = load_problem_file(args.problem)
@@ -133,13 +132,12 @@ def _run(args) -> int:
         print(f"{args.problem}: {problem.V.dofmap.index_map.size_global * 3} displacement dofs, "
               f"{problem.num_pairs} contact pairs, {problem.state.num_gauss_points()} Gauss points, "
               f"method {method}, {increments} increments", flush=True)
+        for line in problem.contact.describe() if problem.has_contact else []:
+            print(f"  {line}", flush=True)
     if args.check:
         return EXIT_OK
-    options = SolverOptions(rtol=solver_spec["rtol"], atol=solver_spec["atol"],
-                            max_iterations=solver_spec["max_iterations"],
-                            linear_solver=solver_spec["linear_solver"],
-                            petsc_options=solver_spec["petsc_options"])
-    solver = make_solver(method, problem, options)
+    options, method_options = solver_options(spec, method)
+    solver = make_solver(method, problem, options, **method_options)
     out = Path(args.out or spec.output["folder"])
     writer = ResultsWriter(problem, method, out, increments, probes=spec.output["probes"] or None,
                            fields=spec.output["fields"], extra={"problem_file": str(args.problem)})

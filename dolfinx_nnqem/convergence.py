@@ -7,6 +7,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from dolfinx_nnqem.material import GaussPointValues
+
 logger = logging.getLogger("dolfinx_nnqem")
 
 STATE_NAMES = ("open", "stick", "slip")
@@ -37,13 +39,14 @@ class IterationRecord:
 
 @dataclass
 class SolveReport:
-    """Outcome of one increment solve."""
+    """Outcome of one increment solve (what :meth:`Solver.solve_increment` returns)."""
 
     converged: bool
     iterations: int
     history: list[IterationRecord] = field(default_factory=list)
     message: str = ""
     system_order: int = 0  #: order of the (non)smooth system solved per iteration
+    gauss_point_values: GaussPointValues | None = None  #: the solver's own state update (NNEQM2), or None
 
     @property
     def final(self) -> IterationRecord | None:

@@ -95,7 +95,7 @@ orientation of (t1, t2) does not matter. Units: W in m/N, q and u in m, r in N (
 of the model). The Alart–Curnier / polar parameter r of the law is a solver choice and not
 part of the problem (it is kept in ``/dolfinx_nnqem`` only).
 
-Directions that the supports fix (``pin_constrained_directions``) have zero rows and
+Directions that the supports fix (each law's ``pin``) have zero rows and
 columns in C; NNEQM1 sets their λ component to zero (the minimum-norm choice). FCLIB's
 problem has no such rule: there, any λ component is admissible that Coulomb's law allows
 with the fixed u component. ``last_condensed`` does not record these directions; in the
@@ -489,7 +489,7 @@ def _flat(value):
 
 def write_condensed_problem(path: str | Path, condensed: Mapping[str, Any], *, solution=None,
                             include_start_guess: bool = True, **kwargs) -> Path:
-    """Write ``NNEQM1Solver.last_condensed`` as an FCLIB local problem (collective).
+    """Write a condensed problem (``NNEQM1Solver.last_condensed.as_dict()``) as an FCLIB local problem (collective).
 
     ``solution``: the contact forces λ solving this inner problem, if known. With
     ``include_start_guess``, NNEQM1's starting point λ_m is written as guess 1.
@@ -508,16 +508,20 @@ def write_nneqm1_problem(path: str | Path, solver, *, with_solution: bool = True
     converged (or after any completed inner solve) it is the inner solution of
     ``solver.last_condensed``. Collective on the problem's communicator.
     """
-    if solver.last_condensed is None:
+    condensed = solver.last_condensed
+    if condensed is None:
         raise ValueError("the solver has not set up a condensed problem yet (solve an increment first)")
+    if condensed.BN.shape[1]:
+        raise ValueError(f"the condensed problem has {condensed.BN.shape[1]} free rigid modes (a body held only "
+                         "by contact): their amplitudes and self-equilibrium equations have no place in FCLIB's "
+                         "local problem W r + q = u")
     p = solver.problem
     solution = None
     if with_solution:
-        lam, _ = p.law.force(p.pairs.gather(p.z))
-        solution = lam.reshape(-1)
+        solution = p.contact.gather(p.contact.force()).reshape(-1)
     kwargs.setdefault("comm", p.comm)
     kwargs.setdefault("number_of_dofs", int(p.V.dofmap.index_map.size_global * p.V.dofmap.index_map_bs))
-    return write_condensed_problem(path, solver.last_condensed, solution=solution, **kwargs)
+    return write_condensed_problem(path, condensed.as_dict(), solution=solution, **kwargs)
 
 
 # -- reader ---------------------------------------------------------------------------------------

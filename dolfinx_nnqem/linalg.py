@@ -37,11 +37,15 @@ def free_dropped_objects(comms) -> None:
             PETSc.garbage_cleanup(comm)
 
 
-def create_ksp(comm, prefix: str, petsc_options: dict | None = None, defaults: bool = True) -> PETSc.KSP:
-    """A KSP configured under ``prefix`` from ``DIRECT_SOLVER_OPTIONS`` (if ``defaults``) updated
-    by ``petsc_options``."""
+def create_ksp(comm, prefix: str, options: dict) -> PETSc.KSP:
+    """A KSP configured from ``options`` under ``prefix`` (``setFromOptions``).
+
+    The options stay in PETSc's database until :func:`clear_options` is called: sub-solvers
+    (a factorisation's MUMPS controls, fieldsplit blocks) read theirs at the first ``setUp``,
+    so call it after that.
+    """
     opts = PETSc.Options()
-    for key, value in {**(DIRECT_SOLVER_OPTIONS if defaults else {}), **(petsc_options or {})}.items():
+    for key, value in options.items():
         opts[prefix + key] = value
     ksp = PETSc.KSP().create(comm)
     ksp.setOptionsPrefix(prefix)
@@ -49,15 +53,28 @@ def create_ksp(comm, prefix: str, petsc_options: dict | None = None, defaults: b
     return ksp
 
 
+def clear_options(prefix: str, options: dict) -> None:
+    """Remove ``options`` under ``prefix`` from PETSc's database (as DOLFINx's solvers do)."""
+    opts = PETSc.Options()
+    for key in options:
+        if opts.hasName(prefix + key):
+            opts.delValue(prefix + key)
+
+
+def direct_options(petsc_options: dict | None) -> dict:
+    """:data:`DIRECT_SOLVER_OPTIONS` updated by the user's ``petsc_options``."""
+    return {**DIRECT_SOLVER_OPTIONS, **(petsc_options or {})}
+
+
 def factorise(ksp: PETSc.KSP, A: PETSc.Mat, solver: str, what: str) -> None:
-    """Set ``A`` on ``ksp`` and factorise it; a singular stiffness becomes a clear ValueError."""
+    """Set ``A`` on ``ksp`` and factorise it; a failed factorisation becomes a clear ValueError."""
     ksp.setOperators(A)
     try:
         ksp.setUp()
     except PETSc.Error as error:
         raise ValueError(
-            f"{solver} factorises {what}, which is singular here: every body must be held by its "
-            "own Dirichlet conditions (a body held only by contact needs the monolithic solver)"
+            f"{solver}: the factorisation of {what} failed (PETSc error {error.ierr}); "
+            "the matrix is singular or the solver package is unavailable"
         ) from error
 
 
@@ -101,13 +118,6 @@ ITERATIVE_NO_CONTACT_OPTIONS = {
     "mg_levels_pc_type": "jacobi",
 }
 """Without contact: CG + GAMG on K_t (symmetric: associated plasticity, consistent tangent)."""
-
-
-def set_options(prefix: str, options: dict) -> None:
-    """Write ``options`` into the PETSc options database under ``prefix``."""
-    opts = PETSc.Options()
-    for key, value in options.items():
-        opts[prefix + key] = value
 
 
 def rigid_body_modes(V) -> PETSc.NullSpace:

@@ -11,7 +11,10 @@ and the consistent tangent C_alg = κ I⊗I + 2μ θ1 I_dev − 2μ θ2 n⊗n wi
 θ1 = 1 − 3μΔp/q_tr, θ2 = 3μ/(3μ+H) − 3μΔp/q_tr (θ2 = 0 when elastic).
 
 Everything is a closed-form UFL expression of the current displacement ``u`` and the state
-(σ_n, p_n, u_n). The state lives in quadrature spaces (``basix.ufl.quadrature_element``) whose
+(σ_n, p_n, u_n). The same von Mises pieces on numpy arrays of Gauss-point values (deviators in a
+5-dimensional orthonormal basis, q, the flow direction, the radial return) serve NNEQM2, which
+solves for the plastic multipliers of all Gauss points at once; a test checks them against the
+UFL forms. The state lives in quadrature spaces (``basix.ufl.quadrature_element``) whose
 points are the points of the integration measure ``dx``, so the forms evaluate the return map
 exactly at the Gauss points where the state is stored; :meth:`PlasticState.commit` interpolates
 the converged expressions into the state with ``dolfinx.fem.Expression``.
@@ -97,6 +100,25 @@ class VonMises:
 def strain(u) -> ufl.core.expr.Expr:
     """Small-strain tensor ε(u) = sym(∇u)."""
     return ufl.sym(ufl.grad(u))
+
+
+@dataclass(frozen=True)
+class GaussPointValues:
+    """Gauss-point values a solver computed itself, for :meth:`ContactProblem.commit`.
+
+    Attributes
+    ----------
+    u
+        The displacement array (owned and ghost entries) they belong to.
+    sigma
+        (owned Gauss points, 3, 3) stresses.
+    dp
+        (owned Gauss points,) equivalent plastic strain increments.
+    """
+
+    u: np.ndarray
+    sigma: np.ndarray
+    dp: np.ndarray
 
 
 class ReturnMap(NamedTuple):
@@ -327,3 +349,62 @@ def _fill_cellwise(state: PlasticState, materials: dict, cell_tags, Q0) -> None:
         )
     for f in fields.values():
         f.x.scatter_forward()
+
+
+# -- the same math on numpy arrays of Gauss-point values -------------------------------------------
+_S2, _S6 = 1.0 / math.sqrt(2.0), 1.0 / math.sqrt(6.0)
+DEVIATORIC_BASIS = np.array([
+    [_S2, 0, 0, 0, -_S2, 0, 0, 0, 0],
+    [_S6, 0, 0, 0, _S6, 0, 0, 0, -2 * _S6],
+    [0, _S2, 0, _S2, 0, 0, 0, 0, 0],
+    [0, 0, _S2, 0, 0, 0, _S2, 0, 0],
+    [0, 0, 0, 0, 0, _S2, 0, _S2, 0],
+])
+"""D (5 × 9): an orthonormal basis of the symmetric deviatoric 3×3 tensors (rows: the 9
+components, row-major); T:D_a are the coordinates of dev T, and |dev T|² = Σ_a (T:D_a)²."""
+_SQRT32 = math.sqrt(1.5)
+
+
+def deviator_coordinates(tensors: np.ndarray) -> np.ndarray:
+    """Coordinates (n, 5) of dev T in :data:`DEVIATORIC_BASIS` for tensors (n, 3, 3) or (n, 9)."""
+    return np.asarray(tensors).reshape(-1, 9) @ DEVIATORIC_BASIS.T
+
+
+def deviator_tensors(coordinates: np.ndarray) -> np.ndarray:
+    """The deviators (n, 3, 3) with the given coordinates (n, 5)."""
+    return (np.asarray(coordinates) @ DEVIATORIC_BASIS).reshape(-1, 3, 3)
+
+
+def equivalent_stress(s: np.ndarray) -> np.ndarray:
+    """q = sqrt(3/2 s:s) of deviators given by their coordinates (n, 5)."""
+    return _SQRT32 * np.linalg.norm(s, axis=-1)
+
+
+def flow_direction(s: np.ndarray, stress_unit: np.ndarray, fallback: np.ndarray | None = None) -> np.ndarray:
+    """N = ∂f/∂σ = (3/2) s / q (coordinates, (n, 5)); 0 (or ``fallback``) where q ≤ 10⁻⁸ × the stress unit."""
+    q = equivalent_stress(s)
+    ok = q > 1e-8 * stress_unit
+    N = np.zeros_like(s) if fallback is None else fallback.copy()
+    N[ok] = 1.5 * s[ok] / q[ok, None]
+    return N
+
+
+def elastic_stress(eps: np.ndarray, lmbda: np.ndarray, mu: np.ndarray) -> np.ndarray:
+    """σ = λ tr(ε) I + 2μ ε for strains (n, 3, 3) and per-point Lamé parameters (n,)."""
+    return (lmbda[:, None, None] * np.trace(eps, axis1=1, axis2=2)[:, None, None] * np.eye(3)
+            + 2.0 * mu[:, None, None] * eps)
+
+
+def radial_return(sigma_n: np.ndarray, deps: np.ndarray, p_n: np.ndarray, lmbda: np.ndarray, mu: np.ndarray,
+                  sigma_y0: np.ndarray, H: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The return map of :meth:`PlasticState.return_map` on arrays: (σ (n, 3, 3), Δp (n,)).
+
+    σ_tr = σ_n + C:Δε, f_tr = q_tr − σ_y0 − H p_n, Δp = max(f_tr, 0)/(3μ + H),
+    σ = σ_tr − 3μ Δp s_tr / q_tr.
+    """
+    sigma_tr = sigma_n + elastic_stress(deps, lmbda, mu)
+    s_tr = sigma_tr - np.trace(sigma_tr, axis1=1, axis2=2)[:, None, None] * np.eye(3) / 3.0
+    q_tr = np.sqrt(1.5 * np.einsum("nij,nij->n", s_tr, s_tr))
+    dp = np.maximum(q_tr - sigma_y0 - H * p_n, 0.0) / (3.0 * mu + H)
+    q_safe = np.where(dp > 0.0, q_tr, 1.0)
+    return sigma_tr - (3.0 * mu * dp / q_safe)[:, None, None] * s_tr, dp

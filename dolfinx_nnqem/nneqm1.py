@@ -1,36 +1,88 @@
-"""NNEQM1: a nonsmooth Newton on the contact unknowns nested in Newton–Raphson (seed §3).
+r"""NNEQM1: a nonsmooth Newton on the contact unknowns nested in Newton–Raphson (seed §3).
 
 For the load factor ℓ of an increment, outer iteration m (``formulation.md`` §5):
 
 1. r_m = F_ext(ℓ) − F_int(u_m) + Bᵀλ_m (constrained rows zero);
-2. one factorisation of the consistent tangent K_m; X = K_m⁻¹ Bᵀ (3NC right-hand sides
-   solved together, KSPMatSolve), the contact flexibility C_m = B X (dense, 3NC × 3NC) and
-   x_r = K_m⁻¹ r_m, w_free = B x_r;
-3. inner: H(w(z), z) = 0 with w(z) = B u_m + w_free + C_m (λ(z) − λ_m), a dense nonsmooth system
-   of order 3NC, by :func:`dolfinx_nnqem.nonsmooth.solve_nonsmooth` (Newton, Armijo, LM);
+2. one factorisation of the consistent tangent K_m (:class:`~dolfinx_nnqem.condensation.Condensation`);
+   X = G Bᵀ (3NC right-hand sides solved together), the contact flexibility C_m = B X (dense,
+   3NC × 3NC) and x_r = G r_m, w_free = B x_r;
+3. inner: H(w(z), z) = 0 with w(z) = w_m + w_free + C_m (λ(z) − λ_m), a dense nonsmooth system
+   of order 3NC, by the package's Newton driver (:func:`dolfinx_nnqem.nonsmooth.solve_nonsmooth`);
 4. du = x_r + X (λ − λ_m); u ← u + du, then the return map at the Gauss points;
 5. converged when ‖R‖ and ‖H‖ are below tolerance relative to the load scale.
 
-``modified=True`` keeps K, X and C from the first iteration of the increment (modified
-Newton): cheaper iterations, linear convergence.
+The outer iteration is the same Newton driver with full steps (no line search): its step is a
+whole condensed contact solve.
 
-The dense contact problem is small (3NC); every rank solves it redundantly with the same data,
-so all ranks take the same decisions.
+Floating bodies: where a body has free rigid modes N (held only by contact), G is K's generalised
+inverse on self-equilibrated loads and the inner system gets the mode amplitudes α as n_r more
+unknowns, with the self-equilibrium rows Nᵀ(r_m + Bᵀ(λ − λ_m)) = 0:
+
+    w = w_m + w_free + C (λ − λ_m) + (B N) α,    du = x_r + X (λ − λ_m) + N α.
+
+``NNEQM1Options(modified=True)`` keeps K, X and C from the first iteration of the increment
+(modified Newton): cheaper iterations, linear convergence.
+
+The dense contact problem is small (3NC + n_r); every rank solves it redundantly with the same
+data, so all ranks take the same decisions.
 """
 
 from __future__ import annotations
 
 import math
 import time
+from dataclasses import asdict, dataclass
 
 import numpy as np
-from petsc4py import PETSc
 
-from dolfinx_nnqem.contact.laws import pin_constrained_directions
+from dolfinx_nnqem.condensation import Condensation
+from dolfinx_nnqem.contact.model import PairLaws
 from dolfinx_nnqem.convergence import IterationRecord, SolveReport, count_states, logger
-from dolfinx_nnqem.linalg import create_ksp, factorise, free_dropped_objects, global_norm
+from dolfinx_nnqem.linalg import free_dropped_objects, global_norm
+from dolfinx_nnqem.newton import Globalisation, Merit, solve
 from dolfinx_nnqem.nonsmooth import solve_nonsmooth
-from dolfinx_nnqem.problem import ContactProblem, SolverOptions
+from dolfinx_nnqem.problem import ContactProblem
+from dolfinx_nnqem.solver import NNEQM1Options, SolverOptions
+
+__all__ = ["CondensedProblem", "NNEQM1Solver"]
+
+FULL_STEPS = Globalisation(line_search=False, levenberg_marquardt=False)
+"""NNEQM1's outer Newton–Raphson: every step is a solved condensed problem, taken in full."""
+
+
+@dataclass
+class CondensedProblem:
+    """One outer iteration's dense contact problem (all pairs, global order).
+
+    Attributes
+    ----------
+    C
+        (3NC, 3NC) contact flexibility B G Bᵀ.
+    w_free, w_m, lam_m
+        (3NC,) relative displacement of the out-of-balance load, at the iterate, and its forces.
+    mu_f, g0
+        (NC,) friction coefficients and initial gaps.
+    w_prev
+        (NC, 3) w at the start of the increment.
+    r
+        The laws' scaling (the largest over the interfaces).
+    BN, e
+        (3NC, n_r) the free rigid modes seen by the pairs, (n_r,) Nᵀ r_m (empty without them).
+    """
+
+    C: np.ndarray
+    w_free: np.ndarray
+    w_m: np.ndarray
+    lam_m: np.ndarray
+    mu_f: np.ndarray
+    g0: np.ndarray
+    w_prev: np.ndarray
+    r: float
+    BN: np.ndarray
+    e: np.ndarray
+
+    def as_dict(self) -> dict:
+        return asdict(self)
 
 
 class NNEQM1Solver:
@@ -42,189 +94,204 @@ class NNEQM1Solver:
         A :class:`~dolfinx_nnqem.problem.ContactProblem` with contact.
     options
         Tolerances, outer iteration limit, ``petsc_options`` for the tangent solves.
-    modified
-        Keep K and C from the start of the increment (modified Newton).
-    inner_max_iterations
-        Iteration limit of the dense nonsmooth solve.
+    nneqm1
+        This solver's own options (:class:`~dolfinx_nnqem.solver.NNEQM1Options`).
     """
 
     name = "nneqm1"
 
-    def __init__(self, problem: ContactProblem, options: SolverOptions | None = None, *,
-                 modified: bool = False, inner_max_iterations: int = 100):
+    def __init__(self, problem: ContactProblem, options: SolverOptions | None = None,
+                 nneqm1: NNEQM1Options | None = None):
         if not problem.has_contact:
             raise ValueError("NNEQM1 solves contact problems: the problem has no Contact")
         self.problem = problem
         self.options = options or SolverOptions()
-        self.modified = modified
-        self.inner_max_iterations = inner_max_iterations
-        self.ksp = create_ksp(problem.comm, f"nnqem_nneqm1_{id(self)}_", self.options.petsc_options)
-        self._K = None
-        self.timings: dict[str, float] = {}
-        self.last_condensed = None  # (C, w_free, w_m, lam_m, ...) of the latest outer iteration
+        self.settings = nneqm1 or NNEQM1Options()
+        self.condensation = Condensation(problem, self.name, self.options.petsc_options)
+        self._timings: dict[str, float] = {}
+        self.last_condensed: CondensedProblem | None = None  #: the latest outer iteration's dense problem
 
-    # -- gathered pair data (global order, every rank) ----------------------------------------------
-    def _gather_pairs(self):
-        p = self.problem
-        pairs = p.pairs
-        g = pairs.gather(np.hstack([p.w_n, p.pairs.g0[:, None], p.mu_f[:, None], p.z,
-                                    p.constrained_directions.astype(float)]))
-        self._constrained = g[:, 8:11] > 0.5
-        return g[:, 0:3], g[:, 3], g[:, 4], g[:, 5:8]
+    @property
+    def timings(self) -> dict[str, float]:
+        """Seconds per phase: assembly, factorisation, flexibility, solve, contact."""
+        out = dict(self.condensation.timings)
+        for key, value in self._timings.items():
+            out[key] = out.get(key, 0.0) + value
+        return out
 
-    def _local_rows(self, array_global: np.ndarray) -> np.ndarray:
-        pairs = self.problem.pairs
-        return array_global[pairs.offset:pairs.offset + pairs.num_local]
-
-    # -- flexibility ---------------------------------------------------------------------------------
-    def _factorise_and_condense(self):
-        """Factor K_m; X = K⁻¹Bᵀ (dense, local rows), C = B X gathered to every rank."""
-        p = self.problem
-        t0 = time.perf_counter()
-        self._K = p.assemble_tangent(self._K)
-        self._tick("assembly", t0)
-        t0 = time.perf_counter()
-        factorise(self.ksp, self._K, "NNEQM1", "the stiffness K")
-        self._tick("factorisation", t0)
-        t0 = time.perf_counter()
-        Bt = p.transposed_B()
-        Bt_dense = Bt.convert("dense")
-        X = Bt_dense.duplicate()
-        self.ksp.matSolve(Bt_dense, X)
-        C_local_rows = p.pairs.B.matMult(X)
-        nc = p.num_pairs
-        # (3 rows per owned pair) × 3NC, regrouped per pair for the gather (a rank may own none)
-        C_rows = C_local_rows.getDenseArray().reshape(p.pairs.num_local, 9 * nc)
-        C = p.pairs.gather(C_rows).reshape(3 * nc, 3 * nc)
-        self._X = X.getDenseArray().copy()  # (owned u rows, 3NC)
-        self._C = C
-        self._tick("flexibility", t0)
-        for m in (Bt, Bt_dense, X, C_local_rows):
-            m.destroy()
-
-    def _solve_K(self, rhs: PETSc.Vec) -> PETSc.Vec:
-        x = rhs.duplicate()
-        t0 = time.perf_counter()
-        self.ksp.solve(rhs, x)
-        self._tick("solve", t0)
-        return x
-
-    # -- one increment --------------------------------------------------------------------------------
     def solve_increment(self, load_factor: float) -> SolveReport:
         p = self.problem
-        opts = self.options
-        law = p.law
         p.apply_prescribed_displacements(load_factor)
         p.predict_contact()
-        nc = p.num_pairs
-        report = SolveReport(converged=False, iterations=0, system_order=3 * nc)
-        w_prev, g0, mu_f, _ = self._gather_pairs()
-        step_length, inner_its = float("nan"), 0
-        for it in range(opts.max_iterations + 1):
-            free_dropped_objects(p.petsc_comms)
-            # residuals at the current iterate
-            t0 = time.perf_counter()
-            F_int = p.assemble_internal_force()
-            self._tick("assembly", t0)
-            R = p.residual(F_int=F_int)
-            R_free = p.free_residual(R)
-            w_local = p.relative_displacement()
-            ev = p.evaluate_law(w_local, p.z)
-            scale = max(p.external_force().norm(), F_int.norm(),
-                        p.pairs.global_force(p.contact_force()).norm())
-            normR, normH = R_free.norm(), global_norm(ev.H, p.comm)
-            if not (math.isfinite(normR) and math.isfinite(normH)):
-                report.message = f"NaN/inf residual at iteration {it} (|R| = {normR}, |H| = {normH})"
-                return report
-            ref = max(scale, opts.atol)
-            record = IterationRecord(it, normR / ref, normH / ref, step_length, "newton" if it else "",
-                                     count_states(ev.state, p.comm),
-                                     p.state.count_trial_plastic_points(p.u), inner_its)
-            report.history.append(record)
-            logger.info(record.line(self.name))
-            report.iterations = it
-            tol = opts.rtol * scale + opts.atol
-            if normR <= tol and normH <= tol:
-                report.converged, report.message = True, "converged"
-                return report
-            if it == opts.max_iterations:
-                break
-
-            # 1.–2. out-of-balance force, factorisation, flexibility
-            if not (self.modified and it > 0):
-                self._factorise_and_condense()
-            r = R_free.copy()
-            r.scale(-1.0)
-            x_r = self._solve_K(r)
-            w_free = p.pairs.gather(p.pairs.relative_displacement(x_r)).reshape(-1)
-            w_m = p.pairs.gather(w_local).reshape(-1)
-            z_m = p.pairs.gather(p.z)
-            lam_m, _ = law.force(z_m)
-            lam_m = lam_m.reshape(-1)
-            self.last_condensed = {"C": self._C, "w_free": w_free, "w_m": w_m, "lam_m": lam_m,
-                                   "mu_f": mu_f, "g0": g0, "w_prev": w_prev, "r": p.r}
-
-            # 3. inner dense nonsmooth solve for z
-            result = self._inner_solve(z_m, w_m, w_free, lam_m, w_prev, g0, mu_f, tol)
-            inner_its = result.iterations
-            if not result.converged:
-                report.message = f"inner nonsmooth solve failed at outer iteration {it}: {result.message}"
-                return report
-            z_new = result.x.reshape(nc, 3)
-            lam_new, _ = law.force(z_new)
-
-            # 4. du = x_r + X (λ − λ_m)
-            n_u = R_free.getLocalSize()
-            du = x_r.getArray(readonly=True) + self._X @ (lam_new.reshape(-1) - lam_m)
-            p.u.x.array[:n_u] += du
-            p.u.x.scatter_forward()
-            p.z = self._local_rows(z_new).copy()
-            step_length = 1.0
-        report.message = (f"no convergence in {opts.max_iterations} outer iterations "
-                          f"(|R|/F = {report.final.equilibrium:.3e}, |H|/F = {report.final.contact:.3e})")
+        report = SolveReport(converged=False, iterations=0,
+                             system_order=3 * p.num_pairs + self.condensation.num_modes)
+        system = _OuterSystem(self, report)
+        outcome = solve(system, FULL_STEPS, self.options.max_iterations)
+        report.iterations, report.converged = outcome.iterations, outcome.converged
+        final = report.final
+        if outcome.converged:
+            report.message = "converged"
+        elif system.inner_failure is not None:
+            report.message = system.inner_failure
+        else:
+            report.message = (f"no convergence in {self.options.max_iterations} outer iterations "
+                              f"(|R|/F = {final.equilibrium:.3e}, |H|/F = {final.contact:.3e})")
         return report
 
-    def _inner_solve(self, z_m, w_m, w_free, lam_m, w_prev, g0, mu_f, tol):
-        """Dense nonsmooth Newton/LM on z with w(z) = w_m + w_free + C (λ(z) − λ_m).
+    def inner_solve(self, cond: CondensedProblem, laws: PairLaws, z_m: np.ndarray, tol: float, scale: float):
+        """Dense nonsmooth Newton/LM on x = (z, α) with w(z, α) = w_m + w_free + C (λ(z) − λ_m) + B N α.
 
-        Unknowns and rows are scaled by the load scale F so that the LM parameter
-        ν = c |H̃| sees a residual and a Jacobian of order one (angles, for the polar law,
-        are not scaled).
+        Unknowns and rows are scaled by the load scale F so that the LM parameter ν = c |H̃|
+        sees a residual and a Jacobian of order one (the polar angle is not scaled; the mode
+        amplitudes α scale as F / r).
         """
-        law, r, C = self.problem.law, self.problem.r, self._C
-        force_unit = r * self.problem.characteristic_length()
+        C, n_r = cond.C, cond.BN.shape[1]
         nc = z_m.shape[0]
-        F = max(tol / max(self.options.rtol, 1e-300), 1e-300)  # the load scale
-        z_scale = np.tile(_unknown_scale(law, F), nc)
+        n3 = 3 * nc
+        F = scale
+        z_scale = laws.unknown_scale(F).reshape(-1)
+        x_scale = np.concatenate([z_scale, np.full(n_r, F / cond.r)])
 
         def residual(x):
-            z = (x * z_scale).reshape(nc, 3)
-            lam, dlam_dz = law.force(z)
-            w = (w_m + w_free + C @ (lam.reshape(-1) - lam_m)).reshape(nc, 3)
-            ev = pin_constrained_directions(law, law.evaluate(w, w_prev, z, g0, mu_f, r), z,
-                                            self._constrained, force_unit)
+            xs = x * x_scale
+            z = xs[:n3].reshape(nc, 3)
+            lam, dlam_dz = laws.force(z)
+            w = cond.w_m + cond.w_free + C @ (lam.reshape(-1) - cond.lam_m)
+            if n_r:
+                w = w + cond.BN @ xs[n3:]
+            ev = laws.evaluate(w.reshape(nc, 3), cond.w_prev, z)
             # J = blockdiag(∂H/∂w) · C · blockdiag(∂λ/∂z) + blockdiag(∂H/∂z)
-            DwC = np.einsum("nij,njk->nik", ev.dH_dw, C.reshape(nc, 3, 3 * nc))
-            J = np.einsum("anj,njk->ank", DwC.reshape(3 * nc, nc, 3), dlam_dz)
+            DwC = np.einsum("nij,njk->nik", ev.dH_dw, C.reshape(nc, 3, n3))
+            Jz = np.einsum("anj,njk->ank", DwC.reshape(n3, nc, 3), dlam_dz)
             idx = np.arange(nc)
-            Jb = J.reshape(nc, 3, nc, 3)
+            Jb = Jz.reshape(nc, 3, nc, 3)
             Jb[idx, :, idx, :] += ev.dH_dz
-            J = J.reshape(3 * nc, 3 * nc) * z_scale[None, :] / F
-            return ev.H.reshape(-1) / F, J
+            if not n_r:
+                return ev.H.reshape(-1) / F, Jz.reshape(n3, n3) * z_scale[None, :] / F
+            # the free rigid modes: w depends on α, and Nᵀ(r + Bᵀ(λ − λ_m)) = 0
+            H = np.concatenate([ev.H.reshape(-1), cond.e + cond.BN.T @ (lam.reshape(-1) - cond.lam_m)])
+            J = np.zeros((n3 + n_r, n3 + n_r))
+            J[:n3, :n3] = Jz.reshape(n3, n3)
+            J[:n3, n3:] = np.einsum("nij,njk->nik", ev.dH_dw, cond.BN.reshape(nc, 3, n_r)).reshape(n3, n_r)
+            J[n3:, :n3] = np.einsum("anj,njk->ank", cond.BN.T.reshape(n_r, nc, 3), dlam_dz).reshape(n_r, n3)
+            return H / F, J * x_scale[None, :] / F
 
-        t0 = time.perf_counter()
-        result = solve_nonsmooth(residual, z_m.reshape(-1) / z_scale, tol=tol / F,
-                                 max_iter=self.inner_max_iterations, watchdog=6)
-        result.x = result.x * z_scale
-        self._tick("contact", t0)
+        g = self.settings.inner
+        x0 = np.concatenate([z_m.reshape(-1), np.zeros(n_r)]) / x_scale
+        result = solve_nonsmooth(residual, x0, tol=tol / F, max_iter=self.settings.inner_max_iterations,
+                                 watchdog=g.watchdog, armijo=g.armijo, min_step=g.min_step, lm_c=g.lm_c,
+                                 lm_delta=g.lm_delta, max_increase=g.max_increase)
+        result.x = result.x * x_scale
         return result
 
-    def _tick(self, key: str, t0: float) -> None:
-        self.timings[key] = self.timings.get(key, 0.0) + time.perf_counter() - t0
+    def destroy(self) -> None:
+        self.condensation.destroy()
 
 
-def _unknown_scale(law, force_scale: float) -> np.ndarray:
-    """Scale of each pair unknown: forces scale with the load; the polar angle θ does not."""
-    if law.name == "polar":
-        return np.array([force_scale, force_scale, 1.0])
-    return np.full(3, force_scale)
+class _OuterSystem:
+    """NNEQM1's outer Newton–Raphson as a backend of the Newton driver (full steps only)."""
+
+    def __init__(self, solver: NNEQM1Solver, report: SolveReport):
+        self.solver = solver
+        self.problem = solver.problem
+        self.report = report
+        self.laws = self.problem.contact.gathered_laws()
+        self.w_prev = self.problem.contact.gather(self.problem.contact.w_n)
+        self.steps = 0
+        self.inner_iterations = 0
+        self.inner_failure: str | None = None
+        self.current = None
+        self._step = None
+
+    def evaluate(self) -> Merit:
+        p, s = self.problem, self.solver
+        t0 = time.perf_counter()
+        F_int = p.assemble_internal_force()
+        s._timings["assembly"] = s._timings.get("assembly", 0.0) + time.perf_counter() - t0
+        R_free = p.free_residual(p.residual(F_int=F_int))
+        w = p.relative_displacement()
+        law = p.contact.evaluate(w)
+        scale = max(p.external_force().norm(), F_int.norm(), p.contact.global_force(p.contact.force()).norm())
+        norm_R, norm_H = R_free.norm(), global_norm(law.H, p.comm)
+        self.current = (R_free, w, law, scale, norm_R, norm_H)
+        opts = s.options
+        tol = opts.rtol * scale + opts.atol
+        return Merit(0.5 * (norm_R ** 2 + norm_H ** 2), norm_R <= tol and norm_H <= tol)
+
+    def record(self, iteration: int, step_length: float, kind: str) -> None:
+        p = self.problem
+        free_dropped_objects(p.petsc_comms)  # once per iteration, on every rank
+        _, _, law, scale, norm_R, norm_H = self.current
+        ref = max(scale, self.solver.options.atol)
+        record = IterationRecord(iteration, norm_R / ref, norm_H / ref, step_length, "newton" if iteration else "",
+                                 count_states(law.state, p.comm), p.state.count_trial_plastic_points(p.u),
+                                 self.inner_iterations)
+        self.report.history.append(record)
+        logger.info(record.line(self.solver.name))
+
+    def snapshot(self):
+        return self.problem.u.x.array.copy(), self.problem.contact.z.copy(), self.current
+
+    def restore(self, snapshot) -> Merit:
+        u, z, self.current = snapshot
+        self.problem.u.x.array[:] = u
+        self.problem.contact.z = z.copy()
+        return self.evaluate()
+
+    def start_step(self) -> None:
+        """Nothing to keep: every step is taken in full."""
+
+    def newton_direction(self, merit: Merit) -> str | None:
+        """One condensed contact solve: the step (du, z_new)."""
+        p, s, cond_solver = self.problem, self.solver, self.solver.condensation
+        model = p.contact
+        R_free, w, _, scale, _, _ = self.current
+        if not (s.settings.modified and self.steps > 0):
+            cond_solver.factorise(p.assemble_tangent, "the tangent stiffness K_t")
+            self._X, self._C = cond_solver.pair_flexibility()
+        r = R_free.copy()
+        r.scale(-1.0)
+        x_r = cond_solver.solve(r)
+        z_m = model.gather(model.z)
+        lam_m, _ = self.laws.force(z_m)
+        cond = CondensedProblem(
+            C=self._C, w_free=model.gather(model.B_times(x_r)).reshape(-1), w_m=model.gather(w).reshape(-1),
+            lam_m=lam_m.reshape(-1), mu_f=self.laws.mu_f, g0=self.laws.g0, w_prev=self.w_prev,
+            r=max(group.r for group in self.laws.groups), BN=cond_solver.mode_coupling(),
+            e=cond_solver.mode_loads(r))
+        s.last_condensed = cond
+        opts = s.options
+        tol = opts.rtol * scale + opts.atol
+        t0 = time.perf_counter()
+        result = s.inner_solve(cond, self.laws, z_m, tol, max(tol / max(opts.rtol, 1e-300), 1e-300))
+        s._timings["contact"] = s._timings.get("contact", 0.0) + time.perf_counter() - t0
+        self.inner_iterations = result.iterations
+        if not result.converged:
+            self.inner_failure = f"inner nonsmooth solve failed at outer iteration {self.steps}: {result.message}"
+            return self.inner_failure
+        nc = model.num_global
+        z_new = result.x[:3 * nc].reshape(nc, 3)
+        lam_new, _ = self.laws.force(z_new)
+        du = x_r.getArray(readonly=True) + self._X @ (lam_new.reshape(-1) - cond.lam_m)
+        if cond_solver.num_modes:
+            du += cond_solver.mode_array() @ result.x[3 * nc:]
+        self._step = (du, model.local_rows(z_new).copy())
+        x_r.destroy()
+        return None
+
+    def lm_direction(self, merit: Merit, globalisation: Globalisation) -> str | None:
+        return "NNEQM1's outer iteration has no Levenberg–Marquardt step"
+
+    def slope(self) -> float:
+        return math.nan  # never asked: the outer iteration takes full steps
+
+    def move(self, step_length: float) -> Merit:
+        p = self.problem
+        du, z_new = self._step
+        n_u = du.shape[0]
+        p.u.x.array[:n_u] += step_length * du
+        p.u.x.scatter_forward()
+        p.contact.z = z_new
+        self.steps += 1
+        return self.evaluate()
+

@@ -1,26 +1,23 @@
-r"""A small dense solver for nonsmooth equations H(x) = 0 (``formulation.md`` §4).
+r"""Dense nonsmooth systems H(x) = 0: the dense backend of the Newton driver.
 
-Damped generalized Newton with a Levenberg--Marquardt fallback, for dense systems of order up to
-a few thousand (the contact systems of NNEQM1/NNEQM2):
+For systems of order up to a few thousand (the contact systems of NNEQM1 and NNEQM2), given as
+a function ``residual(x) -> (H, J)`` with a dense J in the B-subdifferential of H. The
+globalisation (Armijo, watchdog, Levenberg–Marquardt fallback) is the driver's,
+:func:`dolfinx_nnqem.newton.solve`; this module supplies the linear algebra:
 
-* generalized Newton step J_k dx = -H(x_k), J_k in the B-subdifferential of H (LU
-  factorisation; a singular or ill-conditioned J_k is detected from the LU pivots and the
-  LAPACK condition estimate);
-* Armijo backtracking (halving) on the merit function Psi(x) = 1/2 |D H(x)|^2;
-* if J_k is singular or ill-conditioned, or the Newton direction fails the line search, a
-  Levenberg--Marquardt step (A^T A + nu I) dx = -A^T D H, A = D J_k, nu = c |D H|^delta, again
-  with Armijo backtracking on Psi.
+* Newton direction: J d = −H by LU; a singular or ill-conditioned J (LU pivots, LAPACK's
+  condition estimate below ``rcond_min``) has no direction and LM takes over;
+* LM direction: (AᵀA + ν I) d = −Aᵀ D H, A = D J, by Cholesky, with ν = lm_c |D H|^lm_delta;
+* the slope ∇Ψ·d = (Aᵀ D H)·d of the chosen B-Jacobian.
 
-D is the diagonal row scaling ``merit_scale`` (identity by default), used so that rows of
-different units (forces, displacements, stresses) are comparable. Every norm the solver uses or
-reports, the merit Psi, the LM matrix and the tolerance refer to the scaled residual D H. The
-Newton direction itself does not depend on D.
+D is the diagonal row scaling ``merit_scale`` (identity by default), so that rows of different
+units (forces, displacements, stresses) are comparable. Every norm the solver uses or reports,
+the merit Ψ = ½|D H|², the LM matrix and the tolerance refer to D H. The Newton direction itself
+does not depend on D.
 
-Psi is only piecewise smooth for min/max/projection-type H (the contact laws), and the line search
-uses the slope grad(Psi).dx = (D J)^T D H . dx of the chosen B-Jacobian. Near a kink that slope
-can be the wrong one-sided derivative, and Psi can have local minima with H != 0 (for the contact
-laws: folds of the law where friction jams a pair, or a badly chosen r). The solver then stops
-and says so in ``NonsmoothResult.message``; it never returns a wrong "solution".
+Ψ is only piecewise smooth for min/max/projection-type H (the contact laws); near a kink the
+slope can be the wrong one-sided derivative, and Ψ can have local minima with H ≠ 0. The solver
+then stops and says so in ``NonsmoothResult.message``; it never returns a wrong "solution".
 """
 
 from __future__ import annotations
@@ -35,16 +32,15 @@ import numpy.typing as npt
 import scipy.linalg
 from scipy.linalg.lapack import dgecon
 
-__all__ = ["NonsmoothResult", "solve_nonsmooth"]
+from dolfinx_nnqem.newton import Globalisation, Merit, solve
+
+__all__ = ["DenseSystem", "NonsmoothResult", "solve_nonsmooth"]
 
 ResidualFunction = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 """``residual(x) -> (H, J)``: H (n,) and a dense J (n, n) in the B-subdifferential of H at x."""
 
 LogFunction = Callable[[int, float, float, str], None]
 """``log(iteration, norm_H, step_length, kind)``, kind in {"initial", "newton", "lm"}."""
-
-_BACKTRACK = 0.5
-"""Factor of the step length at each Armijo rejection."""
 
 
 @dataclass
@@ -64,7 +60,7 @@ class NonsmoothResult:
     newton_steps, lm_steps
         Accepted generalized Newton and Levenberg--Marquardt steps.
     line_search_steps
-        Total number of step-length reductions (rejected Armijo trials), both kinds of step.
+        Total number of step-length reductions (rejected trial steps), both kinds of step.
     message
         What happened, in words (the reason when not converged).
     """
@@ -79,101 +75,130 @@ class NonsmoothResult:
     message: str = ""
 
 
-def _evaluate(
-    residual: ResidualFunction, x: np.ndarray, scale: np.ndarray, iteration: int
-) -> tuple[np.ndarray, np.ndarray]:
-    """Scaled residual D H(x) and scaled Jacobian D J(x); raise on NaN/inf or wrong shapes."""
-    H, J = residual(x)
-    H = np.asarray(H, dtype=np.float64)
-    J = np.asarray(J, dtype=np.float64)
-    n = x.size
-    if H.shape != (n,):
-        raise ValueError(f"residual returned H of shape {H.shape}, expected ({n},)")
-    if J.shape != (n, n):
-        raise ValueError(f"residual returned J of shape {J.shape}, expected ({n}, {n})")
-    if not np.isfinite(H).all():
-        raise FloatingPointError(
-            f"H(x) is not finite at iteration {iteration} "
-            f"({int(np.count_nonzero(~np.isfinite(H)))} NaN/inf entries)"
-        )
-    if not np.isfinite(J).all():
-        raise FloatingPointError(
-            f"the Jacobian J(x) is not finite at iteration {iteration} "
-            f"({int(np.count_nonzero(~np.isfinite(J)))} NaN/inf entries)"
-        )
-    return scale * H, scale[:, None] * J
+class DenseSystem:
+    """A dense system H(x) = 0 as a :class:`~dolfinx_nnqem.newton.NewtonSystem`.
 
-
-def _newton_direction(A: np.ndarray, F: np.ndarray, rcond_min: float) -> np.ndarray | None:
-    """Solve A dx = -F by LU; None when A is singular or its reciprocal condition < rcond_min."""
-    with warnings.catch_warnings():
-        # lu_factor warns on an exactly zero pivot; the pivots are checked below instead.
-        warnings.simplefilter("ignore", scipy.linalg.LinAlgWarning)
-        lu, piv = scipy.linalg.lu_factor(A, check_finite=False)
-    if np.any(np.diag(lu) == 0.0):
-        return None
-    rcond, info = dgecon(lu, np.linalg.norm(A, 1), norm="1")
-    if info != 0 or not rcond >= rcond_min:
-        return None
-    return scipy.linalg.lu_solve((lu, piv), -F, check_finite=False)
-
-
-def _lm_direction(A: np.ndarray, gradient: np.ndarray, nu: float) -> np.ndarray:
-    """Solve (A^T A + nu I) dx = -gradient by Cholesky (gradient = A^T D H).
-
-    If rounding makes the matrix numerically indefinite (nu tiny against |A|^2), nu is raised
-    tenfold until the factorisation succeeds: the direction then leans towards steepest descent,
-    which is still a descent direction for Psi.
+    Parameters
+    ----------
+    residual
+        ``residual(x) -> (H, J)``.
+    x0
+        The starting point (copied).
+    tol
+        Converged when |D H| <= tol.
+    scale
+        The row scaling D, (n,).
+    rcond_min
+        J is treated as singular below this reciprocal condition number of D J.
+    log
+        Optional ``log(iteration, norm, step_length, kind)`` called for every recorded iterate.
     """
-    normal = A.T @ A
-    size = max(float(np.abs(normal).max(initial=0.0)), 1.0)
-    nu = max(nu, np.finfo(float).tiny)
-    while True:
-        try:
-            factor = scipy.linalg.cho_factor(
-                normal + nu * np.eye(normal.shape[0]), check_finite=False
-            )
-            return scipy.linalg.cho_solve(factor, -gradient, check_finite=False)
-        except np.linalg.LinAlgError:
-            if nu > 1e20 * size:  # cannot happen for finite A; guards an endless loop
-                raise
-            nu *= 10.0
 
+    def __init__(self, residual: ResidualFunction, x0: np.ndarray, tol: float, scale: np.ndarray,
+                 rcond_min: float, log: LogFunction | None = None):
+        self.residual = residual
+        self.x = np.array(x0, dtype=np.float64, copy=True)
+        self.tol, self.scale, self.rcond_min, self.log = tol, scale, rcond_min, log
+        self.norms: list[float] = []
+        self._iteration = 0  # the iterate being evaluated (errors name it)
+        self.F = self.A = None
+        self._x0 = self._F0 = self._A0 = self.dx = None
 
-def _line_search(
-    residual: ResidualFunction,
-    x: np.ndarray,
-    F: np.ndarray,
-    A: np.ndarray,
-    dx: np.ndarray | None,
-    scale: np.ndarray,
-    iteration: int,
-    armijo: float,
-    min_step: float,
-) -> tuple[tuple[float, np.ndarray, np.ndarray, np.ndarray] | None, int]:
-    """Armijo backtracking on Psi = 1/2 |F|^2 from x along dx (F = D H(x), A = D J(x)).
+    # -- evaluation ---------------------------------------------------------------------------
+    def _evaluate_at(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """D H(x) and D J(x); raise on NaN/inf or wrong shapes."""
+        H, J = self.residual(x)
+        H = np.asarray(H, dtype=np.float64)
+        J = np.asarray(J, dtype=np.float64)
+        n = x.size
+        if H.shape != (n,):
+            raise ValueError(f"residual returned H of shape {H.shape}, expected ({n},)")
+        if J.shape != (n, n):
+            raise ValueError(f"residual returned J of shape {J.shape}, expected ({n}, {n})")
+        if not np.isfinite(H).all():
+            raise FloatingPointError(f"H(x) is not finite at iteration {self._iteration} "
+                                     f"({int(np.count_nonzero(~np.isfinite(H)))} NaN/inf entries)")
+        if not np.isfinite(J).all():
+            raise FloatingPointError(f"the Jacobian J(x) is not finite at iteration {self._iteration} "
+                                     f"({int(np.count_nonzero(~np.isfinite(J)))} NaN/inf entries)")
+        return self.scale * H, self.scale[:, None] * J
 
-    Returns ((t, x_new, F_new, A_new), rejections) for the first t in 1, 1/2, 1/4, ... with
-    Psi(x + t dx) <= Psi(x) + armijo t grad(Psi).dx, or (None, rejections) when there is no
-    direction, it is not a descent direction for the B-Jacobian's gradient A^T F, or t would
-    fall below ``min_step``.
-    """
-    if dx is None:
-        return None, 0
-    slope = float((A.T @ F) @ dx)
-    if not slope < 0.0:
-        return None, 0
-    psi = 0.5 * float(F @ F)
-    t = 1.0
-    rejections = 0
-    while t >= min_step:
-        x_new = x + t * dx
-        F_new, A_new = _evaluate(residual, x_new, scale, iteration)
-        if 0.5 * float(F_new @ F_new) <= psi + armijo * t * slope:
-            return (t, x_new, F_new, A_new), rejections
-        t *= _BACKTRACK
-        rejections += 1
-    return None, rejections
+    def _merit(self) -> Merit:
+        norm = float(np.linalg.norm(self.F))
+        return Merit(0.5 * norm * norm, norm <= self.tol)
+
+    def evaluate(self) -> Merit:
+        self.F, self.A = self._evaluate_at(self.x)
+        return self._merit()
+
+    def record(self, iteration: int, step_length: float, kind: str) -> None:
+        norm = float(np.linalg.norm(self.F))
+        self.norms.append(norm)
+        self._iteration = iteration + 1
+        if self.log is not None:
+            if iteration == 0 and not kind:
+                self.log(0, norm, 0.0, "initial")
+            else:
+                self.log(iteration, norm, step_length, "lm" if kind == "lm" else "newton")
+
+    def snapshot(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return self.x, self.F, self.A
+
+    def restore(self, snapshot) -> Merit:
+        self.x, self.F, self.A = snapshot
+        return self._merit()
+
+    # -- steps ------------------------------------------------------------------------------------
+    def start_step(self) -> None:
+        self._x0, self._F0, self._A0 = self.x, self.F, self.A
+
+    def newton_direction(self, merit: Merit) -> str | None:
+        """Solve A d = −F by LU; no direction when A is singular or too ill-conditioned."""
+        A, F = self._A0, self._F0
+        with warnings.catch_warnings():
+            # lu_factor warns on an exactly zero pivot; the pivots are checked below instead.
+            warnings.simplefilter("ignore", scipy.linalg.LinAlgWarning)
+            lu, piv = scipy.linalg.lu_factor(A, check_finite=False)
+        if np.any(np.diag(lu) == 0.0):
+            return "J singular or ill-conditioned"
+        rcond, info = dgecon(lu, np.linalg.norm(A, 1), norm="1")
+        if info != 0 or not rcond >= self.rcond_min:
+            return "J singular or ill-conditioned"
+        self.dx = scipy.linalg.lu_solve((lu, piv), -F, check_finite=False)
+        return None
+
+    def lm_direction(self, merit: Merit, globalisation: Globalisation) -> str | None:
+        """Solve (AᵀA + ν I) d = −AᵀF by Cholesky, ν = lm_c |F|^lm_delta.
+
+        If rounding makes the matrix numerically indefinite (ν tiny against |A|²), ν is raised
+        tenfold until the factorisation succeeds: the direction then leans towards steepest
+        descent, which is still a descent direction for Ψ.
+        """
+        A, F = self._A0, self._F0
+        gradient = A.T @ F
+        if not np.any(gradient):
+            return (f"the merit function is stationary (J^T H = 0) with |H| = {np.linalg.norm(F):.3e} "
+                    f"> tol = {self.tol:.3e}")
+        normal = A.T @ A
+        size = max(float(np.abs(normal).max(initial=0.0)), 1.0)
+        nu = max(globalisation.lm_c * float(np.linalg.norm(F)) ** globalisation.lm_delta, np.finfo(float).tiny)
+        while True:
+            try:
+                factor = scipy.linalg.cho_factor(normal + nu * np.eye(normal.shape[0]), check_finite=False)
+                self.dx = scipy.linalg.cho_solve(factor, -gradient, check_finite=False)
+                return None
+            except np.linalg.LinAlgError:
+                if nu > 1e20 * size:  # cannot happen for finite A; guards an endless loop
+                    raise
+                nu *= 10.0
+
+    def slope(self) -> float:
+        return float((self._A0.T @ self._F0) @ self.dx)
+
+    def move(self, step_length: float) -> Merit:
+        self.x = self._x0 + step_length * self.dx
+        self.F, self.A = self._evaluate_at(self.x)
+        return self._merit()
 
 
 def _check_positive(name: str, value: float) -> float:
@@ -199,7 +224,7 @@ def solve_nonsmooth(
     watchdog: int = 0,
     max_increase: float = 1e8,
 ) -> NonsmoothResult:
-    """Solve H(x) = 0 by damped generalized Newton with a Levenberg--Marquardt fallback.
+    """Solve H(x) = 0 by the globalised semismooth Newton driver on dense arrays.
 
     Parameters
     ----------
@@ -214,13 +239,12 @@ def solve_nonsmooth(
         Maximum number of steps.
     merit_scale
         Row scaling D (scalar or (n,), positive), making rows of different units comparable
-        in Psi = 1/2 |D H|^2, in the LM matrix and in the tolerance. None: D = I.
+        in Ψ = 1/2 |D H|^2, in the LM matrix and in the tolerance. None: D = I.
     lm_c, lm_delta
-        LM parameter nu = lm_c |D H|^lm_delta, lm_c > 0, lm_delta in [1, 2] (locally
-        superlinear). nu is not scale-free: with ``merit_scale`` make D H and D J of order one.
+        LM parameter ν = lm_c |D H|^lm_delta, lm_c > 0, lm_delta in [1, 2] (locally
+        superlinear). ν is not scale-free: with ``merit_scale`` make D H and D J of order one.
     armijo
-        Sufficient-decrease constant sigma in (0, 1/2):
-        Psi(x + t dx) <= Psi(x) + sigma t grad(Psi).dx.
+        Sufficient-decrease constant σ in (0, 1/2).
     min_step
         Smallest step length tried by the backtracking; below it the direction fails.
     rcond_min
@@ -229,18 +253,14 @@ def solve_nonsmooth(
     log
         Optional ``log(iteration, norm_H, step_length, kind)``, called once for the initial
         iterate (kind "initial", step 0) and after every step (kind "newton" or "lm").
-    watchdog
-        Chamberlain's watchdog: up to this many full Newton steps in a row are accepted even
-        when Psi does not decrease (each may grow Psi at most ``max_increase``-fold); after
-        them, if no iterate improved on the best one, the iteration returns to the best
-        iterate and continues with line-searched steps. A change of active branch (a pair
-        opening or closing) makes Psi jump although the full step is the right one; 0 (the
-        default) is the plain monotone method.
+    watchdog, max_increase
+        The driver's watchdog (:class:`~dolfinx_nnqem.newton.Globalisation`); 0 (the default)
+        is the plain monotone method.
 
     Returns
     -------
     NonsmoothResult
-        Failure (max_iter reached, line search failed, stationary point of Psi) is reported in
+        Failure (max_iter reached, line search failed, stationary point of Ψ) is reported in
         ``converged``/``message``, not raised.
 
     Raises
@@ -253,20 +273,14 @@ def solve_nonsmooth(
     tol = _check_positive("tol", tol)
     if int(max_iter) != max_iter or max_iter < 0:
         raise ValueError(f"max_iter must be a non-negative integer, got {max_iter!r}")
-    max_iter = int(max_iter)
-    lm_c = _check_positive("lm_c", lm_c)
-    if not 1.0 <= lm_delta <= 2.0:
-        raise ValueError(f"lm_delta must be in [1, 2], got {lm_delta!r}")
-    if not 0.0 < armijo < 0.5:
-        raise ValueError(f"armijo must be in (0, 1/2), got {armijo!r}")
-    if not 0.0 < min_step < 1.0:
-        raise ValueError(f"min_step must be in (0, 1), got {min_step!r}")
     rcond_min = _check_positive("rcond_min", rcond_min)
-
-    x = np.array(x0, dtype=np.float64, copy=True)
-    if x.ndim != 1:
-        raise ValueError(f"x0 must be one-dimensional, got shape {x.shape}")
-    n = x.size
+    globalisation = Globalisation(armijo=armijo, min_step=min_step, watchdog=int(watchdog),
+                                  max_increase=max_increase, lm_c=_check_positive("lm_c", lm_c),
+                                  lm_delta=lm_delta)
+    x0 = np.array(x0, dtype=np.float64, copy=True)
+    if x0.ndim != 1:
+        raise ValueError(f"x0 must be one-dimensional, got shape {x0.shape}")
+    n = x0.size
     if merit_scale is None:
         scale = np.ones(n)
     else:
@@ -274,84 +288,17 @@ def solve_nonsmooth(
         if not (np.isfinite(scale).all() and (scale > 0.0).all()):
             raise ValueError("merit_scale must be finite and > 0")
 
-    F, A = _evaluate(residual, x, scale, 0)
-    norm = float(np.linalg.norm(F))
-    result = NonsmoothResult(x=x, converged=False, iterations=0, residual_norms=[norm])
-    if log is not None:
-        log(0, norm, 0.0, "initial")
-
-    best = (norm, x, F, A)  # watchdog: best iterate so far
-    free_steps = 0  # full steps accepted in a row without a new best
-    for k in range(1, max_iter + 1):
-        if norm <= tol:
-            break
-        if norm < (1.0 - armijo) * best[0]:
-            best, free_steps = (norm, x, F, A), 0
-        elif free_steps >= watchdog > 0:
-            norm, x, F, A = best  # back to the best iterate; monotone steps from there
-            free_steps = -1
-        # 1. generalized Newton step, if J is regular enough
-        dx = _newton_direction(A, F, rcond_min)
-        step = None
-        if dx is not None and watchdog > 0 and free_steps >= 0:
-            x_full = x + dx
-            F_full, A_full = _evaluate(residual, x_full, scale, k)
-            if float(F_full @ F_full) <= max_increase * float(F @ F):
-                step = (1.0, x_full, F_full, A_full)
-                free_steps += 1
-        if step is None:
-            step, rejections = _line_search(residual, x, F, A, dx, scale, k, armijo, min_step)
-            result.line_search_steps += rejections
-            free_steps = max(free_steps, 0)
-        kind = "newton"
-        if step is None:
-            # 2. Levenberg-Marquardt fallback
-            if dx is None:
-                newton_failure = "J singular or ill-conditioned"
-            else:
-                newton_failure = "the Newton direction failed the line search"
-            kind = "lm"
-            gradient = A.T @ F
-            if not np.any(gradient):
-                result.message = (
-                    f"stopped at iteration {k}: {newton_failure} and the merit function is "
-                    f"stationary (J^T H = 0) with |H| = {norm:.3e} > tol = {tol:.3e}"
-                )
-                return result
-            dx = _lm_direction(A, gradient, lm_c * norm**lm_delta)
-            step, rejections = _line_search(residual, x, F, A, dx, scale, k, armijo, min_step)
-            result.line_search_steps += rejections
-            if step is None:
-                result.message = (
-                    f"stopped at iteration {k}: the step became too small ({newton_failure}, "
-                    f"and the LM direction failed it down to step length {min_step:.1e}: "
-                    f"a local minimum or a kink of Psi); |H| = {norm:.3e} > tol = {tol:.3e}, "
-                    f"|J^T H| = {float(np.linalg.norm(gradient)):.3e}"
-                )
-                return result
-
-        t, x, F, A = step
-        if kind == "newton":
-            result.newton_steps += 1
-        else:
-            result.lm_steps += 1
-        norm = float(np.linalg.norm(F))
-        result.iterations = k
-        result.residual_norms.append(norm)
-        result.x = x
-        if log is not None:
-            log(k, norm, t, kind)
-
-    result.x = x
-    if norm <= tol:
-        result.converged = True
-        result.message = (
-            f"converged in {result.iterations} iterations ({result.newton_steps} Newton, "
-            f"{result.lm_steps} LM): |H| = {norm:.3e} <= tol = {tol:.3e}"
-        )
+    system = DenseSystem(residual, x0, tol, scale, rcond_min, log)
+    outcome = solve(system, globalisation, int(max_iter))
+    norm = system.norms[-1]
+    result = NonsmoothResult(x=system.x, converged=outcome.converged, iterations=outcome.iterations,
+                             residual_norms=system.norms, newton_steps=outcome.newton_steps,
+                             lm_steps=outcome.lm_steps, line_search_steps=outcome.line_search_steps)
+    if outcome.converged:
+        result.message = (f"converged in {result.iterations} iterations ({result.newton_steps} Newton, "
+                          f"{result.lm_steps} LM): |H| = {norm:.3e} <= tol = {tol:.3e}")
+    elif outcome.message.startswith("stopped"):
+        result.message = f"{outcome.message}; |H| = {norm:.3e} > tol = {tol:.3e}"
     else:
-        result.message = (
-            f"not converged after max_iter = {max_iter} iterations: "
-            f"|H| = {norm:.3e} > tol = {tol:.3e}"
-        )
+        result.message = f"not converged after max_iter = {max_iter} iterations: |H| = {norm:.3e} > tol = {tol:.3e}"
     return result

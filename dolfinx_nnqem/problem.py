@@ -8,15 +8,17 @@ A user writes, in DOLFINx terms::
         dirichlet=[Dirichlet(11), Dirichlet(12)],
         tractions=[Traction(13, (1e5, -1e5, 0.5e5))],
         body_forces=[Gravity((0, -9.81, 0))],
-        contact=Contact(surface1=21, surface2=22, mu_f=0.5),
+        contact=Contact(surface1=21, surface2=22, mu_f=0.5),   # or a list of Contact
     )
 
 All loads and prescribed displacements are multiplied by the load factor ℓ of the increment,
 or by their own ``amplitude(ℓ)`` when one is given (e.g. a pressure held constant while a
-drag grows).
-The problem owns the unknowns (displacement ``u`` and the pair unknowns ``z``), the converged
-state, and the assembly of the pieces solvers combine: F_int(u), F_ext, K_t(u), K_e, B and the
-pair law. It never solves anything itself.
+drag grows); so is the motion of rigid obstacles.
+The problem owns the displacement ``u``, the Gauss-point state, the contact model
+(:class:`~dolfinx_nnqem.contact.model.ContactModel`: every interface, the pair unknowns z) and
+the assembly of the pieces solvers combine: F_int(u), F_ext, K_t(u), K_e. It never solves
+anything itself. Before any solve it checks that no body can move rigidly without resistance
+(:mod:`dolfinx_nnqem.bodies`).
 """
 
 from __future__ import annotations
@@ -34,7 +36,10 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from dolfinx_nnqem import compat, jit
-from dolfinx_nnqem.material import PlasticState
+from dolfinx_nnqem.bodies import check_rigid_modes, find_bodies, free_rigid_modes
+from dolfinx_nnqem.contact.model import Contact, ContactModel
+from dolfinx_nnqem.contact.obstacles import Cylinder, Plane, Sphere  # noqa: F401  (the user's imports)
+from dolfinx_nnqem.material import GaussPointValues, PlasticState
 
 
 # -- problem data ---------------------------------------------------------------------------
@@ -88,60 +93,6 @@ class Gravity:
     amplitude: Callable[[float], float] | None = None  #: a(ℓ) replacing ℓ
 
 
-@dataclass(frozen=True)
-class Contact:
-    """Node-to-node frictional contact between two tagged surfaces.
-
-    Parameters
-    ----------
-    surface1, surface2
-        Facet tags of body 1's and body 2's contact surfaces. The pair normal is body 1's
-        outward normal; λ is the force on body 2.
-    mu_f
-        Coulomb friction coefficient (≥ 0).
-    law
-        ``"alart-curnier"`` (Cartesian, the robust default) or ``"polar"`` (the seed's form).
-    r
-        Scaling of the pair laws (force/length); default E·h (see :func:`contact.laws.default_r`).
-    tolerance, search_distance, initial_gap
-        Passed to :func:`dolfinx_nnqem.contact.pairs.find_pairs`.
-    """
-
-    surface1: int
-    surface2: int
-    mu_f: float
-    law: str = "alart-curnier"
-    r: float | None = None
-    tolerance: float | None = None
-    search_distance: float | None = None
-    initial_gap: Callable | None = None
-
-    def __post_init__(self):
-        if not (isinstance(self.mu_f, (int, float)) and math.isfinite(self.mu_f) and self.mu_f >= 0):
-            raise ValueError(f"Contact: mu_f = {self.mu_f!r}; expected a finite value >= 0")
-        if self.r is not None and not (math.isfinite(self.r) and self.r > 0):
-            raise ValueError(f"Contact: r = {self.r!r}; expected a finite value > 0 (force/length)")
-        if self.surface1 == self.surface2:
-            raise ValueError(f"Contact: surface1 and surface2 are both tag {self.surface1}")
-
-
-@dataclass
-class SolverOptions:
-    """Tolerances shared by all solvers.
-
-    Converged when ‖R‖ ≤ rtol · max(‖ℓ F_ext‖, ‖F_int‖, ‖Bᵀλ‖) and ‖H‖ ≤ rtol times the same
-    scale (H is in force units); ``atol`` guards the unloaded start.
-    """
-
-    rtol: float = 1e-10
-    atol: float = 1e-12
-    max_iterations: int = 30
-    petsc_options: dict = field(default_factory=dict)
-    extrapolate: bool = True  #: start each increment from the secant extrapolation of the last two
-    linear_solver: str = "direct"  #: "direct" (MUMPS LU), "iterative" (Krylov + GAMG), or "auto"
-    auto_iterative_dofs: int = 300_000  #: with "auto": iterative from this many displacement dofs
-
-
 # -- the problem ------------------------------------------------------------------------------
 class ContactProblem:
     """Quasi-static small-strain elastoplastic problem, with or without contact.
@@ -155,13 +106,20 @@ class ContactProblem:
     dirichlet, tractions, body_forces
         Supports and loads; all scaled by the load factor.
     contact
-        A :class:`Contact`, or None.
+        A :class:`Contact`, a list of them (several interfaces, rigid obstacles), or None.
     degree
-        Lagrange degree of the displacement: 1 (default; node-to-node contact needs it) or 2
-        (quadratic elements do not lock in isochoric plastic flow; trilinear hexahedra do).
+        Lagrange degree of the displacement: 1 (default; contact needs it) or 2 (quadratic
+        elements do not lock in isochoric plastic flow; trilinear hexahedra do).
     quadrature_degree
         Degree of the Gauss rule; default 2·degree (2×2×2 points per Q1 hexahedron, 3×3×3
         per Q2).
+
+    Raises
+    ------
+    ValueError
+        For unphysical or inconsistent data, and when a body can move rigidly without
+        resistance (no support and no contact against some rigid motion; the message names the
+        body and the motion).
     """
 
     def __init__(
@@ -174,7 +132,7 @@ class ContactProblem:
         dirichlet: Sequence[Dirichlet] = (),
         tractions: Sequence[Traction | Pressure] = (),
         body_forces: Sequence[BodyForce | Gravity] = (),
-        contact: Contact | None = None,
+        contact: Contact | Sequence[Contact] | None = None,
         degree: int = 1,
         quadrature_degree: int | None = None,
     ):
@@ -182,8 +140,12 @@ class ContactProblem:
             raise ValueError(f"the mesh is {mesh.geometry.dim}D; dolfinx_nnqem solves 3D problems")
         if degree not in (1, 2):
             raise ValueError(f"degree = {degree!r}: the displacement is Lagrange of degree 1 or 2")
-        if contact is not None and degree != 1:
-            raise ValueError(f"degree = {degree}: node-to-node contact needs degree 1 (pairs are mesh vertices)")
+        contacts = [] if contact is None else ([contact] if isinstance(contact, Contact) else list(contact))
+        for c in contacts:
+            if not isinstance(c, Contact):
+                raise TypeError(f"contact: {c!r} is not a Contact")
+        if contacts and degree != 1:
+            raise ValueError(f"degree = {degree}: contact needs degree 1 (pairs are mesh vertices)")
         if quadrature_degree is None:
             quadrature_degree = 2 * degree  # 2×2×2 Gauss points for Q1, 3×3×3 for Q2
         self.mesh, self.cell_tags, self.facet_tags = mesh, cell_tags, facet_tags
@@ -202,14 +164,17 @@ class ContactProblem:
         self.K_e_form = jit.form(self.state.elastic_stiffness_form(du, v))
         self.F_ext_parts = self._assemble_external_forces(tractions, body_forces, v)
 
-        self.pending_gauss_values = None  # (u array, σ, Δp) a solver hands to the next commit
         self.load_factor = 0.0  # ℓ of the current iterate
         self.load_factor_n = 0.0  # ℓ of the last converged increment
-        self.contact = contact
-        self.pairs = None
-        self.law = None
-        if contact is not None:
-            self._setup_contact(contact)
+        self._previous = None  # (ℓ, u, z) of the increment before the last: the secant predictor
+        self.contact: ContactModel | None = None
+        if contacts:
+            E_max = self.comm.allreduce(float(np.max(self.state.E.x.array, initial=0.0)), op=MPI.MAX)
+            self.contact = ContactModel(self.V, facet_tags, contacts, E=E_max, h=self.characteristic_length(),
+                                        constrained_dofs=self.constrained_flags())
+        self.bodies = find_bodies(self.V, cell_tags)
+        self.rigid_modes = free_rigid_modes(self.V, self.bodies, self.bc_dofs)
+        check_rigid_modes(self.rigid_modes, self.contact)
 
     @property
     def petsc_comms(self) -> list:
@@ -220,8 +185,8 @@ class ContactProblem:
         """
         if getattr(self, "_petsc_comms", None) is None:
             comms = [self.comm, self.u.x.petsc_vec.getComm()]  # the second: every vector of V
-            if self.pairs is not None:
-                comms.append(self.pairs.B.getComm())
+            if self.contact is not None:
+                comms.append(self.contact.B.getComm())
             self._petsc_comms = comms
         return self._petsc_comms
 
@@ -309,50 +274,13 @@ class ContactProblem:
             F.axpy(_amplitude(amplitude, ell), F_k)
         return F
 
-    def _setup_contact(self, contact: Contact) -> None:
-        from dolfinx_nnqem.contact.laws import default_r, get_law
-        from dolfinx_nnqem.contact.pairs import find_pairs
-
-        if self.facet_tags is None:
-            raise ValueError("Contact needs facet_tags naming the two contact surfaces")
-        self.pairs = find_pairs(
-            self.V, self.facet_tags, contact.surface1, contact.surface2,
-            tolerance=contact.tolerance, search_distance=contact.search_distance,
-            initial_gap=contact.initial_gap,
-        )
-        if self.pairs.num_global == 0:
-            raise ValueError(
-                f"Contact: no node pairs found between surfaces {contact.surface1} and {contact.surface2}")
-        self.law = get_law(contact.law)
-        nloc = self.pairs.num_local
-        self.mu_f = np.full(nloc, float(contact.mu_f))
-        if contact.r is None:
-            E_max = self.comm.allreduce(float(np.max(self.state.E.x.array, initial=0.0)), op=MPI.MAX)
-            self.r = float(default_r(E_max, self.characteristic_length()))
-        else:
-            self.r = float(contact.r)
-        self.constrained_directions = self._constrained_directions()
-        self.z = np.zeros((nloc, 3))  # the law's unknowns (p_n, q1, q2) or (p_n, p_r, θ)
-        self.pair_states = np.zeros(nloc, dtype=np.int8)  # at the last converged increment
-        self.slip_increment = np.zeros((nloc, 2))  # tangential slip of the last converged increment
-        self.z_n = np.zeros((nloc, 3))
-        self.w_n = np.zeros((nloc, 3))  # converged w at the start of the increment
-
-    def _constrained_directions(self) -> np.ndarray:
-        """(n_local_pairs, 3) bool: local directions whose relative motion the supports fix."""
-        from dolfinx_nnqem.results import values_at_blocks
-
+    def constrained_flags(self) -> PETSc.Vec:
+        """A vector laid out like V: 1 at the constrained dofs (owned and ghost), 0 elsewhere."""
         flags = compat.create_vector(self.V)
         with flags.localForm() as local:
             local.set(0.0)
             local.array[self.bc_dofs] = 1.0
-        blocks = self.pairs.gather(np.column_stack([self.pairs.dofs_a, self.pairs.dofs_b]).astype(float))
-        fixed_a = values_at_blocks(self, blocks[:, 0].astype(np.int64), flags) > 0.5
-        fixed_b = values_at_blocks(self, blocks[:, 1].astype(np.int64), flags) > 0.5
-        lo, hi = self.pairs.offset, self.pairs.offset + self.pairs.num_local
-        both = (fixed_a & fixed_b)[lo:hi]  # (n, 3) global components fixed at both nodes
-        involved = np.abs(self.pairs.R) > 1e-12  # (n, k, c): direction k involves component c
-        return np.all(~involved | both[:, None, :], axis=2)
+        return flags
 
     def characteristic_length(self) -> float:
         """Mean cell size h (cube root of the mean cell volume), over all ranks."""
@@ -368,22 +296,16 @@ class ContactProblem:
     # -- quantities solvers combine --------------------------------------------------------------
     @property
     def has_contact(self) -> bool:
-        return self.pairs is not None
+        return self.contact is not None
 
     @property
     def num_pairs(self) -> int:
-        return 0 if self.pairs is None else self.pairs.num_global
+        return 0 if self.contact is None else self.contact.num_global
 
     def constrained_rows(self) -> np.ndarray:
         """Global (unrolled) PETSc row indices of the constrained dofs this rank owns."""
         start = self.V.dofmap.index_map.local_range[0] * 3
         return (start + self.owned_bc_dofs()).astype(PETSc.IntType)
-
-    def transposed_B(self) -> PETSc.Mat:
-        """Bᵀ (a new matrix) with the rows of constrained dofs zeroed: du = 0 there."""
-        Bt = self.pairs.B.transpose(PETSc.Mat())  # without an output matrix petsc4py transposes in place
-        Bt.zeroRows(self.constrained_rows(), diag=0.0)
-        return Bt
 
     def owned_bc_dofs(self) -> np.ndarray:
         """Unrolled bc dofs owned by this rank (indices into the owned part of the vector)."""
@@ -401,41 +323,39 @@ class ContactProblem:
         """F_int(u) = ∫ σ(u) : ε(v) dx with the return map from the converged state."""
         return assemble_vector(self.F_int_form, self.V, F)
 
-    def assemble_tangent(self, A: PETSc.Mat | None = None) -> PETSc.Mat:
-        """K_t(u), the consistent tangent, with identity rows and columns at constrained dofs."""
-        return self._assemble_matrix(self.K_t_form, A)
+    def assemble_tangent(self, A: PETSc.Mat | None = None, extra_bcs: Sequence = ()) -> PETSc.Mat:
+        """K_t(u), the consistent tangent, with identity rows and columns at constrained dofs
+        (and at the dofs of ``extra_bcs``)."""
+        return self._assemble_matrix(self.K_t_form, A, extra_bcs)
 
-    def assemble_elastic_stiffness(self, A: PETSc.Mat | None = None) -> PETSc.Mat:
-        """K_e, the elastic stiffness, with identity rows and columns at constrained dofs."""
-        return self._assemble_matrix(self.K_e_form, A)
+    def assemble_elastic_stiffness(self, A: PETSc.Mat | None = None, extra_bcs: Sequence = ()) -> PETSc.Mat:
+        """K_e, the elastic stiffness, with identity rows and columns at constrained dofs
+        (and at the dofs of ``extra_bcs``)."""
+        return self._assemble_matrix(self.K_e_form, A, extra_bcs)
 
-    def _assemble_matrix(self, form, A):
+    def _assemble_matrix(self, form, A, extra_bcs):
+        bcs = self.bcs + list(extra_bcs)
         if A is None:
-            A = compat.assemble_matrix(form, self.bcs, diagonal=1.0)
+            A = compat.assemble_matrix(form, bcs, diagonal=1.0)
         else:
             A.zeroEntries()
-            dolfinx.fem.petsc.assemble_matrix(A, form, bcs=self.bcs)
+            dolfinx.fem.petsc.assemble_matrix(A, form, bcs=bcs)
         A.assemble()
         return A
 
-    def contact_force(self, z: np.ndarray | None = None) -> np.ndarray:
-        """Local contact forces λ = (p_n, q1, q2) on body 2, shape (num_local_pairs, 3)."""
-        lam, _ = self.law.force(self.z if z is None else z)
-        return lam
-
-    def relative_displacement(self) -> np.ndarray:
-        """w = B u for the owned pairs, shape (num_local_pairs, 3)."""
-        return self.pairs.relative_displacement(self.u.x.petsc_vec)
+    def relative_displacement(self, u: PETSc.Vec | None = None) -> np.ndarray:
+        """w = B u + m(ℓ) of the local pairs, (num_local_pairs, 3) (default: the current u)."""
+        return self.contact.relative_displacement(self.u.x.petsc_vec if u is None else u, self.load_factor)
 
     def residual(self, z: np.ndarray | None = None, F_int: PETSc.Vec | None = None) -> PETSc.Vec:
-        """Equilibrium residual R = F_int(u) − ℓ F_ext − Bᵀλ (constrained rows NOT zeroed).
+        """Equilibrium residual R = F_int(u) − ℓ F_ext − Bᵀλ(z) (constrained rows NOT zeroed).
 
         At constrained dofs R holds the support reactions.
         """
         R = self.assemble_internal_force() if F_int is None else F_int.copy()
         R.axpy(-1.0, self.external_force())
         if self.has_contact:
-            R.axpy(-1.0, self.pairs.global_force(self.contact_force(z)))
+            R.axpy(-1.0, self.contact.global_force(self.contact.force(z)))
         return R
 
     def tangent_action(self, delta: np.ndarray) -> PETSc.Vec:
@@ -458,18 +378,12 @@ class ContactProblem:
             local.array[self.bc_dofs] = 0.0
         return Rf
 
-    def evaluate_law(self, w: np.ndarray, z: np.ndarray):
-        """The pair law at (w, z): ``LawEvaluation(H, dH_dw, dH_dz, state)`` for the owned pairs."""
-        from dolfinx_nnqem.contact.laws import pin_constrained_directions
-
-        evaluation = self.law.evaluate(w, self.w_n, z, self.pairs.g0, self.mu_f, self.r)
-        return pin_constrained_directions(self.law, evaluation, z, self.constrained_directions,
-                                          self.r * self.characteristic_length())
-
     def amplitudes(self, load_factor: float) -> np.ndarray:
-        """The amplitudes of every load and every Dirichlet condition at ``load_factor``."""
-        return np.array([_amplitude(a, load_factor) for a, _ in self.F_ext_parts]
-                        + [_amplitude(a, load_factor) for a, _ in self._bc_amplitudes])
+        """The amplitudes of every load, Dirichlet condition and obstacle motion at ``load_factor``."""
+        values = ([_amplitude(a, load_factor) for a, _ in self.F_ext_parts]
+                  + [_amplitude(a, load_factor) for a, _ in self._bc_amplitudes])
+        motion = self.contact.motion_amplitudes(load_factor) if self.has_contact else np.zeros(0)
+        return np.concatenate([np.array(values), motion])
 
     def extrapolate(self, load_factor: float) -> bool:
         """Secant predictor: u ← u_n + β (u_n − u_{n−1}), z likewise; True if it was applied.
@@ -482,10 +396,9 @@ class ContactProblem:
         changes of the amplitudes are not parallel: e.g. a pressure stops rising and a drag
         starts), since the last increment's response then says little about this one's.
         """
-        previous = getattr(self, "_previous", None)
-        if previous is None:
+        if self._previous is None:
             return False
-        ell_prev, u_prev, z_prev = previous
+        ell_prev, u_prev, z_prev = self._previous
         a_n = self.amplitudes(self.load_factor_n)
         d_prev = a_n - self.amplitudes(ell_prev)
         d_new = self.amplitudes(load_factor) - a_n
@@ -498,56 +411,44 @@ class ContactProblem:
         u_n = self.state.u_n.x.array
         self.u.x.array[:] = u_n + beta * (u_n - u_prev)
         if self.has_contact:
-            self.z = self.z_n + beta * (self.z_n - z_prev)
+            self.contact.z = self.contact.z_n + beta * (self.contact.z_n - z_prev)
         return True
 
     def predict_contact(self) -> None:
-        """Starting active set: touching pairs (g ≤ 0) with p_n = 0 get a tiny p_n > 0.
-
-        At the tie p_n = r·g = 0 the laws take the open branch, so a body held only by
-        contact would have a singular first Jacobian. Starting on the closed branch is the
-        usual initial active set of semismooth Newton; a pair that should open does so in
-        the next iteration. The value (1e-12 · r · h) is far below any tolerance.
-        """
-        if not self.has_contact:
-            return
-        tiny = 1e-12 * self.r * self.characteristic_length()
-        gap = self.pairs.g0 + self.relative_displacement()[:, 0]
-        touching = (gap <= 0.0) & (self.z[:, 0] <= 0.0)
-        self.z[touching, 0] = tiny
+        """Starting active set (see :meth:`ContactModel.predict`)."""
+        if self.has_contact:
+            self.contact.predict(self.relative_displacement())
 
     # -- increments --------------------------------------------------------------------------------
-    def commit(self) -> None:
+    def commit(self, gauss_point_values: GaussPointValues | None = None) -> None:
         """Accept the current iterate as the converged end of the increment.
 
-        The Gauss-point state is updated by the radial return at ``u``, unless the solver left
-        its own values in :attr:`pending_gauss_values` for exactly this ``u`` (NNEQM2, whose
-        flow directions are frozen within the increment, is not the radial return).
+        The Gauss-point state is updated by the radial return at ``u``, unless the solver
+        returned its own values for exactly this ``u`` (NNEQM2, whose flow directions are frozen
+        within the increment, is not the radial return).
         """
         self._previous = (self.load_factor_n, self.state.u_n.x.array.copy(),
-                          self.z_n.copy() if self.has_contact else None)
-        pending, self.pending_gauss_values = self.pending_gauss_values, None
-        if pending is not None and np.array_equal(pending[0], self.u.x.array):
-            # a solver that integrates the flow itself (NNEQM2) left its Gauss-point values
-            self.state.commit_values(self.u, pending[1], pending[2])
+                          self.contact.z_n.copy() if self.has_contact else None)
+        if gauss_point_values is not None and np.array_equal(gauss_point_values.u, self.u.x.array):
+            self.state.commit_values(self.u, gauss_point_values.sigma, gauss_point_values.dp)
         else:
             self.state.commit(self.u)
         self.load_factor_n = self.load_factor
         if self.has_contact:
-            w = self.relative_displacement()
-            # states and slip must be read before w_n moves on (slip is measured from w_n)
-            self.pair_states = self.evaluate_law(w, self.z).state.copy()
-            self.slip_increment = w[:, 1:3] - self.w_n[:, 1:3]
-            self.w_n = w
-            self.z_n = self.z.copy()
+            self.contact.commit(self.relative_displacement())
 
     def restore(self) -> None:
         """Return to the last converged increment (after a failed attempt)."""
         self.u.x.array[:] = self.state.u_n.x.array
         self.load_factor = self.load_factor_n
-        self.pending_gauss_values = None
         if self.has_contact:
-            self.z = self.z_n.copy()
+            self.contact.restore()
+
+    def destroy(self) -> None:
+        """Free the PETSc objects the problem holds (the contact model's, the rigid modes')."""
+        if self.contact is not None:
+            self.contact.destroy()
+        self.rigid_modes.destroy()
 
 
 def assemble_vector(form, V, F: PETSc.Vec | None = None) -> PETSc.Vec:

@@ -12,18 +12,30 @@ A problem file names a mesh with physical tags and everything :class:`ContactPro
     H = 2.0e10
     density = 2400.0
 
-    [contact]
-    surface1 = 21                         # facet tags
+    [[contact]]                           # one table per interface ([contact] for a single one)
+    surface1 = 21                         # facet tags: master (body 1) and slave (body 2) sides
     surface2 = 22
     mu_f = 0.5
     law = "alart-curnier"                 # or "polar"
+    name = "beams"                        # optional: how tables and logs name it
+
+    [[contact]]                           # a rigid obstacle as the master side
+    surface2 = 5
+    mu_f = 0.2
+    [contact.obstacle]
+    type = "sphere"                       # "plane" (point, normal), "sphere" (centre, radius),
+    centre = [0.0, 1.2, 0.0]              # "cylinder" (point, axis, radius)
+    radius = 0.2
+    motion = [[0.0, 0, 0, 0], [0.5, 0, -1e-3, 0], [1.0, 2e-3, -1e-3, 0]]   # d(ℓ): rows [ℓ, dx, dy, dz]
+                                          # or motion = [dx, dy, dz] (times ℓ, or an amplitude)
 
     [[dirichlet]]
     tag = 11                              # u = 0 (all components) on facets tagged 11
     [[dirichlet]]
     tag = 31
-    value = 0.001                         # u_x = ℓ · 1 mm
+    value = 0.001                         # u_x = ℓ · 1 mm ...
     components = [0]
+    amplitude = [[0.0, 0.0], [0.5, 0.0], [1.0, 1.0]]   # ... or a(ℓ) · 1 mm: rows [ℓ, a], linear between
 
     [[traction]]
     tag = 13
@@ -53,6 +65,8 @@ A problem file names a mesh with physical tags and everything :class:`ContactPro
     [output.probes]
     "tip" = [2.0, 0.0, 0.0]
 
+Every load ([[traction]], [[pressure]], [[body_force]], [gravity]) and [[dirichlet]] entry takes
+an optional ``amplitude`` table like the one above (default a(ℓ) = ℓ).
 An XDMF mesh takes ``file = "mesh.xdmf"``, ``mesh_name = "mesh"``, ``cell_tags = "cell_tags"``
 and ``facet_tags = "facet_tags"`` (the names of the grids in the file).
 Every key is checked: an unknown or malformed one raises :class:`ProblemFileError` naming it.
@@ -86,7 +100,7 @@ class ProblemSpec:
     path: Path
     mesh: dict
     materials: dict
-    contact: dict | None
+    contact: list
     dirichlet: list
     traction: list
     pressure: list
@@ -111,7 +125,7 @@ def load_problem_file(path: str | Path) -> ProblemSpec:
     where = str(path)
     mesh = _mesh_section(_table(data, "mesh", where, required=True), path.parent, where)
     materials = _materials_section(_table(data, "materials", where, required=True), where)
-    contact = _contact_section(data.get("contact"), where)
+    contact = _contact_tables(data.get("contact"), where)
     dirichlet = [_dirichlet_entry(e, f"{where}: dirichlet[{i}]") for i, e in enumerate(_array(data, "dirichlet", where))]
     traction = [_traction_entry(e, f"{where}: traction[{i}]") for i, e in enumerate(_array(data, "traction", where))]
     pressure = [_pressure_entry(e, f"{where}: pressure[{i}]") for i, e in enumerate(_array(data, "pressure", where))]
@@ -119,13 +133,14 @@ def load_problem_file(path: str | Path) -> ProblemSpec:
                   for i, e in enumerate(_array(data, "body_force", where))]
     gravity = data.get("gravity")
     if gravity is not None:
-        gravity = _checked_keys(gravity, {"g"}, {"g"}, f"{where}: [gravity]")
+        gravity = _checked_keys(gravity, {"g", "amplitude"}, {"g"}, f"{where}: [gravity]")
         gravity["g"] = _vector(gravity["g"], f"{where}: gravity.g")
+        _amplitude_entry(gravity, f"{where}: gravity")
     solver = _solver_section(data.get("solver", {}), where)
     output = _output_section(data.get("output", {}), where)
     if not dirichlet:
         raise ProblemFileError(f"{where}: no [[dirichlet]] entry; a quasi-static problem needs supports")
-    if solver["method"] != "monolithic" and contact is None:
+    if solver["method"] != "monolithic" and not contact:
         raise ProblemFileError(f"{where}: solver.method = {solver['method']!r} needs a [contact] section")
     return ProblemSpec(path, mesh, materials, contact, dirichlet, traction, pressure, body_force,
                        gravity, solver, output)
@@ -223,27 +238,106 @@ def _materials_section(materials: dict, where: str) -> dict:
     return out
 
 
-def _contact_section(contact, where: str) -> dict | None:
+def _contact_tables(contact, where: str) -> list:
+    """[contact] (one interface) or [[contact]] (any number): a list of checked tables."""
     if contact is None:
-        return None
-    w = f"{where}: [contact]"
-    contact = _checked_keys(contact, {"surface1", "surface2", "mu_f", "law", "r", "tolerance", "search_distance"},
-                            {"surface1", "surface2", "mu_f"}, w)
-    contact["surface1"] = _tag(contact["surface1"], f"{w}.surface1")
+        return []
+    tables = [contact] if isinstance(contact, dict) else contact
+    if not isinstance(tables, list) or not all(isinstance(t, dict) for t in tables):
+        raise ProblemFileError(f"{where}: contact must be a table [contact] or tables [[contact]]")
+    out = [_contact_section(t, f"{where}: contact[{i}]" if len(tables) > 1 else f"{where}: [contact]")
+           for i, t in enumerate(tables)]
+    names = [c.get("name") for c in out if c.get("name") is not None]
+    if len(set(names)) != len(names):
+        raise ProblemFileError(f"{where}: contact names must differ, got {names}")
+    return out
+
+
+OBSTACLE_KEYS = {"plane": {"point", "normal"}, "sphere": {"centre", "radius"}, "cylinder": {"point", "axis", "radius"}}
+
+
+def _contact_section(contact: dict, w: str) -> dict:
+    contact = _checked_keys(contact, {"surface1", "surface2", "obstacle", "mu_f", "law", "r", "tolerance",
+                                      "search_distance", "name"}, {"surface2", "mu_f"}, w)
     contact["surface2"] = _tag(contact["surface2"], f"{w}.surface2")
-    if contact["surface1"] == contact["surface2"]:
-        raise ProblemFileError(f"{w}: surface1 and surface2 are both tag {contact['surface1']}")
+    if ("surface1" in contact) == ("obstacle" in contact):
+        raise ProblemFileError(f"{w}: give either surface1 (a facet tag) or an obstacle table, not "
+                               f"{'both' if 'surface1' in contact else 'neither'}")
+    if "surface1" in contact:
+        contact["surface1"] = _tag(contact["surface1"], f"{w}.surface1")
+        if contact["surface1"] == contact["surface2"]:
+            raise ProblemFileError(f"{w}: surface1 and surface2 are both tag {contact['surface1']}")
+    else:
+        contact["obstacle"] = _obstacle_entry(contact["obstacle"], f"{w}.obstacle")
+        if "search_distance" in contact:
+            raise ProblemFileError(f"{w}.search_distance: applies to node-to-node contact, not to an obstacle")
     contact["mu_f"] = float(_number(contact["mu_f"], f"{w}.mu_f", nonnegative=True))
     if contact.get("law", "alart-curnier") not in ("alart-curnier", "cartesian", "polar", "seed"):
         raise ProblemFileError(f"{w}.law = {contact['law']!r}: expected 'alart-curnier' or 'polar'")
     for key in ("r", "tolerance", "search_distance"):
         if key in contact:
             contact[key] = float(_number(contact[key], f"{w}.{key}", positive=True))
+    if "name" in contact and not isinstance(contact["name"], str):
+        raise ProblemFileError(f"{w}.name = {contact['name']!r}: expected a string")
     return contact
 
 
+def _obstacle_entry(entry, where: str) -> dict:
+    if not isinstance(entry, dict):
+        raise ProblemFileError(f"{where}: must be a table with a type (plane, sphere or cylinder)")
+    kind = entry.get("type")
+    if kind not in OBSTACLE_KEYS:
+        raise ProblemFileError(f"{where}.type = {kind!r}: expected one of {sorted(OBSTACLE_KEYS)}")
+    entry = _checked_keys(entry, {"type", "motion", "amplitude"} | OBSTACLE_KEYS[kind],
+                          {"type"} | OBSTACLE_KEYS[kind], where)
+    for key in ("point", "normal", "centre", "axis"):
+        if key in entry:
+            entry[key] = _vector(entry[key], f"{where}.{key}")
+    if "radius" in entry:
+        entry["radius"] = float(_number(entry["radius"], f"{where}.radius", positive=True))
+    motion = entry.get("motion", [0.0, 0.0, 0.0])
+    if isinstance(motion, list) and motion and all(isinstance(row, list) for row in motion):
+        if "amplitude" in entry:
+            raise ProblemFileError(f"{where}: a motion path [[ℓ, dx, dy, dz], ...] takes no amplitude")
+        entry["motion"] = _path(motion, f"{where}.motion")
+    else:
+        entry["motion"] = _vector(motion, f"{where}.motion")
+        _amplitude_entry(entry, where)
+    return entry
+
+
+def _amplitude_entry(entry: dict, where: str) -> None:
+    """Check an optional ``amplitude`` table in place (rows [ℓ, a])."""
+    if "amplitude" not in entry:
+        return
+    from dolfinx_nnqem.amplitude import PiecewiseLinear
+
+    try:
+        entry["amplitude"] = PiecewiseLinear([[float(_number(v, f"{where}.amplitude[{i}]")) for v in row]
+                                              for i, row in enumerate(_rows(entry["amplitude"], f"{where}.amplitude"))])
+    except ValueError as error:
+        raise ProblemFileError(f"{where}.{error}") from None
+
+
+def _path(rows, where: str):
+    from dolfinx_nnqem.amplitude import PiecewiseLinearPath
+
+    try:
+        return PiecewiseLinearPath([[float(_number(v, f"{where}[{i}]")) for v in row]
+                                    for i, row in enumerate(_rows(rows, where))])
+    except ValueError as error:
+        raise ProblemFileError(f"{where}: {error}") from None
+
+
+def _rows(value, where: str) -> list:
+    if not isinstance(value, list) or not value or not all(isinstance(row, list) for row in value):
+        raise ProblemFileError(f"{where} = {value!r}: expected a list of rows, e.g. [[0.0, 0.0], [1.0, 1.0]]")
+    return value
+
+
 def _dirichlet_entry(entry: dict, where: str) -> dict:
-    entry = _checked_keys(entry, {"tag", "value", "components"}, {"tag"}, where)
+    entry = _checked_keys(entry, {"tag", "value", "components", "amplitude"}, {"tag"}, where)
+    _amplitude_entry(entry, where)
     entry["tag"] = _tag(entry["tag"], f"{where}.tag")
     components = entry.get("components")
     if components is not None:
@@ -260,21 +354,24 @@ def _dirichlet_entry(entry: dict, where: str) -> dict:
 
 
 def _traction_entry(entry: dict, where: str) -> dict:
-    entry = _checked_keys(entry, {"tag", "value"}, {"tag", "value"}, where)
+    entry = _checked_keys(entry, {"tag", "value", "amplitude"}, {"tag", "value"}, where)
+    _amplitude_entry(entry, where)
     entry["tag"] = _tag(entry["tag"], f"{where}.tag")
     entry["value"] = _vector(entry["value"], f"{where}.value")
     return entry
 
 
 def _pressure_entry(entry: dict, where: str) -> dict:
-    entry = _checked_keys(entry, {"tag", "p"}, {"tag", "p"}, where)
+    entry = _checked_keys(entry, {"tag", "p", "amplitude"}, {"tag", "p"}, where)
+    _amplitude_entry(entry, where)
     entry["tag"] = _tag(entry["tag"], f"{where}.tag")
     entry["p"] = float(_number(entry["p"], f"{where}.p"))
     return entry
 
 
 def _body_force_entry(entry: dict, where: str) -> dict:
-    entry = _checked_keys(entry, {"value", "cell_tag"}, {"value"}, where)
+    entry = _checked_keys(entry, {"value", "cell_tag", "amplitude"}, {"value"}, where)
+    _amplitude_entry(entry, where)
     entry["value"] = _vector(entry["value"], f"{where}.value")
     if "cell_tag" in entry:
         entry["cell_tag"] = _tag(entry["cell_tag"], f"{where}.cell_tag")
@@ -345,20 +442,45 @@ def read_mesh(spec: ProblemSpec, comm):
 
 def build_problem(spec: ProblemSpec, comm):
     """The :class:`ContactProblem` of a checked problem file."""
+    from dolfinx_nnqem.contact.obstacles import Cylinder, Plane, Sphere
     from dolfinx_nnqem.problem import (BodyForce, Contact, ContactProblem, Dirichlet, Gravity, Pressure,
                                        Traction)
 
     mesh, cell_tags, facet_tags = read_mesh(spec, comm)
-    contact = None
-    if spec.contact is not None:
-        contact = Contact(**spec.contact)
-    loads = [Traction(e["tag"], e["value"]) for e in spec.traction]
-    loads += [Pressure(e["tag"], e["p"]) for e in spec.pressure]
-    body = [BodyForce(e["value"], e.get("cell_tag")) for e in spec.body_force]
+    obstacle_classes = {"plane": Plane, "sphere": Sphere, "cylinder": Cylinder}
+    contact = []
+    for entry in spec.contact:
+        entry = dict(entry)
+        obstacle = entry.pop("obstacle", None)
+        if obstacle is not None:
+            obstacle = dict(obstacle)
+            entry["surface1"] = obstacle_classes[obstacle.pop("type")](**obstacle)
+        contact.append(Contact(**entry))
+    loads = [Traction(e["tag"], e["value"], e.get("amplitude")) for e in spec.traction]
+    loads += [Pressure(e["tag"], e["p"], e.get("amplitude")) for e in spec.pressure]
+    body = [BodyForce(e["value"], e.get("cell_tag"), e.get("amplitude")) for e in spec.body_force]
     if spec.gravity is not None:
-        body.append(Gravity(spec.gravity["g"]))
+        body.append(Gravity(spec.gravity["g"], spec.gravity.get("amplitude")))
     return ContactProblem(
         mesh, cell_tags, facet_tags, materials=spec.materials,
-        dirichlet=[Dirichlet(e["tag"], e.get("value", 0.0), e.get("components")) for e in spec.dirichlet],
-        tractions=loads, body_forces=body, contact=contact,
+        dirichlet=[Dirichlet(e["tag"], e.get("value", 0.0), e.get("components"), e.get("amplitude"))
+                   for e in spec.dirichlet],
+        tractions=loads, body_forces=body, contact=contact or None,
     )
+
+
+def solver_options(spec: ProblemSpec, method: str | None = None):
+    """(SolverOptions, {method: its own options}) from the [solver] section (``method`` overrides its method)."""
+    from dolfinx_nnqem.solver import MonolithicOptions, SolverOptions
+
+    s = spec.solver
+    method = method or s["method"]
+    if method != "monolithic" and s["linear_solver"] != "direct":
+        raise ProblemFileError(f"{spec.path}: [solver].linear_solver = {s['linear_solver']!r} needs the monolithic "
+                               f"method ({method} factorises the stiffness)")
+    options = SolverOptions(rtol=s["rtol"], atol=s["atol"], max_iterations=s["max_iterations"],
+                            petsc_options=s["petsc_options"])
+    method_options = {}
+    if method == "monolithic":
+        method_options["monolithic"] = MonolithicOptions(linear_solver=s["linear_solver"])
+    return options, method_options

@@ -75,30 +75,35 @@ def node_blocks_at_points(problem, points: np.ndarray, cell_tag: int | None = No
 def pair_table(problem) -> dict[str, np.ndarray]:
     """Gathered pair data in global pair order (same arrays on every rank).
 
-    Keys: ``position`` (X_a), ``position_b`` (X_b), ``frame`` (R), ``state`` (0/1/2),
-    ``force_local_body1`` (−λ: normal, tangential 1, tangential 2 on body 1, N),
-    ``force_on_body1`` (global frame, N), ``u_body1``, ``u_body2`` (m), ``gap`` (m),
+    Body 1 is the master side of a pair (``surface1``, or a rigid obstacle), body 2 its slave
+    side (``surface2``). Keys: ``interface`` (index into ``problem.contact.interfaces``),
+    ``position`` (the master point, X_a for node-to-node), ``position_b`` (the slave node),
+    ``frame`` (R), ``state`` (0/1/2), ``force_local_body1`` (−λ: normal, tangential 1,
+    tangential 2 on body 1, N), ``force_on_body1`` (global frame, N), ``u_body1`` (the master
+    point's displacement u_s − Rᵀw: node a's, or the obstacle's), ``u_body2`` (m), ``gap`` (m),
     ``slip`` (tangential slip of the last increment, m), ``z`` (the law's unknowns).
     """
-    pairs = problem.pairs
-    lam = problem.contact_force()
+    model = problem.contact
+    lam = model.force()
     w = problem.relative_displacement()
+    X_master = np.concatenate([i.pairs.X_master for i in model.interfaces]).reshape(-1, 3)
+    X_slave = np.concatenate([i.pairs.X_slave for i in model.interfaces]).reshape(-1, 3)
+    slave_blocks = np.concatenate([i.pairs.slave_blocks for i in model.interfaces]).astype(float)
     local = np.hstack([
-        pairs.X_a, pairs.X_b, pairs.R.reshape(-1, 9), problem.pair_states[:, None].astype(float),
-        -lam, -np.einsum("nji,nj->ni", pairs.R, lam), (pairs.g0 + w[:, 0])[:, None],
-        problem.slip_increment, problem.z,
-        pairs.dofs_a[:, None].astype(float), pairs.dofs_b[:, None].astype(float),
+        X_master, X_slave, model.R.reshape(-1, 9), model.state_n[:, None].astype(float),
+        -lam, -np.einsum("nji,nj->ni", model.R, lam), (model.g0 + w[:, 0])[:, None],
+        model.slip_n, model.z, slave_blocks[:, None], model.interface_index[:, None].astype(float),
+        np.einsum("nji,nj->ni", model.R, w),
     ])
-    g = pairs.gather(local)
+    g = model.gather(local)
     table = {
         "position": g[:, 0:3], "position_b": g[:, 3:6], "frame": g[:, 6:15].reshape(-1, 3, 3),
         "state": g[:, 15].astype(np.int8), "force_local_body1": g[:, 16:19],
         "force_on_body1": g[:, 19:22], "gap": g[:, 22], "slip": g[:, 23:25], "z": g[:, 25:28],
+        "interface": g[:, 29].astype(np.int32),
     }
-    blocks_a = g[:, 28].astype(np.int64)
-    blocks_b = g[:, 29].astype(np.int64)
-    table["u_body1"] = values_at_blocks(problem, blocks_a)
-    table["u_body2"] = values_at_blocks(problem, blocks_b)
+    table["u_body2"] = values_at_blocks(problem, g[:, 28].astype(np.int64))
+    table["u_body1"] = table["u_body2"] - g[:, 30:33]  # w = R (u_s − u_master)
     table["state_name"] = np.array([STATE_NAMES[s] for s in table["state"]])
     return table
 
@@ -138,22 +143,26 @@ def applied_load(problem) -> np.ndarray:
 
 
 def equilibrium_check(problem) -> dict:
-    """Global equilibrium: applied load + reactions = 0 (contact forces are internal).
+    """Global equilibrium: applied load + support reactions + obstacle forces = 0.
 
-    Returns the applied load, the reactions per tag, their sum, the relative global imbalance
-    ‖F_applied + Σ reactions‖ / ‖F_applied‖ (or / Σ‖reactions‖ when nothing is applied), and
-    the relative free-dof residual ‖R_free‖ / ‖F_ext(ℓ)‖.
+    Contact forces between deformable bodies are internal; a rigid obstacle is outside the
+    model and its force on the body counts like a reaction. Returns the applied load, the
+    reactions per tag, the obstacle forces per interface, their sum, the relative global
+    imbalance ‖F_applied + Σ reactions‖ / ‖F_applied‖ (or / Σ‖reactions‖ when nothing is
+    applied), and the relative free-dof residual ‖R_free‖ / ‖F_ext(ℓ)‖.
     """
     R = problem.residual()
     react = reactions(problem, R)
+    obstacles = problem.contact.obstacle_reactions() if problem.has_contact else {}
     applied = applied_load(problem)
-    total_reaction = sum(react.values(), np.zeros(3))
+    total_reaction = sum(react.values(), np.zeros(3)) + sum(obstacles.values(), np.zeros(3))
     imbalance = applied + total_reaction
-    scale = max(np.linalg.norm(applied), sum(np.linalg.norm(r) for r in react.values()), 1e-300)
+    scale = max(np.linalg.norm(applied), sum(np.linalg.norm(r) for r in react.values()),
+                sum(np.linalg.norm(r) for r in obstacles.values()), 1e-300)
     R_free = problem.free_residual(R)
     F_scale = max(problem.external_force().norm(), 1e-300)
     return {
-        "applied_load": applied, "reactions": react, "reaction_sum": total_reaction,
+        "applied_load": applied, "reactions": react, "obstacle_forces": obstacles, "reaction_sum": total_reaction,
         "global_imbalance": float(np.linalg.norm(imbalance) / scale),
         "residual_norm": float(R_free.norm() / F_scale),
     }

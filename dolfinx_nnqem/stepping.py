@@ -52,7 +52,7 @@ def solve_load_steps(
     problem
         The :class:`~dolfinx_nnqem.problem.ContactProblem`.
     solver
-        Any solver with ``solve_increment(load_factor) -> SolveReport``.
+        A :class:`~dolfinx_nnqem.solver.Solver`.
     increments
         Number of equal increments N (the seed: 15).
     max_cutbacks
@@ -96,7 +96,7 @@ def solve_load_steps(
                            f"({report.message}); cutback {cutbacks}, new step {step:.6g}")
             continue
         t_commit = time.perf_counter()
-        problem.commit()
+        problem.commit(report.gauss_point_values)
         ell = target
         result = IncrementResult(
             index=len(results) + 1, load_factor=target, report=report,
@@ -150,7 +150,7 @@ def solve_load_path(problem, solver, load_factors: Sequence[float], *,
         if not report.converged:
             problem.restore()
             raise ConvergenceError(_failure_message(solver, float(target), report, 0))
-        problem.commit()
+        problem.commit(report.gauss_point_values)
         result = IncrementResult(index=len(results) + 1, load_factor=float(target), report=report,
                                  plastic_points=problem.state.count_plastic_points(),
                                  wall_time_s=time.perf_counter() - t0, cutbacks=0)

@@ -19,8 +19,9 @@ from mpi4py import MPI
 from dolfinx_nnqem.material import VonMises
 from dolfinx_nnqem.meshing import TwoBeamsTags as T
 from dolfinx_nnqem.meshing import build_two_beams
-from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Gravity, SolverOptions, Traction
-from dolfinx_nnqem.solvers import make_solver
+from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Gravity, Traction
+from dolfinx_nnqem.solver import SolverOptions
+from dolfinx_nnqem.solver import make_solver
 
 MATERIAL = VonMises(E=2.0e10, nu=0.17, sigma_y0=5.0e5, H=2.0e10, density=2400.0)
 MU_F = 0.5
@@ -61,9 +62,10 @@ def two_beams_problem(comm: MPI.Comm = MPI.COMM_WORLD, *, law: str = "alart-curn
 def run_two_beams(method: str = "monolithic", increments: int = 15, out: str | Path = "results/two_beams",
                   *, law: str | None = None, refine: int = 1, options: SolverOptions | None = None,
                   fields: bool = True, comm: MPI.Comm = MPI.COMM_WORLD, progress=None,
-                  solver_kwargs: dict | None = None) -> dict:
+                  method_options: dict | None = None) -> dict:
     """Solve the benchmark with ``method`` and write ``out``/summary.json (+ fields, pairs).
 
+    ``method_options``: e.g. ``{"nneqm2": NNEQM2Options(...)}`` (see :func:`make_solver`).
     Returns the summary dictionary (the content of summary.json).
     """
     from dolfinx_nnqem.output import ResultsWriter
@@ -72,8 +74,8 @@ def run_two_beams(method: str = "monolithic", increments: int = 15, out: str | P
     law = law or DEFAULT_LAW.get(method, "alart-curnier")
     t0 = time.perf_counter()
     problem = two_beams_problem(comm, law=law, refine=refine)
-    solver = make_solver(method, problem, options, **(solver_kwargs or {}))
-    extra = {"law": law, "refine": refine, "r": problem.r,
+    solver = make_solver(method, problem, options, **(method_options or {}))
+    extra = {"law": law, "refine": refine, "r": problem.contact.interfaces[0].r,
              "model": "two overlapping cantilevers (benchmark-two-beams.md)"}
     writer = ResultsWriter(problem, method, out, increments, probes=FREE_END_CORNERS, extra=extra,
                            fields=fields)

@@ -9,7 +9,8 @@ from dolfinx_nnqem.meshing import StackedBlocksTags as T
 from dolfinx_nnqem.meshing import build_stacked_blocks
 from dolfinx_nnqem.monolithic import MonolithicSolver
 from dolfinx_nnqem.output import von_mises  # noqa: F401  (keeps the import surface tested)
-from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Pressure, SolverOptions
+from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Pressure
+from dolfinx_nnqem.solver import SolverOptions
 from dolfinx_nnqem.results import pair_table
 from dolfinx_nnqem.stepping import solve_load_steps
 

@@ -219,7 +219,7 @@ def test_fclib_solutions_are_pair_law_solutions(tmp_path):
 # -- a real NNEQM1 inner problem ------------------------------------------------------------------
 def _two_beams_nneqm1(law):
     from dolfinx_nnqem.stepping import solve_load_steps
-    from dolfinx_nnqem.solvers import make_solver
+    from dolfinx_nnqem.solver import make_solver
     from dolfinx_nnqem.two_beams import two_beams_problem
 
     p = two_beams_problem(law=law)
@@ -231,17 +231,17 @@ def _two_beams_nneqm1(law):
 
 
 def _check_two_beams(p, s, path):
-    c = s.last_condensed
+    c = s.last_condensed.as_dict()
     d = fclib.read_fclib_local(path)
     r, u = d["solution"]["r"], d["solution"]["u"]
     # the converged contact forces are the inner solution of the last condensed problem
-    lam, _ = p.law.force(p.pairs.gather(p.z))
+    lam = p.contact.gather(p.contact.force())
     assert np.array_equal(r, lam.reshape(-1))
     err_W = np.abs(d["W"] - c["C"]).max()
     q_ref = _q_by_hand(c)
     err_q = np.abs(d["q"] - q_ref).max() / np.abs(q_ref).max()
     # FCLIB's u is the physical (gap, incremental slip) of the converged displacement field
-    w = p.pairs.gather(p.w_n)  # committed at the end of the increment
+    w = p.contact.gather(p.contact.w_n)  # committed at the end of the increment
     phys = np.column_stack((c["g0"] + w[:, 0], w[:, 1:] - c["w_prev"][:, 1:])).reshape(-1)
     err_u = np.abs(u - phys).max() / np.abs(phys).max()
     err = fclib.complementarity_error(d["W"], d["q"], d["mu"], r)
@@ -251,7 +251,7 @@ def _check_two_beams(p, s, path):
     wrong = fclib.fclib_local_from_condensed(c["C"], c["w_free"], c["mu_f"], w_m=c["w_m"], lam_m=c["lam_m"],
                                              g0=c["g0"], w_prev=-np.asarray(c["w_prev"]))
     err_wrong = fclib.complementarity_error(wrong["W"], wrong["q"], wrong["mu"], r)
-    print(f"\n  law {p.law.name}: {d['number_of_contacts']} contacts {viol['contacts']}; W vs C {err_W:.1e}; "
+    print(f"\n  law {p.contact.interfaces[0].law.name}: {d['number_of_contacts']} contacts {viol['contacts']}; W vs C {err_W:.1e}; "
           f"q {err_q:.1e}; u vs physical (gap, slip) {err_u:.1e}; FCLIB complementarity error "
           f"{err:.1e} (fclib_merit_local {merit:.1e}; at NNEQM1's start λ_m {start:.1e}); "
           f"control with +w_prev in q {err_wrong:.1e}")

@@ -44,7 +44,8 @@ from dolfinx_nnqem.material import VonMises
 from dolfinx_nnqem.meshing import StackedBlocksTags as T
 from dolfinx_nnqem.meshing import build_graded_contact_blocks
 from dolfinx_nnqem.monolithic import MonolithicSolver
-from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, SolverOptions
+from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet
+from dolfinx_nnqem.solver import SolverOptions
 from dolfinx_nnqem.results import pair_table, reactions, values_at_blocks
 from dolfinx_nnqem.stepping import solve_load_steps
 
@@ -103,7 +104,8 @@ class PairLoads:
         p = self.p0 * ufl.sqrt(ufl.max_value(1.0 - (x[0] ** 2 + x[2] ** 2) / self.a ** 2, 0.0))
         self.area_form = fem.form(v[1] * ds(T.CONTACT1))
         self.hertz_form = fem.form(p * v[1] * ds(T.CONTACT1))
-        self.blocks = problem.pairs.gather(problem.pairs.dofs_a.astype(np.int64))
+        pairs = problem.contact.interfaces[0].pairs  # node-to-node: the body-1 nodes a_i
+        self.blocks = pairs.gather(pairs.dofs_a.astype(np.int64))
         self.area = self._per_pair(self.area_form)
 
     def _per_pair(self, form) -> np.ndarray:

@@ -18,7 +18,7 @@ from mpi4py import MPI
 from dolfinx_nnqem import compat
 from dolfinx_nnqem.monolithic import MonolithicSolver
 from dolfinx_nnqem.pressed_blocks import pressed_blocks_problem
-from dolfinx_nnqem.problem import SolverOptions
+from dolfinx_nnqem.solver import MonolithicOptions
 from dolfinx_nnqem.results import pair_table
 from dolfinx_nnqem.stepping import solve_load_steps
 
@@ -27,7 +27,7 @@ SCRIPTS = Path(__file__).parent / "mpi_scripts"
 
 def _solve(linear_solver: str):
     problem = pressed_blocks_problem(2, MPI.COMM_SELF)
-    solver = MonolithicSolver(problem, SolverOptions(linear_solver=linear_solver))
+    solver = MonolithicSolver(problem, monolithic=MonolithicOptions(linear_solver=linear_solver))
     results = solve_load_steps(problem, solver, 6)
     return problem, solver, results
 
@@ -98,9 +98,8 @@ def test_iterative_solver_on_two_ranks_matches_serial(direct, tmp_path):
 
 @pytest.mark.parametrize("augmentation", [0.0, -1.0, float("nan"), float("inf")])
 def test_unphysical_augmentation_is_refused(augmentation):
-    problem = pressed_blocks_problem(1, MPI.COMM_SELF)
     with pytest.raises(ValueError, match="augmentation"):
-        MonolithicSolver(problem, SolverOptions(linear_solver="iterative"), augmentation=augmentation)
+        MonolithicOptions(linear_solver="iterative", augmentation=augmentation)
 
 
 @pytest.mark.parametrize("level", [0, 1.5, True])

@@ -22,6 +22,7 @@ from dolfinx_nnqem import two_beams as tb
 from dolfinx_nnqem.material import VonMises
 from dolfinx_nnqem.monolithic import MonolithicSolver
 from dolfinx_nnqem.nneqm2 import NNEQM2Solver
+from dolfinx_nnqem.solver import NNEQM2Options
 from dolfinx_nnqem.problem import ContactProblem, Dirichlet
 from dolfinx_nnqem.stepping import solve_load_steps
 
@@ -121,7 +122,8 @@ def test_nneqm2_frozen_vs_updated_flow_directions():
             variants += [("updated N (trial)", {"update_flow_directions": True}),
                          ("updated N (stress)", {"update_flow_directions": True, "flow_update": "stress"})]
         for name, kwargs in variants:
-            _, solver, s, u, p = _tension_then_shear(lambda pr, kw=kwargs: NNEQM2Solver(pr, **kw), n)
+            _, solver, s, u, p = _tension_then_shear(lambda pr, kw=kwargs: NNEQM2Solver(pr, nneqm2=NNEQM2Options(**kw)),
+                                                     n)
             d = (np.abs(s - s_ref).max() / sy, np.abs(u - u_ref).max() / np.abs(u_ref).max(),
                  np.abs(p - p_ref).max() / np.abs(p_ref).max())
             info = solver.increment_info
@@ -167,7 +169,7 @@ def _differences(s, ref):
             np.abs(c - c0).max() / np.abs(c0).max(), states == states0)
 
 
-def _run(method, increments, out, monkeypatch=None, **solver_kwargs):
+def _run(method, increments, out, monkeypatch=None, **nneqm2_options):
     captured = {}
     if monkeypatch is not None:
         make = tb.make_solver
@@ -177,7 +179,8 @@ def _run(method, increments, out, monkeypatch=None, **solver_kwargs):
             return captured["solver"]
 
         monkeypatch.setattr(tb, "make_solver", capture)
-    summary = tb.run_two_beams(method, increments, out, fields=False, solver_kwargs=solver_kwargs)
+    method_options = {"nneqm2": NNEQM2Options(**nneqm2_options)} if nneqm2_options else None
+    summary = tb.run_two_beams(method, increments, out, fields=False, method_options=method_options)
     if monkeypatch is not None:
         monkeypatch.undo()
     return summary, captured.get("solver")

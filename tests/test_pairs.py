@@ -134,10 +134,13 @@ def test_B_layout_lambda_vector_and_gather(two_beams):
 
 
 def test_scaled_B(two_beams):
+    """blockdiag(D_i) B from B's pair rows (PairRows.scaled), in B's sparsity."""
+    from dolfinx_nnqem.contact.pairset import rows_matrix
+
     V, _, _, pairs = two_beams
     rng = np.random.default_rng(3)
     D = rng.normal(size=(pairs.num_local, 3, 3))
-    A = pairs.scaled_B(D)
+    A = rows_matrix(pairs.comm, pairs.rows, pairs.num_global, V.dofmap.index_map, pairs.rows.scaled(D))
     u = interpolated(V, lambda x: np.vstack([x[0] * x[1], x[2] ** 2, x[0] - x[1]]))
     y = A.createVecLeft()
     A.mult(u.x.petsc_vec, y)
@@ -150,7 +153,7 @@ def test_scaled_B(two_beams):
     np.testing.assert_allclose(y.getArray().reshape(-1, 3), expected, atol=1e-13)
     assert same_pattern
     with pytest.raises(ValueError, match="shape"):
-        pairs.scaled_B(D[:, :2])
+        pairs.rows.scaled(D[:, :2])
 
 
 def test_local_frames():

@@ -14,7 +14,8 @@ from dolfinx_nnqem.material import VonMises
 from dolfinx_nnqem.meshing import ThickCylinderTags as T
 from dolfinx_nnqem.meshing import build_thick_cylinder
 from dolfinx_nnqem.monolithic import MonolithicSolver
-from dolfinx_nnqem.problem import ContactProblem, Dirichlet, Pressure, SolverOptions
+from dolfinx_nnqem.problem import ContactProblem, Dirichlet, Pressure
+from dolfinx_nnqem.solver import SolverOptions
 from dolfinx_nnqem.results import node_blocks_at_points, values_at_blocks
 from dolfinx_nnqem.stepping import solve_load_steps
 

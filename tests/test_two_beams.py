@@ -108,13 +108,13 @@ def test_v9_nneqm1_on_two_ranks_matches_serial(tmp_path):
 def test_iterative_linear_solver_gives_the_direct_answer(serial_monolithic):
     """linear_solver="iterative" (FGMRES, Schur fieldsplit, GAMG on K): the same Newton iterates."""
     from dolfinx_nnqem.monolithic import MonolithicSolver
-    from dolfinx_nnqem.problem import SolverOptions
+    from dolfinx_nnqem.solver import MonolithicOptions
     from dolfinx_nnqem.results import pair_table
     from dolfinx_nnqem.stepping import solve_load_steps
     from dolfinx_nnqem.two_beams import two_beams_problem
 
     problem = two_beams_problem()
-    results = solve_load_steps(problem, MonolithicSolver(problem, SolverOptions(linear_solver="iterative")), 15)
+    results = solve_load_steps(problem, MonolithicSolver(problem, monolithic=MonolithicOptions(linear_solver="iterative")), 15)
     f = pair_table(problem)["force_on_body1"]
     f0, _ = _pair_arrays(serial_monolithic)
     diff = np.abs(f - f0).max() / np.abs(f0).max()

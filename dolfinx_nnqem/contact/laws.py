@@ -361,9 +361,12 @@ def _check_z(name: str, z: npt.ArrayLike) -> np.ndarray:
 
 
 class ContactLaw(Protocol):
-    """What the solvers need from a pair law."""
+    """What callers may use of a pair law (the contact model; solvers never look inside)."""
 
     name: str
+    regular: ContactLaw | None
+    """A law with exactly the same solutions and a regular Jacobian where this one is singular,
+    for warm starts (the Cartesian law for the polar one); None if this law is regular."""
 
     def evaluate(
         self,
@@ -377,7 +380,13 @@ class ContactLaw(Protocol):
 
     def force(self, z: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]: ...
 
-    def unknowns(self, lam: npt.ArrayLike) -> np.ndarray: ...
+    def unknowns(self, lam: npt.ArrayLike, slip: npt.ArrayLike | None = None,
+                 no_force: float = 0.0) -> np.ndarray: ...
+
+    def unknown_scale(self, force_scale: float) -> np.ndarray: ...
+
+    def pin(self, evaluation: LawEvaluation, z: npt.ArrayLike, constrained: npt.ArrayLike,
+            force_unit: float) -> LawEvaluation: ...
 
 
 class AlartCurnierLaw:
@@ -387,6 +396,7 @@ class AlartCurnierLaw:
     """
 
     name: str = "alart-curnier"
+    regular = None
 
     def evaluate(
         self,
@@ -417,9 +427,29 @@ class AlartCurnierLaw:
         z = _check_z("z", z)
         return z.copy(), np.broadcast_to(np.eye(3), (z.shape[0], 3, 3)).copy()
 
-    def unknowns(self, lam: npt.ArrayLike) -> np.ndarray:
-        """Unknowns z = lambda."""
+    def unknowns(self, lam: npt.ArrayLike, slip: npt.ArrayLike | None = None,
+                 no_force: float = 0.0) -> np.ndarray:
+        """Unknowns z = lambda (``slip`` and ``no_force`` are not needed)."""
         return _check_z("lam", lam).copy()
+
+    def unknown_scale(self, force_scale: float) -> np.ndarray:
+        """Scale of (p_n, q1, q2): all forces, so all ``force_scale``."""
+        return np.full(3, float(force_scale))
+
+    def pin(self, evaluation: LawEvaluation, z: npt.ArrayLike, constrained: npt.ArrayLike,
+            force_unit: float) -> LawEvaluation:
+        """Rows of directions the supports fix become λ_k = 0 (see :func:`_pin_rows`)."""
+        constrained = np.asarray(constrained, dtype=bool)
+        if not constrained.any():
+            return evaluation
+        z = np.asarray(z, dtype=np.float64)
+        values = np.zeros_like(evaluation.H)
+        derivatives = np.zeros_like(evaluation.dH_dz)
+        values[:, 0] = z[:, 0]
+        derivatives[:, 0, 0] = 1.0
+        values[:, 1:] = z[:, 1:]
+        derivatives[:, 1, 1] = derivatives[:, 2, 2] = 1.0
+        return _pin_rows(evaluation, constrained, values, derivatives)
 
     def __repr__(self) -> str:
         return "AlartCurnierLaw()"
@@ -434,6 +464,11 @@ class PolarLaw:
     """
 
     name: str = "polar"
+
+    @property
+    def regular(self) -> ContactLaw:
+        """The Cartesian law: the same solutions, regular where p_r = 0."""
+        return AlartCurnierLaw()
 
     def evaluate(
         self,
@@ -464,14 +499,58 @@ class PolarLaw:
         dlam_dz[:, 2, 2] = -p_r * c
         return lam, dlam_dz
 
-    def unknowns(self, lam: npt.ArrayLike) -> np.ndarray:
-        """(p_n, p_r, theta) with p_r = |q| >= 0, d(theta) = -q/|q|, theta = 0 where q = 0."""
+    def unknowns(self, lam: npt.ArrayLike, slip: npt.ArrayLike | None = None,
+                 no_force: float = 0.0) -> np.ndarray:
+        """(p_n, p_r, theta) with p_r = |q| >= 0 and d(theta) = -q/|q|.
+
+        Where |q| <= ``no_force`` the force gives no direction: theta is the direction of
+        ``slip`` (n, 2) if given (H3 needs slip parallel to d), else 0.
+        """
         lam = _check_z("lam", lam)
         q1, q2 = lam[:, 1], lam[:, 2]
         p_r = np.hypot(q1, q2)
         # q = -p_r d  =>  d = -q/|q|; atan2 of -0.0 would give +-pi, hence the explicit 0.
         theta = np.where(p_r > 0.0, np.arctan2(-q2, -q1), 0.0)
-        return np.column_stack((lam[:, 0], p_r, theta))
+        z = np.column_stack((lam[:, 0], p_r, theta))
+        if slip is not None:
+            slip = np.asarray(slip, dtype=np.float64)
+            undirected = p_r <= no_force
+            z[undirected, 2] = np.arctan2(slip[undirected, 1], slip[undirected, 0])
+        return z
+
+    def unknown_scale(self, force_scale: float) -> np.ndarray:
+        """Scale of (p_n, p_r, theta): forces scale with ``force_scale``, the angle does not."""
+        return np.array([float(force_scale), float(force_scale), 1.0])
+
+    def pin(self, evaluation: LawEvaluation, z: npt.ArrayLike, constrained: npt.ArrayLike,
+            force_unit: float) -> LawEvaluation:
+        """Rows of directions the supports fix (see :func:`_pin_rows`).
+
+        When both tangential directions are constrained, H2 = p_r and H3 = force_unit · θ; when
+        only t2 (t1) is, the slip-direction row becomes H3 = force_unit · sin θ (cos θ), so the
+        friction force acts along t1 (t2) only and H2 still enforces Coulomb's law along it.
+        """
+        constrained = np.asarray(constrained, dtype=bool)
+        if not constrained.any():
+            return evaluation
+        z = np.asarray(z, dtype=np.float64)
+        rows = np.zeros_like(constrained)
+        values = np.zeros_like(evaluation.H)
+        derivatives = np.zeros_like(evaluation.dH_dz)
+        rows[:, 0] = constrained[:, 0]
+        values[:, 0] = z[:, 0]
+        derivatives[:, 0, 0] = 1.0
+        theta = z[:, 2]
+        both = constrained[:, 1] & constrained[:, 2]
+        only_t2 = constrained[:, 2] & ~constrained[:, 1]
+        only_t1 = constrained[:, 1] & ~constrained[:, 2]
+        rows[:, 1] = both
+        rows[:, 2] = both | only_t1 | only_t2
+        values[:, 1] = z[:, 1]
+        derivatives[:, 1, 1] = 1.0
+        values[:, 2] = force_unit * np.where(both, theta, np.where(only_t2, np.sin(theta), np.cos(theta)))
+        derivatives[:, 2, 2] = force_unit * np.where(both, 1.0, np.where(only_t2, np.cos(theta), -np.sin(theta)))
+        return _pin_rows(evaluation, rows, values, derivatives)
 
     def __repr__(self) -> str:
         return "PolarLaw()"
@@ -544,53 +623,24 @@ def default_r(E: float, h: float) -> float:
     return E * h
 
 
-def pin_constrained_directions(law: ContactLaw, evaluation: LawEvaluation, z: npt.ArrayLike,
-                               constrained: npt.ArrayLike, force_scale: float) -> LawEvaluation:
-    """Replace the rows of local directions whose relative motion the supports fix.
+def _pin_rows(evaluation: LawEvaluation, rows: np.ndarray, values: np.ndarray,
+              derivatives: np.ndarray) -> LawEvaluation:
+    """Replace the rows of directions whose relative motion the supports fix.
 
-    When both nodes of a pair are held by Dirichlet conditions in every global component a
+    When both sides of a pair are held by Dirichlet conditions in every global component a
     local direction k involves, w_k cannot change and λ_k only feeds the support reactions:
-    it is statically indeterminate and its column in −Bᵀ vanishes (a singular Jacobian).
-    Such components are set to zero (the minimum-norm choice): row k of H becomes λ_k(z).
-
-    For the polar law, when both tangential directions are constrained, H2 = p_r and
-    H3 = force_scale · θ; when only t2 (t1) is, the slip-direction row becomes
-    H3 = force_scale · sin θ (cos θ), so the friction force acts along t1 (t2) only and H2
-    still enforces Coulomb's law along it.
+    it is statically indeterminate and its column in −Bᵀ vanishes (a singular Jacobian). Such
+    components are set to zero (the minimum-norm choice): row k of H becomes a function of z
+    alone (``values``, with the z-derivatives ``derivatives``) that vanishes with λ_k.
 
     Parameters
     ----------
-    constrained
-        (nc, 3) bool: local directions (normal, t1, t2) fixed by the supports.
-    force_scale
-        Force unit used to scale the angle row of the polar law.
+    rows
+        (nc, 3) bool: the rows to replace.
+    values, derivatives
+        (nc, 3) and (nc, 3, 3): the new rows and their derivatives with respect to z.
     """
-    constrained = np.asarray(constrained, dtype=bool)
-    if not constrained.any():
-        return evaluation
     H, dH_dw, dH_dz = evaluation.H.copy(), evaluation.dH_dw.copy(), evaluation.dH_dz.copy()
-    z = np.asarray(z, dtype=np.float64)
-    rows = np.zeros_like(constrained)
-    values = np.zeros_like(H)
-    derivatives = np.zeros_like(dH_dz)
-    rows[:, 0] = constrained[:, 0]
-    values[:, 0] = z[:, 0]
-    derivatives[:, 0, 0] = 1.0
-    if law.name == "polar":
-        theta = z[:, 2]
-        both = constrained[:, 1] & constrained[:, 2]
-        only_t2 = constrained[:, 2] & ~constrained[:, 1]
-        only_t1 = constrained[:, 1] & ~constrained[:, 2]
-        rows[:, 1] = both
-        rows[:, 2] = both | only_t1 | only_t2
-        values[:, 1] = z[:, 1]
-        derivatives[:, 1, 1] = 1.0
-        values[:, 2] = force_scale * np.where(both, theta, np.where(only_t2, np.sin(theta), np.cos(theta)))
-        derivatives[:, 2, 2] = force_scale * np.where(both, 1.0, np.where(only_t2, np.cos(theta), -np.sin(theta)))
-    else:
-        rows[:, 1:] = constrained[:, 1:]
-        values[:, 1:] = z[:, 1:]
-        derivatives[:, 1, 1] = derivatives[:, 2, 2] = 1.0
     H[rows] = values[rows]
     dH_dw[rows] = 0.0
     dH_dz[rows] = derivatives[rows]

@@ -17,13 +17,13 @@ from petsc4py import PETSc
 
 from dolfinx_nnqem.monolithic import MonolithicSolver
 from dolfinx_nnqem.pressed_blocks import pressed_blocks_problem
-from dolfinx_nnqem.problem import SolverOptions
+from dolfinx_nnqem.solver import MonolithicOptions
 from dolfinx_nnqem.results import pair_table
 from dolfinx_nnqem.stepping import solve_load_steps
 
 linear_solver, out = sys.argv[1], sys.argv[2]
 problem = pressed_blocks_problem(2, MPI.COMM_WORLD)
-results = solve_load_steps(problem, MonolithicSolver(problem, SolverOptions(linear_solver=linear_solver)), 6)
+results = solve_load_steps(problem, MonolithicSolver(problem, monolithic=MonolithicOptions(linear_solver=linear_solver)), 6)
 table = pair_table(problem)
 if MPI.COMM_WORLD.rank == 0:
     np.savez(out, position=table["position"], force_on_body1=table["force_on_body1"],

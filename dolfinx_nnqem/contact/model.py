@@ -1,0 +1,475 @@
+r"""The contact model: every interface of a problem as one set of pairs with its unknowns.
+
+This is the contract between the problem and the solvers (``formulation.md`` §2–§3). The model
+owns the interfaces (each a :class:`~dolfinx_nnqem.contact.pairset.PairSet` with its law, r and
+μ_f), the pair unknowns z, the converged relative displacement w_n and the directions the
+supports fix. Solvers use only what it exposes:
+
+* w = B u + m(ℓ) (:meth:`ContactModel.relative_displacement`), B's action and Bᵀλ;
+* H(w, z) with its generalized Jacobian blocks ∂H/∂w, ∂H/∂z (:meth:`ContactModel.evaluate`),
+  the force λ(z) and ∂λ/∂z, the scale of the unknowns;
+* blockdiag(D) B in B's sparsity, refilled in place (:meth:`ContactModel.scaled_B`);
+* the same laws on all pairs gathered on every rank, for the dense methods
+  (:meth:`ContactModel.gathered_laws`).
+
+Solvers never ask which law a pair follows: :class:`PairLaws` applies each interface's law to
+its pairs, and everything law-specific is a method of the law.
+
+All interfaces' pairs are concatenated: this rank's pairs are those of interface 0, then of
+interface 1, ...; the global pair order is by rank, then in that local order (for a single
+interface, the pair set's own global order).
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+from dolfinx_nnqem import compat  # noqa: F401, I001  (first: loads MPI/PETSc for the PyPI wheel)
+
+import numpy as np
+import numpy.typing as npt
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from dolfinx_nnqem.contact.laws import ContactLaw, LawEvaluation, default_r, get_law
+from dolfinx_nnqem.contact.obstacles import RigidObstacle, obstacle_pairs
+from dolfinx_nnqem.contact.pairs import find_pairs
+from dolfinx_nnqem.contact.pairset import PairRows, PairSet, rows_matrix
+from dolfinx_nnqem.contact.surfaces import ContactPairError
+
+__all__ = ["Contact", "ContactModel", "Interface", "PairLaws"]
+
+PREDICTED_PRESSURE = 1e-12
+"""Starting active set: touching pairs start with p_n = this × r h (see :meth:`ContactModel.predict`)."""
+
+
+def _real(name: str, value, *, positive: bool = False, allow_none: bool = False) -> float | None:
+    """``value`` as a finite float (numpy scalars accepted); ``name`` in the error."""
+    if value is None and allow_none:
+        return None
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(float(value)):
+        raise ValueError(f"Contact: {name} = {value!r}; expected a finite number")
+    value = float(value)
+    if positive and value <= 0.0:
+        raise ValueError(f"Contact: {name} = {value!r}; expected a value > 0")
+    if not positive and value < 0.0:
+        raise ValueError(f"Contact: {name} = {value!r}; expected a value >= 0")
+    return value
+
+
+@dataclass(frozen=True)
+class Contact:
+    """One frictional contact interface.
+
+    Parameters
+    ----------
+    surface1
+        The master side: the facet tag of body 1's contact surface, or a rigid obstacle
+        (:class:`~dolfinx_nnqem.contact.obstacles.Plane`, ``Sphere``, ``Cylinder``). The pair
+        normal is its outward normal.
+    surface2
+        The slave side: the facet tag of body 2's contact surface. λ is the force on it; every
+        one of its nodes gets a pair.
+    mu_f
+        Coulomb friction coefficient (≥ 0).
+    law
+        ``"alart-curnier"`` (Cartesian, the robust default) or ``"polar"`` (the seed's form).
+    r
+        Scaling of the pair laws (force/length); default E·h (see :func:`contact.laws.default_r`).
+    tolerance
+        Distance below which nodes coincide (default 1e-8 × the mesh's bounding-box diagonal).
+    search_distance, initial_gap
+        Node-to-node only: see :func:`dolfinx_nnqem.contact.pairs.find_pairs`.
+    name
+        How logs and pair tables name the interface (default ``"21-22"`` or ``"sphere-22"``).
+    """
+
+    surface1: int | RigidObstacle
+    surface2: int
+    mu_f: float
+    law: str = "alart-curnier"
+    r: float | None = None
+    tolerance: float | None = None
+    search_distance: float | None = None
+    initial_gap: Callable | None = None
+    name: str | None = None
+
+    def __post_init__(self):
+        _real("mu_f", self.mu_f)
+        _real("r", self.r, positive=True, allow_none=True)
+        _real("tolerance", self.tolerance, positive=True, allow_none=True)
+        _real("search_distance", self.search_distance, positive=True, allow_none=True)
+        get_law(self.law)  # an unknown name raises here, before any mesh work
+        if isinstance(self.surface2, bool) or not isinstance(self.surface2, numbers.Integral):
+            raise ValueError(f"Contact: surface2 = {self.surface2!r}; expected a facet tag (an integer)")
+        if self.obstacle is None:
+            if isinstance(self.surface1, bool) or not isinstance(self.surface1, numbers.Integral):
+                raise ValueError(f"Contact: surface1 = {self.surface1!r}; expected a facet tag or a rigid "
+                                 "obstacle (Plane, Sphere, Cylinder)")
+            if self.surface1 == self.surface2:
+                raise ValueError(f"Contact: surface1 and surface2 are both tag {self.surface1}")
+        elif self.search_distance is not None or self.initial_gap is not None:
+            raise ValueError("Contact: search_distance and initial_gap apply to node-to-node contact, not to a "
+                             "rigid obstacle (its gap is the exact distance)")
+
+    @property
+    def obstacle(self) -> RigidObstacle | None:
+        """The rigid obstacle of the master side, or None for two deformable surfaces."""
+        return self.surface1 if isinstance(self.surface1, RigidObstacle) else None
+
+    @property
+    def label(self) -> str:
+        if self.name is not None:
+            return self.name
+        master = type(self.obstacle).__name__.lower() if self.obstacle is not None else str(self.surface1)
+        return f"{master}-{self.surface2}"
+
+    def pair_set(self, V, facet_tags) -> PairSet:
+        """The discretised interface (collective)."""
+        if self.obstacle is not None:
+            return obstacle_pairs(V, facet_tags, int(self.surface2), self.obstacle, tolerance=self.tolerance)
+        return find_pairs(V, facet_tags, int(self.surface1), int(self.surface2), tolerance=self.tolerance,
+                          search_distance=self.search_distance, initial_gap=self.initial_gap)
+
+
+@dataclass(frozen=True, eq=False)
+class LawGroup:
+    """The pairs (``index``) that follow ``law`` with the scaling ``r``."""
+
+    law: ContactLaw
+    r: float
+    force_unit: float  #: r h: the force unit of rows that are not forces (the polar angle row)
+    index: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class PairLaws:
+    """Which law, r and μ_f each pair of a set follows (this rank's pairs, or all pairs gathered).
+
+    Attributes
+    ----------
+    groups
+        One :class:`LawGroup` per interface.
+    g0, mu_f
+        (n,) initial gaps and friction coefficients.
+    constrained
+        (n, 3) bool: local directions whose relative motion the supports fix.
+    """
+
+    groups: tuple[LawGroup, ...]
+    g0: np.ndarray
+    mu_f: np.ndarray
+    constrained: np.ndarray
+
+    @property
+    def size(self) -> int:
+        return len(self.g0)
+
+    def evaluate(self, w: np.ndarray, w_prev: np.ndarray, z: np.ndarray) -> LawEvaluation:
+        """H, ∂H/∂w, ∂H/∂z and the states of every pair at (w, z), pinned directions applied."""
+        n = self.size
+        if len(self.groups) == 1:  # one interface: no copies
+            return self._evaluate_group(self.groups[0], w, w_prev, z, slice(None))
+        H, dH_dw, dH_dz = np.zeros((n, 3)), np.zeros((n, 3, 3)), np.zeros((n, 3, 3))
+        state = np.zeros(n, dtype=np.int8)
+        for group in self.groups:
+            ev = self._evaluate_group(group, w, w_prev, z, group.index)
+            H[group.index], dH_dw[group.index], dH_dz[group.index] = ev.H, ev.dH_dw, ev.dH_dz
+            state[group.index] = ev.state
+        return LawEvaluation(H, dH_dw, dH_dz, state)
+
+    def _evaluate_group(self, group: LawGroup, w, w_prev, z, index) -> LawEvaluation:
+        ev = group.law.evaluate(w[index], w_prev[index], z[index], self.g0[index], self.mu_f[index], group.r)
+        return group.law.pin(ev, z[index], self.constrained[index], group.force_unit)
+
+    def force(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """λ(z) (n, 3) and ∂λ/∂z (n, 3, 3)."""
+        if len(self.groups) == 1:
+            return self.groups[0].law.force(z)
+        lam, dlam_dz = np.zeros((self.size, 3)), np.zeros((self.size, 3, 3))
+        for group in self.groups:
+            lam[group.index], dlam_dz[group.index] = group.law.force(z[group.index])
+        return lam, dlam_dz
+
+    def unknowns(self, lam: np.ndarray, slip: np.ndarray | None = None, no_force: float = 0.0) -> np.ndarray:
+        """z giving the forces ``lam`` (see each law's ``unknowns``)."""
+        z = np.zeros((self.size, 3))
+        for group in self.groups:
+            z[group.index] = group.law.unknowns(lam[group.index], None if slip is None else slip[group.index],
+                                                no_force)
+        return z
+
+    def unknown_scale(self, force_scale: float) -> np.ndarray:
+        """(n, 3): the scale of each unknown when forces are of order ``force_scale``."""
+        scale = np.zeros((self.size, 3))
+        for group in self.groups:
+            scale[group.index] = group.law.unknown_scale(force_scale)
+        return scale
+
+    def regularised(self) -> PairLaws | None:
+        """The same pairs with every law replaced by its regular companion; None if all are regular."""
+        if all(group.law.regular is None for group in self.groups):
+            return None
+        groups = tuple(LawGroup(group.law.regular or group.law, group.r, group.force_unit, group.index)
+                       for group in self.groups)
+        return PairLaws(groups, self.g0, self.mu_f, self.constrained)
+
+
+@dataclass(frozen=True, eq=False)
+class Interface:
+    """One interface of the model: its specification, pair set and law, and its local pairs."""
+
+    contact: Contact
+    pairs: PairSet
+    law: ContactLaw
+    r: float
+    local: slice  #: this interface's rows among the model's local pairs
+
+
+class ContactModel:
+    """All contact interfaces of a problem as one set of pairs (collective construction).
+
+    Parameters
+    ----------
+    V
+        The displacement space (vector P1).
+    facet_tags
+        Facet tags naming the contact surfaces.
+    contacts
+        The interfaces.
+    E, h
+        Young's modulus and element size for the default r = E h.
+    constrained_dofs
+        A vector laid out like V, 1 at constrained dofs and 0 elsewhere: pair directions whose
+        every involved dof is constrained are pinned (:meth:`ContactLaw.pin`).
+
+    Attributes
+    ----------
+    z, z_n
+        (num_local, 3) the pair unknowns (current iterate, last converged increment).
+    w_n
+        (num_local, 3) w at the last converged increment (slip is measured from it).
+    state_n, slip_n
+        Pair states and tangential slip of the last converged increment (for reports).
+    """
+
+    def __init__(self, V, facet_tags, contacts: Sequence[Contact], *, E: float, h: float,
+                 constrained_dofs: PETSc.Vec):
+        if not contacts:
+            raise ValueError("ContactModel: no contact interface given")
+        self.comm = V.mesh.comm
+        self.V = V
+        self.h = float(h)
+        labels = [c.label for c in contacts]
+        if len(set(labels)) != len(labels):
+            raise ValueError(f"contact interfaces need distinct names, got {labels}")
+        interfaces, start = [], 0
+        for contact in contacts:
+            pairs = contact.pair_set(V, facet_tags)
+            if pairs.num_global == 0:
+                raise ContactPairError(f"contact {contact.label}: no pairs found")
+            r = float(default_r(E, h)) if contact.r is None else float(contact.r)
+            interfaces.append(Interface(contact, pairs, get_law(contact.law), r,
+                                        slice(start, start + pairs.num_local)))
+            start += pairs.num_local
+        self.interfaces: list[Interface] = interfaces
+        self.num_local = start
+        counts = self.comm.allgather(self.num_local)
+        self.num_global = int(sum(counts))
+        self.offset = int(sum(counts[: self.comm.rank]))
+
+        self.rows = PairRows.concatenate([i.pairs.rows for i in interfaces])
+        self.B = rows_matrix(self.comm, self.rows, self.num_global, V.dofmap.index_map)
+        self.R = np.concatenate([i.pairs.R for i in interfaces]).reshape(-1, 3, 3)
+        self.g0 = np.concatenate([i.pairs.g0 for i in interfaces])
+        self.interface_index = np.concatenate([np.full(i.pairs.num_local, k, dtype=np.int32)
+                                               for k, i in enumerate(interfaces)])
+        mu_f = np.concatenate([np.full(i.pairs.num_local, float(i.contact.mu_f)) for i in interfaces])
+        self.laws = PairLaws(self._groups(self.interface_index), self.g0, mu_f,
+                             self._constrained_directions(constrained_dofs))
+        self._gathered_laws = None
+        self._w = self.B.createVecLeft()
+
+        n = self.num_local
+        self.z = np.zeros((n, 3))
+        self.z_n = np.zeros((n, 3))
+        self.w_n = np.zeros((n, 3))
+        self.state_n = np.zeros(n, dtype=np.int8)
+        self.slip_n = np.zeros((n, 2))
+
+    def _groups(self, interface_index: np.ndarray) -> tuple[LawGroup, ...]:
+        return tuple(LawGroup(i.law, i.r, i.r * self.h, np.flatnonzero(interface_index == k))
+                     for k, i in enumerate(self.interfaces))
+
+    def _constrained_directions(self, constrained_dofs: PETSc.Vec) -> np.ndarray:
+        """(num_local, 3) bool: rows of B all of whose (significant) columns are constrained dofs."""
+        values = self.rows.values
+        pair = np.repeat(np.arange(len(self.rows.indptr) - 1), np.diff(self.rows.indptr)) // 3
+        largest = np.zeros(self.num_local)
+        np.maximum.at(largest, pair, np.abs(values))
+        involved = (np.abs(values) > 1e-12 * largest[pair]).astype(float)
+        M = rows_matrix(self.comm, self.rows, self.num_global, self.V.dofmap.index_map, involved)
+        free = constrained_dofs.duplicate()
+        with free.localForm() as f, constrained_dofs.localForm() as c:
+            f.array[:] = 1.0 - c.array
+        y = M.createVecLeft()
+        M.mult(free, y)
+        out = y.getArray(readonly=True).reshape(-1, 3) == 0.0
+        for obj in (M, free, y):
+            obj.destroy()
+        return out
+
+    # -- sizes and parallel helpers ------------------------------------------------------------
+    @property
+    def constrained(self) -> np.ndarray:
+        return self.laws.constrained
+
+    @property
+    def mu_f(self) -> np.ndarray:
+        return self.laws.mu_f
+
+    def gather(self, values: npt.ArrayLike) -> np.ndarray:
+        """All pairs' values in global pair order, on every rank (collective)."""
+        values = np.asarray(values)
+        if values.shape[:1] != (self.num_local,):
+            raise ValueError(f"values must have {self.num_local} rows, got shape {values.shape}")
+        return np.concatenate(self.comm.allgather(values), axis=0)
+
+    def local_rows(self, values_global: np.ndarray) -> np.ndarray:
+        """This rank's rows of an array in global pair order."""
+        return values_global[self.offset:self.offset + self.num_local]
+
+    def gathered_laws(self) -> PairLaws:
+        """The laws of all pairs in global pair order, on every rank (collective, then cached)."""
+        if self._gathered_laws is None:
+            index = self.gather(self.interface_index)
+            self._gathered_laws = PairLaws(self._groups(index), self.gather(self.g0), self.gather(self.mu_f),
+                                           self.gather(self.constrained))
+        return self._gathered_laws
+
+    # -- kinematics and forces -------------------------------------------------------------------
+    def motion(self, load_factor: float) -> np.ndarray:
+        """(num_local, 3): m(ℓ), the known part of w (moving rigid obstacles)."""
+        m = np.zeros((self.num_local, 3))
+        for interface in self.interfaces:
+            if interface.contact.obstacle is not None:
+                m[interface.local] = interface.pairs.motion(load_factor)
+        return m
+
+    def motion_amplitudes(self, load_factor: float) -> np.ndarray:
+        """The obstacles' translations at ``load_factor`` (the same on every rank)."""
+        parts = [i.pairs.motion_amplitudes(load_factor) for i in self.interfaces]
+        return np.concatenate(parts) if parts else np.zeros(0)
+
+    def B_times(self, x: PETSc.Vec) -> np.ndarray:
+        """B x, (num_local, 3), for any vector laid out like V (only owned entries are read)."""
+        self.B.mult(x, self._w)
+        return self._w.getArray(readonly=True).reshape(-1, 3).copy()
+
+    def relative_displacement(self, u: PETSc.Vec, load_factor: float) -> np.ndarray:
+        """w = B u + m(ℓ), (num_local, 3)."""
+        w = self.B_times(u)
+        if any(i.contact.obstacle is not None for i in self.interfaces):
+            w += self.motion(load_factor)
+        return w
+
+    def force(self, z: np.ndarray | None = None) -> np.ndarray:
+        """λ(z) (num_local, 3), the local forces on the slave side (default: the current z)."""
+        return self.laws.force(self.z if z is None else z)[0]
+
+    def force_derivative(self, z: np.ndarray | None = None) -> np.ndarray:
+        """∂λ/∂z (num_local, 3, 3)."""
+        return self.laws.force(self.z if z is None else z)[1]
+
+    def global_force(self, lam: npt.ArrayLike, out: PETSc.Vec | None = None) -> PETSc.Vec:
+        """Bᵀλ laid out like V's owned dofs (a new vector, or ``out`` overwritten)."""
+        lam = np.asarray(lam, dtype=PETSc.ScalarType)
+        if lam.shape != (self.num_local, 3):
+            raise ValueError(f"lam must have shape ({self.num_local}, 3), got {lam.shape}")
+        self._w.getArray()[:] = lam.ravel()
+        if out is None:
+            out = self.B.createVecRight()
+        self.B.multTranspose(self._w, out)
+        return out
+
+    def scaled_B(self, D: np.ndarray, out: PETSc.Mat | None = None) -> PETSc.Mat:
+        """blockdiag(D_i) B in B's sparsity: a new matrix, or ``out`` (made by this method) refilled."""
+        values = self.rows.scaled(D)
+        if out is None:
+            return rows_matrix(self.comm, self.rows, self.num_global, self.V.dofmap.index_map, values)
+        out.setValuesCSR(self.rows.indptr, self.rows.columns, values)
+        out.assemble()
+        return out
+
+    def create_lambda_vector(self) -> PETSc.Vec:
+        """A PETSc vector with B's row layout (3 entries per local pair), set to zero."""
+        lam = self.B.createVecLeft()
+        lam.set(0.0)
+        return lam
+
+    # -- the laws -----------------------------------------------------------------------------------
+    def evaluate(self, w: np.ndarray, z: np.ndarray | None = None) -> LawEvaluation:
+        """H(w, z) of the local pairs with ∂H/∂w, ∂H/∂z and the states (default: the current z)."""
+        return self.laws.evaluate(w, self.w_n, self.z if z is None else z)
+
+    def unknown_scale(self, force_scale: float) -> np.ndarray:
+        """(num_local, 3): the scale of each local unknown when forces are of order ``force_scale``."""
+        return self.laws.unknown_scale(force_scale)
+
+    def predict(self, w: np.ndarray) -> None:
+        """Starting active set: touching pairs (g ≤ 0) with p_n = 0 get a tiny p_n > 0.
+
+        At the tie p_n = r·g = 0 the laws take the open branch, so a body held only by
+        contact would have a singular first Jacobian. Starting on the closed branch is the
+        usual initial active set of semismooth Newton; a pair that should open does so in
+        the next iteration. The value (:data:`PREDICTED_PRESSURE` · r · h) is far below any
+        tolerance.
+        """
+        tiny = np.zeros(self.num_local)
+        for group in self.laws.groups:
+            tiny[group.index] = PREDICTED_PRESSURE * group.force_unit
+        gap = self.g0 + w[:, 0]
+        touching = (gap <= 0.0) & (self.z[:, 0] <= 0.0)
+        self.z[touching, 0] = tiny[touching]
+
+    # -- increments ---------------------------------------------------------------------------------
+    def commit(self, w: np.ndarray) -> None:
+        """Accept the current z and ``w`` as the converged end of the increment."""
+        # states and slip are read before w_n moves on (slip is measured from w_n)
+        self.state_n = self.evaluate(w).state.copy()
+        self.slip_n = w[:, 1:3] - self.w_n[:, 1:3]
+        self.w_n = w.copy()
+        self.z_n = self.z.copy()
+
+    def restore(self) -> None:
+        """Back to the last converged increment's unknowns."""
+        self.z = self.z_n.copy()
+
+    # -- reporting ----------------------------------------------------------------------------------
+    def obstacle_reactions(self, lam: np.ndarray | None = None) -> dict[str, np.ndarray]:
+        """Force of each rigid obstacle on the body, Σ R_sᵀ λ_s (global frame), over all ranks."""
+        lam = self.force() if lam is None else lam
+        out = {}
+        for interface in self.interfaces:
+            if interface.contact.obstacle is None:
+                continue
+            local = np.einsum("nji,nj->i", self.R[interface.local], lam[interface.local])
+            out[interface.contact.label] = np.asarray(self.comm.allreduce(local, op=MPI.SUM))
+        return out
+
+    def describe(self) -> list[str]:
+        """One line per interface."""
+        return [f"contact {i.contact.label}: {i.pairs.describe()}, law {i.law.name}, μ_f = {i.contact.mu_f:g}, "
+                f"r = {i.r:.4g}" for i in self.interfaces]
+
+    def destroy(self) -> None:
+        """Free the PETSc objects of the model and of its pair sets."""
+        self.B.destroy()
+        self._w.destroy()
+        for interface in self.interfaces:
+            B = getattr(interface.pairs, "B", None)
+            if B is not None:
+                B.destroy()

@@ -1,0 +1,269 @@
+r"""Rigid obstacles: an analytical rigid body (plane, sphere, cylinder) as the master side.
+
+``formulation.md`` §2b: one pair per slave node s of the tagged surface, with
+
+    w_s = R_s (u_s − d(ℓ)),   g0_s = signed distance of X_s from the obstacle,
+
+n_s (the first row of R_s) the obstacle's outward unit normal at the point closest to X_s. B
+has only the slave node's columns, and the obstacle's prescribed motion d(ℓ) enters w as the
+known part m_s(ℓ) = −R_s d(ℓ): it moves the gap and the slip like a displacement of the
+master side. Small displacements: the closest points, normals and gaps are computed once, in
+the reference configuration (the obstacle translates; it does not rotate).
+
+The obstacle's reaction is the opposite of the slave forces: −Σ_s R_sᵀ λ_s (it appears in the
+global equilibrium check next to the support reactions).
+"""
+
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+from dolfinx_nnqem import compat  # noqa: F401, I001  (first: loads MPI/PETSc for the PyPI wheel)
+
+import dolfinx
+import numpy as np
+import numpy.typing as npt
+from mpi4py import MPI
+
+from dolfinx_nnqem.contact.pairs import owned_by_slave
+from dolfinx_nnqem.contact.pairset import PairRows
+from dolfinx_nnqem.contact.surfaces import (ContactPairError, first_by_position, format_point,
+                                            gather_surfaces, local_frames, mesh_tolerance)
+
+__all__ = ["Cylinder", "ObstaclePairs", "Plane", "RigidObstacle", "Sphere", "obstacle_pairs",
+           "obstacle_reaction"]
+
+
+def _vector3(name: str, value, unit: bool = False) -> np.ndarray:
+    try:
+        v = np.asarray(value, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} = {value!r}: expected 3 numbers") from None
+    if v.shape != (3,) or not np.all(np.isfinite(v)):
+        raise ValueError(f"{name} = {value!r}: expected 3 finite numbers")
+    if unit:
+        length = float(np.linalg.norm(v))
+        if length == 0.0:
+            raise ValueError(f"{name} = {value!r}: a direction must not be zero")
+        v = v / length
+    return v
+
+
+def _positive(name: str, value) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} = {value!r}: expected a number") from None
+    if not (math.isfinite(v) and v > 0.0):
+        raise ValueError(f"{name} = {value!r}: expected a finite value > 0")
+    return v
+
+
+@dataclass(frozen=True, kw_only=True)
+class RigidObstacle(ABC):
+    """A rigid body with a prescribed translation d(ℓ).
+
+    Parameters
+    ----------
+    motion
+        The translation: a vector scaled by ``amplitude(ℓ)`` (by ℓ when no amplitude is given),
+        or a function ℓ -> (3,) giving d(ℓ) itself (e.g. press, then slide).
+    amplitude
+        a(ℓ) for a vector ``motion``.
+    """
+
+    motion: Sequence[float] | Callable[[float], Sequence[float]] = (0.0, 0.0, 0.0)
+    amplitude: Callable[[float], float] | None = None
+
+    def __post_init__(self):
+        if not callable(self.motion):
+            _vector3(f"{type(self).__name__}.motion", self.motion)
+        elif self.amplitude is not None:
+            raise ValueError(f"{type(self).__name__}: give a motion vector with an amplitude, or a "
+                             "motion function d(ℓ) alone")
+
+    def displacement(self, load_factor: float) -> np.ndarray:
+        """d(ℓ), the obstacle's translation at the load factor ``load_factor``."""
+        if callable(self.motion):
+            d = _vector3(f"{type(self).__name__}.motion({load_factor})", self.motion(load_factor))
+        else:
+            a = load_factor if self.amplitude is None else float(self.amplitude(load_factor))
+            if not math.isfinite(a):
+                raise ValueError(f"{type(self).__name__}: the motion amplitude gave {a} at load factor {load_factor}")
+            d = a * np.asarray(self.motion, dtype=np.float64)
+        return d
+
+    @abstractmethod
+    def project(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Closest points of the obstacle's surface to the points ``x`` (m, 3).
+
+        Returns the signed distances g (m,) (> 0 outside the obstacle), the outward unit
+        normals n (m, 3) at the closest points, and the closest points p (m, 3) = x − g n.
+        """
+
+    @abstractmethod
+    def describe(self) -> str:
+        """The obstacle in words, for messages and logs."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class Plane(RigidObstacle):
+    """The half-space {x : n · (x − point) ≤ 0}; ``normal`` n points towards the deformable body."""
+
+    point: Sequence[float]
+    normal: Sequence[float]
+
+    def __post_init__(self):
+        super().__post_init__()
+        _vector3("Plane.point", self.point)
+        _vector3("Plane.normal", self.normal, unit=True)
+
+    def project(self, x):
+        n = _vector3("Plane.normal", self.normal, unit=True)
+        g = (x - np.asarray(self.point, dtype=np.float64)) @ n
+        normals = np.broadcast_to(n, x.shape).copy()
+        return g, normals, x - g[:, None] * normals
+
+    def describe(self) -> str:
+        return f"rigid plane through {format_point(self.point)} with normal {format_point(self.normal)}"
+
+
+@dataclass(frozen=True, kw_only=True)
+class Sphere(RigidObstacle):
+    """A rigid ball of centre ``centre`` and radius ``radius``."""
+
+    centre: Sequence[float]
+    radius: float
+
+    def __post_init__(self):
+        super().__post_init__()
+        _vector3("Sphere.centre", self.centre)
+        _positive("Sphere.radius", self.radius)
+
+    def project(self, x):
+        d = x - np.asarray(self.centre, dtype=np.float64)
+        distance = np.linalg.norm(d, axis=1)
+        _check_off_axis(distance, x, "the centre of the sphere")
+        n = d / distance[:, None]
+        return distance - float(self.radius), n, np.asarray(self.centre) + float(self.radius) * n
+
+    def describe(self) -> str:
+        return f"rigid sphere of radius {self.radius:g} centred at {format_point(self.centre)}"
+
+
+@dataclass(frozen=True, kw_only=True)
+class Cylinder(RigidObstacle):
+    """An infinite rigid cylinder of radius ``radius`` about the axis through ``point`` along ``axis``."""
+
+    point: Sequence[float]
+    axis: Sequence[float]
+    radius: float
+
+    def __post_init__(self):
+        super().__post_init__()
+        _vector3("Cylinder.point", self.point)
+        _vector3("Cylinder.axis", self.axis, unit=True)
+        _positive("Cylinder.radius", self.radius)
+
+    def project(self, x):
+        e = _vector3("Cylinder.axis", self.axis, unit=True)
+        d = x - np.asarray(self.point, dtype=np.float64)
+        radial = d - (d @ e)[:, None] * e
+        distance = np.linalg.norm(radial, axis=1)
+        _check_off_axis(distance, x, "the cylinder's axis")
+        n = radial / distance[:, None]
+        return distance - float(self.radius), n, x - (distance - float(self.radius))[:, None] * n
+
+    def describe(self) -> str:
+        return (f"rigid cylinder of radius {self.radius:g} about the axis through {format_point(self.point)} "
+                f"along {format_point(self.axis)}")
+
+
+def _check_off_axis(distance: np.ndarray, x: np.ndarray, what: str) -> None:
+    if np.any(distance == 0.0):
+        i = int(np.flatnonzero(distance == 0.0)[0])
+        raise ContactPairError(f"the slave node at {format_point(x[i])} lies on {what}: no closest point")
+
+
+@dataclass(eq=False)
+class ObstaclePairs:
+    """The pairs between a tagged surface and a rigid obstacle owned by this rank (a PairSet).
+
+    Pair i joins slave node ``slave_blocks[i]`` and the obstacle point ``X_master[i]`` closest
+    to it. Global order: by the rank owning the slave node, then by its coordinates.
+    """
+
+    comm: MPI.Comm
+    obstacle: RigidObstacle
+    surface: int
+    num_local: int
+    num_global: int
+    offset: int
+    slave_blocks: np.ndarray
+    X_slave: np.ndarray
+    X_master: np.ndarray
+    R: np.ndarray
+    g0: np.ndarray
+    rows: PairRows
+    kind: str = "rigid obstacle"
+
+    def motion(self, load_factor: float) -> np.ndarray:
+        """m(ℓ) = −R d(ℓ): the obstacle's translation seen in each pair's frame."""
+        return -np.einsum("nij,j->ni", self.R, self.obstacle.displacement(load_factor))
+
+    def motion_amplitudes(self, load_factor: float) -> np.ndarray:
+        return self.obstacle.displacement(load_factor)
+
+    def describe(self) -> str:
+        return f"{self.obstacle.describe()} against surface {self.surface}, {self.num_global} pairs"
+
+
+def obstacle_pairs(V: dolfinx.fem.FunctionSpace, facet_tags: dolfinx.mesh.MeshTags, surface: int,
+                   obstacle: RigidObstacle, *, tolerance: float | None = None) -> ObstaclePairs:
+    """One pair per node of the surface tagged ``surface`` against ``obstacle`` (collective).
+
+    Raises
+    ------
+    ContactPairError
+        (on every rank) if the surface is missing or malformed, a node lies inside the
+        obstacle (deeper than ``tolerance``), or the surface faces away from the obstacle.
+    """
+    comm = V.mesh.comm
+    if not isinstance(obstacle, RigidObstacle):
+        raise TypeError(f"obstacle must be a Plane, Sphere or Cylinder, got {obstacle!r}")
+    tolerance = mesh_tolerance(V.mesh) if tolerance is None else float(tolerance)
+    nodes = gather_surfaces(V, facet_tags, [surface], roles=["the slave surface"]).nodes[0]
+    order = np.lexsort((nodes.x[:, 2], nodes.x[:, 1], nodes.x[:, 0]))
+    index, x, slave_normal = nodes.index[order], nodes.x[order], nodes.normal[order]
+    g0, n, p = obstacle.project(x)
+    inside = g0 < -tolerance
+    if np.any(inside):
+        i = first_by_position(x, inside)
+        raise ContactPairError(
+            f"the node at {format_point(x[i])} of surface {surface} lies inside the {obstacle.describe()} "
+            f"(signed distance {g0[i]:.6g}); place the obstacle outside the body and move it with `motion`")
+    away = np.einsum("ij,ij->i", n, slave_normal) > 0.0
+    if np.any(away):
+        i = first_by_position(x, away)
+        raise ContactPairError(
+            f"surface {surface} faces away from the {obstacle.describe()} at the node {format_point(x[i])} "
+            f"(outward normal {format_point(slave_normal[i])}, obstacle normal {format_point(n[i])}): "
+            "tag the side of the body that faces the obstacle")
+    g0 = np.where(np.abs(g0) <= tolerance, 0.0, g0)  # touching within the tolerance: no gap
+    R = local_frames(n)
+    mine, offset, num_global = owned_by_slave(comm, V.dofmap.index_map, index)
+    columns = 3 * index[mine, None] + np.arange(3)
+    return ObstaclePairs(
+        comm=comm, obstacle=obstacle, surface=int(surface), num_local=len(mine), num_global=num_global,
+        offset=offset, slave_blocks=index[mine], X_slave=x[mine], X_master=p[mine], R=R[mine], g0=g0[mine],
+        rows=PairRows.from_blocks(columns, R[mine]),
+    )
+
+
+def obstacle_reaction(R: npt.ArrayLike, lam: npt.ArrayLike) -> np.ndarray:
+    """Force (3,) the slave surface exerts on the obstacle, −Σ R_sᵀ λ_s, from local pairs."""
+    return -np.einsum("nji,nj->i", np.asarray(R), np.asarray(lam))
+

@@ -1,0 +1,179 @@
+r"""The pair-set contract: what the contact model needs from a discretisation of an interface.
+
+``formulation.md`` §2b: whatever the discretisation (node-to-node, rigid obstacle, node-to-
+surface, dual mortar), an interface is a set of pairs j, each with
+
+* a local frame R_j (rows n_j, t1_j, t2_j) and an initial gap g0_j,
+* three rows of B such that the relative displacement in the frame is
+  w_j = (B u)_j + m_j(ℓ), with m_j(ℓ) a known motion of the master side (a moving rigid
+  obstacle; zero otherwise),
+* an owner: the rank that owns the pair's slave node.
+
+The pair force λ_j = (p_n, q1, q2) acts on the slave side; the global nodal force is Bᵀλ. The
+laws and the solvers see nothing else, so a new discretisation is a new :class:`PairSet`
+implementation and nothing more.
+
+B's rows are given as :class:`PairRows`: the three rows of a pair share one sorted set of
+columns (3 components of each node the pair involves), so any number of nodes per row works
+(2 for node-to-node, 1 for an obstacle, 1 + the master facet's nodes for node-to-surface).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+from mpi4py import MPI
+from petsc4py import PETSc
+
+__all__ = ["PairRows", "PairSet", "rows_matrix"]
+
+
+@dataclass(frozen=True, eq=False)
+class PairRows:
+    """The local rows of B, three per pair, in CSR form.
+
+    Pair i owns rows 3i, 3i + 1, 3i + 2 (its normal, t1 and t2 components of w), and the three
+    rows have the same columns in the same (ascending) order. Columns are global indices
+    3 × (dof block) + component, laid out like V's dofs.
+
+    Attributes
+    ----------
+    indptr
+        (3 n + 1,) row pointers.
+    columns
+        (nnz,) global column indices, ascending within each row.
+    values
+        (nnz,) entries of B.
+    """
+
+    indptr: np.ndarray
+    columns: np.ndarray
+    values: np.ndarray
+
+    @classmethod
+    def from_blocks(cls, columns: np.ndarray, blocks: np.ndarray) -> PairRows:
+        """Rows of pairs that all involve the same number m of columns.
+
+        Parameters
+        ----------
+        columns
+            (n, m) global columns of each pair (any order; they are sorted here).
+        blocks
+            (n, 3, m) the pair's 3 × m block of B, in the order of ``columns``.
+        """
+        columns = np.asarray(columns, dtype=np.int64)
+        blocks = np.asarray(blocks, dtype=np.float64)
+        n, m = columns.shape
+        order = np.argsort(columns, axis=1, kind="stable")
+        columns = np.take_along_axis(columns, order, axis=1)
+        blocks = np.take_along_axis(blocks, order[:, None, :], axis=2)
+        return cls(
+            np.arange(0, 3 * n * m + 1, m, dtype=PETSc.IntType),
+            np.repeat(columns, 3, axis=0).reshape(-1).astype(PETSc.IntType),
+            blocks.reshape(-1).copy(),
+        )
+
+    @classmethod
+    def concatenate(cls, parts: list[PairRows]) -> PairRows:
+        """The rows of several pair sets, one after the other."""
+        indptr = [np.zeros(1, dtype=PETSc.IntType)]
+        start = 0
+        for part in parts:
+            indptr.append(part.indptr[1:] + start)
+            start += int(part.indptr[-1])
+        return cls(np.concatenate(indptr).astype(PETSc.IntType),
+                   np.concatenate([p.columns for p in parts]).astype(PETSc.IntType),
+                   np.concatenate([p.values for p in parts]))
+
+    @property
+    def num_pairs(self) -> int:
+        return (len(self.indptr) - 1) // 3
+
+    @cached_property
+    def _sources(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """For every entry e (row 3p + r, position q in the row): p, r and the positions of the
+        entries at the same place in rows 3p, 3p + 1, 3p + 2."""
+        rows = np.repeat(np.arange(len(self.indptr) - 1), np.diff(self.indptr))
+        pair, r = np.divmod(rows, 3)
+        q = np.arange(len(self.columns)) - self.indptr[rows]
+        sources = np.stack([self.indptr[3 * pair + l] + q for l in range(3)])
+        return pair, r, sources
+
+    def scaled(self, D: np.ndarray) -> np.ndarray:
+        """Values of blockdiag(D_i) B in this layout (row 3i + r = Σ_l D_i[r, l] · row 3i + l).
+
+        Parameters
+        ----------
+        D
+            (n, 3, 3) one matrix per pair.
+        """
+        D = np.asarray(D, dtype=np.float64)
+        if D.shape != (self.num_pairs, 3, 3):
+            raise ValueError(f"D must have shape ({self.num_pairs}, 3, 3), got {D.shape}")
+        pair, r, s = self._sources
+        v = self.values
+        return D[pair, r, 0] * v[s[0]] + D[pair, r, 1] * v[s[1]] + D[pair, r, 2] * v[s[2]]
+
+
+def rows_matrix(comm: MPI.Comm, rows: PairRows, num_global_pairs: int, index_map,
+                values: np.ndarray | None = None) -> PETSc.Mat:
+    """A PETSc AIJ matrix with ``rows`` as its local rows (3 per local pair).
+
+    Parameters
+    ----------
+    comm
+        The communicator of the pairs.
+    rows
+        The local rows.
+    num_global_pairs
+        Pairs over all ranks.
+    index_map
+        V's dof index map (block size 3): the column layout.
+    values
+        Values to use instead of ``rows.values`` (same layout), e.g. :meth:`PairRows.scaled`.
+    """
+    n = rows.num_pairs
+    A = PETSc.Mat().createAIJ(
+        size=((3 * n, 3 * num_global_pairs), (3 * index_map.size_local, 3 * index_map.size_global)),
+        csr=(rows.indptr, rows.columns, rows.values if values is None else values),
+        comm=comm,
+    )
+    A.assemble()
+    return A
+
+
+@runtime_checkable
+class PairSet(Protocol):
+    """A discretised contact interface (``formulation.md`` §2b), owned pairs of this rank.
+
+    Pair i of this rank is global pair ``offset + i`` of the set; pairs are owned by the rank
+    that owns their slave node, and their global order is the same for any number of ranks
+    up to that ownership. Per-pair arrays hold the LOCAL pairs.
+    """
+
+    comm: MPI.Comm
+    num_local: int
+    num_global: int
+    offset: int
+    R: np.ndarray  #: (num_local, 3, 3) frames, rows (n, t1, t2); n points from the master to the slave side
+    g0: np.ndarray  #: (num_local,) initial gaps
+    rows: PairRows  #: the local rows of B
+    X_slave: np.ndarray  #: (num_local, 3) slave node positions
+    X_master: np.ndarray  #: (num_local, 3) the facing point of the master side
+    slave_blocks: np.ndarray  #: (num_local,) global dof-block indices of the slave nodes
+    kind: str  #: "node-to-node", "rigid obstacle", ...
+
+    def motion(self, load_factor: float) -> np.ndarray:
+        """(num_local, 3): m(ℓ), the known part of w (the master side's prescribed motion)."""
+        ...
+
+    def motion_amplitudes(self, load_factor: float) -> np.ndarray:
+        """The master side's motion as numbers (for the secant predictor); empty if it does not move."""
+        ...
+
+    def describe(self) -> str:
+        """One line for logs: the kind, the surfaces and the number of pairs."""
+        ...

@@ -1,0 +1,216 @@
+"""The solver contract, the options every solver shares and each solver's own, and the solvers by name.
+
+A solver takes a :class:`~dolfinx_nnqem.problem.ContactProblem` and solves one load increment at
+a time (:class:`Solver`); :func:`dolfinx_nnqem.stepping.solve_load_steps` drives it. Options
+come in two parts: :class:`SolverOptions` (tolerances, iteration limit, PETSc options of the
+displacement solves) for every solver, and one dataclass per solver for what only it has.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+from dataclasses import dataclass, field
+from typing import Protocol
+
+from dolfinx_nnqem.convergence import SolveReport
+from dolfinx_nnqem.newton import Globalisation
+
+__all__ = ["METHODS", "MonolithicOptions", "NNEQM1Options", "NNEQM2Options", "Solver", "SolverOptions",
+           "make_solver"]
+
+METHODS = ("monolithic", "nneqm1", "nneqm2")
+
+
+class Solver(Protocol):
+    """What load stepping, writers and users may use of a solver."""
+
+    name: str  #: "monolithic", "nneqm1" or "nneqm2"
+    timings: dict[str, float]  #: seconds per phase, accumulated over the run
+
+    def solve_increment(self, load_factor: float) -> SolveReport:
+        """Solve for the load factor ``load_factor`` from the last converged state.
+
+        The problem's iterate (u, z) is left at the solution (or the last iterate if the
+        report says it did not converge); the problem's converged state is not touched: the
+        caller commits (with ``report.gauss_point_values``) or restores.
+        """
+
+    def destroy(self) -> None:
+        """Free the solver's PETSc objects."""
+
+
+def _check_integer(owner: str, name: str, value, lowest: int) -> None:
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < lowest:
+        raise ValueError(f"{owner}: {name} = {value!r}; expected an integer >= {lowest}")
+
+
+def _check_real(owner: str, name: str, value, low: float, high: float) -> None:
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(float(value)) \
+            or not low < float(value) <= high:
+        raise ValueError(f"{owner}: {name} = {value!r}; expected a finite number in ({low:g}, {high:g}]")
+
+
+@dataclass
+class SolverOptions:
+    """Options every solver shares.
+
+    Converged when ‖R‖ ≤ rtol · F + atol and ‖H‖ ≤ rtol · F + atol, R the equilibrium
+    residual at the free dofs, H the pair laws (force units), F = max(‖ℓ F_ext‖, ‖F_int‖, ‖Bᵀλ‖)
+    the problem's force scale; ``atol`` (force units) guards the unloaded start.
+
+    Attributes
+    ----------
+    rtol, atol
+        Tolerances (0 < rtol ≤ 1e-2; 0 ≤ atol).
+    max_iterations
+        Newton iterations per increment (NNEQM1: outer iterations).
+    petsc_options
+        PETSc options of the displacement solves (the monolithic Newton system, or NNEQM1's and
+        NNEQM2's stiffness), merged over the package's defaults (MUMPS LU).
+    """
+
+    rtol: float = 1e-10
+    atol: float = 1e-12
+    max_iterations: int = 30
+    petsc_options: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        _check_real("SolverOptions", "rtol", self.rtol, 0.0, 1e-2)
+        if isinstance(self.atol, bool) or not isinstance(self.atol, numbers.Real) \
+                or not (math.isfinite(float(self.atol)) and self.atol >= 0):
+            raise ValueError(f"SolverOptions: atol = {self.atol!r}; expected a finite number >= 0")
+        _check_integer("SolverOptions", "max_iterations", self.max_iterations, 1)
+        if not isinstance(self.petsc_options, dict):
+            raise ValueError(f"SolverOptions: petsc_options = {self.petsc_options!r}; expected a dict")
+
+
+@dataclass
+class MonolithicOptions:
+    """Options of the monolithic semismooth Newton solver.
+
+    Attributes
+    ----------
+    linear_solver
+        "direct" (MUMPS LU), "iterative" (FGMRES + Schur fieldsplit + GAMG), or "auto"
+        (iterative from ``auto_iterative_dofs`` displacement dofs on).
+    extrapolate
+        Start each increment from the secant extrapolation of the last two.
+    augmentation
+        Iterative solver only: the penalty added to the u block on closed pair directions, in
+        units of r (:class:`dolfinx_nnqem.block_system.AugmentedSystem`). It changes the
+        preconditioner, not the Newton step.
+    lag_preconditioner
+        Iterative solver with contact: keep the u block's AMG hierarchy while it works.
+    globalisation
+        The Newton driver's damping (:class:`~dolfinx_nnqem.newton.Globalisation`); the LM
+        parameter is ν = lm_c · min(ε, 1)^lm_delta · mean diag(JᵀJ), ε the relative residual.
+    """
+
+    linear_solver: str = "direct"
+    auto_iterative_dofs: int = 300_000
+    extrapolate: bool = True
+    augmentation: float = 1.0
+    lag_preconditioner: bool = True
+    globalisation: Globalisation = field(default_factory=lambda: Globalisation(min_step=1.0 / 64, watchdog=6))
+
+    def __post_init__(self):
+        if self.linear_solver not in ("direct", "iterative", "auto"):
+            raise ValueError(f"MonolithicOptions: linear_solver = {self.linear_solver!r}; expected 'direct', "
+                             "'iterative' or 'auto'")
+        _check_integer("MonolithicOptions", "auto_iterative_dofs", self.auto_iterative_dofs, 0)
+        if isinstance(self.augmentation, bool) or not isinstance(self.augmentation, numbers.Real) \
+                or not (math.isfinite(float(self.augmentation)) and self.augmentation > 0):
+            raise ValueError(f"MonolithicSolver: augmentation = {self.augmentation!r}; expected a finite value > 0 "
+                             "(the u block's penalty on closed pair directions, in units of r)")
+
+
+@dataclass
+class NNEQM1Options:
+    """Options of NNEQM1 (nonsmooth Newton on the pair unknowns nested in Newton–Raphson).
+
+    Attributes
+    ----------
+    modified
+        Keep K, X and C from the first iteration of the increment (modified Newton).
+    inner_max_iterations
+        Iteration limit of the dense nonsmooth solve.
+    inner
+        Damping of the dense nonsmooth solve (ν = lm_c |H̃|^lm_delta on its scaled rows).
+    """
+
+    modified: bool = False
+    inner_max_iterations: int = 100
+    inner: Globalisation = field(default_factory=lambda: Globalisation(min_step=1e-10, watchdog=6))
+
+    def __post_init__(self):
+        _check_integer("NNEQM1Options", "inner_max_iterations", self.inner_max_iterations, 1)
+
+
+@dataclass
+class NNEQM2Options:
+    """Options of NNEQM2 (one nonsmooth system of the pairs and every Gauss point's Δγ).
+
+    Attributes
+    ----------
+    update_flow_directions
+        False (the seed's method): the flow directions N are frozen at their value from the
+        start of the increment. True: N recomputed from the current iterate after each solve
+        until it stops changing (the radial return's fixed point).
+    flow_update
+        How ``update_flow_directions`` recomputes N: from the trial stress σ_n + C ε(du)
+        ("trial", default) or from the stress σ_n + C (ε(du) − Δγ N) ("stress").
+    inner_max_iterations
+        Iteration limit of each dense nonsmooth solve.
+    max_flow_updates
+        Limit of the N fixed-point passes.
+    flow_rtol
+        Convergence of the N fixed point (stress over σ_y); default 100 · rtol.
+    regular_start
+        Start laws that are singular where the friction force vanishes (the polar law) from the
+        solution of their regular companion (the Cartesian law), which has the same solutions;
+        False starts them from the previous increment (the seed's procedure).
+    inner
+        Damping of the dense nonsmooth solves.
+    """
+
+    update_flow_directions: bool = False
+    flow_update: str = "trial"
+    inner_max_iterations: int = 100
+    max_flow_updates: int = 50
+    flow_rtol: float | None = None
+    regular_start: bool = True
+    inner: Globalisation = field(default_factory=lambda: Globalisation(min_step=1e-10, watchdog=0))
+
+    def __post_init__(self):
+        if self.flow_update not in ("trial", "stress"):
+            raise ValueError(f"NNEQM2Options: flow_update = {self.flow_update!r}; expected 'trial' or 'stress'")
+        _check_integer("NNEQM2Options", "inner_max_iterations", self.inner_max_iterations, 1)
+        _check_integer("NNEQM2Options", "max_flow_updates", self.max_flow_updates, 0)
+        if self.flow_rtol is not None:
+            _check_real("NNEQM2Options", "flow_rtol", self.flow_rtol, 0.0, 1.0)
+
+
+def make_solver(method: str, problem, options: SolverOptions | None = None, **method_options) -> Solver:
+    """The solver called ``method`` ("monolithic", "nneqm1", "nneqm2") for ``problem``.
+
+    ``method_options``: ``monolithic=MonolithicOptions(...)``, ``nneqm1=NNEQM1Options(...)`` or
+    ``nneqm2=NNEQM2Options(...)``, for the chosen method only.
+    """
+    method = method.lower()
+    if method not in METHODS:
+        raise ValueError(f"unknown method {method!r}; expected one of {list(METHODS)}")
+    unknown = sorted(set(method_options) - {method})
+    if unknown:
+        raise ValueError(f"make_solver({method!r}): options {unknown} belong to another method")
+    if method == "monolithic":
+        from dolfinx_nnqem.monolithic import MonolithicSolver
+
+        return MonolithicSolver(problem, options, method_options.get("monolithic"))
+    if method == "nneqm1":
+        from dolfinx_nnqem.nneqm1 import NNEQM1Solver
+
+        return NNEQM1Solver(problem, options, method_options.get("nneqm1"))
+    from dolfinx_nnqem.nneqm2 import NNEQM2Solver
+
+    return NNEQM2Solver(problem, options, method_options.get("nneqm2"))
