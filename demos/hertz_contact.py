@@ -46,22 +46,17 @@ import time
 from pathlib import Path
 
 import dolfinx_nnqem  # noqa: F401  (before dolfinx: the PyPI wheel needs it)
-import dolfinx.fem as fem
-import dolfinx.fem.petsc
 import numpy as np
-import ufl
 from mpi4py import MPI
-from petsc4py import PETSc
-from scipy.optimize import minimize_scalar
 
-from dolfinx_nnqem import compat
+from dolfinx_nnqem.hertz import NodalLoads, hertz_contact, measure_hertz
 from dolfinx_nnqem.material import VonMises
 from dolfinx_nnqem.meshing import StackedBlocksTags as T
 from dolfinx_nnqem.meshing import build_graded_contact_blocks
 from dolfinx_nnqem.monolithic import MonolithicSolver
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet
 from dolfinx_nnqem.solver import SolverOptions
-from dolfinx_nnqem.results import pair_table, reactions, values_at_blocks
+from dolfinx_nnqem.results import pair_table, reactions
 from dolfinx_nnqem.stepping import solve_load_steps
 
 parser = argparse.ArgumentParser(description="V6 Hertz contact and V7 Cattaneo–Mindlin partial slip")
@@ -142,38 +137,14 @@ if comm.rank == 0:
 #   best fit the pair forces (least squares).
 
 # %%
-v = ufl.TestFunction(problem.V)
-ds = ufl.Measure("ds", domain=mesh, subdomain_data=facet_tags, metadata={"quadrature_degree": 16})
-x = ufl.SpatialCoordinate(mesh)
-a_c, p0_c = fem.Constant(mesh, PETSc.ScalarType(1.0)), fem.Constant(mesh, PETSc.ScalarType(1.0))
-hertz_form = fem.form(p0_c * ufl.sqrt(ufl.max_value(1.0 - (x[0] ** 2 + x[2] ** 2) / a_c ** 2, 0.0))
-                      * v[1] * ds(T.CONTACT1))
 pairs = problem.contact.interfaces[0].pairs  # node-to-node: the body-1 nodes a_i
-blocks_a = pairs.gather(pairs.dofs_a.astype(np.int64))
-
-
-def per_pair(form):
-    """A form's assembled y-component at each pair's node a, in global pair order."""
-    F = compat.create_vector(problem.V)
-    with F.localForm() as local:
-        local.set(0.0)
-    dolfinx.fem.petsc.assemble_vector(F, form)
-    F.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-    return values_at_blocks(problem, blocks_a, F)[:, 1]
-
-
-area = per_pair(fem.form(v[1] * ds(T.CONTACT1)))
-
-
-def hertz_forces(a, p0):
-    a_c.value, p0_c.value = a, p0
-    return per_pair(hertz_form)
+loads = NodalLoads(problem, T.CONTACT1, pairs.gather(pairs.dofs_a.astype(np.int64)))
+area = loads.area
 
 
 def hertz(F):
     """Hertz's (a, p0) for the full force F."""
-    a = (3.0 * F * R_SPHERE / (4.0 * E_STAR)) ** (1.0 / 3.0)
-    return a, 3.0 * F / (2.0 * math.pi * a**2)
+    return hertz_contact(F, R_SPHERE, E_STAR)
 
 
 # %% [markdown]
@@ -209,13 +180,8 @@ r = np.hypot(position[:, 0], position[:, 2])
 f = -table["force_local_body1"]  # on body 2: (p_n, q along +x, q along −z)
 P = f[:, 0].sum()
 F = 2.0 * P
-a_hertz, p0_hertz = hertz(F)
-centre = int(np.argmin(r))
-p0 = f[centre, 0] / area[centre]
-fit = minimize_scalar(lambda a: np.sum((f[:, 0] - hertz_forces(a, 3.0 * F / (2.0 * math.pi * a * a))) ** 2),
-                      bounds=(0.5 * a_hertz, 1.5 * a_hertz), method="bounded",
-                      options={"xatol": 1e-6 * a_hertz})
-a_fe = float(fit.x)
+m = measure_hertz(loads, f[:, 0], position, table["state"] != 0, 2, R_SPHERE, E_STAR)
+a_hertz, p0_hertz, a_fe, p0 = m["a_hertz"], m["p0_hertz"], m["a"], m["p0"]
 closed = table["state"] != 0
 v6 = {
     "F_N": F, "equilibrium": abs(P + history[0]["reactions"][T.TOP][1]) / P,
@@ -274,7 +240,7 @@ if comm.rank == 0:
 # error). Right: the friction traction |q| / A at the last increment with Mindlin's profile.
 
 # %%
-hertz_nodal = hertz_forces(a_hertz, p0_hertz)  # collective: outside the rank-0 block
+hertz_nodal = loads.hertz(a_hertz, p0_hertz)  # collective: outside the rank-0 block
 if comm.rank == 0:
     import matplotlib
 

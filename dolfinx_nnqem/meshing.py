@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import inspect
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
 from dolfinx_nnqem import compat  # noqa: I001  (first: loads MPI/PETSc for the PyPI wheel)
@@ -28,10 +28,14 @@ import numpy as np
 from mpi4py import MPI
 
 __all__ = [
+    "BlockStackTags",
     "MeshAndTags",
     "StackedBlocksTags",
     "ThickCylinderTags",
     "TwoBeamsTags",
+    "build_block_stack",
+    "build_graded_block",
+    "build_graded_contact_blocks",
     "build_stacked_blocks",
     "build_thick_cylinder",
     "build_two_beams",
@@ -89,6 +93,43 @@ class StackedBlocksTags:
     BODY2_XMAX = 42
     BODY2_ZMIN = 43
     BODY2_ZMAX = 44
+
+
+class BlockStackTags:
+    """Tags of :func:`build_block_stack` (blocks numbered k = 1, 2, ... from the bottom up).
+
+    Cells: block k has tag k. Facets of block k: ``bottom(k)`` = 100 + k (y min),
+    ``top(k)`` = 200 + k (y max), ``xmin(k)`` = 300 + k, ``xmax(k)`` = 400 + k,
+    ``zmin(k)`` = 500 + k, ``zmax(k)`` = 600 + k.
+    """
+
+    @staticmethod
+    def body(k: int) -> int:
+        return k
+
+    @staticmethod
+    def bottom(k: int) -> int:
+        return 100 + k
+
+    @staticmethod
+    def top(k: int) -> int:
+        return 200 + k
+
+    @staticmethod
+    def xmin(k: int) -> int:
+        return 300 + k
+
+    @staticmethod
+    def xmax(k: int) -> int:
+        return 400 + k
+
+    @staticmethod
+    def zmin(k: int) -> int:
+        return 500 + k
+
+    @staticmethod
+    def zmax(k: int) -> int:
+        return 600 + k
 
 
 class ThickCylinderTags:
@@ -473,6 +514,71 @@ def build_stacked_blocks(
     return _mesh_from_gmsh(comm, "stacked_blocks", build, msh_file)
 
 
+def build_block_stack(
+    comm: MPI.Comm = MPI.COMM_WORLD,
+    Lx: float = 1.0,
+    Lz: float = 1.0,
+    heights: Sequence[float] = (0.5, 0.5, 0.5),
+    divisions: Sequence[tuple[int, int, int]] = ((2, 1, 2), (2, 1, 2), (2, 1, 2)),
+    *,
+    y0: float = 0.0,
+    centred: bool = False,
+    msh_file: str | os.PathLike | None = None,
+) -> MeshAndTags:
+    """Blocks stacked along y, each meshed on its own (no shared nodes): several contact interfaces.
+
+    Block k (1 at the bottom) spans y in [y0 + Σ_{i<k} h_i, y0 + Σ_{i≤k} h_i] and x in [0, Lx],
+    z in [0, Lz] (or, with ``centred``, [-Lx/2, Lx/2] and [-Lz/2, Lz/2]), with
+    ``divisions[k-1] = (nx, ny, nz)`` structured hexahedra. Neighbouring blocks with the same nx
+    and nz have coincident interface nodes; different ones make non-matching interfaces.
+
+    Returns
+    -------
+    MeshAndTags
+        Tags as in :class:`BlockStackTags`.
+    """
+    heights = [float(h) for h in heights]
+    if len(heights) != len(divisions) or not heights:
+        raise ValueError(f"heights ({len(heights)}) and divisions ({len(divisions)}) must have one entry per block")
+    for k, (h, n) in enumerate(zip(heights, divisions), start=1):
+        if not h > 0:
+            raise ValueError(f"block {k}: height must be positive, got {h!r}")
+        if len(n) != 3 or any(int(c) != c or c < 1 for c in n):
+            raise ValueError(f"block {k}: divisions must be three positive integers, got {n!r}")
+    if not (Lx > 0 and Lz > 0):
+        raise ValueError(f"Lx and Lz must be positive, got {Lx!r}, {Lz!r}")
+    x0 = -Lx / 2 if centred else 0.0
+    z0 = -Lz / 2 if centred else 0.0
+    bottoms = y0 + np.concatenate([[0.0], np.cumsum(heights)[:-1]])
+
+    def build() -> None:
+        volumes = [_fragment_boxes([(x0, yb, z0, Lx, h, Lz)]) for yb, h in zip(bottoms, heights)]
+        gmsh.model.occ.synchronize()
+        counts = {}
+        for body, (n_x, n_y, n_z) in zip(volumes, divisions):
+            counts |= _box_curve_counts(body, lambda d, n=(n_x, n_y, n_z): n[int(np.argmax(d))])
+        _structured_hexahedra(counts)
+        size = float(np.linalg.norm([Lx, sum(heights), Lz]))
+        x1, z1 = x0 + Lx, z0 + Lz
+        T = BlockStackTags
+        for k, (body, yb, h) in enumerate(zip(volumes, bottoms, heights), start=1):
+            _add_group(3, body, T.body(k), f"block{k}")
+            yt = yb + h
+            for lower, upper, tag, label in (
+                ((x0, yb, z0), (x1, yb, z1), T.bottom(k), "bottom"),
+                ((x0, yt, z0), (x1, yt, z1), T.top(k), "top"),
+                ((x0, yb, z0), (x0, yt, z1), T.xmin(k), "xmin"),
+                ((x1, yb, z0), (x1, yt, z1), T.xmax(k), "xmax"),
+                ((x0, yb, z0), (x1, yt, z0), T.zmin(k), "zmin"),
+                ((x0, yb, z1), (x1, yt, z1), T.zmax(k), "zmax"),
+            ):
+                _add_group(2, _surfaces_in_box(lower, upper, body, size), tag, f"block{k}_{label}")
+        gmsh.model.mesh.generate(3)
+        _round_node_coordinates()
+
+    return _mesh_from_gmsh(comm, "block_stack", build, msh_file)
+
+
 # --------------------------------------------------------------------------------------------
 # Thick-walled cylinder under internal pressure (plane strain, elastoplastic verification)
 # --------------------------------------------------------------------------------------------
@@ -616,5 +722,30 @@ def build_graded_contact_blocks(comm: MPI.Comm = MPI.COMM_WORLD, h: float = 0.25
     index = np.rint(x).astype(np.int64)
     if not np.allclose(x, index, atol=1e-9):
         raise RuntimeError("build_graded_contact_blocks: the unit block mesh has non-integer nodes")
+    x[:, 0], x[:, 1], x[:, 2] = xs[index[:, 0]], ys[index[:, 1]], zs[index[:, 2]]
+    return MeshAndTags(mesh, cell_tags, facet_tags)
+
+
+def build_graded_block(comm: MPI.Comm = MPI.COMM_WORLD, h: float = 0.25, *, fine_width: float = 1.25,
+                       fine_depth: float = 0.5, block: float = 6.0, half: bool = False,
+                       ratio: float = 1.3) -> MeshAndTags:
+    """One block below y = 0, graded towards the point x = z = 0 of its top (indentation tests).
+
+    Elements of size ``h`` over |x|, z ≤ ``fine_width`` and ``fine_depth`` below the top,
+    growing by ``ratio`` beyond, out to ``block`` (half width, depth and height). Quarter model
+    (x, z ≥ 0) or, with ``half``, half model (z ≥ 0). Tags as :class:`BlockStackTags` (block 1:
+    top = 201, bottom = 101, x = 0 plane 301, z = 0 plane 501).
+    """
+    s = graded_nodes(h, round(fine_width / h), block, ratio)
+    t = graded_nodes(h, round(fine_depth / h), block, ratio)
+    xs = np.concatenate([-s[:0:-1], s]) if half else s
+    ys = -t[::-1]  # from y = -block up to the top y = 0
+    zs = s
+    nx, ny, nz = len(xs) - 1, len(ys) - 1, len(zs) - 1
+    mesh, cell_tags, facet_tags = build_block_stack(comm, nx, nz, [ny], [(nx, ny, nz)])
+    x = mesh.geometry.x
+    index = np.rint(x).astype(np.int64)
+    if not np.allclose(x, index, atol=1e-9):
+        raise RuntimeError("build_graded_block: the unit block mesh has non-integer nodes")
     x[:, 0], x[:, 1], x[:, 2] = xs[index[:, 0]], ys[index[:, 1]], zs[index[:, 2]]
     return MeshAndTags(mesh, cell_tags, facet_tags)

@@ -27,26 +27,21 @@ Measurements (``docs/verification-hertz.md`` gives the reasoning):
   innermost slipping pair.
 """
 
-import math
 import time
 
-import dolfinx.fem as fem
-import dolfinx.fem.petsc
 import numpy as np
 import pytest
-import ufl
 from mpi4py import MPI
-from petsc4py import PETSc
-from scipy.optimize import minimize_scalar
 
-from dolfinx_nnqem import compat
+from dolfinx_nnqem.hertz import NodalLoads, hertz_contact
+from dolfinx_nnqem.hertz import measure_hertz as _measure
 from dolfinx_nnqem.material import VonMises
 from dolfinx_nnqem.meshing import StackedBlocksTags as T
 from dolfinx_nnqem.meshing import build_graded_contact_blocks
 from dolfinx_nnqem.monolithic import MonolithicSolver
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet
 from dolfinx_nnqem.solver import SolverOptions
-from dolfinx_nnqem.results import pair_table, reactions, values_at_blocks
+from dolfinx_nnqem.results import pair_table, reactions
 from dolfinx_nnqem.stepping import solve_load_steps
 
 E, NU = 210e3, 0.3  # MPa
@@ -88,74 +83,21 @@ def hertz_problem(h: float, *, half: bool = False, mu_f: float = 0.0, drag: floa
 
 
 # -- measuring ----------------------------------------------------------------------------------
-class PairLoads:
-    """Per pair (global pair order): the tributary area ∫ N_a dA on body 1's contact face and the
-    consistent nodal forces ∫ p N_a dA of a Hertz pressure p = p0 sqrt(1 − r²/a²)."""
-
-    def __init__(self, problem):
-        self.problem = problem
-        mesh = problem.mesh
-        v = ufl.TestFunction(problem.V)
-        ds = ufl.Measure("ds", domain=mesh, subdomain_data=problem.facet_tags,
-                         metadata={"quadrature_degree": 16})  # the √ kink at r = a
-        x = ufl.SpatialCoordinate(mesh)
-        self.a = fem.Constant(mesh, PETSc.ScalarType(1.0))
-        self.p0 = fem.Constant(mesh, PETSc.ScalarType(1.0))
-        p = self.p0 * ufl.sqrt(ufl.max_value(1.0 - (x[0] ** 2 + x[2] ** 2) / self.a ** 2, 0.0))
-        self.area_form = fem.form(v[1] * ds(T.CONTACT1))
-        self.hertz_form = fem.form(p * v[1] * ds(T.CONTACT1))
-        pairs = problem.contact.interfaces[0].pairs  # node-to-node: the body-1 nodes a_i
-        self.blocks = pairs.gather(pairs.dofs_a.astype(np.int64))
-        self.area = self._per_pair(self.area_form)
-
-    def _per_pair(self, form) -> np.ndarray:
-        F = compat.create_vector(self.problem.V)
-        with F.localForm() as local:
-            local.set(0.0)
-        dolfinx.fem.petsc.assemble_vector(F, form)
-        F.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-        values = values_at_blocks(self.problem, self.blocks, F)[:, 1]
-        F.destroy()
-        return values
-
-    def hertz(self, a: float, p0: float) -> np.ndarray:
-        self.a.value, self.p0.value = a, p0
-        return self._per_pair(self.hertz_form)
+def pair_loads(problem) -> NodalLoads:
+    """Tributary areas and Hertz forces at the pairs' body-1 nodes (global pair order)."""
+    pairs = problem.contact.interfaces[0].pairs  # node-to-node: the body-1 nodes a_i
+    return NodalLoads(problem, T.CONTACT1, pairs.gather(pairs.dofs_a.astype(np.int64)))
 
 
 def hertz_reference(F: float) -> tuple[float, float]:
     """Hertz, sphere (radius R) on a flat, identical elastic materials: (a, p0) for the force F."""
-    a = (3.0 * F * R_SPHERE / (4.0 * E_STAR)) ** (1.0 / 3.0)
-    return a, 3.0 * F / (2.0 * math.pi * a**2)
+    return hertz_contact(F, R_SPHERE, E_STAR)
 
 
-def measure_hertz(problem, loads: PairLoads, table: dict, symmetry: int) -> dict:
+def measure_hertz(problem, loads: NodalLoads, table: dict, symmetry: int) -> dict:
     """F, a and p0 from the pair forces (``symmetry``: 4 quarter model, 2 half model)."""
-    position = table["position"]
-    r = np.hypot(position[:, 0], position[:, 2])
-    p_n = -table["force_local_body1"][:, 0]  # on body 2, ≥ 0
-    closed = table["state"] != 0
-    F = symmetry * p_n.sum()
-    a_hertz, p0_hertz = hertz_reference(F)
-    centre = int(np.argmin(r))
-    assert r[centre] < 1e-12
-    p0 = p_n[centre] / loads.area[centre]
-
-    def misfit(a):
-        return float(np.sum((p_n - loads.hertz(a, 3.0 * F / (2.0 * math.pi * a**2))) ** 2))
-
-    fit = minimize_scalar(misfit, bounds=(0.5 * a_hertz, 1.5 * a_hertz), method="bounded",
-                          options={"xatol": 1e-6 * a_hertz})
-    a = float(fit.x)
-    f_hertz_centre = loads.hertz(a_hertz, p0_hertz)[centre]
-    return {
-        "F": F, "a_hertz": a_hertz, "p0_hertz": p0_hertz, "p0": p0, "a": a,
-        "err_p0": p0 / p0_hertz - 1.0, "err_a": a / a_hertz - 1.0,
-        # the centre pair's force against the Hertz pressure's consistent nodal force there
-        "err_f_centre": p_n[centre] / f_hertz_centre - 1.0,
-        "r_closed": r[closed].max(), "r_open": r[~closed].min(), "closed": int(closed.sum()),
-        "pressure": p_n / loads.area, "r": r,
-    }
+    return _measure(loads, -table["force_local_body1"][:, 0], table["position"], table["state"] != 0,
+                    symmetry, R_SPHERE, E_STAR)
 
 
 def equilibrium_errors(problem, table: dict) -> tuple[float, float]:
@@ -170,7 +112,7 @@ def run_v6(h: float) -> dict:
     """Quarter model, frictionless, the approach δ in one increment."""
     t0 = time.perf_counter()
     problem = hertz_problem(h)
-    loads = PairLoads(problem)
+    loads = pair_loads(problem)
     solver = MonolithicSolver(problem, SolverOptions(rtol=1e-12, max_iterations=30))
     results = solve_load_steps(problem, solver, 1)
     table = pair_table(problem)
@@ -237,7 +179,7 @@ def run_v7(h: float, drag: float, tangential_increments: int) -> list[dict]:
         h, half=True, mu_f=MU_F, drag=drag,
         normal=lambda ell: min(n * ell, 1.0),
         tangential=lambda ell: max(n * ell - 1.0, 0.0) / tangential_increments)
-    loads = PairLoads(problem)
+    loads = pair_loads(problem)
     solver = MonolithicSolver(problem, SolverOptions(rtol=1e-12, max_iterations=30))
     out = []
 

@@ -6,7 +6,7 @@ import pytest
 import ufl
 from conftest import box_with_face_tags
 
-from dolfinx_nnqem.material import PlasticState, VonMises, strain
+from dolfinx_nnqem.material import PlasticState, VonMises
 from dolfinx_nnqem.monolithic import MonolithicSolver
 from dolfinx_nnqem.problem import ContactProblem, Dirichlet
 from dolfinx_nnqem.stepping import solve_load_steps

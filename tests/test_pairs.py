@@ -10,7 +10,6 @@ import dolfinx
 import numpy as np
 import pytest
 from mpi4py import MPI
-from petsc4py import PETSc
 
 from dolfinx_nnqem import compat, meshing
 from dolfinx_nnqem.contact.pairs import ContactPairError, find_pairs, local_frames
