@@ -85,6 +85,20 @@ class CondensedProblem:
         return asdict(self)
 
 
+def rigid_start(BN: np.ndarray, w_change: np.ndarray) -> np.ndarray:
+    """Starting mode amplitudes α_0 = −(B N)⁺ Δw: the rigid motion that undoes the change ``w_change``
+    of the pairs' relative displacements, in the least-squares sense.
+
+    The generalised inverse fixes a floating body at its fixing dofs, so the elastic predictor
+    moves it rigidly by an arbitrary amount; started from α = 0, its pairs would open or
+    penetrate for no physical reason (and an interface whose pairs all open leaves the body's
+    modes without a Jacobian column). Started from α_0, the pairs keep their relative position.
+    """
+    if BN.shape[1] == 0:
+        return np.zeros(0)
+    return -np.linalg.lstsq(BN, w_change, rcond=None)[0]
+
+
 class NNEQM1Solver:
     """Nested NNEQM: contact flexibility + dense nonsmooth Newton inside Newton–Raphson.
 
@@ -152,14 +166,12 @@ class NNEQM1Solver:
         z_scale = laws.unknown_scale(F).reshape(-1)
         x_scale = np.concatenate([z_scale, np.full(n_r, F / cond.r)])
 
-        def residual(x):
-            xs = x * x_scale
-            z = xs[:n3].reshape(nc, 3)
-            lam, dlam_dz = laws.force(z)
+        def w_of(xs, lam):
             w = cond.w_m + cond.w_free + C @ (lam.reshape(-1) - cond.lam_m)
-            if n_r:
-                w = w + cond.BN @ xs[n3:]
-            ev = laws.evaluate(w.reshape(nc, 3), cond.w_prev, z)
+            return w + cond.BN @ xs[n3:] if n_r else w
+
+        def system(xs, lam, dlam_dz, ev):
+            """The scaled rows and Jacobian for the law evaluation ``ev``."""
             # J = blockdiag(∂H/∂w) · C · blockdiag(∂λ/∂z) + blockdiag(∂H/∂z)
             DwC = np.einsum("nij,njk->nik", ev.dH_dw, C.reshape(nc, 3, n3))
             Jz = np.einsum("anj,njk->ank", DwC.reshape(n3, nc, 3), dlam_dz)
@@ -176,13 +188,50 @@ class NNEQM1Solver:
             J[n3:, :n3] = np.einsum("anj,njk->ank", cond.BN.T.reshape(n_r, nc, 3), dlam_dz).reshape(n_r, n3)
             return H / F, J * x_scale[None, :] / F
 
+        def residual(x):
+            xs = x * x_scale
+            z = xs[:n3].reshape(nc, 3)
+            lam, dlam_dz = laws.force(z)
+            ev = laws.evaluate(w_of(xs, lam).reshape(nc, 3), cond.w_prev, z)
+            return system(xs, lam, dlam_dz, ev)
+
         g = self.settings.inner
-        x0 = np.concatenate([z_m.reshape(-1), np.zeros(n_r)]) / x_scale
+        x0 = np.concatenate([z_m.reshape(-1), rigid_start(cond.BN, cond.w_free)]) / x_scale
+        if n_r:  # only a floating body's predictor is out of balance (see _frozen_branch_start)
+            x0 = self._frozen_branch_start(x0, x_scale, laws, cond, z_m, w_of, system)
         result = solve_nonsmooth(residual, x0, tol=tol / F, max_iter=self.settings.inner_max_iterations,
                                  watchdog=g.watchdog, armijo=g.armijo, min_step=g.min_step, lm_c=g.lm_c,
                                  lm_delta=g.lm_delta, max_increase=g.max_increase)
         result.x = result.x * x_scale
         return result
+
+    @staticmethod
+    def _frozen_branch_start(x0, x_scale, laws, cond, z_m, w_of, system):
+        """The inner start: one Newton step with every pair's branch frozen at the outer iterate.
+
+        The elastic predictor w_free is the response to the out-of-balance load before the pair
+        forces change; where that load is not in balance (a body held only by contact, whose
+        generalised inverse fixes it at its fixing dofs) it deforms the contact surfaces
+        meaninglessly, and pairs evaluated there start on the wrong branch (opening although
+        they will be pressed). The monolithic solver linearises the laws where the iterate is;
+        this step does the same here: the laws' values and B-Jacobians at (w_m, z_m), their
+        linearisation at x0, one solve. The iteration then starts from its solution (or from x0
+        if that system is singular). Used when there are free rigid modes: where every body is
+        supported, the predictor is the physical response to the out-of-balance load and the
+        seed's start from it is kept.
+        """
+        nc = z_m.shape[0]
+        xs = x0 * x_scale
+        lam, dlam_dz = laws.force(z_m)
+        ev = laws.evaluate(cond.w_m.reshape(nc, 3), cond.w_prev, z_m)
+        w = w_of(xs, lam).reshape(nc, 3)
+        H_lin = ev.H + np.einsum("nij,nj->ni", ev.dH_dw, w - cond.w_m.reshape(nc, 3))
+        H, J = system(xs, lam, dlam_dz, ev._replace(H=H_lin))
+        try:
+            step = np.linalg.solve(J, -H)
+        except np.linalg.LinAlgError:
+            return x0
+        return x0 + step if np.all(np.isfinite(step)) else x0
 
     def destroy(self) -> None:
         self.condensation.destroy()

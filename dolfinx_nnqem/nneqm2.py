@@ -97,6 +97,7 @@ from dolfinx_nnqem.convergence import IterationRecord, SolveReport, logger
 from dolfinx_nnqem.linalg import free_dropped_objects
 from dolfinx_nnqem.material import (DEVIATORIC_BASIS, GaussPointValues, deviator_coordinates, deviator_tensors,
                                     elastic_stress, equivalent_stress, flow_direction, strain)
+from dolfinx_nnqem.nneqm1 import rigid_start
 from dolfinx_nnqem.nonsmooth import solve_nonsmooth
 from dolfinx_nnqem.problem import ContactProblem, assemble_vector
 from dolfinx_nnqem.solver import NNEQM2Options, SolverOptions
@@ -136,6 +137,7 @@ class _Increment:
     e0: np.ndarray
     SB: np.ndarray
     r: float
+    w_start: np.ndarray | None = None  #: w where the increment starts (B u + m(ℓ), prescribed values applied)
     N: np.ndarray | None = None
     SQ: np.ndarray | None = None
     WBQ: np.ndarray | None = None
@@ -374,7 +376,7 @@ class NNEQM2Solver:
         scale = max(F_ext.norm(), F_n.norm())
 
         # -- gathered pair data (global order, every rank)
-        laws = w_prev = w0 = None
+        laws = w_prev = w0 = w_start = None
         z_start = np.zeros((0, 3))
         lam_start = np.zeros((0, 3))
         if nc:
@@ -386,6 +388,7 @@ class NNEQM2Solver:
             un_plus.axpy(1.0, du0)
             w0 = model.gather(p.relative_displacement(un_plus)).reshape(-1)
             un_plus.destroy()
+            w_start = model.gather(p.relative_displacement()).reshape(-1)
             lam_start, _ = laws.force(z_start)
             scale = max(scale, model.global_force(model.force()).norm())
         F = max(scale, opts.atol)
@@ -400,7 +403,7 @@ class NNEQM2Solver:
             BN=self.condensation.mode_coupling() if nc else np.zeros((0, n_r)),
             e=self.condensation.mode_loads(b), s_n=s_n, p_n=self._gather_gp(st.p_n.x.array[:self.n_gp]),
             mu=mu, sy=sy, Hh=Hh, su=su, gscale=gscale, e0=e0, SB=self._SB if nc else np.zeros((NG, 5, 0)),
-            r=max(group.r for group in laws.groups) if nc else 1.0)
+            r=max(group.r for group in laws.groups) if nc else 1.0, w_start=w_start)
 
         # -- flow directions at the start of the increment
         s_dir = s_n.copy()
@@ -410,7 +413,8 @@ class NNEQM2Solver:
             s_dir[flat] = s_tr[flat]
         N = flow_direction(s_dir, su)
 
-        x = np.concatenate([z_start.reshape(-1) / self._z_scale(d, laws), np.zeros(NG), np.zeros(n_r)])
+        alpha_0 = rigid_start(d.BN, w0 - w_prev.reshape(-1)) if n_r else np.zeros(0)
+        x = np.concatenate([z_start.reshape(-1) / self._z_scale(d, laws), np.zeros(NG), alpha_0 / (F / d.r)])
         flow_updates, change = 0, float("nan")
         total_its = 0
         while True:
@@ -558,7 +562,9 @@ class NNEQM2Solver:
         m = n3 + NG + n_r
         last = {}
 
-        def residual(x):
+        def residual(x, frozen=None):
+            """[pair rows / F; H4; self-equilibrium / F] and its Jacobian at ``x``; with ``frozen``
+            = (law evaluation, w) the pair rows are that evaluation linearised at x instead."""
             dgt = x[n3:n3 + NG]
             dg = dgt * gscale
             Hs = np.empty(m)
@@ -569,7 +575,11 @@ class NNEQM2Solver:
                 w = d.w0 + d.WBB @ lam.reshape(-1) + d.WBQ @ dg
                 if n_r:
                     w = w + d.BN @ (x[n3 + NG:] * a_scale)
-                ev = laws.evaluate(w.reshape(nc, 3), d.w_prev, z)
+                if frozen is None:
+                    ev = laws.evaluate(w.reshape(nc, 3), d.w_prev, z)
+                else:
+                    ev, w_f = frozen
+                    ev = ev._replace(H=ev.H + np.einsum("nij,nj->ni", ev.dH_dw, w.reshape(nc, 3) - w_f))
                 Hs[:n3] = ev.H.reshape(-1) / F
                 # pair rows: blockdiag(∂H/∂w) [W_BB Λ', W_BQ, B N] + [blockdiag(∂H/∂z), 0, 0]
                 DwW = np.einsum("nij,njk->nik", ev.dH_dw, d.WBB.reshape(nc, 3, n3))
@@ -626,6 +636,8 @@ class NNEQM2Solver:
 
         g = self.settings.inner
         t0 = time.perf_counter()
+        if n_r and d.w_start is not None:
+            x0 = self._frozen_branch_start(x0, d, laws, z_scale, residual)
         result = solve_nonsmooth(residual, x0, tol=tol, max_iter=self.settings.inner_max_iterations, log=log,
                                  watchdog=g.watchdog, armijo=g.armijo, min_step=g.min_step, lm_c=g.lm_c,
                                  lm_delta=g.lm_delta, max_increase=g.max_increase)
@@ -636,6 +648,28 @@ class NNEQM2Solver:
             converged, message, xs = comm.bcast((result.converged, result.message, result.x), root=0)
             result.converged, result.message, result.x = converged, message, xs
         return result, records
+
+    @staticmethod
+    def _frozen_branch_start(x0, d: _Increment, laws, z_scale, residual):
+        """One Newton step with the pairs' branches frozen at the start of the increment.
+
+        As in NNEQM1 (:meth:`NNEQM1Solver._frozen_branch_start`): a floating body's elastic
+        predictor du_0 = G b is the response to a load not yet balanced by contact, fixed at the
+        fixing dofs, and pairs evaluated there start on meaningless branches. The pair laws are
+        evaluated where the increment starts (u_n with the new prescribed values), linearised at
+        x0, and the whole system solved once; the iteration starts from there (or from x0 if
+        that system is singular).
+        """
+        nc = d.nc
+        z = (x0[:3 * nc] * z_scale).reshape(nc, 3)
+        w_start = d.w_start.reshape(nc, 3)
+        ev = laws.evaluate(w_start, d.w_prev, z)
+        H, J = residual(x0, frozen=(ev, w_start))
+        try:
+            step = np.linalg.solve(J, -H)
+        except np.linalg.LinAlgError:
+            return x0
+        return x0 + step if np.all(np.isfinite(step)) else x0
 
     # -- checks of the converged increment ----------------------------------------------------
     def _checks(self, sigma, dg_local, F_ext, load_factor, iterations, flow_updates, change) -> dict:
