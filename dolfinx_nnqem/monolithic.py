@@ -193,14 +193,12 @@ class MonolithicSolver:
         self._tick("assembly", t0)
         R_free = p.free_residual(p.residual(F_int=F_int))
         law, H = None, np.zeros((0, 3))
-        scale = max(p.external_force().norm(), F_int.norm())
         if p.has_contact:
             t0 = time.perf_counter()
             law = p.contact.evaluate(p.relative_displacement())
             H = law.H
             self._tick("contact", t0)
-            scale = max(scale, p.contact.global_force(p.contact.force()).norm())
-        return _Evaluation(R_free, H, law, scale, R_free.norm(), global_norm(H, p.comm))
+        return _Evaluation(R_free, H, law, p.force_scale(F_int), R_free.norm(), global_norm(H, p.comm))
 
     def _newton_matrix(self, ev: _Evaluation) -> PETSc.Mat:
         """J as one AIJ matrix (the direct system, and the LM fallback's)."""

@@ -260,7 +260,7 @@ class _OuterSystem:
         R_free = p.free_residual(p.residual(F_int=F_int))
         w = p.relative_displacement()
         law = p.contact.evaluate(w)
-        scale = max(p.external_force().norm(), F_int.norm(), p.contact.global_force(p.contact.force()).norm())
+        scale = p.force_scale(F_int)
         norm_R, norm_H = R_free.norm(), global_norm(law.H, p.comm)
         self.current = (R_free, w, law, scale, norm_R, norm_H)
         opts = s.options

@@ -373,7 +373,8 @@ class NNEQM2Solver:
         du0 = self.condensation.solve(b)
         du0_arr = du0.getArray(readonly=True).copy()
         e0 = self._gather_gp(deviator_coordinates(self._strains9(du0)))
-        scale = max(F_ext.norm(), F_n.norm())
+        # F_n and F_ext, the lifted prescribed increments and an obstacle's motion (not yet in F_n)
+        scale = max(F_ext.norm(), F_n.norm(), lift.norm())
 
         # -- gathered pair data (global order, every rank)
         laws = w_prev = w0 = w_start = None
@@ -390,7 +391,8 @@ class NNEQM2Solver:
             un_plus.destroy()
             w_start = model.gather(p.relative_displacement()).reshape(-1)
             lam_start, _ = laws.force(z_start)
-            scale = max(scale, model.global_force(model.force()).norm())
+            scale = max(scale, model.global_force(model.force()).norm(),
+                        model.motion_force_scale(p.load_factor, p.load_factor_n))
         F = max(scale, opts.atol)
         tol = opts.rtol + opts.atol / F
 

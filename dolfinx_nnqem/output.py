@@ -195,6 +195,8 @@ class SummaryWriter:
         eq = res.equilibrium_check(p)
         d["applied_load"] = eq["applied_load"].tolist()
         d["reactions"] = {str(k): v.tolist() for k, v in eq["reactions"].items()}
+        if eq["obstacle_forces"]:
+            d["obstacle_forces"] = {k: v.tolist() for k, v in eq["obstacle_forces"].items()}
         d["reaction_sum"] = eq["reaction_sum"].tolist()
         d["equilibrium_residual"] = eq["global_imbalance"]
         d["free_dof_residual"] = eq["residual_norm"]

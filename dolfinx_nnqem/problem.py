@@ -358,6 +358,19 @@ class ContactProblem:
             R.axpy(-1.0, self.contact.global_force(self.contact.force(z)))
         return R
 
+    def force_scale(self, F_int: PETSc.Vec) -> float:
+        """The problem's force scale F at the current iterate, for convergence tests.
+
+        F = max(‖F_ext(ℓ)‖, ‖F_int‖, ‖Bᵀλ(z)‖, r ‖Δm‖): the applied loads, the internal forces
+        (which carry the prescribed displacements), the contact forces, and the forces a moving
+        rigid obstacle sets up over the increment (``ContactModel.motion_force_scale``).
+        """
+        scale = max(self.external_force().norm(), F_int.norm())
+        if self.has_contact:
+            scale = max(scale, self.contact.global_force(self.contact.force()).norm(),
+                        self.contact.motion_force_scale(self.load_factor, self.load_factor_n))
+        return scale
+
     def tangent_action(self, delta: np.ndarray) -> PETSc.Vec:
         """K_t(u) δ without any constrained row or column removed (δ: local array, ghosts included).
 

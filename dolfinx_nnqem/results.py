@@ -81,7 +81,8 @@ def pair_table(problem) -> dict[str, np.ndarray]:
     ``frame`` (R), ``state`` (0/1/2), ``force_local_body1`` (−λ: normal, tangential 1,
     tangential 2 on body 1, N), ``force_on_body1`` (global frame, N), ``u_body1`` (the master
     point's displacement u_s − Rᵀw: node a's, or the obstacle's), ``u_body2`` (m), ``gap`` (m),
-    ``slip`` (tangential slip of the last increment, m), ``z`` (the law's unknowns).
+    ``slip`` (tangential slip of the last increment, m), ``z`` (the law's unknowns),
+    ``slave_block`` (the slave node's global dof block).
     """
     model = problem.contact
     lam = model.force()
@@ -100,7 +101,7 @@ def pair_table(problem) -> dict[str, np.ndarray]:
         "position": g[:, 0:3], "position_b": g[:, 3:6], "frame": g[:, 6:15].reshape(-1, 3, 3),
         "state": g[:, 15].astype(np.int8), "force_local_body1": g[:, 16:19],
         "force_on_body1": g[:, 19:22], "gap": g[:, 22], "slip": g[:, 23:25], "z": g[:, 25:28],
-        "interface": g[:, 29].astype(np.int32),
+        "interface": g[:, 29].astype(np.int32), "slave_block": g[:, 28].astype(np.int64),
     }
     table["u_body2"] = values_at_blocks(problem, g[:, 28].astype(np.int64))
     table["u_body1"] = table["u_body2"] - g[:, 30:33]  # w = R (u_s − u_master)

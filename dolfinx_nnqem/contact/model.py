@@ -364,6 +364,20 @@ class ContactModel:
         parts = [i.pairs.motion_amplitudes(load_factor) for i in self.interfaces]
         return np.concatenate(parts) if parts else np.zeros(0)
 
+    def motion_force_scale(self, load_factor: float, load_factor_n: float) -> float:
+        """r ‖m(ℓ) − m(ℓ_n)‖ over all pairs (collective): the forces an obstacle's motion over the
+        increment sets up, in force units. 0 when no obstacle moves.
+
+        Loads and prescribed displacements show in F_ext and F_int; a moving obstacle shows in
+        neither until the pairs close, so a solver's force scale needs it explicitly.
+        """
+        local = 0.0
+        for interface in self.interfaces:
+            if interface.contact.obstacle is not None:
+                dm = interface.pairs.motion(load_factor) - interface.pairs.motion(load_factor_n)
+                local += float(np.sum((interface.r * dm) ** 2))
+        return float(np.sqrt(self.comm.allreduce(local, op=MPI.SUM)))
+
     def B_times(self, x: PETSc.Vec) -> np.ndarray:
         """B x, (num_local, 3), for any vector laid out like V (only owned entries are read)."""
         self.B.mult(x, self._w)
