@@ -138,6 +138,7 @@ class _Increment:
     SB: np.ndarray
     r: float
     w_start: np.ndarray | None = None  #: w where the increment starts (B u + m(ℓ), prescribed values applied)
+    dp_n: np.ndarray | None = None  #: (NG,) Δp of the last increment (which Gauss points yielded)
     N: np.ndarray | None = None
     SQ: np.ndarray | None = None
     WBQ: np.ndarray | None = None
@@ -405,7 +406,13 @@ class NNEQM2Solver:
             BN=self.condensation.mode_coupling() if nc else np.zeros((0, n_r)),
             e=self.condensation.mode_loads(b), s_n=s_n, p_n=self._gather_gp(st.p_n.x.array[:self.n_gp]),
             mu=mu, sy=sy, Hh=Hh, su=su, gscale=gscale, e0=e0, SB=self._SB if nc else np.zeros((NG, 5, 0)),
-            r=max(group.r for group in laws.groups) if nc else 1.0, w_start=w_start)
+            r=max(group.r for group in laws.groups) if nc else 1.0, w_start=w_start,
+            dp_n=self._gather_gp(st.dp_n.x.array[:self.n_gp]))
+
+        alpha_0 = rigid_start(d.BN, w0 - w_prev.reshape(-1)) if n_r else np.zeros(0)
+        if n_r and nc:  # a floating body: the pair forces from an equilibrated elastic prediction
+            z_start, alpha_0 = self._elastic_pair_prediction(d, laws, z_start, alpha_0)
+            lam_start, _ = laws.force(z_start)
 
         # -- flow directions at the start of the increment
         s_dir = s_n.copy()
@@ -415,7 +422,6 @@ class NNEQM2Solver:
             s_dir[flat] = s_tr[flat]
         N = flow_direction(s_dir, su)
 
-        alpha_0 = rigid_start(d.BN, w0 - w_prev.reshape(-1)) if n_r else np.zeros(0)
         x = np.concatenate([z_start.reshape(-1) / self._z_scale(d, laws), np.zeros(NG), alpha_0 / (F / d.r)])
         flow_updates, change = 0, float("nan")
         total_its = 0
@@ -564,9 +570,10 @@ class NNEQM2Solver:
         m = n3 + NG + n_r
         last = {}
 
-        def residual(x, frozen=None):
+        def residual(x, frozen=None, yield_branch=None):
             """[pair rows / F; H4; self-equilibrium / F] and its Jacobian at ``x``; with ``frozen``
-            = (law evaluation, w) the pair rows are that evaluation linearised at x instead."""
+            = (law evaluation, w) the pair rows are that evaluation linearised at x instead, and
+            with ``yield_branch`` (NG,) bool the Gauss points take that branch of their min."""
             dgt = x[n3:n3 + NG]
             dg = dgt * gscale
             Hs = np.empty(m)
@@ -602,7 +609,7 @@ class NNEQM2Solver:
                     J[n3 + NG:, n3:n3 + NG] = d.NtQ * gscale[None, :] / F
                 last["states"] = ev.state
             a, b, s, q = self._yield_rows(x, d, laws)
-            use_a = a <= b  # tie: the first argument (yield branch)
+            use_a = a <= b if yield_branch is None else yield_branch  # tie: the first argument (yield branch)
             Hs[n3:n3 + NG] = np.where(use_a, a, b)
             # ∂(−f/σ_u): g_j = 2μ_j (3/2) s_j / q_j
             qs = np.where(q > 0.0, q, 1.0)
@@ -652,21 +659,54 @@ class NNEQM2Solver:
         return result, records
 
     @staticmethod
+    def _elastic_pair_prediction(d: _Increment, laws, z: np.ndarray, alpha: np.ndarray):
+        """(z, α) of one elastic Newton step of the pairs and the self-equilibrium rows alone,
+        the pair branches frozen where the increment starts (no plastic flow).
+
+        A floating body's predictor strains e0 come from a load not yet balanced by contact;
+        with the pair forces of this prediction, e0 + S_B λ is the strain of an equilibrated
+        elastic state, from which the flow directions of Gauss points without stress are taken.
+        """
+        nc, n_r, F = d.nc, d.n_r, d.F
+        n3 = 3 * nc
+        lam, dlam_dz = laws.force(z)
+        w_start = d.w_start.reshape(nc, 3)
+        ev = laws.evaluate(w_start, d.w_prev, z)
+        w = (d.w0 + d.WBB @ lam.reshape(-1) + d.BN @ alpha).reshape(nc, 3)
+        H = np.concatenate([(ev.H + np.einsum("nij,nj->ni", ev.dH_dw, w - w_start)).reshape(-1),
+                            d.e + d.BN.T @ lam.reshape(-1)]) / F
+        J = np.zeros((n3 + n_r, n3 + n_r))
+        DwW = np.einsum("nij,njk->nik", ev.dH_dw, d.WBB.reshape(nc, 3, n3))
+        Jz = np.einsum("anj,njk->ank", DwW.reshape(n3, nc, 3), dlam_dz).reshape(nc, 3, nc, 3)
+        Jz[np.arange(nc), :, np.arange(nc), :] += ev.dH_dz
+        J[:n3, :n3] = Jz.reshape(n3, n3)
+        J[:n3, n3:] = np.einsum("nij,njk->nik", ev.dH_dw, d.BN.reshape(nc, 3, n_r)).reshape(n3, n_r)
+        J[n3:, :n3] = np.einsum("anj,njk->ank", d.BN.T.reshape(n_r, nc, 3), dlam_dz).reshape(n_r, n3)
+        try:
+            step = np.linalg.solve(J / F, -H)
+        except np.linalg.LinAlgError:
+            return z, alpha
+        if not np.all(np.isfinite(step)):
+            return z, alpha
+        return z + step[:n3].reshape(nc, 3), alpha + step[n3:]
+
+    @staticmethod
     def _frozen_branch_start(x0, d: _Increment, laws, z_scale, residual):
-        """One Newton step with the pairs' branches frozen at the start of the increment.
+        """One Newton step with every branch frozen where the increment starts.
 
         As in NNEQM1 (:meth:`NNEQM1Solver._frozen_branch_start`): a floating body's elastic
         predictor du_0 = G b is the response to a load not yet balanced by contact, fixed at the
-        fixing dofs, and pairs evaluated there start on meaningless branches. The pair laws are
-        evaluated where the increment starts (u_n with the new prescribed values), linearised at
-        x0, and the whole system solved once; the iteration starts from there (or from x0 if
-        that system is singular).
+        fixing dofs; pairs and Gauss points evaluated there start on meaningless branches. The
+        pair laws are evaluated where the increment starts (u_n with the new prescribed values)
+        and linearised at x0, each Gauss point takes the branch it ended the last increment on
+        (plastic if it yielded), and the whole system is solved once; the iteration starts from
+        there (or from x0 if that system is singular).
         """
         nc = d.nc
         z = (x0[:3 * nc] * z_scale).reshape(nc, 3)
         w_start = d.w_start.reshape(nc, 3)
         ev = laws.evaluate(w_start, d.w_prev, z)
-        H, J = residual(x0, frozen=(ev, w_start))
+        H, J = residual(x0, frozen=(ev, w_start), yield_branch=d.dp_n > 0.0)
         try:
             step = np.linalg.solve(J, -H)
         except np.linalg.LinAlgError:

@@ -145,6 +145,16 @@ def sphere_problem(h, material=VonMises(E=E, nu=NU), mu_f=0.0, depth=DELTA):
         contact=Contact(sphere, T.top(1), mu_f=mu_f))
 
 
+def sphere_problem_sliding(comm=MPI.COMM_WORLD, h=A_NOMINAL / 2):
+    """The sphere pressed by δ over ℓ ≤ ½, then moved sideways by 2 δ (μ_f = 0.3): a sliding indenter."""
+    mesh, ct, ft = build_graded_block(comm, h, fine_width=1.25 * A_NOMINAL, fine_depth=0.5 * A_NOMINAL, half=True)
+    path = PiecewiseLinearPath([[0.0, 0.0, 0.0, 0.0], [0.5, 0.0, -DELTA, 0.0], [1.0, 2 * DELTA, -DELTA, 0.0]])
+    sphere = Sphere(centre=(0.0, R_SPHERE, 0.0), radius=R_SPHERE, motion=path)
+    return ContactProblem(mesh, ct, ft, materials=VonMises(E=E, nu=NU),
+                          dirichlet=[Dirichlet(T.bottom(1)), Dirichlet(T.zmin(1), 0.0, [2])],
+                          contact=Contact(sphere, T.top(1), mu_f=0.3))
+
+
 def run_sphere(h):
     problem = sphere_problem(h)
     results = solve_load_steps(problem, make_solver("monolithic", problem, SolverOptions(rtol=1e-12)), 1)
