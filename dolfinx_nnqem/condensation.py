@@ -133,7 +133,7 @@ class Condensation:
     def solve(self, rhs: PETSc.Vec) -> PETSc.Vec:
         """K̃⁻¹ (rhs with the fixing rows zeroed); constrained rows of ``rhs`` are kept (lifting)."""
         b = rhs
-        if len(self._owned_fixing):
+        if self.num_modes:  # on every rank (a copy is collective), whichever owns the fixing dofs
             b = rhs.copy()
             b.getArray()[self._owned_fixing] = 0.0
         x = rhs.duplicate()
