@@ -547,36 +547,40 @@ def build_block_stack(
             raise ValueError(f"block {k}: divisions must be three positive integers, got {n!r}")
     if not (Lx > 0 and Lz > 0):
         raise ValueError(f"Lx and Lz must be positive, got {Lx!r}, {Lz!r}")
+    return _mesh_from_gmsh(comm, "block_stack",
+                           lambda: _build_block_stack_model(Lx, Lz, heights, divisions, y0, centred), msh_file)
+
+
+def _build_block_stack_model(Lx: float, Lz: float, heights: Sequence[float],
+                             divisions: Sequence[tuple[int, int, int]], y0: float = 0.0,
+                             centred: bool = False) -> None:
+    """The gmsh model of :func:`build_block_stack` (current model, rank 0): geometry, groups, mesh."""
     x0 = -Lx / 2 if centred else 0.0
     z0 = -Lz / 2 if centred else 0.0
     bottoms = y0 + np.concatenate([[0.0], np.cumsum(heights)[:-1]])
-
-    def build() -> None:
-        volumes = [_fragment_boxes([(x0, yb, z0, Lx, h, Lz)]) for yb, h in zip(bottoms, heights)]
-        gmsh.model.occ.synchronize()
-        counts = {}
-        for body, (n_x, n_y, n_z) in zip(volumes, divisions):
-            counts |= _box_curve_counts(body, lambda d, n=(n_x, n_y, n_z): n[int(np.argmax(d))])
-        _structured_hexahedra(counts)
-        size = float(np.linalg.norm([Lx, sum(heights), Lz]))
-        x1, z1 = x0 + Lx, z0 + Lz
-        T = BlockStackTags
-        for k, (body, yb, h) in enumerate(zip(volumes, bottoms, heights), start=1):
-            _add_group(3, body, T.body(k), f"block{k}")
-            yt = yb + h
-            for lower, upper, tag, label in (
-                ((x0, yb, z0), (x1, yb, z1), T.bottom(k), "bottom"),
-                ((x0, yt, z0), (x1, yt, z1), T.top(k), "top"),
-                ((x0, yb, z0), (x0, yt, z1), T.xmin(k), "xmin"),
-                ((x1, yb, z0), (x1, yt, z1), T.xmax(k), "xmax"),
-                ((x0, yb, z0), (x1, yt, z0), T.zmin(k), "zmin"),
-                ((x0, yb, z1), (x1, yt, z1), T.zmax(k), "zmax"),
-            ):
-                _add_group(2, _surfaces_in_box(lower, upper, body, size), tag, f"block{k}_{label}")
-        gmsh.model.mesh.generate(3)
-        _round_node_coordinates()
-
-    return _mesh_from_gmsh(comm, "block_stack", build, msh_file)
+    volumes = [_fragment_boxes([(x0, yb, z0, Lx, h, Lz)]) for yb, h in zip(bottoms, heights)]
+    gmsh.model.occ.synchronize()
+    counts = {}
+    for body, (n_x, n_y, n_z) in zip(volumes, divisions):
+        counts |= _box_curve_counts(body, lambda d, n=(n_x, n_y, n_z): n[int(np.argmax(d))])
+    _structured_hexahedra(counts)
+    size = float(np.linalg.norm([Lx, sum(heights), Lz]))
+    x1, z1 = x0 + Lx, z0 + Lz
+    T = BlockStackTags
+    for k, (body, yb, h) in enumerate(zip(volumes, bottoms, heights), start=1):
+        _add_group(3, body, T.body(k), f"block{k}")
+        yt = yb + h
+        for lower, upper, tag, label in (
+            ((x0, yb, z0), (x1, yb, z1), T.bottom(k), "bottom"),
+            ((x0, yt, z0), (x1, yt, z1), T.top(k), "top"),
+            ((x0, yb, z0), (x0, yt, z1), T.xmin(k), "xmin"),
+            ((x1, yb, z0), (x1, yt, z1), T.xmax(k), "xmax"),
+            ((x0, yb, z0), (x1, yt, z0), T.zmin(k), "zmin"),
+            ((x0, yb, z1), (x1, yt, z1), T.zmax(k), "zmax"),
+        ):
+            _add_group(2, _surfaces_in_box(lower, upper, body, size), tag, f"block{k}_{label}")
+    gmsh.model.mesh.generate(3)
+    _round_node_coordinates()
 
 
 # --------------------------------------------------------------------------------------------
@@ -723,18 +727,37 @@ def build_graded_contact_blocks(comm: MPI.Comm = MPI.COMM_WORLD, h: float = 0.25
     if not np.allclose(x, index, atol=1e-9):
         raise RuntimeError("build_graded_contact_blocks: the unit block mesh has non-integer nodes")
     x[:, 0], x[:, 1], x[:, 2] = xs[index[:, 0]], ys[index[:, 1]], zs[index[:, 2]]
+    if msh_file is not None:
+        _write_graded_msh(msh_file, comm, nx, ny, nz, xs, ys, zs)
     return MeshAndTags(mesh, cell_tags, facet_tags)
+
+
+def _write_graded_msh(msh_file, comm, nx, ny, nz, xs, ys, zs) -> None:
+    """Write the unit block's gmsh model with its nodes moved to the graded grid (rank 0)."""
+    if comm.rank != 0:
+        return
+
+    def move() -> None:
+        tags, coords, _ = gmsh.model.mesh.getNodes()
+        coords = coords.reshape(-1, 3)
+        index = np.rint(coords).astype(np.int64)
+        for tag, i in zip(tags, index):
+            gmsh.model.mesh.setNode(int(tag), [xs[i[0]], ys[i[1]], zs[i[2]]], [])
+
+    _mesh_from_gmsh(MPI.COMM_SELF, "graded_block", lambda: (_build_block_stack_model(nx, nz, [ny], [(nx, ny, nz)]),
+                                                             move()), msh_file)
 
 
 def build_graded_block(comm: MPI.Comm = MPI.COMM_WORLD, h: float = 0.25, *, fine_width: float = 1.25,
                        fine_depth: float = 0.5, block: float = 6.0, half: bool = False,
-                       ratio: float = 1.3) -> MeshAndTags:
+                       ratio: float = 1.3, msh_file: str | os.PathLike | None = None) -> MeshAndTags:
     """One block below y = 0, graded towards the point x = z = 0 of its top (indentation tests).
 
     Elements of size ``h`` over |x|, z ≤ ``fine_width`` and ``fine_depth`` below the top,
     growing by ``ratio`` beyond, out to ``block`` (half width, depth and height). Quarter model
     (x, z ≥ 0) or, with ``half``, half model (z ≥ 0). Tags as :class:`BlockStackTags` (block 1:
-    top = 201, bottom = 101, x = 0 plane 301, z = 0 plane 501).
+    top = 201, bottom = 101, x = 0 plane 301, z = 0 plane 501). With ``msh_file``, the graded
+    mesh is also written to that file (rank 0).
     """
     s = graded_nodes(h, round(fine_width / h), block, ratio)
     t = graded_nodes(h, round(fine_depth / h), block, ratio)
@@ -748,4 +771,22 @@ def build_graded_block(comm: MPI.Comm = MPI.COMM_WORLD, h: float = 0.25, *, fine
     if not np.allclose(x, index, atol=1e-9):
         raise RuntimeError("build_graded_block: the unit block mesh has non-integer nodes")
     x[:, 0], x[:, 1], x[:, 2] = xs[index[:, 0]], ys[index[:, 1]], zs[index[:, 2]]
+    if msh_file is not None:
+        _write_graded_msh(msh_file, comm, nx, ny, nz, xs, ys, zs)
     return MeshAndTags(mesh, cell_tags, facet_tags)
+
+
+def _write_graded_msh(msh_file, comm, nx, ny, nz, xs, ys, zs) -> None:
+    """Write the unit block's gmsh model with its nodes moved to the graded grid (rank 0)."""
+    if comm.rank != 0:
+        return
+
+    def move() -> None:
+        tags, coords, _ = gmsh.model.mesh.getNodes()
+        coords = coords.reshape(-1, 3)
+        index = np.rint(coords).astype(np.int64)
+        for tag, i in zip(tags, index):
+            gmsh.model.mesh.setNode(int(tag), [xs[i[0]], ys[i[1]], zs[i[2]]], [])
+
+    _mesh_from_gmsh(MPI.COMM_SELF, "graded_block", lambda: (_build_block_stack_model(nx, nz, [ny], [(nx, ny, nz)]),
+                                                             move()), msh_file)

@@ -107,12 +107,12 @@ class PairWriter:
     def _write_csv(path: Path, t: dict) -> None:
         with open(path, "w", newline="") as fh:
             w = csv.writer(fh)
-            w.writerow(["pair", "x", "y", "z", "state", "p_n_on_body1", "t1_on_body1", "t2_on_body1",
+            w.writerow(["pair", "interface", "x", "y", "z", "state", "p_n_on_body1", "t1_on_body1", "t2_on_body1",
                         "Fx_on_body1", "Fy_on_body1", "Fz_on_body1", "gap", "slip1", "slip2",
                         "u1x", "u1y", "u1z", "u2x", "u2y", "u2z"])
             for i in range(len(t["state"])):
-                w.writerow([i, *t["position"][i], STATE_NAMES[t["state"][i]], *t["force_local_body1"][i],
-                            *t["force_on_body1"][i], t["gap"][i], *t["slip"][i],
+                w.writerow([i, t["interface_name"][i], *t["position"][i], STATE_NAMES[t["state"][i]],
+                            *t["force_local_body1"][i], *t["force_on_body1"][i], t["gap"][i], *t["slip"][i],
                             *t["u_body1"][i], *t["u_body2"][i]])
 
     @staticmethod
@@ -125,6 +125,7 @@ class PairWriter:
         cloud["friction_on_body2"] = -t["force_on_body1"] - (-local[:, 0])[:, None] * t["frame"][:, 0, :]
         cloud["force_on_body1"] = t["force_on_body1"]
         cloud["state"] = t["state"].astype(np.int32)
+        cloud["interface"] = t["interface"].astype(np.int32)
         cloud["gap"] = t["gap"]
         cloud["slip"] = np.linalg.norm(t["slip"], axis=1)
         cloud["u_body1"] = t["u_body1"]
@@ -211,7 +212,7 @@ class SummaryWriter:
                  "force_on_body1": t["force_on_body1"][i].tolist(),
                  "force_local_body1": t["force_local_body1"][i].tolist(),
                  "u_body1": t["u_body1"][i].tolist(), "u_body2": t["u_body2"][i].tolist(),
-                 "gap": float(t["gap"][i])}
+                 "gap": float(t["gap"][i]), "interface": str(t["interface_name"][i])}
                 for i in range(len(t["state"]))]
         if p.comm.rank == 0:
             tmp = self.path.with_suffix(".json.tmp")

@@ -101,12 +101,15 @@ def _gather_grid(problem, field: str):
 
 
 def plot_deformed(problem, path: str | os.PathLike, *, field: str = "von_mises", scale: float | None = None,
-                  show_pairs: bool = True, title: str = "", camera: str | None = "iso") -> None:
+                  show_pairs: bool = True, title: str = "", camera: str | Sequence[float] | None = "iso",
+                  focus: Sequence[float] | None = None, zoom: float = 1.0) -> None:
     """Deformed shape (displacements × ``scale``) coloured by a Gauss-point field (cell means).
 
     ``field``: ``"von_mises"`` (Pa) or ``"p"`` (equivalent plastic strain). Contact pairs are
-    drawn as spheres coloured by state (white open, blue stick, red slip). ``camera``: "iso",
-    "xy", "xz", "yz" or None (VTK's default). Collective.
+    drawn at their slave nodes as spheres coloured by state (white open, blue stick, red slip).
+    ``camera``: "iso", "xy", "xz", "yz", "front", a direction (x, y, z) from the focus to the
+    camera, or None (VTK's default); ``focus``: the point looked at (default the mesh centre);
+    ``zoom``: > 1 magnifies. Collective.
     """
     grid_data = _gather_grid(problem, field)
     table = res.pair_table(problem) if (show_pairs and problem.has_contact) else None
@@ -127,7 +130,7 @@ def plot_deformed(problem, path: str | os.PathLike, *, field: str = "von_mises",
     plotter.add_mesh(grid, scalars=field, show_edges=True, cmap="viridis",
                      scalar_bar_args={"title": {"von_mises": "von Mises (Pa)", "p": "p"}[field]})
     if table is not None:
-        centres = table["position"] + scale * table["u_body1"]
+        centres = table["position_b"] + scale * table["u_body2"]  # the slave nodes: on the drawn mesh
         for state, colour in STATE_COLOURS.items():
             sel = table["state"] == state
             if np.any(sel):
@@ -136,9 +139,17 @@ def plot_deformed(problem, path: str | os.PathLike, *, field: str = "von_mises",
     plotter.add_text(f"{title}  (displacements x {scale:.3g})", font_size=10)
     views = {"iso": plotter.view_isometric, "xy": plotter.view_xy, "xz": plotter.view_xz,
              "yz": plotter.view_yz, "front": lambda: plotter.view_vector((0.4, 0.5, 1.0), viewup=(0, 1, 0))}
-    if camera is not None:
+    if isinstance(camera, str):
         if camera not in views:
-            raise ValueError(f"camera {camera!r}: expected one of {sorted(views)} or None")
+            raise ValueError(f"camera {camera!r}: expected one of {sorted(views)}, a direction, or None")
         views[camera]()
+    elif camera is not None:
+        plotter.view_vector(tuple(float(c) for c in camera), viewup=(0, 1, 0))
+    if focus is not None:
+        position = np.asarray(plotter.camera.position) - np.asarray(plotter.camera.focal_point)
+        plotter.camera.focal_point = tuple(focus)
+        plotter.camera.position = tuple(np.asarray(focus) + position)
+    if zoom != 1.0:
+        plotter.camera.zoom(zoom)
     plotter.screenshot(str(path))
     plotter.close()

@@ -82,7 +82,7 @@ def pair_table(problem) -> dict[str, np.ndarray]:
     tangential 2 on body 1, N), ``force_on_body1`` (global frame, N), ``u_body1`` (the master
     point's displacement u_s − Rᵀw: node a's, or the obstacle's), ``u_body2`` (m), ``gap`` (m),
     ``slip`` (tangential slip of the last increment, m), ``z`` (the law's unknowns),
-    ``slave_block`` (the slave node's global dof block).
+    ``slave_block`` (the slave node's global dof block), ``interface_name``.
     """
     model = problem.contact
     lam = model.force()
@@ -106,6 +106,8 @@ def pair_table(problem) -> dict[str, np.ndarray]:
     table["u_body2"] = values_at_blocks(problem, g[:, 28].astype(np.int64))
     table["u_body1"] = table["u_body2"] - g[:, 30:33]  # w = R (u_s − u_master)
     table["state_name"] = np.array([STATE_NAMES[s] for s in table["state"]])
+    labels = [i.contact.label for i in model.interfaces]
+    table["interface_name"] = np.array([labels[k] for k in table["interface"]])
     return table
 
 

@@ -4,10 +4,12 @@
     python meshes/generate.py two_beams --refine 2 --output-dir /tmp
 
 Written files: ``two_beams.msh`` (the seed benchmark, ``benchmark-two-beams.md``; with
-``--refine n``: ``two_beams_refine{n}.msh``), ``stacked_blocks.msh`` and
-``thick_cylinder.msh``. They hold the physical groups (tags) documented in
-``TwoBeamsTags``, ``StackedBlocksTags`` and ``ThickCylinderTags``; read them back with
-``dolfinx_nnqem.compat.read_from_msh``.
+``--refine n``: ``two_beams_refine{n}.msh``), ``stacked_blocks.msh``, ``thick_cylinder.msh``,
+``three_blocks.msh`` (three unit blocks of height 0.5 stacked along y, 4 × 2 × 4 hexahedra
+each: two contact interfaces) and ``indenter_block.msh`` (the half block |x| ≤ 6 mm, 0 ≤ z ≤ 6 mm,
+−6 ≤ y ≤ 0 mm, graded to h = 0.25 mm at the top point x = z = 0, for a rigid indenter). They hold the physical groups
+(tags) documented in ``TwoBeamsTags``, ``StackedBlocksTags``, ``ThickCylinderTags`` and
+``BlockStackTags``; read them back with ``dolfinx_nnqem.compat.read_from_msh``.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ import dolfinx_nnqem  # noqa: F401  (first: the PyPI wheel loads MPI/PETSc befor
 from dolfinx_nnqem import meshing
 from mpi4py import MPI
 
-MODELS = ("two_beams", "stacked_blocks", "thick_cylinder")
+MODELS = ("two_beams", "stacked_blocks", "thick_cylinder", "three_blocks", "indenter_block")
 
 
 def main(argv: list[str] | None = None) -> list[pathlib.Path]:
@@ -46,9 +48,15 @@ def main(argv: list[str] | None = None) -> list[pathlib.Path]:
         elif model == "stacked_blocks":
             path = args.output_dir / "stacked_blocks.msh"
             mesh, _, _ = meshing.build_stacked_blocks(comm, msh_file=path)
-        else:
+        elif model == "thick_cylinder":
             path = args.output_dir / "thick_cylinder.msh"
             mesh, _, _ = meshing.build_thick_cylinder(comm, msh_file=path)
+        elif model == "three_blocks":
+            path = args.output_dir / "three_blocks.msh"
+            mesh, _, _ = meshing.build_block_stack(comm, 1.0, 1.0, [0.5] * 3, [(4, 2, 4)] * 3, msh_file=path)
+        else:
+            path = args.output_dir / "indenter_block.msh"
+            mesh, _, _ = meshing.build_graded_block(comm, 0.25, half=True, msh_file=path)
         num_cells = mesh.topology.index_map(mesh.topology.dim).size_global
         print(f"{path}: {num_cells} hexahedra, {mesh.geometry.x.shape[0]} nodes")
         written.append(path)

@@ -112,3 +112,16 @@ def test_problem_file_with_an_xdmf_mesh(tmp_path):
     print(f"\n  XDMF mesh: {summary['num_pairs']} pairs, iterations {summary['iterations']}, "
           f"equilibrium {summary['equilibrium_residual']:.1e}")
     assert summary["num_pairs"] == 9 and summary["converged"]
+
+
+def test_three_blocks_problem_file(tmp_path):
+    """Two [[contact]] tables and amplitude tables: the lower interface slides at μ_low p A."""
+    assert main(["-q", "run", str(ROOT / "demos" / "three_blocks.toml"), "--out", str(tmp_path)]) == EXIT_OK
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    pairs = summary["pairs"]
+    friction = {name: sum(p["force_on_body1"][0] for p in pairs if p["interface"] == name) for name in ("lower", "upper")}
+    states = {name: {p["state"] for p in pairs if p["interface"] == name} for name in ("lower", "upper")}
+    err = abs(friction["lower"] - 0.2 * 1.0e6) / (0.2 * 1.0e6)
+    print(f"\n  friction per interface {friction}, states {states}: |F_lower − μ_low p A| / μ_low p A = {err:.1e}")
+    assert summary["converged"] and err < 1e-8 and abs(friction["upper"] - friction["lower"]) < 1e-8 * 2e5
+    assert "stick" not in states["lower"] and "stick" in states["upper"]

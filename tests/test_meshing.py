@@ -122,8 +122,20 @@ def test_generate_script(tmp_path):
     written = generate.main(["--output-dir", str(tmp_path)])
     names = sorted(p.name for p in written)
     print(f"\n  generate.py wrote {names}")
-    assert names == ["stacked_blocks.msh", "thick_cylinder.msh", "two_beams.msh"]
+    assert names == ["indenter_block.msh", "stacked_blocks.msh", "thick_cylinder.msh", "three_blocks.msh",
+                     "two_beams.msh"]
     assert all((tmp_path / n).stat().st_size > 0 for n in names)
+    # the graded block is written with its graded nodes: it reads back as the builder's mesh
+    from dolfinx_nnqem import compat
+    from dolfinx_nnqem.meshing import build_graded_block
+
+    read = compat.read_from_msh(str(tmp_path / "indenter_block.msh"), MPI.COMM_SELF, 0, gdim=3)
+    built = build_graded_block(MPI.COMM_SELF, 0.25, half=True)
+    order = lambda x: x[np.lexsort((x[:, 2], x[:, 1], x[:, 0]))]  # noqa: E731
+    diff = np.abs(order(read[0].geometry.x) - order(built.mesh.geometry.x)).max()
+    print(f"  indenter_block.msh against build_graded_block: max node distance {diff:.1e}; facet tags "
+          f"{sorted(set(read[2].values.tolist()))}")
+    assert diff < 1e-12 and sorted(set(read[2].values.tolist())) == [101, 201, 301, 401, 501, 601]
     with pytest.raises(SystemExit):
         generate.main(["no_such_model", "--output-dir", str(tmp_path)])
 
