@@ -179,3 +179,53 @@ def test_vectorised_kernels_agree_with_dolfinx_default_flags(monkeypatch):
         rel = np.abs(a - b).max() / np.abs(b).max()
         print(f"\n  {name}: max relative difference {rel:.1e}")
         assert rel < 1e-12, name
+
+
+def test_numpy_return_map_agrees_with_ufl():
+    """The numpy radial return and von Mises pieces NNEQM2 uses (material.py) against the UFL forms,
+    on a non-homogeneous two-increment path where some Gauss points yield twice, some once, some never."""
+    import dolfinx.mesh as dmesh
+    from mpi4py import MPI
+
+    from dolfinx_nnqem import compat, jit
+    from dolfinx_nnqem.material import (deviator_coordinates, deviator_tensors, equivalent_stress, flow_direction,
+                                        radial_return, strain)
+
+    material = VonMises(E=2.0e11, nu=0.3, sigma_y0=2.5e8, H=1.0e10)
+    mesh = dmesh.create_box(MPI.COMM_SELF, [np.zeros(3), np.ones(3)], [2, 2, 2], dmesh.CellType.hexahedron)
+    V = fem.functionspace(mesh, ("Lagrange", 1, (3,)))
+    state = PlasticState(V, material)
+    u = fem.Function(V)
+    rng = np.random.default_rng(4)
+    points = compat.interpolation_points(state.W_tensor)
+    eps_fn = fem.Function(state.W_tensor)
+    eps_expr = jit.expression(strain(u), points)
+    n = state.W_scalar.dofmap.index_map.size_local
+    lmbda, mu = np.full(n, material.lmbda), np.full(n, material.mu)
+    sy, H = np.full(n, material.sigma_y0), np.full(n, material.H)
+    worst = 0.0
+    eps_old = np.zeros((n, 3, 3))
+    for scale in (4.0e-4, 9.0e-4):
+        A = rng.normal(size=(3, 3, 3))
+        u.interpolate(lambda x, A=A: scale * np.einsum("ijk,jn,kn->in", A, x, x))
+        eps_fn.interpolate(eps_expr)
+        eps = eps_fn.x.array.reshape(n, 3, 3).copy()
+        sigma_n = state.sigma_n.x.array.reshape(n, 3, 3).copy()
+        p_n = state.p_n.x.array.copy()
+        sigma, dp = radial_return(sigma_n, eps - eps_old, p_n, lmbda, mu, sy, H)
+        state.commit(u)  # the UFL return map
+        err_sigma = np.abs(sigma - state.sigma_n.x.array.reshape(n, 3, 3)).max() / material.sigma_y0
+        err_dp = np.abs(dp - state.dp_n.x.array).max() / max(dp.max(), 1e-300)
+        worst = max(worst, err_sigma, err_dp)
+        print(f"\n  increment to {scale:.1e}: {int(np.sum(dp > 0))} of {n} Gauss points yield; numpy vs UFL: "
+              f"max |Δσ| / σ_y0 = {err_sigma:.1e}, max |ΔΔp| / max Δp = {err_dp:.1e}")
+        eps_old = eps
+    s = deviator_coordinates(state.sigma_n.x.array.reshape(n, 3, 3))
+    dev = state.sigma_n.x.array.reshape(n, 3, 3) - np.trace(state.sigma_n.x.array.reshape(n, 3, 3), axis1=1,
+                                                            axis2=2)[:, None, None] * np.eye(3) / 3
+    q_direct = np.sqrt(1.5 * np.einsum("nij,nij->n", dev, dev))
+    N = deviator_tensors(flow_direction(s, np.full(n, material.sigma_y0)))
+    err_q = np.abs(equivalent_stress(s) - q_direct).max() / q_direct.max()
+    err_N = np.abs(N - 1.5 * dev / q_direct[:, None, None]).max()
+    print(f"  deviator coordinates: q {err_q:.1e}, N = 3s/(2q) {err_N:.1e} (tolerance 1e-12)")
+    assert worst < 1e-12 and err_q < 1e-12 and err_N < 1e-12
