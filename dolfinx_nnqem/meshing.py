@@ -727,25 +727,7 @@ def build_graded_contact_blocks(comm: MPI.Comm = MPI.COMM_WORLD, h: float = 0.25
     if not np.allclose(x, index, atol=1e-9):
         raise RuntimeError("build_graded_contact_blocks: the unit block mesh has non-integer nodes")
     x[:, 0], x[:, 1], x[:, 2] = xs[index[:, 0]], ys[index[:, 1]], zs[index[:, 2]]
-    if msh_file is not None:
-        _write_graded_msh(msh_file, comm, nx, ny, nz, xs, ys, zs)
     return MeshAndTags(mesh, cell_tags, facet_tags)
-
-
-def _write_graded_msh(msh_file, comm, nx, ny, nz, xs, ys, zs) -> None:
-    """Write the unit block's gmsh model with its nodes moved to the graded grid (rank 0)."""
-    if comm.rank != 0:
-        return
-
-    def move() -> None:
-        tags, coords, _ = gmsh.model.mesh.getNodes()
-        coords = coords.reshape(-1, 3)
-        index = np.rint(coords).astype(np.int64)
-        for tag, i in zip(tags, index):
-            gmsh.model.mesh.setNode(int(tag), [xs[i[0]], ys[i[1]], zs[i[2]]], [])
-
-    _mesh_from_gmsh(MPI.COMM_SELF, "graded_block", lambda: (_build_block_stack_model(nx, nz, [ny], [(nx, ny, nz)]),
-                                                             move()), msh_file)
 
 
 def build_graded_block(comm: MPI.Comm = MPI.COMM_WORLD, h: float = 0.25, *, fine_width: float = 1.25,
