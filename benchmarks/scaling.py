@@ -55,15 +55,13 @@ def one_newton_solve(problem, solver) -> float:
     Uses the solver's own KSP (no second AMG hierarchy in memory); iterative: to rtol 1e-8.
     """
     comm = problem.comm
-    ev = problem.contact.evaluate(problem.relative_displacement()) if problem.has_contact else None
-    H = ev.H if ev is not None else np.zeros((0, 3))
-    R_free = problem.free_residual(problem.residual())
-    solver._refresh_u_pc = True
+    evaluation = solver.evaluate()
+    solver.linear._refresh = True  # a fresh AMG hierarchy (iterative) or factorisation (direct)
     if solver.iterative:
-        solver.ksp.setTolerances(rtol=1e-8)
+        solver.linear.ksp.setTolerances(rtol=1e-8)
     comm.Barrier()
     t0 = time.perf_counter()
-    solver._newton_direction(R_free, H, ev)
+    solver.newton_direction(evaluation)
     comm.Barrier()
     return time.perf_counter() - t0
 

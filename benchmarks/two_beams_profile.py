@@ -31,9 +31,7 @@ def one_tangent_solve(problem, solver) -> float:
     """Seconds for one assembly of the Newton matrix, one factorisation and one solve."""
     t0 = time.perf_counter()
     if solver.name == "monolithic":
-        w = problem.relative_displacement()
-        ev = problem.contact.evaluate(w)
-        J = solver._jacobian(ev)
+        J = solver._newton_matrix(solver.evaluate())
     else:
         J = problem.assemble_tangent()
     ksp = PETSc.KSP().create(problem.comm)
