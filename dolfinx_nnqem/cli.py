@@ -166,6 +166,10 @@ def _run(args) -> int:
         return EXIT_OK
     options, method_options = solver_options(spec, method)
     checks = check_options(spec)
+    if method != "monolithic" or solver_spec["linear_solver"] == "direct":
+        from dolfinx_nnqem.preflight import check_direct_solver
+
+        check_direct_solver(comm, options.petsc_options)  # an unknown solver package is reported as such
     solver = make_solver(method, problem, options, **method_options)
     out = Path(args.out or spec.output["folder"])
     identity = {"problem_sha256": hashlib.sha256(Path(args.problem).read_bytes()).hexdigest(),
@@ -230,6 +234,8 @@ def _classify(error: BaseException, args) -> tuple[int, str]:
             return EXIT_PETSC, f"dolfinx-nnqem: PETSc error {error.ierr}: {_petsc_text(error)}"
     except ImportError:
         pass
+    if hasattr(error, "ierr"):  # preflight.PetscSetupError
+        return EXIT_PETSC, f"dolfinx-nnqem: {error}: {_petsc_text(error)}"
     cause = error.__cause__
     if cause is not None and type(cause).__name__ == "Error" and hasattr(cause, "ierr"):
         return EXIT_PETSC, f"dolfinx-nnqem: {error} [PETSc error {cause.ierr}: {_petsc_text(cause)}]"
@@ -247,8 +253,9 @@ def _petsc_text(error) -> str:
     texts = {56: "no support for this operation (e.g. an unknown or unavailable solver package)",
              71: "zero pivot in the factorisation (a singular matrix: a body without supports?)",
              76: "error in an external library (e.g. MUMPS failed to factorise)",
-             86: "unknown type (an unknown solver or preconditioner name in petsc_options)"}
-    return texts.get(getattr(error, "ierr", None), str(error).strip() or "see PETSc's message above")
+             86: "unknown type (an unknown solver or preconditioner name in petsc_options)",
+             92: "no such factorisation package in this PETSc (pc_factor_mat_solver_type)"}
+    return texts.get(getattr(error, "ierr", None), "see PETSc's message above")
 
 
 def _os_text(error: OSError) -> str:
