@@ -510,8 +510,8 @@ def _read_msh(file: Path, comm):
         types = gmsh.model.mesh.getElementTypes(3)
         if len(types) == 0:
             dims = sorted({d for d, _ in gmsh.model.getEntities() if len(gmsh.model.mesh.getElementTypes(d))})
-            raise ProblemFileError(f"{file}: no 3D cells (elements of dimension {dims}); dolfinx_nnqem solves 3D "
-                                   "solids: mesh the volumes")
+            raise ProblemFileError(f"{file}: a {max(dims, default=0)}D mesh (no 3D cells; elements of dimension "
+                                   f"{dims}); dolfinx_nnqem solves 3D solids: mesh the volumes")
         if len(types) > 1:
             names = [gmsh.model.mesh.getElementProperties(t)[0] for t in types]
             raise ProblemFileError(f"{file}: the volumes mix cell types {names}; use one (all tetrahedra or all "
