@@ -174,9 +174,11 @@ def _run(args) -> int:
     out = Path(args.out or spec.output["folder"])
     identity = {"problem_sha256": hashlib.sha256(Path(args.problem).read_bytes()).hexdigest(),
                 "method": method, "increments": int(increments)}
+    _install_sigterm()  # again: gmsh and PETSc's set-up may have reset the signal handlers
     writer = ResultsWriter(problem, method, out, increments, probes=spec.output["probes"] or None,
                            fields=spec.output["fields"], extra={"problem_file": str(args.problem)},
                            overwrite=args.overwrite, resume=args.restart)
+    solving = False  # summary.json records how a run ended only once it has started solving
     try:
         resume = None
         if args.restart:
@@ -191,15 +193,17 @@ def _run(args) -> int:
         bar = None if args.quiet else _progress_bar(increments, method)
         if bar is not None:
             callbacks.append(bar)
+        solving = True
         solve_load_steps(problem, solver, increments, max_cutbacks=solver_spec["max_cutbacks"],
                          callbacks=callbacks, check=checks, checkpoint=ckpt, resume=resume)
     except KeyboardInterrupt:
-        writer.ended("interrupted")
+        if solving:
+            writer.ended("interrupted")
         raise
     except Exception as error:
         from dolfinx_nnqem.convergence import ConvergenceError
 
-        if not isinstance(error, ConvergenceError):
+        if solving and not isinstance(error, ConvergenceError):
             writer.ended("error", f"{type(error).__name__}: {error}")
         raise
     finally:
@@ -280,6 +284,8 @@ def _install_sigterm() -> None:
 
     try:
         signal.signal(signal.SIGTERM, handler)
+        # MPI's start-up may leave SIGINT at its default (kill): make Ctrl-C a KeyboardInterrupt again
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     except ValueError:  # not the main thread (e.g. called from a test runner's worker)
         pass
 

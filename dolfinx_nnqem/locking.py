@@ -93,7 +93,15 @@ class OutputLock:
 def previous_outputs(folder: str | os.PathLike) -> list[Path]:
     """The files and folders of an earlier run in ``folder`` (see :data:`OUTPUT_NAMES`)."""
     folder = Path(folder)
-    return [folder / name for name in OUTPUT_NAMES if (folder / name).exists()]
+    found = []
+    for name in OUTPUT_NAMES:
+        path = folder / name
+        if path.is_dir() and not path.is_symlink():
+            if any(p.is_file() for p in path.rglob("*")):  # empty folders hold no results
+                found.append(path)
+        elif path.exists() or path.is_symlink():
+            found.append(path)
+    return found
 
 
 def clear_outputs(folder: str | os.PathLike) -> list[Path]:

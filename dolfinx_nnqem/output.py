@@ -285,7 +285,10 @@ class SummaryWriter:
         if message:
             self.data["error"] = message
         self.data["wall_time_s"] = time.perf_counter() - self.t0
-        self.write()
+        try:
+            self.write()
+        except OSError:  # the run is ending on an error already (a full disk): keep that one
+            pass
 
     def state(self) -> dict:
         return {"data": _jsonable(self.data)}

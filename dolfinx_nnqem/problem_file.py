@@ -499,7 +499,7 @@ def _read_msh(file: Path, comm):
 
     def open_model():
         if not gmsh.isInitialized():
-            gmsh.initialize()
+            gmsh.initialize(interruptible=False)  # leave Ctrl-C to the command line
             started[0] = True
         gmsh.option.setNumber("General.Terminal", 0)
         gmsh.model.add("dolfinx_nnqem problem file")
