@@ -278,17 +278,21 @@ class SummaryWriter:
         self.write()
 
     def ended(self, status: str, message: str = "") -> None:
-        """Record how the run ended when it did not complete ("interrupted", "error")."""
+        """Record how the run ended when it did not complete ("interrupted", "error"); rank 0
+        writes, without waiting for the other ranks."""
         if self.data.get("status") in ("completed", "not converged"):
             return
         self.data["status"] = status
         if message:
             self.data["error"] = message
         self.data["wall_time_s"] = time.perf_counter() - self.t0
-        try:
-            self.write()
-        except OSError:  # the run is ending on an error already (a full disk): keep that one
-            pass
+        # NOT collective: the other ranks may be elsewhere (an error on one rank only), and the
+        # run is ending on an error already (e.g. a full disk): keep that one
+        if self.problem.comm.rank == 0:
+            try:
+                atomic_write_text(self.path, json.dumps(_jsonable(self.data), indent=1))
+            except OSError:
+                pass
 
     def state(self) -> dict:
         return {"data": _jsonable(self.data)}
