@@ -263,7 +263,7 @@ def _petsc_text(error) -> str:
 
 
 def _os_text(error: OSError) -> str:
-    text = str(error)
+    text = error.strerror or str(error) if error.errno is not None else str(error)
     if error.filename and str(error.filename) not in text:
         text += f" ({error.filename})"
     return text
