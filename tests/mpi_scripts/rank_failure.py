@@ -3,8 +3,8 @@
     mpiexec -n 2 python rank_failure.py CASE RANK -- dolfinx-nnqem arguments...
 
 CASE ``solve``: the solver raises ValueError on rank RANK only, in the middle of increment 2
-(the other rank is then inside a collective call); CASE ``writer``: rank RANK's summary writer
-fails with a full disk (only rank 0 writes files, so RANK must be 0 for a real effect).
+(the other rank is then inside a collective call); CASE ``writer``: rank RANK's writes of
+summary.json and pairs.pvd fail with a full disk (only rank 0 writes them: RANK 0).
 The script exits with the command line's exit code; it must never hang.
 """
 
@@ -38,10 +38,10 @@ def main() -> int:
 
             from dolfinx_nnqem import output
 
-            def full(self):
-                raise OSError(errno.ENOSPC, f"No space left on device: '{self.path}'", str(self.path))
+            def full(path, text, **kwargs):  # what safe_io raises when the disk is full
+                raise OSError(errno.ENOSPC, f"cannot write {path}: No space left on device", str(path))
 
-            output.SummaryWriter.write = full
+            output.atomic_write_text = full
     return cli.main(argv)
 
 
