@@ -99,3 +99,24 @@ def test_restart_on_two_ranks_equals_an_uninterrupted_run(tmp_path):
     from dolfinx_nnqem.cli import main
 
     assert main(["-q", "run", str(p), "--out", str(out), "--restart"]) == EXIT_BAD_INPUT
+
+
+def test_ctrl_c_on_two_ranks(tmp_path):
+    """Ctrl-C in a terminal signals mpiexec and both ranks: one message, exit 130, files intact."""
+    import signal
+
+    from dolfinx_nnqem.cli import EXIT_INTERRUPTED
+
+    p = problem_file(tmp_path, increments=30)
+    out = tmp_path / "out"
+    job = start(["-q", "run", str(p), "--out", str(out)], ranks=2)
+    wait_for_checkpoint(out, 2, job)
+    t0 = time.perf_counter()
+    kill_session(job, signal.SIGINT)
+    _, err = job.communicate(timeout=LIMIT_S)
+    wall = time.perf_counter() - t0
+    lines = [line for line in err.splitlines() if line.startswith("dolfinx-nnqem")]
+    summary = json.loads((out / "summary.json").read_text())
+    print(f"\n  exit {job.returncode} {wall:.1f} s after SIGINT: {lines}; summary status {summary['status']}")
+    assert job.returncode == EXIT_INTERRUPTED and len(lines) == 1 and summary["status"] == "interrupted"
+    assert not list(out.rglob(".*.tmp-*"))
