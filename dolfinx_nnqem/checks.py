@@ -21,7 +21,8 @@ API only, before committing it:
   ever larger displacements. Both limits can be relaxed (or set to None).
 
 The tolerance is ``CheckOptions.rtol`` or, by default, derived from the solver's own ``rtol``:
-``min(max(1e4 · rtol, 1e-7), 1e-3)`` (1e-6 for the default rtol = 1e-10): a state that meets the
+``max(min(max(1e4 · rtol, 1e-7), 1e-3), 10 · rtol)`` (1e-6 for the default rtol = 1e-10; never
+below ten times the solver's own rtol): a state that meets the
 solver's criterion passes with room for round-off (and for solvers whose own measure differs:
 NNEQM1's nested solves, NNEQM2's scaled system) while anything that is not equilibrium fails.
 
@@ -55,7 +56,7 @@ class CheckOptions:
     ----------
     rtol
         Relative tolerance of the equilibrium and contact checks (against the force scale F);
-        None: ``min(max(1e4 · solver rtol, 1e-7), 1e-3)``. Must be in (0, 1e-2].
+        None: ``max(min(max(1e4 · solver rtol, 1e-7), 1e-3), 10 · solver rtol)``. Must be in (0, 1e-2].
     max_strain, max_rotation
         Small-strain limits (see the module docstring); None disables a limit.
     """
@@ -77,7 +78,8 @@ class CheckOptions:
     def tolerance(self, solver_rtol: float) -> float:
         if self.rtol is not None:
             return float(self.rtol)
-        return min(max(1e4 * float(solver_rtol), 1e-7), 1e-3)
+        rtol = float(solver_rtol)
+        return max(min(max(1e4 * rtol, 1e-7), 1e-3), 10.0 * rtol)
 
 
 @dataclass

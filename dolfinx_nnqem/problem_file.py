@@ -60,7 +60,7 @@ A problem file names a mesh with physical tags and everything :class:`ContactPro
     pc_factor_mat_solver_type = "mumps"
 
     [checks]                              # the independent check of every converged state
-    rtol = 1e-6                           # default: from [solver].rtol (min(max(1e4 rtol, 1e-7), 1e-3))
+    rtol = 1e-6                           # default: from [solver].rtol (1e-6 for rtol = 1e-10)
     max_strain = 0.1                      # small-strain limits (false: no limit)
     max_rotation = 0.1
 

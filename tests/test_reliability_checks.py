@@ -153,3 +153,13 @@ def test_summary_residuals_are_meaningful_when_only_displacements_are_prescribed
           f"{s['equilibrium_residual']:.1e}, checks {[round(c['equilibrium'], 20) for c in s['checks']]}")
     assert s["converged"] and s["status"] == "completed"
     assert s["free_dof_residual"] < 1e-8 and s["equilibrium_residual"] < 1e-8 and len(s["checks"]) == 2
+
+
+def test_check_tolerance_follows_the_solver_rtol():
+    tol = {rtol: CheckOptions().tolerance(rtol) for rtol in (1e-14, 1e-10, 1e-6, 1e-4, 1e-2)}
+    print(f"\n  solver rtol -> check tolerance: {tol}")
+    assert tol[1e-10] == pytest.approx(1e-6) and tol[1e-14] == 1e-7 and tol[1e-6] == 1e-3
+    assert all(t >= 10 * r for r, t in tol.items() if r >= 1e-8)
+    problem = _box()
+    results = solve_load_steps(problem, make_solver("monolithic", problem, SolverOptions(rtol=1e-2)), 2)
+    assert all(r.check.ok for r in results)
