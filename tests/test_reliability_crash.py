@@ -122,6 +122,8 @@ def test_not_converged_at_increment_1_writes_the_summary(tmp_path, capsys):
 def test_petsc_errors_are_reported_as_themselves(tmp_path, capsys, options, method, words):
     p = problem_file(tmp_path, increments=2, solver=f"[solver.petsc_options]\n{options}")
     code = main(["-q", "run", str(p), "--out", str(tmp_path / "out"), "--method", method])
+    if code == EXIT_OK and "mumps" in options:
+        pytest.skip("this MUMPS factorises within the 1 MB limit (Debian 13's does): no failure to report")
     err = capsys.readouterr().err.strip().splitlines()[-1]
     print(f"\n  {method}, {options!r}: exit {code}: {err}")
     assert code == EXIT_PETSC and words in err and "did not converge" not in err
