@@ -278,21 +278,22 @@ class SummaryWriter:
         self.write()
 
     def ended(self, status: str, message: str = "") -> None:
-        """Record how the run ended when it did not complete ("interrupted", "error"); rank 0
-        writes, without waiting for the other ranks."""
+        """Record how the run ended when it did not complete ("interrupted", "error"), without
+        waiting for the other ranks."""
         if self.data.get("status") in ("completed", "not converged"):
             return
         self.data["status"] = status
         if message:
             self.data["error"] = message
         self.data["wall_time_s"] = time.perf_counter() - self.t0
-        # NOT collective: the other ranks may be elsewhere (an error on one rank only), and the
-        # run is ending on an error already (e.g. a full disk): keep that one
-        if self.problem.comm.rank == 0:
-            try:
-                atomic_write_text(self.path, json.dumps(_jsonable(self.data), indent=1))
-            except OSError:
-                pass
+        # NOT collective: the other ranks may be stuck in a collective call (an error or a
+        # signal seen by some ranks only), so every rank that gets here writes the same data
+        # (each through its own temporary file and an atomic rename); a failure to write is
+        # ignored: the run is ending on an error already (e.g. a full disk), keep that one
+        try:
+            atomic_write_text(self.path, json.dumps(_jsonable(self.data), indent=1))
+        except OSError:
+            pass
 
     def state(self) -> dict:
         return {"data": _jsonable(self.data)}
