@@ -1,7 +1,12 @@
 """The ``dolfinx-nnqem`` command (also ``python -m dolfinx_nnqem``).
 
-Exit codes: 0 success; 1 an increment did not converge (the converged ones are written);
-2 bad command line; 3 bad input (parameters, tags, mesh).
+Exit codes (``docs/reliability.md``): 0 success; 1 an increment did not converge (the converged
+ones are written, ``summary.json`` says which increment failed and why); 2 bad command line;
+3 bad input (parameters, tags, mesh, checkpoint); 4 an input/output failure (a file that cannot
+be written or read, a full disk, an output folder in use or holding an earlier run); 5 a PETSc
+error (unknown solver package, failed factorisation); 70 an internal error (a bug);
+130 interrupted (Ctrl-C, SIGINT), 143 terminated (SIGTERM). No traceback is shown unless -vv.
+With MPI every rank ends with the same code and rank 0 prints the message once.
 """
 
 from __future__ import annotations
@@ -15,13 +20,22 @@ from pathlib import Path
 from dolfinx_nnqem.solver import METHODS
 
 EXIT_OK, EXIT_DIVERGED, EXIT_USAGE, EXIT_BAD_INPUT = 0, 1, 2, 3
+EXIT_IO, EXIT_PETSC, EXIT_INTERNAL = 4, 5, 70
+EXIT_INTERRUPTED, EXIT_TERMINATED = 130, 143
+DOCS = "docs/problem-file.md (the format), docs/reliability.md (checks, exit codes, restart)"
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, turned into an exception so that files are closed and the run ends cleanly."""
 
 
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="dolfinx-nnqem",
         description="Elastoplastic frictional contact in DOLFINx by nonsmooth equations (NNEQM).",
-        epilog="Exit codes: 0 ok, 1 an increment did not converge, 2 bad command line, 3 bad input.",
+        epilog="Exit codes: 0 ok, 1 an increment did not converge, 2 bad command line, 3 bad input, "
+               "4 input/output failure, 5 PETSc error, 70 internal error, 130/143 interrupted/terminated "
+               "(docs/reliability.md).",
     )
     # the logging flags work before or after the subcommand
     common = argparse.ArgumentParser(add_help=False)
@@ -40,17 +54,26 @@ def _parser() -> argparse.ArgumentParser:
     tb.add_argument("--law", choices=("polar", "alart-curnier"), default=None,
                     help="pair law (default: polar for nneqm1/nneqm2, alart-curnier for monolithic)")
     tb.add_argument("--refine", type=int, default=1, help="divide the 0.2 m elements by this factor")
-    tb.add_argument("--out", default="results/two_beams", help="output folder (default results/two_beams)")
+    tb.add_argument("--out", default="results/two_beams",
+                    help="output folder (default results/two_beams; an earlier run's outputs there are replaced)")
     tb.add_argument("--no-fields", action="store_true", help="skip the XDMF field output")
 
     run = sub.add_parser("run", parents=[common], help="solve a problem file (TOML)",
                          description="Solve the problem described in a TOML problem file "
-                                     "(format: docs/problem-file.md; example: demos/two_beams.toml).")
+                                     "(format: docs/problem-file.md; example: demos/two_beams.toml).",
+                         epilog=f"Documentation: {DOCS}. Exit codes: 0 ok, 1 not converged, 2 bad command line, "
+                                "3 bad input, 4 input/output failure, 5 PETSc error, 70 internal error, "
+                                "130/143 interrupted/terminated.")
     run.add_argument("problem", help="the problem file (.toml)")
     run.add_argument("--out", default=None, help="output folder (default: [output].folder of the file)")
     run.add_argument("--method", choices=METHODS, default=None, help="override [solver].method")
     run.add_argument("--increments", type=int, default=None, help="override [solver].increments")
     run.add_argument("--check", action="store_true", help="only check the file and build the problem")
+    mode = run.add_mutually_exclusive_group()
+    mode.add_argument("--restart", action="store_true",
+                      help="continue the run in the output folder from its last complete checkpoint")
+    mode.add_argument("--overwrite", action="store_true",
+                      help="replace the results of an earlier run in the output folder (otherwise refused)")
     return parser
 
 
@@ -114,18 +137,23 @@ def _progress_bar(total: int, method: str):
 
 
 def _run(args) -> int:
+    import hashlib
+
     from mpi4py import MPI
 
+    from dolfinx_nnqem import checkpoint
+    from dolfinx_nnqem.collective import agree
     from dolfinx_nnqem.output import ResultsWriter
-    from dolfinx_nnqem.problem_file import build_problem, load_problem_file, solver_options
+    from dolfinx_nnqem.problem_file import (build_problem, check_options, load_problem_file,
+                                            solver_options)
     from dolfinx_nnqem.solver import make_solver
     from dolfinx_nnqem.stepping import solve_load_steps
 
-    spec = load_problem_file(args.problem)
+    comm = MPI.COMM_WORLD
+    spec = agree(comm, load_problem_file, args.problem)
     solver_spec = spec.solver
     method = args.method or solver_spec["method"]
     increments = args.increments or solver_spec["increments"]
-    comm = MPI.COMM_WORLD
     problem = build_problem(spec, comm)
     rank0 = comm.rank == 0
     if rank0 and not args.quiet:
@@ -137,17 +165,47 @@ def _run(args) -> int:
     if args.check:
         return EXIT_OK
     options, method_options = solver_options(spec, method)
+    checks = check_options(spec)
+    if method != "monolithic" or solver_spec["linear_solver"] == "direct":
+        from dolfinx_nnqem.preflight import check_direct_solver
+
+        check_direct_solver(comm, options.petsc_options)  # an unknown solver package is reported as such
     solver = make_solver(method, problem, options, **method_options)
     out = Path(args.out or spec.output["folder"])
+    identity = {"problem_sha256": hashlib.sha256(Path(args.problem).read_bytes()).hexdigest(),
+                "method": method, "increments": int(increments)}
+    _install_sigterm()  # again: gmsh and PETSc's set-up may have reset the signal handlers
     writer = ResultsWriter(problem, method, out, increments, probes=spec.output["probes"] or None,
-                           fields=spec.output["fields"], extra={"problem_file": str(args.problem)})
-    callbacks = [writer]
-    bar = None if args.quiet else _progress_bar(increments, method)
-    if bar is not None:
-        callbacks.append(bar)
+                           fields=spec.output["fields"], extra={"problem_file": str(args.problem)},
+                           overwrite=args.overwrite, resume=args.restart)
+    solving = False  # summary.json records how a run ended only once it has started solving
     try:
+        resume = None
+        if args.restart:
+            resume, meta = checkpoint.restore(problem, out, expected_meta=identity)
+            writer.resume(meta["writers"][0])
+            if rank0 and not args.quiet:
+                print(f"restarting after increment {resume.index} (load factor {problem.load_factor_n:.6g}) "
+                      f"from {out}/checkpoints", flush=True)
+        every = spec.output["checkpoint_every"]
+        ckpt = checkpoint.Checkpointer(out, every, writers=[writer], meta=identity) if every else None
+        callbacks = [writer]
+        bar = None if args.quiet else _progress_bar(increments, method)
+        if bar is not None:
+            callbacks.append(bar)
+        solving = True
         solve_load_steps(problem, solver, increments, max_cutbacks=solver_spec["max_cutbacks"],
-                         callbacks=callbacks)
+                         callbacks=callbacks, check=checks, checkpoint=ckpt, resume=resume)
+    except KeyboardInterrupt:
+        if solving:
+            writer.ended("interrupted")
+        raise
+    except Exception as error:
+        from dolfinx_nnqem.convergence import ConvergenceError
+
+        if solving and not isinstance(error, ConvergenceError):
+            writer.ended("error", f"{type(error).__name__}: {error}")
+        raise
     finally:
         writer.close()
     if rank0 and not args.quiet:
@@ -163,29 +221,113 @@ def _available(method: str) -> bool:
     return importlib.util.find_spec(f"dolfinx_nnqem.{method}") is not None
 
 
+def _classify(error: BaseException, args) -> tuple[int, str]:
+    """The exit code and the one-line message of an exception that ended the run."""
+    from dolfinx_nnqem.convergence import ConvergenceError
+
+    if isinstance(error, Terminated):
+        return EXIT_TERMINATED, "dolfinx-nnqem: terminated (SIGTERM)" + _restart_hint(args)
+    if isinstance(error, KeyboardInterrupt):
+        return EXIT_INTERRUPTED, "dolfinx-nnqem: interrupted (Ctrl-C)" + _restart_hint(args)
+    if isinstance(error, ConvergenceError):
+        return EXIT_DIVERGED, f"dolfinx-nnqem: {error}"
+    try:
+        from petsc4py import PETSc
+
+        if isinstance(error, PETSc.Error):
+            return EXIT_PETSC, f"dolfinx-nnqem: PETSc error {error.ierr}: {_petsc_text(error)}"
+    except ImportError:
+        pass
+    if hasattr(error, "ierr"):  # preflight.PetscSetupError
+        return EXIT_PETSC, f"dolfinx-nnqem: {error}: {_petsc_text(error)}"
+    cause = error.__cause__
+    if cause is not None and type(cause).__name__ == "Error" and hasattr(cause, "ierr"):
+        return EXIT_PETSC, f"dolfinx-nnqem: {error} [PETSc error {cause.ierr}: {_petsc_text(cause)}]"
+    if isinstance(error, OSError):
+        return EXIT_IO, f"dolfinx-nnqem: input/output error: {_os_text(error)}"
+    if isinstance(error, (ValueError, TypeError)):
+        return EXIT_BAD_INPUT, f"dolfinx-nnqem: bad input: {error}"
+    if isinstance(error, MemoryError):
+        return EXIT_INTERNAL, "dolfinx-nnqem: out of memory"
+    return EXIT_INTERNAL, (f"dolfinx-nnqem: internal error: {type(error).__name__}: {error} "
+                           "(please report it; -vv shows the traceback)")
+
+
+def _petsc_text(error) -> str:
+    texts = {56: "no support for this operation (e.g. an unknown or unavailable solver package)",
+             71: "zero pivot in the factorisation (a singular matrix: a body without supports?)",
+             76: "error in an external library (e.g. MUMPS failed to factorise)",
+             86: "unknown type (an unknown solver or preconditioner name in petsc_options)",
+             92: "no such factorisation package in this PETSc (pc_factor_mat_solver_type)"}
+    return texts.get(getattr(error, "ierr", None), "see PETSc's message above")
+
+
+def _os_text(error: OSError) -> str:
+    text = error.strerror or str(error) if error.errno is not None else str(error)
+    if error.filename and str(error.filename) not in text:
+        text += f" ({error.filename})"
+    return text
+
+
+def _restart_hint(args) -> str:
+    if getattr(args, "command", None) != "run":
+        return ""
+    return (f"; the converged increments are written; continue with: dolfinx-nnqem run {args.problem} --restart"
+            + (f" --out {args.out}" if args.out else ""))
+
+
+def _install_sigterm() -> None:
+    import signal
+
+    def handler(signum, frame):
+        raise Terminated()
+
+    try:
+        signal.signal(signal.SIGTERM, handler)
+        # MPI's start-up may leave SIGINT at its default (kill): make Ctrl-C a KeyboardInterrupt again
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    except ValueError:  # not the main thread (e.g. called from a test runner's worker)
+        pass
+
+
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     args.verbose = getattr(args, "verbose", 0)
     args.quiet = getattr(args, "quiet", False)
-    if getattr(args, "increments", None) is not None and args.increments < 1:
-        print("dolfinx-nnqem: error: --increments must be >= 1", file=sys.stderr)
+    if getattr(args, "increments", None) is not None and not 1 <= args.increments <= 100_000:
+        print("dolfinx-nnqem: error: --increments must be in [1, 100000]", file=sys.stderr)
+        return EXIT_USAGE
+    if getattr(args, "out", None) is not None and args.out.strip() in ("", "."):
+        print("dolfinx-nnqem: error: --out needs a folder name (not empty, not '.')", file=sys.stderr)
         return EXIT_USAGE
     _configure_logging(args.verbose, args.quiet)
     import dolfinx_nnqem  # noqa: F401  (loads the PyPI wheel's MPI/PETSc first)
-    from dolfinx_nnqem.convergence import ConvergenceError
+    from mpi4py import MPI
 
+    from dolfinx_nnqem import collective
+
+    collective.init()
+    _install_sigterm()
+    code, message = EXIT_OK, ""
     try:
         if args.command == "two-beams":
-            return _two_beams(args)
-        if args.command == "run":
-            return _run(args)
-    except ConvergenceError as error:
-        print(f"dolfinx-nnqem: {error}", file=sys.stderr)
-        return EXIT_DIVERGED
-    except (ValueError, TypeError, OSError) as error:
-        print(f"dolfinx-nnqem: bad input: {error}", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    return EXIT_USAGE
+            code = _two_beams(args)
+        elif args.command == "run":
+            code = _run(args)
+        else:
+            code = EXIT_USAGE
+    except BaseException as error:  # noqa: BLE001  (every failure becomes a message and an exit code)
+        if isinstance(error, SystemExit):
+            raise
+        code, message = _classify(error, args)
+        if args.verbose >= 2:
+            import traceback
+
+            message += "\n" + "".join(traceback.format_exception(error))
+    code, message = collective.finish_collectively(code, message)
+    if message and MPI.COMM_WORLD.rank == 0:
+        print(message, file=sys.stderr, flush=True)
+    return code
 
 
 if __name__ == "__main__":

@@ -40,6 +40,7 @@ from dolfinx_nnqem.bodies import check_rigid_modes, find_bodies, free_rigid_mode
 from dolfinx_nnqem.contact.model import Contact, ContactModel
 from dolfinx_nnqem.contact.obstacles import Cylinder, Plane, Sphere  # noqa: F401  (the user's imports)
 from dolfinx_nnqem.material import GaussPointValues, PlasticState
+from dolfinx_nnqem.validation import check_cell_tag, check_mesh
 
 
 # -- problem data ---------------------------------------------------------------------------
@@ -136,8 +137,7 @@ class ContactProblem:
         degree: int = 1,
         quadrature_degree: int | None = None,
     ):
-        if mesh.geometry.dim != 3:
-            raise ValueError(f"the mesh is {mesh.geometry.dim}D; dolfinx_nnqem solves 3D problems")
+        check_mesh(mesh)  # a 3D mesh of 3D cells, one cell type
         if degree not in (1, 2):
             raise ValueError(f"degree = {degree!r}: the displacement is Lagrange of degree 1 or 2")
         contacts = [] if contact is None else ([contact] if isinstance(contact, Contact) else list(contact))
@@ -257,6 +257,8 @@ class ContactProblem:
                 form = self.state.density * ufl.dot(g, v) * dx
             elif isinstance(b, BodyForce):
                 _check_finite("BodyForce.value", b.value, 3)
+                if b.cell_tag is not None:
+                    check_cell_tag(b.cell_tag, self.cell_tags, self.comm, "BodyForce")
                 f = ufl.as_vector([float(c) for c in b.value])
                 form = ufl.dot(f, v) * (dx if b.cell_tag is None else dx(b.cell_tag))
             else:
@@ -426,6 +428,27 @@ class ContactProblem:
         if self.has_contact:
             self.contact.z = self.contact.z_n + beta * (self.contact.z_n - z_prev)
         return True
+
+    @property
+    def predictor_history(self) -> tuple | None:
+        """``(ℓ, u, z)`` of the increment before the last converged one (what :meth:`extrapolate`
+        needs; None before two increments exist). u is the local array (ghosts included), z this
+        rank's pair unknowns (None without contact). For checkpoints."""
+        return self._previous
+
+    def set_predictor_history(self, history: tuple | None) -> None:
+        """Restore :attr:`predictor_history` (from a checkpoint of the same problem and partition)."""
+        if history is not None:
+            ell, u, z = history
+            u = np.array(u, dtype=float)
+            if u.shape != self.u.x.array.shape:
+                raise ValueError(f"predictor history: u has shape {u.shape}, expected {self.u.x.array.shape}")
+            if self.has_contact:
+                z = np.array(z, dtype=float).reshape(self.contact.num_local, 3)
+            else:
+                z = None
+            history = (float(ell), u, z)
+        self._previous = history
 
     def predict_contact(self) -> None:
         """Starting active set (see :meth:`ContactModel.predict`)."""

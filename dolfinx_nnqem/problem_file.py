@@ -59,9 +59,15 @@ A problem file names a mesh with physical tags and everything :class:`ContactPro
     [solver.petsc_options]
     pc_factor_mat_solver_type = "mumps"
 
+    [checks]                              # the independent check of every converged state
+    rtol = 1e-6                           # default: from [solver].rtol (1e-6 for rtol = 1e-10)
+    max_strain = 0.1                      # small-strain limits (false: no limit)
+    max_rotation = 0.1
+
     [output]
-    folder = "results/my_run"             # relative to the current directory
+    folder = "results/my_run"             # relative to the current directory; not empty
     fields = true
+    checkpoint_every = 1                  # a restart checkpoint every N increments (0: none)
     [output.probes]
     "tip" = [2.0, 0.0, 0.0]
 
@@ -89,7 +95,7 @@ class ProblemFileError(ValueError):
 
 
 SECTIONS = {"mesh", "materials", "contact", "dirichlet", "traction", "pressure", "body_force",
-            "gravity", "solver", "output"}
+            "gravity", "solver", "checks", "output"}
 METHODS = ("monolithic", "nneqm1", "nneqm2")
 
 
@@ -108,6 +114,7 @@ class ProblemSpec:
     gravity: dict | None
     solver: dict
     output: dict = field(default_factory=dict)
+    checks: dict = field(default_factory=dict)
 
 
 def load_problem_file(path: str | Path) -> ProblemSpec:
@@ -138,12 +145,13 @@ def load_problem_file(path: str | Path) -> ProblemSpec:
         _amplitude_entry(gravity, f"{where}: gravity")
     solver = _solver_section(data.get("solver", {}), where)
     output = _output_section(data.get("output", {}), where)
+    checks = _checks_section(data.get("checks", {}), where)
     if not dirichlet:
         raise ProblemFileError(f"{where}: no [[dirichlet]] entry; a quasi-static problem needs supports")
     if solver["method"] != "monolithic" and not contact:
         raise ProblemFileError(f"{where}: solver.method = {solver['method']!r} needs a [contact] section")
     return ProblemSpec(path, mesh, materials, contact, dirichlet, traction, pressure, body_force,
-                       gravity, solver, output)
+                       gravity, solver, output, checks)
 
 
 # -- sections ---------------------------------------------------------------------------------
@@ -176,7 +184,7 @@ def _checked_keys(table: dict, allowed: set, required: set, where: str) -> dict:
     return dict(table)
 
 
-def _number(value, where: str, *, positive=False, nonnegative=False, integer=False) -> float:
+def _number(value, where: str, *, positive=False, nonnegative=False, integer=False, high=None) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ProblemFileError(f"{where} = {value!r}: expected a number")
     if integer and not isinstance(value, int):
@@ -187,6 +195,8 @@ def _number(value, where: str, *, positive=False, nonnegative=False, integer=Fal
         raise ProblemFileError(f"{where} = {value!r}: expected a value > 0")
     if nonnegative and value < 0:
         raise ProblemFileError(f"{where} = {value!r}: expected a value >= 0")
+    if high is not None and value > high:
+        raise ProblemFileError(f"{where} = {value!r}: expected a value <= {high:g}")
     return value
 
 
@@ -385,13 +395,16 @@ def _solver_section(solver: dict, where: str) -> dict:
     solver.setdefault("method", "monolithic")
     if solver["method"] not in METHODS:
         raise ProblemFileError(f"{w}.method = {solver['method']!r}: expected one of {list(METHODS)}")
-    solver["increments"] = int(_number(solver.get("increments", 15), f"{w}.increments", positive=True, integer=True))
+    from dolfinx_nnqem.validation import MAX_CUTBACKS, MAX_INCREMENTS
+
+    solver["increments"] = int(_number(solver.get("increments", 15), f"{w}.increments", positive=True, integer=True,
+                                       high=MAX_INCREMENTS))
     solver["max_cutbacks"] = int(_number(solver.get("max_cutbacks", 5), f"{w}.max_cutbacks",
-                                         nonnegative=True, integer=True))
+                                         nonnegative=True, integer=True, high=MAX_CUTBACKS))
     solver["max_iterations"] = int(_number(solver.get("max_iterations", 30), f"{w}.max_iterations",
-                                           positive=True, integer=True))
-    for key, default in (("rtol", 1e-10), ("atol", 1e-12)):
-        solver[key] = float(_number(solver.get(key, default), f"{w}.{key}", positive=True))
+                                           positive=True, integer=True, high=10_000))
+    solver["rtol"] = float(_number(solver.get("rtol", 1e-10), f"{w}.rtol", positive=True, high=1e-2))
+    solver["atol"] = float(_number(solver.get("atol", 1e-12), f"{w}.atol", nonnegative=True))
     solver.setdefault("linear_solver", "direct")
     if solver["linear_solver"] not in ("direct", "iterative", "auto"):
         raise ProblemFileError(f"{w}.linear_solver = {solver['linear_solver']!r}: expected \"direct\", "
@@ -408,10 +421,15 @@ def _solver_section(solver: dict, where: str) -> dict:
 
 def _output_section(output: dict, where: str) -> dict:
     w = f"{where}: [output]"
-    output = _checked_keys(output, {"folder", "fields", "probes"}, set(), w)
+    output = _checked_keys(output, {"folder", "fields", "probes", "checkpoint_every"}, set(), w)
     output.setdefault("folder", "results/" + Path(where).stem)
     if not isinstance(output["folder"], str):
         raise ProblemFileError(f"{w}.folder must be a string")
+    if output["folder"].strip() in ("", "."):
+        raise ProblemFileError(f"{w}.folder = {output['folder']!r}: give a folder name (an empty name would mix the "
+                               "results with the current directory)")
+    output["checkpoint_every"] = int(_number(output.get("checkpoint_every", 1), f"{w}.checkpoint_every",
+                                             nonnegative=True, integer=True))
     if not isinstance(output.setdefault("fields", True), bool):
         raise ProblemFileError(f"{w}.fields must be true or false")
     probes = output.setdefault("probes", {})
@@ -421,23 +439,116 @@ def _output_section(output: dict, where: str) -> dict:
     return output
 
 
+def _checks_section(checks: dict, where: str) -> dict:
+    """[checks]: rtol, max_strain, max_rotation (false disables a small-strain limit)."""
+    from dolfinx_nnqem.checks import DEFAULT_MAX_ROTATION, DEFAULT_MAX_STRAIN
+
+    w = f"{where}: [checks]"
+    checks = _checked_keys(checks, {"rtol", "max_strain", "max_rotation"}, set(), w)
+    if "rtol" in checks:
+        checks["rtol"] = float(_number(checks["rtol"], f"{w}.rtol", positive=True, high=1e-2))
+    for key, default in (("max_strain", DEFAULT_MAX_STRAIN), ("max_rotation", DEFAULT_MAX_ROTATION)):
+        value = checks.get(key, default)
+        if value is False:
+            checks[key] = None
+        elif value is True:
+            raise ProblemFileError(f"{w}.{key} = true: give a number, or false to disable the limit")
+        else:
+            checks[key] = float(_number(value, f"{w}.{key}", positive=True))
+    return checks
+
+
+def check_options(spec: ProblemSpec):
+    """The :class:`~dolfinx_nnqem.checks.CheckOptions` of the [checks] section."""
+    from dolfinx_nnqem.checks import CheckOptions
+
+    return CheckOptions(**spec.checks)
+
+
 # -- building ---------------------------------------------------------------------------------
 def read_mesh(spec: ProblemSpec, comm):
     """The mesh and its tags from ``spec.mesh`` (gmsh .msh or XDMF)."""
-    from dolfinx_nnqem import compat
 
     file = spec.mesh["file"]
     if file.suffix == ".msh":
-        mesh, cell_tags, facet_tags = compat.read_from_msh(str(file), comm, 0, gdim=3)
+        return _read_msh(file, comm)
     else:
         from dolfinx.io import XDMFFile
 
+        from dolfinx_nnqem.collective import agree
+
+        agree(comm, _check_xdmf, file, spec.mesh)  # names checked on every rank before the collective read
         with XDMFFile(comm, str(file), "r") as xdmf:
             mesh = xdmf.read_mesh(name=spec.mesh["mesh_name"])
             mesh.topology.create_connectivity(mesh.topology.dim - 1, mesh.topology.dim)
             cell_tags = xdmf.read_meshtags(mesh, name=spec.mesh["cell_tags"])
             facet_tags = xdmf.read_meshtags(mesh, name=spec.mesh["facet_tags"])
     return mesh, cell_tags, facet_tags
+
+
+def _read_msh(file: Path, comm):
+    """A gmsh file read on rank 0 and distributed; what rank 0 finds wrong is raised on every rank
+    BEFORE the collective distribution starts (no rank is left waiting)."""
+    import gmsh
+
+    from dolfinx_nnqem import compat
+    from dolfinx_nnqem.collective import on_rank0
+
+    started = [False]
+
+    def open_model():
+        if not gmsh.isInitialized():
+            gmsh.initialize(interruptible=False)  # leave Ctrl-C to the command line
+            started[0] = True
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.model.add("dolfinx_nnqem problem file")
+        try:
+            gmsh.merge(str(file))
+        except Exception as error:
+            raise ProblemFileError(f"{file}: gmsh cannot read it ({error})") from None
+        types = gmsh.model.mesh.getElementTypes(3)
+        if len(types) == 0:
+            dims = sorted({d for d, _ in gmsh.model.getEntities() if len(gmsh.model.mesh.getElementTypes(d))})
+            raise ProblemFileError(f"{file}: a {max(dims, default=0)}D mesh (no 3D cells; elements of dimension "
+                                   f"{dims}); dolfinx_nnqem solves 3D solids: mesh the volumes")
+        if len(types) > 1:
+            names = [gmsh.model.mesh.getElementProperties(t)[0] for t in types]
+            raise ProblemFileError(f"{file}: the volumes mix cell types {names}; use one (all tetrahedra or all "
+                                   "hexahedra)")
+        if not gmsh.model.getPhysicalGroups(3):
+            raise ProblemFileError(f"{file}: no physical volume groups; tag every body (the cell tags name the "
+                                   "materials)")
+
+    def close_model():
+        if gmsh.isInitialized():
+            gmsh.model.remove()
+            if started[0]:
+                gmsh.finalize()
+
+    try:
+        on_rank0(comm, open_model)
+        return compat.model_to_mesh(gmsh.model, comm, 0, gdim=3)
+    finally:
+        if comm.rank == 0:
+            close_model()
+
+
+def _check_xdmf(file: Path, names: dict) -> None:
+    import xml.etree.ElementTree as ET
+
+    try:
+        tree = ET.parse(file)
+    except (ET.ParseError, OSError) as error:
+        raise ProblemFileError(f"{file}: not a readable XDMF file ({error})") from None
+    grids = {g.get("Name") for g in tree.iter("Grid")}
+    for key in ("mesh_name", "cell_tags", "facet_tags"):
+        if names[key] not in grids:
+            raise ProblemFileError(f"{file}: no grid named {names[key]!r} (mesh.{key}); the file has {sorted(grids)}")
+    for item in tree.iter("DataItem"):
+        if item.get("Format") == "HDF" and item.text:
+            h5 = file.parent / item.text.strip().split(":")[0]
+            if not h5.is_file():
+                raise ProblemFileError(f"{file}: its data file {h5} is missing")
 
 
 def build_problem(spec: ProblemSpec, comm):

@@ -152,7 +152,8 @@ def equilibrium_check(problem) -> dict:
     model and its force on the body counts like a reaction. Returns the applied load, the
     reactions per tag, the obstacle forces per interface, their sum, the relative global
     imbalance ‖F_applied + Σ reactions‖ / ‖F_applied‖ (or / Σ‖reactions‖ when nothing is
-    applied), and the relative free-dof residual ‖R_free‖ / ‖F_ext(ℓ)‖.
+    applied), and the relative free-dof residual ‖R_free‖ / F with the problem's force scale
+    F = max(‖F_ext(ℓ)‖, ‖F_int‖, ‖Bᵀλ‖) (meaningful also when only displacements are prescribed).
     """
     R = problem.residual()
     react = reactions(problem, R)
@@ -163,7 +164,9 @@ def equilibrium_check(problem) -> dict:
     scale = max(np.linalg.norm(applied), sum(np.linalg.norm(r) for r in react.values()),
                 sum(np.linalg.norm(r) for r in obstacles.values()), 1e-300)
     R_free = problem.free_residual(R)
-    F_scale = max(problem.external_force().norm(), 1e-300)
+    F_scale = max(problem.external_force().norm(), problem.assemble_internal_force().norm(), 1e-300)
+    if problem.has_contact:
+        F_scale = max(F_scale, problem.contact.global_force(problem.contact.force()).norm())
     return {
         "applied_load": applied, "reactions": react, "obstacle_forces": obstacles, "reaction_sum": total_reaction,
         "global_imbalance": float(np.linalg.norm(imbalance) / scale),

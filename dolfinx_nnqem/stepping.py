@@ -5,6 +5,13 @@ is halved and retried, at most ``max_cutbacks`` times in a row; then :class:`Con
 names the increment, the residuals and the pair states. Every converged increment is committed
 and handed to the callbacks (the writers) before the next one starts, so a run that dies later
 loses no converged increment.
+
+A solver's "converged" is not taken on trust: before the commit the state is checked
+independently (:func:`dolfinx_nnqem.checks.check_state`: equilibrium at the free dofs, every
+pair's complementarity, finite values, the small-strain setting); a failed check makes the
+increment a non-converged one with the check's reason. A ``checkpoint``
+(:class:`dolfinx_nnqem.checkpoint.Checkpointer`) saves what the next increment needs after the
+writers ran; ``resume`` (from :func:`dolfinx_nnqem.checkpoint.restore`) continues such a run.
 """
 
 from __future__ import annotations
@@ -13,8 +20,10 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
+from dolfinx_nnqem.checks import CheckOptions, StateCheck, check_state, failure_details
 from dolfinx_nnqem.convergence import ConvergenceError, SolveReport, logger
 from dolfinx_nnqem.linalg import free_dropped_objects
+from dolfinx_nnqem.validation import check_stepping_arguments
 
 
 @dataclass
@@ -29,10 +38,21 @@ class IncrementResult:
     cutbacks: int  #: halvings needed before this increment converged
     commit_time_s: float = 0.0  #: state update (Gauss-point stresses) after convergence
     output_time_s: float = 0.0  #: time spent in the callbacks (writers)
+    check: StateCheck | None = None  #: the independent check of the converged state
 
     @property
     def iterations(self) -> int:
         return self.report.iterations
+
+
+@dataclass
+class StepperState:
+    """Where load stepping stands after a converged increment (what a restart needs)."""
+
+    start: float  #: the load factor the run started from
+    step: float  #: the next increment's size (after a cutback: the reduced one)
+    cutbacks: int  #: halvings still in force
+    index: int  #: converged increments so far
 
 
 def solve_load_steps(
@@ -44,6 +64,9 @@ def solve_load_steps(
     callbacks: Sequence[Callable[[IncrementResult], None]] = (),
     final_load_factor: float = 1.0,
     max_displacement: float | None = None,
+    check: CheckOptions | None = None,
+    checkpoint=None,
+    resume: StepperState | None = None,
 ) -> list[IncrementResult]:
     """Drive ``solver`` from the last converged load factor to ``final_load_factor``.
 
@@ -63,14 +86,35 @@ def solve_load_steps(
         Reject (and cut back) an increment whose largest displacement component exceeds this:
         past a limit load a small-displacement model keeps finding equilibria with ever larger
         displacements, so collapse is declared when the displacement leaves the small range.
+    check
+        :class:`~dolfinx_nnqem.checks.CheckOptions` of the independent check of every converged
+        state (default: tolerances derived from the solver's ``options``).
+    checkpoint
+        Called as ``checkpoint(problem, stepper_state, result)`` after the callbacks of every
+        converged increment (:class:`dolfinx_nnqem.checkpoint.Checkpointer`).
+    resume
+        The :class:`StepperState` of a restored checkpoint: continue that run (same
+        ``increments`` and ``final_load_factor``).
+
+    Raises
+    ------
+    ConvergenceError
+        An increment did not converge after ``max_cutbacks`` halvings. Its ``failure``
+        attribute (a dict: increment, load factor, reason, the worst nodes and pairs) is also
+        handed to every callback that has a ``failed`` method before it is raised.
     """
-    if increments < 1:
-        raise ValueError(f"increments = {increments}; expected >= 1")
-    start = problem.load_factor_n
-    step = (final_load_factor - start) / increments
+    increments, max_cutbacks, final_load_factor, max_displacement = check_stepping_arguments(
+        increments, max_cutbacks, final_load_factor, max_displacement)
+    check = check or CheckOptions()
+    solver_options = getattr(solver, "options", None)
+    if resume is None:
+        start = problem.load_factor_n
+        step = (final_load_factor - start) / increments
+        cutbacks, index0 = 0, 0
+    else:
+        start, step, cutbacks, index0 = resume.start, resume.step, resume.cutbacks, resume.index
     results: list[IncrementResult] = []
-    cutbacks = 0
-    ell = start
+    ell = problem.load_factor_n
     direction = 1.0 if final_load_factor >= start else -1.0  # unloading paths run downwards
     span = abs(final_load_factor - start)
     while direction * (final_load_factor - ell) > 1e-12 * span:
@@ -80,6 +124,12 @@ def solve_load_steps(
         free_dropped_objects(problem.petsc_comms)
         t0 = time.perf_counter()
         report = solver.solve_increment(target)
+        verdict = None
+        if report.converged:
+            verdict = check_state(problem, report, solver_options, check)
+            if not verdict.ok:
+                report.converged = False
+                report.message = f"the solver reported convergence, but the independent check failed: {verdict.reason}"
         if report.converged and max_displacement is not None:
             u_max = _max_displacement(problem)
             if u_max > max_displacement:
@@ -87,9 +137,13 @@ def solve_load_steps(
                 report.message = (f"largest displacement {u_max:.4g} exceeds max_displacement = "
                                   f"{max_displacement:.4g} (collapse)")
         if not report.converged:
-            problem.restore()
             if cutbacks >= max_cutbacks:
-                raise ConvergenceError(_failure_message(solver, target, report, cutbacks))
+                failure = {"increment": index0 + len(results) + 1, "load_factor": float(target),
+                           "last_converged_load_factor": float(ell), "cutbacks": cutbacks,
+                           "reason": report.message, **failure_details(problem)}
+                problem.restore()
+                _give_up(_failure_message(solver, target, report, cutbacks), failure, callbacks)
+            problem.restore()
             cutbacks += 1
             step /= 2.0
             logger.warning(f"[{solver.name}] increment to load factor {target:.6g} failed "
@@ -99,10 +153,10 @@ def solve_load_steps(
         problem.commit(report.gauss_point_values)
         ell = target
         result = IncrementResult(
-            index=len(results) + 1, load_factor=target, report=report,
+            index=index0 + len(results) + 1, load_factor=target, report=report,
             plastic_points=problem.state.count_plastic_points(),
             wall_time_s=time.perf_counter() - t0, cutbacks=cutbacks,
-            commit_time_s=time.perf_counter() - t_commit,
+            commit_time_s=time.perf_counter() - t_commit, check=verdict,
         )
         results.append(result)
         logger.info(f"[{solver.name}] increment {result.index}: load factor {target:.6g} converged in "
@@ -114,7 +168,19 @@ def solve_load_steps(
         if cutbacks:  # after a successful cut step, try the original step size again
             step = direction * min(abs(2.0 * step), span / increments)
             cutbacks = max(cutbacks - 1, 0)
+        if checkpoint is not None:
+            checkpoint(problem, StepperState(start, step, cutbacks, result.index), result)
     return results
+
+
+def _give_up(message: str, failure: dict, callbacks) -> None:
+    """Raise ConvergenceError with ``failure``, after handing it to the callbacks that take it."""
+    error = ConvergenceError(message)
+    error.failure = failure
+    for callback in callbacks:
+        if hasattr(callback, "failed"):
+            callback.failed(failure)
+    raise error
 
 
 def _max_displacement(problem) -> float:
@@ -136,7 +202,8 @@ def _failure_message(solver, target: float, report: SolveReport, cutbacks: int) 
 
 
 def solve_load_path(problem, solver, load_factors: Sequence[float], *,
-                    callbacks: Sequence[Callable[[IncrementResult], None]] = ()) -> list[IncrementResult]:
+                    callbacks: Sequence[Callable[[IncrementResult], None]] = (),
+                    check: CheckOptions | None = None) -> list[IncrementResult]:
     """Solve the increments ending at the given load factors, in order, without cutback.
 
     For an explicit load path (e.g. to repeat the path another run took after cutbacks, since
@@ -147,13 +214,21 @@ def solve_load_path(problem, solver, load_factors: Sequence[float], *,
     for target in load_factors:
         t0 = time.perf_counter()
         report = solver.solve_increment(float(target))
+        verdict = None
+        if report.converged:
+            verdict = check_state(problem, report, getattr(solver, "options", None), check)
+            if not verdict.ok:
+                report.converged = False
+                report.message = f"the solver reported convergence, but the independent check failed: {verdict.reason}"
         if not report.converged:
+            failure = {"increment": len(results) + 1, "load_factor": float(target), "cutbacks": 0,
+                       "reason": report.message, **failure_details(problem)}
             problem.restore()
-            raise ConvergenceError(_failure_message(solver, float(target), report, 0))
+            _give_up(_failure_message(solver, float(target), report, 0), failure, callbacks)
         problem.commit(report.gauss_point_values)
         result = IncrementResult(index=len(results) + 1, load_factor=float(target), report=report,
                                  plastic_points=problem.state.count_plastic_points(),
-                                 wall_time_s=time.perf_counter() - t0, cutbacks=0)
+                                 wall_time_s=time.perf_counter() - t0, cutbacks=0, check=verdict)
         results.append(result)
         for callback in callbacks:
             callback(result)

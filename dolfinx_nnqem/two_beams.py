@@ -89,10 +89,7 @@ def run_two_beams(method: str = "monolithic", increments: int = 15, out: str | P
     summary["timings_s"] = dict(getattr(solver, "timings", {}))
     summary["free_end_corners"] = summary.pop("probes", [])
     writer.summary.data = summary
-    if comm.rank == 0:
-        import json
-
-        (Path(out) / "summary.json").write_text(json.dumps(summary, indent=1))
+    writer.summary.write()  # atomic, rank 0, errors raised on every rank
     return summary
 
 

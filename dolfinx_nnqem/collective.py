@@ -1,0 +1,133 @@
+"""An error on one MPI rank is an error on every rank: agreement helpers.
+
+A rank that raises while the others go on waits for nothing, but the others then wait forever
+in their next collective call. Code that may fail on some ranks only (files written by rank 0,
+a value one rank finds bad) runs through :func:`agree` / :func:`on_rank0`: every rank learns
+whether any rank failed, and every rank raises the same exception (the lowest failing rank's
+type and message). What cannot be made collective (a failure inside a collective library call)
+is handled by the command line's last resort: :func:`finish_collectively` waits a bounded time
+for the other ranks to fail too, and otherwise aborts the whole job with the exit code.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from collections.abc import Callable
+
+from mpi4py import MPI
+
+__all__ = ["CollectiveError", "agree", "finish_collectively", "on_rank0", "rebuild"]
+
+ABORT_TIMEOUT_S = float(os.environ.get("NNQEM_ABORT_TIMEOUT", "10"))
+"""How long a failing rank waits for the others to fail too before aborting the job (seconds)."""
+
+
+class CollectiveError(RuntimeError):
+    """Another rank failed (its exception could not be rebuilt here as its own type)."""
+
+
+_REBUILDABLE = (ValueError, TypeError, OSError, KeyboardInterrupt, RuntimeError, LookupError)
+
+
+def _describe(error: BaseException) -> tuple:
+    module = type(error).__module__
+    errno = getattr(error, "errno", None) if isinstance(error, OSError) else None
+    filename = getattr(error, "filename", None) if isinstance(error, OSError) else None
+    strerror = getattr(error, "strerror", None) if isinstance(error, OSError) else None
+    return (module, type(error).__qualname__, str(error), errno, strerror, filename)
+
+
+def rebuild(description: tuple) -> BaseException:
+    """An exception like the one ``description`` (from another rank) describes."""
+    module, name, message, errno, strerror, filename = description
+    cls = None
+    try:
+        import importlib
+
+        cls = getattr(importlib.import_module(module), name.split(".")[-1], None)
+    except Exception:
+        cls = None
+    if isinstance(cls, type) and issubclass(cls, OSError) and errno is not None:
+        return cls(errno, strerror or message, filename) if filename else cls(errno, strerror or message)
+    if isinstance(cls, type) and issubclass(cls, _REBUILDABLE):
+        try:
+            return cls(message)
+        except Exception:
+            pass
+    return CollectiveError(f"{name}: {message}")
+
+
+def agree(comm, fn: Callable, *args, **kwargs):
+    """``fn(*args, **kwargs)`` on every rank; if it raised on any rank, raise on every rank.
+
+    Every rank raises the exception of the lowest rank that failed (its type, message, errno
+    and file name), so every rank stops with the same message. ``fn`` must not be collective
+    itself (use this around rank-local work: files, checks of local data).
+    """
+    error = None
+    result = None
+    try:
+        result = fn(*args, **kwargs)
+    except BaseException as exc:  # noqa: BLE001  (KeyboardInterrupt must also reach every rank)
+        error = exc
+    if comm is None or comm.size == 1:
+        if error is not None:
+            raise error
+        return result
+    failures = comm.allgather(None if error is None else _describe(error))
+    first = next((f for f in failures if f is not None), None)
+    if first is None:
+        return result
+    if error is not None and failures.index(first) == comm.rank:
+        raise error
+    raise rebuild(first) from error
+
+
+def on_rank0(comm, fn: Callable, *args, **kwargs):
+    """``fn`` on rank 0 only (files of a gathered result); its failure is raised on every rank.
+    Returns fn's result on rank 0, None elsewhere."""
+    rank = 0 if comm is None else comm.rank
+    return agree(comm, lambda: fn(*args, **kwargs) if rank == 0 else None)
+
+
+_ERROR_COMM = None
+
+
+def error_comm():
+    """A private duplicate of COMM_WORLD used only by :func:`finish_collectively` (created
+    collectively at start-up by :func:`init`)."""
+    return _ERROR_COMM
+
+
+def init() -> None:
+    """Create the private error communicator (collective; call once at start-up on every rank)."""
+    global _ERROR_COMM
+    if _ERROR_COMM is None and MPI.COMM_WORLD.size > 1:
+        _ERROR_COMM = MPI.COMM_WORLD.Dup()
+
+
+def finish_collectively(code: int, message: str, *, timeout: float | None = None) -> tuple[int, str]:
+    """Agree with the other ranks on how the job ends after an error on this rank.
+
+    Every rank that fails calls this. If all ranks arrive within ``timeout`` seconds, they agree
+    on the lowest rank's (code, message), which is returned on every rank (rank 0 prints it).
+    If some rank does not arrive (it waits in a collective call for this one), the message is
+    printed by this rank and the whole job is aborted with ``code``: no rank hangs.
+    """
+    comm = _ERROR_COMM
+    if comm is None or comm.size == 1:
+        return code, message
+    timeout = ABORT_TIMEOUT_S if timeout is None else timeout
+    request = comm.Ibarrier()
+    deadline = time.monotonic() + timeout
+    while not request.Test():
+        if time.monotonic() > deadline:
+            sys.stderr.write(f"{message}\n(rank {comm.rank}: the other ranks did not stop within {timeout:g} s; "
+                             f"aborting the job with exit code {code})\n")
+            sys.stderr.flush()
+            MPI.COMM_WORLD.Abort(code)
+        time.sleep(0.01)
+    outcomes = comm.allgather((code, message))
+    return outcomes[0] if outcomes[0][0] != 0 else next((o for o in outcomes if o[0] != 0), (code, message))

@@ -1,0 +1,179 @@
+"""Bad inputs, table-driven, through BOTH the problem file (exit code 3, the key named) and the
+Python API (ValueError/TypeError naming the value), before anything is solved."""
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from dolfinx_nnqem.cli import EXIT_BAD_INPUT, EXIT_OK, main
+from dolfinx_nnqem.material import VonMises
+from dolfinx_nnqem.meshing import build_two_beams
+from dolfinx_nnqem.problem import BodyForce, Contact, ContactProblem, Dirichlet, Pressure, Traction
+from dolfinx_nnqem.solver import SolverOptions
+
+ROOT = Path(__file__).resolve().parents[1]
+MESH = (ROOT / "meshes" / "two_beams.msh").as_posix()
+GOOD = f"""
+[mesh]
+file = "{MESH}"
+[materials.1]
+E = 1.0e9
+nu = 0.3
+[materials.2]
+E = 1.0e9
+nu = 0.3
+[contact]
+surface1 = 21
+surface2 = 22
+mu_f = 0.3
+[[dirichlet]]
+tag = 11
+[[dirichlet]]
+tag = 12
+[solver]
+increments = 2
+[output]
+folder = "out"
+"""
+M = VonMises(E=1e9, nu=0.3)
+
+
+@pytest.fixture(scope="module")
+def beams():
+    return build_two_beams(MPI.COMM_WORLD)
+
+
+def _api(beams, **change):
+    mesh, cell_tags, facet_tags = beams
+    kwargs = dict(materials={1: M, 2: M}, dirichlet=[Dirichlet(11), Dirichlet(12)],
+                  contact=Contact(21, 22, mu_f=0.3))
+    kwargs.update(change)
+    return ContactProblem(mesh, cell_tags, facet_tags, **kwargs)
+
+
+def _square():
+    import dolfinx.mesh as dm
+
+    return dm.create_unit_square(MPI.COMM_WORLD, 2, 2)
+
+
+# name: (problem-file edit (old, new), API call raising, words the message must contain)
+CASES = {
+    "dirichlet tag missing": (("tag = 12", "tag = 99"),
+                              lambda b: _api(b, dirichlet=[Dirichlet(11), Dirichlet(99)]), "99"),
+    "traction tag missing": (("[solver]", "[[traction]]\ntag = 98\nvalue = [1.0, 0.0, 0.0]\n[solver]"),
+                             lambda b: _api(b, tractions=[Traction(98, (1.0, 0.0, 0.0))]), "98"),
+    "pressure tag missing": (("[solver]", "[[pressure]]\ntag = 97\np = 1.0\n[solver]"),
+                             lambda b: _api(b, tractions=[Pressure(97, 1.0)]), "97"),
+    "body force cell tag missing": (("[solver]", "[[body_force]]\nvalue = [0.0, -1.0, 0.0]\ncell_tag = 7\n[solver]"),
+                                    lambda b: _api(b, body_forces=[BodyForce((0, -1, 0), cell_tag=7)]), "cell tag 7"),
+    "material tag missing": (("[materials.2]", "[materials.5]\nE = 1.0e9\nnu = 0.3\n[materials.2]"),
+                             lambda b: _api(b, materials={1: M, 2: M, 5: M}), "cell tag 5"),
+    "contact tag missing": (("surface2 = 22", "surface2 = 96"),
+                            lambda b: _api(b, contact=Contact(21, 96, mu_f=0.3)), "96"),
+    "contact surfaces share nodes": (("surface1 = 21\nsurface2 = 22", "surface1 = 12\nsurface2 = 13"),
+                                     lambda b: _api(b, contact=Contact(12, 13, mu_f=0.3)), "share"),
+    "a body moves rigidly": (("[contact]\nsurface1 = 21\nsurface2 = 22\nmu_f = 0.3\n[[dirichlet]]\ntag = 11\n"
+                              "[[dirichlet]]\ntag = 12\n", "[[dirichlet]]\ntag = 11\n"),
+                             lambda b: _api(b, contact=None, dirichlet=[Dirichlet(11)]), "rigid"),
+    "friction not finite": (("mu_f = 0.3", "mu_f = nan"),
+                            lambda b: Contact(21, 22, mu_f=float("nan")), "mu_f"),
+    "E infinite": (("E = 1.0e9", "E = inf"), lambda b: VonMises(E=math.inf, nu=0.3), "E"),
+    "rtol too large": (("increments = 2", "increments = 2\nrtol = 0.5"), lambda b: SolverOptions(rtol=0.5), "rtol"),
+    "rtol not a number": (("increments = 2", "increments = 2\nrtol = nan"),
+                          lambda b: SolverOptions(rtol=float("nan")), "rtol"),
+    "atol negative": (("increments = 2", "increments = 2\natol = -1.0"), lambda b: SolverOptions(atol=-1.0), "atol"),
+    "increments too many": (("increments = 2", "increments = 1000000"), "steps:increments=1000000", "increments"),
+    "increments not an integer": (("increments = 2", "increments = 2.5"), "steps:increments=2.5", "increments"),
+    "cutbacks too many": (("increments = 2", "increments = 2\nmax_cutbacks = 99"), "steps:max_cutbacks=99",
+                          "max_cutbacks"),
+    "output folder empty": (('folder = "out"', 'folder = ""'), "writer:", "folder"),
+    "traction not finite": (("[solver]", "[[traction]]\ntag = 13\nvalue = [nan, 0.0, 0.0]\n[solver]"),
+                            lambda b: _api(b, tractions=[Traction(13, (math.nan, 0.0, 0.0))]), "finite"),
+    "2D mesh": (None, lambda b: ContactProblem(_square(), None, None, materials=M), "2D"),
+}
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_bad_input_through_the_problem_file(tmp_path, capsys, name):
+    edit, _, words = CASES[name]
+    if edit is None:
+        edit = (f'file = "{MESH}"', f'file = "{_square_msh(tmp_path)}"')
+    old, new = edit
+    assert old in GOOD
+    path = tmp_path / "p.toml"
+    path.write_text(GOOD.replace(old, new, 1))
+    code = main(["-q", "run", str(path), "--check"])
+    err = capsys.readouterr().err.strip()
+    print(f"\n  exit {code}: {err}")
+    assert code == EXIT_BAD_INPUT and words in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_bad_input_through_the_api(tmp_path, beams, name):
+    _, call, words = CASES[name]
+    with pytest.raises((ValueError, TypeError)) as error:
+        if isinstance(call, str):
+            _api_call(call, beams, tmp_path)
+        else:
+            call(beams)
+    print(f"\n  {type(error.value).__name__}: {error.value}")
+    assert words in str(error.value)
+
+
+def _api_call(spec, beams, tmp_path):
+    from dolfinx_nnqem.output import ResultsWriter
+    from dolfinx_nnqem.solver import make_solver
+    from dolfinx_nnqem.stepping import solve_load_steps
+
+    kind, _, arg = spec.partition(":")
+    problem = _api(beams)
+    if kind == "writer":
+        ResultsWriter(problem, "monolithic", "", 2)
+    key, value = arg.split("=")
+    solve_load_steps(problem, make_solver("monolithic", problem), **{"increments": 2, key: eval(value)})
+
+
+def _square_msh(tmp_path) -> str:
+    import gmsh
+
+    started = not gmsh.isInitialized()
+    if started:
+        gmsh.initialize()
+    gmsh.option.setNumber("General.Terminal", 0)
+    gmsh.model.add("square")
+    gmsh.model.occ.addRectangle(0, 0, 0, 1, 1)
+    gmsh.model.occ.synchronize()
+    gmsh.model.addPhysicalGroup(2, [1], 1)
+    gmsh.model.mesh.generate(2)
+    path = tmp_path / "square.msh"
+    gmsh.write(str(path))
+    gmsh.model.remove()
+    if started:
+        gmsh.finalize()
+    return path.as_posix()
+
+
+def test_numpy_scalars_are_accepted(tmp_path, beams):
+    from dolfinx_nnqem.solver import make_solver
+    from dolfinx_nnqem.stepping import solve_load_steps
+
+    m = VonMises(E=np.float64(1e9), nu=np.float32(0.3))
+    problem = _api(beams, materials={np.int64(1): m, np.int32(2): m},
+                   dirichlet=[Dirichlet(np.int64(11)), Dirichlet(np.int64(12))],
+                   tractions=[Traction(np.int64(13), np.array([1e3, -1e3, 0.0]))],
+                   contact=Contact(np.int64(21), np.int64(22), mu_f=np.float64(0.3)))
+    solver = make_solver("monolithic", problem, SolverOptions(rtol=np.float64(1e-10), max_iterations=np.int64(30)))
+    results = solve_load_steps(problem, solver, np.int64(2), max_cutbacks=np.int32(2),
+                               final_load_factor=np.float64(1.0))
+    print(f"\n  numpy scalars: {len(results)} increments, |R|/F = {results[-1].check.equilibrium:.1e}")
+    assert len(results) == 2
+
+
+def test_the_good_file_passes(tmp_path, capsys):
+    path = tmp_path / "p.toml"
+    path.write_text(GOOD)
+    assert main(["-q", "run", str(path), "--check"]) == EXIT_OK

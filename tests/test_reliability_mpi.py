@@ -1,0 +1,125 @@
+"""MPI: an error on one rank is an error on all. Each case runs on 2 ranks under a time limit:
+every rank must stop, with one message and the documented exit code, and nothing may hang."""
+
+import json
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from dolfinx_nnqem import compat
+from dolfinx_nnqem.cli import EXIT_BAD_INPUT, EXIT_IO, EXIT_OK
+
+from reliability_helpers import ROOT, env, kill_session, problem_file, start, wait_for_checkpoint
+
+pytestmark = pytest.mark.mpi
+SCRIPT = ROOT / "tests" / "mpi_scripts" / "rank_failure.py"
+LIMIT_S = 120
+
+
+def _mpirun(args, timeout=LIMIT_S, **extra_env):
+    e = env()
+    e.update(extra_env)
+    t0 = time.perf_counter()
+    run = subprocess.run([*compat.mpiexec(), "-n", "2", sys.executable, *args], env=e, capture_output=True,
+                         text=True, timeout=timeout)
+    return run, time.perf_counter() - t0
+
+
+def _cli(args):
+    return ["-m", "dolfinx_nnqem", *args]
+
+
+def test_output_folder_that_cannot_be_created(tmp_path):
+    p = problem_file(tmp_path, increments=2)
+    (tmp_path / "afile").write_text("x")
+    run, wall = _mpirun(_cli(["-q", "run", str(p), "--out", str(tmp_path / "afile" / "out")]))
+    lines = [line for line in run.stderr.splitlines() if line.startswith("dolfinx-nnqem")]
+    print(f"\n  exit {run.returncode} after {wall:.1f} s: {lines}")
+    assert run.returncode == EXIT_IO and len(lines) == 1 and "afile" in lines[0]
+
+
+def test_a_corrupt_mesh_read_on_rank_0(tmp_path):
+    bad = tmp_path / "bad.msh"
+    bad.write_text("$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\ngarbage\n")
+    p = problem_file(tmp_path, increments=2)
+    p.write_text(p.read_text().replace((ROOT / "meshes" / "two_beams.msh").as_posix(), bad.as_posix()))
+    run, wall = _mpirun(_cli(["-q", "run", str(p), "--out", str(tmp_path / "out")]))
+    lines = [line for line in run.stderr.splitlines() if line.startswith("dolfinx-nnqem")]
+    print(f"\n  exit {run.returncode} after {wall:.1f} s: {lines}")
+    assert run.returncode == EXIT_BAD_INPUT and len(lines) == 1 and "bad.msh" in lines[0]
+
+
+def test_a_full_disk_on_rank_0_only(tmp_path):
+    p = problem_file(tmp_path, increments=3)
+    run, wall = _mpirun([str(SCRIPT), "writer", "0", "--", "-q", "run", str(p), "--out", str(tmp_path / "out")])
+    lines = [line for line in run.stderr.splitlines() if line.startswith("dolfinx-nnqem")]
+    print(f"\n  exit {run.returncode} after {wall:.1f} s: {lines}")
+    assert run.returncode == EXIT_IO and len(lines) == 1 and "No space left" in lines[0]
+
+
+def test_a_bad_value_found_by_one_rank_inside_a_collective_solve(tmp_path):
+    """Rank 1 raises while rank 0 waits inside the solver: the job is aborted with the code."""
+    p = problem_file(tmp_path, increments=3)
+    run, wall = _mpirun([str(SCRIPT), "solve", "1", "--", "-q", "run", str(p), "--out", str(tmp_path / "out")],
+                        NNQEM_ABORT_TIMEOUT="3")
+    print(f"\n  exit {run.returncode} after {wall:.1f} s: "
+          f"{[line for line in run.stderr.splitlines() if 'bad value' in line or 'abort' in line.lower()][:3]}")
+    assert run.returncode == EXIT_BAD_INPUT and "a bad value found on rank 1 only" in run.stderr
+    assert wall < LIMIT_S
+
+
+def test_restart_on_two_ranks_equals_an_uninterrupted_run(tmp_path):
+    p = problem_file(tmp_path, increments=12)
+    ref, out = tmp_path / "ref", tmp_path / "killed"
+    run, _ = _mpirun(_cli(["-q", "run", str(p), "--out", str(ref)]))
+    assert run.returncode == EXIT_OK, run.stderr
+    job = start(["-q", "run", str(p), "--out", str(out)], ranks=2)
+    k = wait_for_checkpoint(out, 3, job)
+    kill_session(job)
+    job.wait()
+    run, _ = _mpirun(_cli(["-q", "run", str(p), "--out", str(out), "--restart"]))
+    assert run.returncode == EXIT_OK, run.stderr
+    a = json.loads((ref / "summary.json").read_text())
+    b = json.loads((out / "summary.json").read_text())
+    f_ref = np.array([q["force_on_body1"] for q in a["pairs"]])
+    f_out = np.array([q["force_on_body1"] for q in b["pairs"]])
+    u_ref = np.array([q["u"] for q in a["probes"]])
+    u_out = np.array([q["u"] for q in b["probes"]])
+    df = np.max(np.abs(f_out - f_ref)) / np.max(np.abs(f_ref))
+    du = np.max(np.abs(u_out - u_ref)) / np.max(np.abs(u_ref))
+    print(f"\n  2 ranks, killed after checkpoint {k}, restarted: load factors equal {a['load_factors'] == b['load_factors']}"
+          f", iterations equal {a['iterations'] == b['iterations']}, pair forces {df:.1e}, probe displacements {du:.1e}")
+    assert b["mpi_ranks"] == 2 and b["load_factors"] == a["load_factors"] and b["iterations"] == a["iterations"]
+    assert df <= 1e-12 and du <= 1e-12
+    # a 2-rank checkpoint is refused on 1 rank
+    from dolfinx_nnqem.cli import main
+
+    assert main(["-q", "run", str(p), "--out", str(out), "--restart"]) == EXIT_BAD_INPUT
+
+
+def test_ctrl_c_on_two_ranks(tmp_path):
+    """Ctrl-C in a terminal signals mpiexec and both ranks: one message, exit 130, files intact."""
+    import signal
+
+    from dolfinx_nnqem.cli import EXIT_INTERRUPTED
+
+    p = problem_file(tmp_path, increments=30)
+    out = tmp_path / "out"
+    job = start(["-q", "run", str(p), "--out", str(out)], ranks=2)
+    wait_for_checkpoint(out, 2, job)
+    t0 = time.perf_counter()
+    kill_session(job, signal.SIGINT)
+    _, err = job.communicate(timeout=LIMIT_S)
+    wall = time.perf_counter() - t0
+    lines = [line for line in err.splitlines() if line.startswith("dolfinx-nnqem")]
+    summary = json.loads((out / "summary.json").read_text())
+    print(f"\n  exit {job.returncode} {wall:.1f} s after SIGINT: {lines}; summary status {summary['status']}")
+    assert summary["status"] == "interrupted" and not list(out.rglob(".*.tmp-*"))
+    from mpi4py import MPI
+
+    if "Open MPI" in MPI.Get_library_version():
+        return  # OpenMPI's mpirun, itself interrupted, ends with its own code (1) and drops the ranks' output
+    assert job.returncode == EXIT_INTERRUPTED and len(lines) == 1
