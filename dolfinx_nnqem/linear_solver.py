@@ -63,7 +63,8 @@ class DirectSolver:
         """A direct solve is exact: no forcing."""
 
     def solve(self, J: PETSc.Mat, b: PETSc.Vec, x: PETSc.Vec, pair_state: np.ndarray | None = None) -> str | None:
-        """Solve J x = b; None on success, else why not (a PETSc error or a failed solve)."""
+        """Solve J x = b; None on success, else why not (a failed factorisation: the Newton driver
+        falls back to Levenberg–Marquardt). PETSc errors are raised."""
         self.ksp.setOperators(J)
         t0 = time.perf_counter()
         try:
@@ -71,9 +72,11 @@ class DirectSolver:
             _tick(self.timings, "setup", t0)
             t0 = time.perf_counter()
             self.ksp.solve(b, x)
-        except PETSc.Error as error:
-            self.ksp.reset()  # a failed factorisation must not be reused for the next matrix
-            return f"the linear solve failed (PETSc error {error.ierr})"
+        except PETSc.Error:
+            # a real error (out of memory, an unavailable package, ...), not a singular matrix, which
+            # PETSc reports through the converged reason below: it ends the run as itself
+            self.ksp.reset()
+            raise
         finally:
             _tick(self.timings, "solve", t0)
             self._clear_options()
@@ -192,21 +195,19 @@ class IterativeSolver:
         """
         self.ksp.setOperators(J)
         self._configure(J)
-        if not self._krylov_solve(b, x, pair_state):
-            return "the linear solve failed (PETSc error)"
+        self._krylov_solve(b, x, pair_state)
         if self._lagging and self._lagged_solve_is_poor(b):
             # the lagged AMG hierarchy no longer fits K + BᵀPB: rebuild it, solve the same system again
             self._refresh = True
-            if not self._krylov_solve(b, x, pair_state):
-                return "the linear solve failed (PETSc error)"
+            self._krylov_solve(b, x, pair_state)
             self._lagged_solve_is_poor(b)  # records the fresh hierarchy's convergence rate
         reason = self.ksp.getConvergedReason()
         if reason <= 0 or not np.all(np.isfinite(x.getArray(readonly=True))):
             return f"the linear solve failed (KSP reason {reason})"
         return None
 
-    def _krylov_solve(self, b: PETSc.Vec, x: PETSc.Vec, pair_state) -> bool:
-        """Set up (lagging the u block's AMG where it may) and solve; False on a PETSc error."""
+    def _krylov_solve(self, b: PETSc.Vec, x: PETSc.Vec, pair_state) -> None:
+        """Set up (lagging the u block's AMG where it may) and solve; PETSc errors are raised."""
         t0 = time.perf_counter()
         try:
             self.ksp.setUp()
@@ -216,14 +217,13 @@ class IterativeSolver:
             self.ksp.solve(b, x)
         except PETSc.Error:
             self._refresh = True  # whatever failed, do not lag from it
-            return False
+            raise
         finally:
             _tick(self.timings, "solve", t0)
             if not self._set_up_once:
                 clear_options(self.prefix, self._options)
                 self._set_up_once = True
         self.linear_iterations += self.ksp.getIterationNumber()
-        return True
 
     def _lag_u_preconditioner(self, state) -> None:
         """Keep the u block's AMG hierarchy over Newton iterations and increments while it works.

@@ -186,3 +186,26 @@ def test_missing_checkpoint_and_other_rank_counts_are_refused(tmp_path, capsys):
     second = capsys.readouterr().err.strip()
     print(f"\n  {first}\n  {second}")
     assert "no complete checkpoint" in first and "restart it on 3" in second
+
+
+def test_a_petsc_error_in_a_newton_solve_is_raised_not_taken_for_a_singular_matrix():
+    """A singular matrix is a converged reason (the driver falls back to Levenberg–Marquardt); a PETSc
+    error (no such package, out of memory) must end the run as itself."""
+    from mpi4py import MPI
+    from petsc4py import PETSc
+
+    from dolfinx_nnqem.linear_solver import DirectSolver
+
+    A = PETSc.Mat().createAIJ(size=(4, 4), nnz=1, comm=MPI.COMM_SELF)
+    for i in range(4):
+        A.setValue(i, i, 1.0 + i)
+    A.assemble()
+    b, x = A.createVecs()
+    b.set(1.0)
+    good = DirectSolver(MPI.COMM_SELF, "test_direct_good_", None)
+    assert good.solve(A, b, x) is None and np.allclose(x.getArray(), 1.0 / np.arange(1, 5))
+    bad = DirectSolver(MPI.COMM_SELF, "test_direct_bad_", {"pc_factor_mat_solver_type": "nonexistent"})
+    with pytest.raises(PETSc.Error):
+        bad.solve(A, b, x)
+    for obj in (A, b, x, good.ksp, bad.ksp):
+        obj.destroy()
