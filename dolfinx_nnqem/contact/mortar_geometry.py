@@ -56,10 +56,26 @@ import numpy.typing as npt
 import scipy.sparse
 from scipy.spatial import cKDTree
 
-from dolfinx_nnqem.contact.projection import _cyclic, _shape, newell_area_vectors, shape_derivatives, shape_functions
+from dolfinx_nnqem.contact.projection import (
+    _check_facets,
+    _cyclic,
+    _shape,
+    newell_area_vectors,
+    shape_derivatives,
+    shape_functions,
+)
 
-__all__ = ["MIN_FACING_COSINE", "RELATIVE_TOLERANCE", "MortarIntegrals", "couple_integrals",
-           "candidate_couples", "dual_coefficients", "facet_rule", "mortar_integrals", "triangle_rule"]
+__all__ = [
+    "MIN_FACING_COSINE",
+    "RELATIVE_TOLERANCE",
+    "MortarIntegrals",
+    "candidate_couples",
+    "couple_integrals",
+    "dual_coefficients",
+    "facet_rule",
+    "mortar_integrals",
+    "triangle_rule",
+]
 
 MIN_FACING_COSINE = 1e-2
 """A master facet counts for a slave facet only if −n_m · n_0 exceeds this (it faces the slave
@@ -70,6 +86,10 @@ RELATIVE_TOLERANCE = 1e-10
 within 1e-12 × the slave facet's diameter of a clip line as on it."""
 
 _NEWTON_MAX_ITERATIONS = 30
+
+# Note on numba's on-disk cache: the kernels below call projection._shape; numba invalidates a
+# cached kernel when ITS file changes, not when a callee's file does. After editing _shape,
+# clear __pycache__/*.nbi / *.nbc of this module.
 
 
 # --------------------------------------------------------------------------------------------
@@ -167,6 +187,19 @@ def dual_coefficients(x_cyclic: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
 
 
 @numba.njit(cache=True)
+def _cross(a, b, out):
+    """out = a × b for 3-vectors (hand-written: numba's np.cross is slow to compile)."""
+    out[0] = a[1] * b[2] - a[2] * b[1]
+    out[1] = a[2] * b[0] - a[0] * b[2]
+    out[2] = a[0] * b[1] - a[1] * b[0]
+
+
+@numba.njit(cache=True)
+def _dot(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+@numba.njit(cache=True)
 def _centre_frame(x, k):
     """Centre x(ξ_c) (the vertex mean for quads, the centroid for triangles), unit normal
     ∂x/∂ξ × ∂x/∂η / |…| there, and |∂x/∂ξ × ∂x/∂η| (0 for a degenerate facet)."""
@@ -182,8 +215,9 @@ def _centre_frame(x, k):
             centre[j] += N[a] * x[a, j]
             xs[j] += dN[a, 0] * x[a, j]
             xt[j] += dN[a, 1] * x[a, j]
-    n = np.cross(xs, xt)
-    length = np.sqrt(n[0] ** 2 + n[1] ** 2 + n[2] ** 2)
+    n = np.empty(3)
+    _cross(xs, xt, n)
+    length = np.sqrt(_dot(n, n))
     if length > 0.0:
         n /= length
     return centre, n, length
@@ -252,7 +286,9 @@ def _clip(subject, n, clipper, kc, tol, out):
     consecutive vertices closer than ``tol`` are merged afterwards.
     """
     poly = np.empty((16, 2))
-    poly[:n] = subject[:n]
+    for i in range(n):
+        poly[i, 0] = subject[i, 0]
+        poly[i, 1] = subject[i, 1]
     buf = np.empty((16, 2))
     for e in range(kc):
         if n == 0:
@@ -283,14 +319,17 @@ def _clip(subject, n, clipper, kc, tol, out):
                 buf[m, 0] = p0 + t * (q0 - p0)
                 buf[m, 1] = p1 + t * (q1 - p1)
                 m += 1
-        poly[:m] = buf[:m]
+        for i in range(m):
+            poly[i, 0] = buf[i, 0]
+            poly[i, 1] = buf[i, 1]
         n = m
     # merge near-coincident consecutive vertices (clipping along a shared edge duplicates them)
     m = 0
     for i in range(n):
         if m > 0 and abs(poly[i, 0] - out[m - 1, 0]) <= tol and abs(poly[i, 1] - out[m - 1, 1]) <= tol:
             continue
-        out[m] = poly[i]
+        out[m, 0] = poly[i, 0]
+        out[m, 1] = poly[i, 1]
         m += 1
     while m > 1 and abs(out[m - 1, 0] - out[0, 0]) <= tol and abs(out[m - 1, 1] - out[0, 1]) <= tol:
         m -= 1
@@ -318,29 +357,39 @@ def _couple(xs, A, xm, qb, qw, relative_tolerance, min_cos, M, g, cov):
     km = xm.shape[0]
     x0, n0, js = _centre_frame(xs, ks)
     _, nm, jm = _centre_frame(xm, km)
-    if js == 0.0 or jm == 0.0 or nm[0] * n0[0] + nm[1] * n0[1] + nm[2] * n0[2] > -min_cos:
+    if js == 0.0 or jm == 0.0 or _dot(nm, n0) > -min_cos:
         return 0.0, 0
     # in-plane axes: t1 along the first slave edge, t2 = n0 × t1 (right-handed with n0)
-    t1 = xs[1] - xs[0]
-    t1 -= (t1[0] * n0[0] + t1[1] * n0[1] + t1[2] * n0[2]) * n0
-    t1 /= np.sqrt(t1[0] ** 2 + t1[1] ** 2 + t1[2] ** 2)
-    t2 = np.cross(n0, t1)
+    t1 = np.empty(3)
+    t2 = np.empty(3)
+    d = np.empty(3)
+    for j in range(3):
+        t1[j] = xs[1, j] - xs[0, j]
+    tn = _dot(t1, n0)
+    for j in range(3):
+        t1[j] -= tn * n0[j]
+    tl = np.sqrt(_dot(t1, t1))
+    for j in range(3):
+        t1[j] /= tl
+    _cross(n0, t1, t2)
     S = np.empty((ks, 2))
     hs = np.empty(ks)
     diameter = 0.0
     for a in range(ks):
-        d = xs[a] - x0
-        S[a, 0] = d[0] * t1[0] + d[1] * t1[1] + d[2] * t1[2]
-        S[a, 1] = d[0] * t2[0] + d[1] * t2[1] + d[2] * t2[2]
-        hs[a] = d[0] * n0[0] + d[1] * n0[1] + d[2] * n0[2]
+        for j in range(3):
+            d[j] = xs[a, j] - x0[j]
+        S[a, 0] = _dot(d, t1)
+        S[a, 1] = _dot(d, t2)
+        hs[a] = _dot(d, n0)
         diameter = max(diameter, 2.0 * np.sqrt(S[a, 0] ** 2 + S[a, 1] ** 2))
     Pm = np.empty((km, 2))
     hm = np.empty(km)
     for a in range(km):
-        d = xm[a] - x0
-        Pm[a, 0] = d[0] * t1[0] + d[1] * t1[1] + d[2] * t1[2]
-        Pm[a, 1] = d[0] * t2[0] + d[1] * t2[1] + d[2] * t2[2]
-        hm[a] = d[0] * n0[0] + d[1] * n0[1] + d[2] * n0[2]
+        for j in range(3):
+            d[j] = xm[a, j] - x0[j]
+        Pm[a, 0] = _dot(d, t1)
+        Pm[a, 1] = _dot(d, t2)
+        hm[a] = _dot(d, n0)
     slave_area = _polygon_area(S, ks)
     if slave_area <= 0.0:
         return 0.0, 0
@@ -348,7 +397,9 @@ def _couple(xs, A, xm, qb, qw, relative_tolerance, min_cos, M, g, cov):
     subject = np.empty((16, 2))
     reverse = _polygon_area(Pm, km) < 0.0
     for a in range(km):
-        subject[a] = Pm[km - 1 - a] if reverse else Pm[a]
+        b = km - 1 - a if reverse else a
+        subject[a, 0] = Pm[b, 0]
+        subject[a, 1] = Pm[b, 1]
     tol = 1e-12 * diameter
     poly = np.empty((16, 2))
     n = _clip(subject, km, S, ks, tol, poly)
@@ -369,10 +420,13 @@ def _couple(xs, A, xm, qb, qw, relative_tolerance, min_cos, M, g, cov):
     xi_s = np.empty(2)
     xi_m = np.empty(2)
     phi = np.empty(ks)
+    xa = np.empty(3)
+    xb = np.empty(3)
+    cr = np.empty(3)
     total = 0.0
     failed = 0
     for i in range(n):
-        j = (i + 1) % n
+        j = (i + 1) % n  # the sub-triangle (centroid, poly[i], poly[j])
         cell = 0.5 * ((poly[i, 0] - c0) * (poly[j, 1] - c1) - (poly[j, 0] - c0) * (poly[i, 1] - c1))
         if cell <= 0.0:
             continue
@@ -385,23 +439,24 @@ def _couple(xs, A, xm, qb, qw, relative_tolerance, min_cos, M, g, cov):
             _shape(ks, xi_s[0], xi_s[1], Ns, dNs)
             _shape(km, xi_m[0], xi_m[1], Nm, dNm)
             # slave area element over plane area element at ξ_s (1 for a planar slave facet)
-            xa = np.zeros(3)
-            xb = np.zeros(3)
+            xa[:] = 0.0
+            xb[:] = 0.0
             J00 = 0.0
             J01 = 0.0
             J10 = 0.0
             J11 = 0.0
             h_s = 0.0
             for a in range(ks):
-                xa += dNs[a, 0] * xs[a]
-                xb += dNs[a, 1] * xs[a]
+                for c in range(3):
+                    xa[c] += dNs[a, 0] * xs[a, c]
+                    xb[c] += dNs[a, 1] * xs[a, c]
                 J00 += dNs[a, 0] * S[a, 0]
                 J01 += dNs[a, 1] * S[a, 0]
                 J10 += dNs[a, 0] * S[a, 1]
                 J11 += dNs[a, 1] * S[a, 1]
                 h_s += Ns[a] * hs[a]
-            cr = np.cross(xa, xb)
-            ratio = np.sqrt(cr[0] ** 2 + cr[1] ** 2 + cr[2] ** 2) / abs(J00 * J11 - J01 * J10)
+            _cross(xa, xb, cr)
+            ratio = np.sqrt(_dot(cr, cr)) / abs(J00 * J11 - J01 * J10)
             h_m = 0.0
             for b in range(km):
                 h_m += Nm[b] * hm[b]
@@ -590,9 +645,17 @@ def mortar_integrals(slave_nodes: npt.ArrayLike, slave_x: npt.ArrayLike, slave_a
     """
     slave_nodes = np.asarray(slave_nodes, dtype=np.int64)
     master_nodes = np.asarray(master_nodes, dtype=np.int64)
-    slave_area = np.asarray(slave_area, dtype=np.float64).reshape(-1, 3)
-    xs, perm_s = _cyclic(np.asarray(slave_x, dtype=np.float64), slave_area)
-    xm, perm_m = _cyclic(np.asarray(master_x, dtype=np.float64), np.asarray(master_area, dtype=np.float64))
+    slave_x = np.asarray(slave_x, dtype=np.float64)
+    master_x = np.asarray(master_x, dtype=np.float64)
+    slave_area = np.asarray(slave_area, dtype=np.float64)
+    master_area = np.asarray(master_area, dtype=np.float64)
+    _check_facets(slave_x, slave_area, "slave facets")
+    _check_facets(master_x, master_area, "master facets")
+    if slave_nodes.shape != slave_x.shape[:2] or master_nodes.shape != master_x.shape[:2]:
+        raise ValueError(f"node arrays {slave_nodes.shape}, {master_nodes.shape} do not match the "
+                         f"coordinates {slave_x.shape}, {master_x.shape}")
+    xs, perm_s = _cyclic(slave_x, slave_area)
+    xm, perm_m = _cyclic(master_x, master_area)
     nodes_s = np.take_along_axis(slave_nodes, perm_s, axis=1)
     nodes_m = np.take_along_axis(master_nodes, perm_m, axis=1)
     A, De = dual_coefficients(xs)

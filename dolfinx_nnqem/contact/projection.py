@@ -37,8 +37,17 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial import cKDTree
 
-__all__ = ["Projection", "TIE_TOLERANCE", "cyclic_order", "facet_normals", "newell_area_vectors",
-           "project_points", "reference_vertices", "shape_derivatives", "shape_functions"]
+__all__ = [
+    "TIE_TOLERANCE",
+    "Projection",
+    "cyclic_order",
+    "facet_normals",
+    "newell_area_vectors",
+    "project_points",
+    "reference_vertices",
+    "shape_derivatives",
+    "shape_functions",
+]
 
 TIE_TOLERANCE = 1e-10
 """Two candidate facets whose distances to a point differ by less than this times the master
@@ -180,6 +189,13 @@ def cyclic_order(x: npt.ArrayLike, outward: npt.ArrayLike) -> np.ndarray:
     return np.argsort(angle, axis=1, kind="stable")
 
 
+def _check_facets(x: np.ndarray, outward: np.ndarray, name: str = "facets") -> None:
+    """Raise ValueError unless x is (m, 3 or 4, 3) with m ≥ 1 and outward is (m, 3)."""
+    if x.ndim != 3 or x.shape[1] not in (3, 4) or x.shape[2] != 3 or len(x) == 0 or outward.shape != (len(x), 3):
+        raise ValueError(f"{name}: expected vertices (m >= 1, 3 or 4, 3) and outward vectors (m, 3), "
+                         f"got {x.shape} and {outward.shape}")
+
+
 def _cyclic(x: np.ndarray, outward: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(cyclic vertices, permutation) of facets given in any order."""
     perm = cyclic_order(x, outward)
@@ -260,16 +276,20 @@ def _stationary_point(x, k, p, xi, max_iterations):
     """
     N = np.empty(k)
     dN = np.empty((k, 2))
+    r = np.empty(3)
+    xs = np.empty(3)
+    xt = np.empty(3)
+    xst = np.empty(3)
     xi[0] = 1.0 / 3.0 if k == 3 else 0.0
     xi[1] = xi[0]
     iterations = 1 if k == 3 else max_iterations  # tri3: the map is affine, one step is exact
     size = np.inf
     for _ in range(iterations):
         _shape(k, xi[0], xi[1], N, dN)
-        r = np.zeros(3)
-        xs = np.zeros(3)
-        xt = np.zeros(3)
-        xst = np.zeros(3)
+        r[:] = 0.0
+        xs[:] = 0.0
+        xt[:] = 0.0
+        xst[:] = 0.0
         for a in range(k):
             for j in range(3):
                 r[j] += N[a] * x[a, j]
@@ -426,18 +446,20 @@ class Projection:
 
 
 def _candidates(points: np.ndarray, centroid: np.ndarray, radius: np.ndarray,
-                max_distance: float | None) -> tuple[np.ndarray, np.ndarray]:
-    """CSR candidate facets of each point: every facet that may hold the closest point.
+                max_distance: float | None, tie: float) -> tuple[np.ndarray, np.ndarray]:
+    """CSR candidate facets of each point: every facet that may hold the closest point (or tie).
 
-    The bilinear (or linear) map at the reference centre is the vertex mean, so the nearest
-    centroid c* at distance δ bounds the distance to the surface by δ; a facet f can be closer
-    only if |X_s − c_f| ≤ δ + r_max (r_f: largest centroid-to-vertex distance). Points with
-    δ − r_max > max_distance get no candidate.
+    The linear or bilinear map at the reference centre is the vertex mean, which therefore lies
+    on the facet: the nearest centroid, at distance δ, bounds the distance to the surface by δ.
+    Every point of facet f lies in the convex hull of its vertices (N_a ≥ 0), hence within r_f
+    (the largest centroid-to-vertex distance) of its centroid c_f, so f can be closer than
+    δ + tie only if |X_s − c_f| ≤ δ + r_max + tie. Points with δ − r_max > max_distance are
+    farther than max_distance from every facet and get no candidate.
     """
     tree = cKDTree(centroid)
     delta, _ = tree.query(points)
     r_max = float(radius.max())
-    ball = delta + r_max * (1.0 + 1e-9) + 1e-300
+    ball = delta + r_max * (1.0 + 1e-12) + tie
     if max_distance is not None:
         ball = np.where(delta - r_max > max_distance, -1.0, ball)
     lists = tree.query_ball_point(points, np.maximum(ball, 0.0), return_sorted=True)
@@ -469,7 +491,7 @@ def project_points(points: npt.ArrayLike, x: npt.ArrayLike, outward: npt.ArrayLi
     outward
         (m, 3) the master facets' outward area vectors (``Facets.area``).
     max_distance
-        Points farther than this from every facet (by the centroid bound) get ``facet = −1``;
+        Points farther than this from the surface get ``facet = −1`` (and NaN elsewhere);
         None: every point is projected.
     tie_tolerance
         Relative tie tolerance (default :data:`TIE_TOLERANCE`).
@@ -480,20 +502,22 @@ def project_points(points: npt.ArrayLike, x: npt.ArrayLike, outward: npt.ArrayLi
     """
     points = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
     x = np.asarray(x, dtype=np.float64)
-    outward = np.asarray(outward, dtype=np.float64).reshape(-1, 3)
-    m, k = x.shape[:2]
-    if k not in (3, 4) or x.shape[2] != 3 or outward.shape[0] != m:
-        raise ValueError(f"expected facets (m, 3 or 4, 3) and outward vectors (m, 3), got {x.shape}, {outward.shape}")
+    outward = np.asarray(outward, dtype=np.float64)
+    _check_facets(x, outward)
+    k = x.shape[1]
     xc, perm = _cyclic(x, outward)
     centroid = xc.mean(axis=1)
     radius = np.linalg.norm(xc - centroid[:, None, :], axis=2).max(axis=1)
-    offsets, candidates = _candidates(points, centroid, radius, max_distance)
     diagonal = float(np.linalg.norm(xc.reshape(-1, 3).max(axis=0) - xc.reshape(-1, 3).min(axis=0)))
-    facet, xi, dist = _project_kernel(points, xc, offsets, candidates, tie_tolerance * diagonal,
-                                      NEWTON_MAX_ITERATIONS)
+    tie = tie_tolerance * diagonal
+    offsets, candidates = _candidates(points, centroid, radius, max_distance, tie)
+    facet, xi, dist = _project_kernel(points, xc, offsets, candidates, tie, NEWTON_MAX_ITERATIONS)
+    if max_distance is not None:
+        facet[dist > max_distance] = -1
 
     n = len(points)
     found = facet >= 0
+    xi[~found] = np.nan
     f = facet[found]
     N = np.full((n, k), np.nan)
     Nc = shape_functions(k, xi[found])
