@@ -368,6 +368,25 @@ def test_curved_interface_balance():
     assert rel < 1e-12 and abs(R.coverage - 1).max() < 1e-12 and err < 1e-3
 
 
+def test_warped_slave_balance_converges():
+    """Warped slave quads (a saddle z = 2 (x − ½)(y − ½)): Σ_k M_jk = D_jj up to the quadrature
+    error of the plane-to-facet area ratio, which vanishes under refinement."""
+    def saddle(x, y):
+        return 2.0 * (x - 0.5) * (y - 0.5)
+
+    errors = []
+    for n in (4, 8, 16):
+        sn, sx, sa = surface_grid(n, "quad", height=saddle)
+        mn, mx, ma = surface_grid(n + 1, "quad", lo=(-0.2, -0.2), hi=(1.2, 1.2),
+                                  height=lambda x, y: saddle(x, y) + 0.01, up=False, offset=10**5)
+        R = mortar_integrals(sn, sx, sa, mn, mx, ma)
+        errors.append((abs(np.asarray(R.M.sum(axis=1)).ravel() - R.D).max() / R.D.max(), abs(R.coverage - 1).max()))
+    errors = np.array(errors)
+    print("warped slave, n = 4, 8, 16: max |Σ_k M_jk − D_jj| / max D:", ", ".join(f"{e:.1e}" for e in errors[:, 0]),
+          "; max |coverage − 1|:", ", ".join(f"{e:.1e}" for e in errors[:, 1]))
+    assert np.all(errors[0] < 1e-4) and np.all(errors[1] < errors[0] / 10) and np.all(errors[2] < errors[1] / 10)
+
+
 def _permute_vertices(nodes, x, seed):
     """The same facets with each facet's vertices in a random order."""
     perm = np.argsort(np.random.default_rng(seed).random(nodes.shape), axis=1)
