@@ -136,11 +136,13 @@ class PairWriter:
             w = csv.writer(fh)
             w.writerow(["pair", "interface", "x", "y", "z", "state", "p_n_on_body1", "t1_on_body1", "t2_on_body1",
                         "Fx_on_body1", "Fy_on_body1", "Fz_on_body1", "gap", "slip1", "slip2",
-                        "u1x", "u1y", "u1z", "u2x", "u2y", "u2z", "load_factor"])
+                        "u1x", "u1y", "u1z", "u2x", "u2y", "u2z", "area", "pressure", "weighted_gap",
+                        "slave_x", "slave_y", "slave_z", "load_factor"])
             for i in range(len(t["state"])):
                 w.writerow([i, t["interface_name"][i], *t["position"][i], STATE_NAMES[t["state"][i]],
                             *t["force_local_body1"][i], *t["force_on_body1"][i], t["gap"][i], *t["slip"][i],
-                            *t["u_body1"][i], *t["u_body2"][i], repr(load_factor)])
+                            *t["u_body1"][i], *t["u_body2"][i], t["area"][i], t["pressure"][i],
+                            t["weighted_gap"][i], *t["position_b"][i], repr(load_factor)])
 
     @staticmethod
     def _write_vtp(path: Path, t: dict, load_factor: float = float("nan")) -> None:
@@ -154,6 +156,9 @@ class PairWriter:
         cloud["state"] = t["state"].astype(np.int32)
         cloud["interface"] = t["interface"].astype(np.int32)
         cloud["gap"] = t["gap"]
+        cloud["pressure"] = t["pressure"]  # p_n / tributary area, Pa
+        cloud["weighted_gap"] = t["weighted_gap"]
+        cloud["area"] = t["area"]
         cloud["slip"] = np.linalg.norm(t["slip"], axis=1)
         cloud["u_body1"] = t["u_body1"]
         cloud["u_body2"] = t["u_body2"]
@@ -264,7 +269,9 @@ class SummaryWriter:
                  "force_on_body1": t["force_on_body1"][i].tolist(),
                  "force_local_body1": t["force_local_body1"][i].tolist(),
                  "u_body1": t["u_body1"][i].tolist(), "u_body2": t["u_body2"][i].tolist(),
-                 "gap": float(t["gap"][i]), "interface": str(t["interface_name"][i])}
+                 "gap": float(t["gap"][i]), "pressure": float(t["pressure"][i]),
+                 "weighted_gap": float(t["weighted_gap"][i]), "area": float(t["area"][i]),
+                 "interface": str(t["interface_name"][i])}
                 for i in range(len(t["state"]))]
         self.write()
 

@@ -18,6 +18,10 @@ A problem file names a mesh with physical tags and everything :class:`ContactPro
     mu_f = 0.5
     law = "alart-curnier"                 # or "polar"
     name = "beams"                        # optional: how tables and logs name it
+    discretisation = "auto"               # or "node-to-node", "node-to-surface", "mortar"
+                                          # (auto: node-to-node if the nodes coincide, else mortar)
+    # slave = 22                          # optional: the slave side (default: surface2 for
+                                          # node-to-node, the finer side otherwise)
 
     [[contact]]                           # a rigid obstacle as the master side
     surface2 = 5
@@ -268,7 +272,7 @@ OBSTACLE_KEYS = {"plane": {"point", "normal"}, "sphere": {"centre", "radius"}, "
 
 def _contact_section(contact: dict, w: str) -> dict:
     contact = _checked_keys(contact, {"surface1", "surface2", "obstacle", "mu_f", "law", "r", "tolerance",
-                                      "search_distance", "name"}, {"surface2", "mu_f"}, w)
+                                      "search_distance", "name", "discretisation", "slave"}, {"surface2", "mu_f"}, w)
     contact["surface2"] = _tag(contact["surface2"], f"{w}.surface2")
     if ("surface1" in contact) == ("obstacle" in contact):
         raise ProblemFileError(f"{w}: give either surface1 (a facet tag) or an obstacle table, not "
@@ -281,6 +285,17 @@ def _contact_section(contact: dict, w: str) -> dict:
         contact["obstacle"] = _obstacle_entry(contact["obstacle"], f"{w}.obstacle")
         if "search_distance" in contact:
             raise ProblemFileError(f"{w}.search_distance: applies to node-to-node contact, not to an obstacle")
+    from dolfinx_nnqem.contact.discretisation import DISCRETISATIONS, OBSTACLE_DISCRETISATIONS
+
+    allowed = DISCRETISATIONS if "surface1" in contact else OBSTACLE_DISCRETISATIONS
+    if contact.get("discretisation", "auto") not in allowed:
+        raise ProblemFileError(f"{w}.discretisation = {contact['discretisation']!r}: expected one of "
+                               f"{', '.join(repr(d) for d in allowed)}")
+    if "slave" in contact:
+        contact["slave"] = _tag(contact["slave"], f"{w}.slave")
+        sides = [contact[k] for k in ("surface1", "surface2") if k in contact]
+        if contact["slave"] not in sides:
+            raise ProblemFileError(f"{w}.slave = {contact['slave']}: expected one of the surfaces' tags {sides}")
     contact["mu_f"] = float(_number(contact["mu_f"], f"{w}.mu_f", nonnegative=True))
     if contact.get("law", "alart-curnier") not in ("alart-curnier", "cartesian", "polar", "seed"):
         raise ProblemFileError(f"{w}.law = {contact['law']!r}: expected 'alart-curnier' or 'polar'")

@@ -82,7 +82,9 @@ def pair_table(problem) -> dict[str, np.ndarray]:
     tangential 2 on body 1, N), ``force_on_body1`` (global frame, N), ``u_body1`` (the master
     point's displacement u_s − Rᵀw: node a's, or the obstacle's), ``u_body2`` (m), ``gap`` (m),
     ``slip`` (tangential slip of the last increment, m), ``z`` (the law's unknowns),
-    ``slave_block`` (the slave node's global dof block), ``interface_name``.
+    ``slave_block`` (the slave node's global dof block), ``interface_name``, ``area`` (the slave
+    node's tributary area, m²), ``pressure`` (contact pressure p_n / area, Pa) and ``weighted_gap``
+    (area × gap, m³: mortar's weighted gap).
     """
     model = problem.contact
     lam = model.force()
@@ -94,7 +96,7 @@ def pair_table(problem) -> dict[str, np.ndarray]:
         X_master, X_slave, model.R.reshape(-1, 9), model.state_n[:, None].astype(float),
         -lam, -np.einsum("nji,nj->ni", model.R, lam), (model.g0 + w[:, 0])[:, None],
         model.slip_n, model.z, slave_blocks[:, None], model.interface_index[:, None].astype(float),
-        np.einsum("nji,nj->ni", model.R, w),
+        np.einsum("nji,nj->ni", model.R, w), model.area[:, None],
     ])
     g = model.gather(local)
     table = {
@@ -105,6 +107,9 @@ def pair_table(problem) -> dict[str, np.ndarray]:
     }
     table["u_body2"] = values_at_blocks(problem, g[:, 28].astype(np.int64))
     table["u_body1"] = table["u_body2"] - g[:, 30:33]  # w = R (u_s − u_master)
+    table["area"] = g[:, 33]
+    table["pressure"] = -table["force_local_body1"][:, 0] / table["area"]
+    table["weighted_gap"] = table["area"] * table["gap"]
     table["state_name"] = np.array([STATE_NAMES[s] for s in table["state"]])
     labels = [i.contact.label for i in model.interfaces]
     table["interface_name"] = np.array([labels[k] for k in table["interface"]])

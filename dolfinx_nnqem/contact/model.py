@@ -36,7 +36,7 @@ from petsc4py import PETSc
 
 from dolfinx_nnqem.contact.laws import ContactLaw, LawEvaluation, default_r, get_law
 from dolfinx_nnqem.contact.obstacles import RigidObstacle, obstacle_pairs
-from dolfinx_nnqem.contact.pairs import find_pairs
+from dolfinx_nnqem.contact.discretisation import DISCRETISATIONS, OBSTACLE_DISCRETISATIONS, discretise
 from dolfinx_nnqem.contact.pairset import PairRows, PairSet, rows_matrix
 from dolfinx_nnqem.contact.surfaces import ContactPairError
 
@@ -67,12 +67,13 @@ class Contact:
     Parameters
     ----------
     surface1
-        The master side: the facet tag of body 1's contact surface, or a rigid obstacle
-        (:class:`~dolfinx_nnqem.contact.obstacles.Plane`, ``Sphere``, ``Cylinder``). The pair
-        normal is its outward normal.
+        The facet tag of body 1's contact surface, or a rigid obstacle
+        (:class:`~dolfinx_nnqem.contact.obstacles.Plane`, ``Sphere``, ``Cylinder``). The master side
+        unless ``slave`` says otherwise; the pair normal is the master's outward normal (for mortar,
+        minus the slave's).
     surface2
-        The slave side: the facet tag of body 2's contact surface. λ is the force on it; every
-        one of its nodes gets a pair.
+        The facet tag of body 2's contact surface: the slave side by default for node-to-node
+        pairs and obstacles (λ is the force on it; every one of its nodes gets a pair).
     mu_f
         Coulomb friction coefficient (≥ 0).
     law
@@ -81,10 +82,24 @@ class Contact:
         Scaling of the pair laws (force/length); default E·h (see :func:`contact.laws.default_r`).
     tolerance
         Distance below which nodes coincide (default 1e-8 × the mesh's bounding-box diagonal).
-    search_distance, initial_gap
-        Node-to-node only: see :func:`dolfinx_nnqem.contact.pairs.find_pairs`.
+    search_distance
+        Node-to-node: the largest distance of non-coincident partners (see
+        :func:`dolfinx_nnqem.contact.pairs.find_pairs`). Node-to-surface and mortar: the largest
+        distance between a slave node (facet) and the master facets it can touch (default twice
+        the larger facet size).
+    initial_gap
+        Node-to-node only: g0(x) replacing the geometric gap.
     name
         How logs and pair tables name the interface (default ``"21-22"`` or ``"sphere-22"``).
+    discretisation
+        ``"auto"`` (node-to-node where the surfaces' nodes coincide, else dual mortar),
+        ``"node-to-node"``, ``"node-to-surface"`` or ``"mortar"`` (see
+        :mod:`dolfinx_nnqem.contact.discretisation`). Against a rigid obstacle: ``"auto"`` or
+        ``"node-to-surface"`` (the same thing: slave nodes projected onto the exact surface).
+    slave
+        The slave surface's tag, ``surface1`` or ``surface2``. Default: ``surface2`` for
+        node-to-node; the finer side for node-to-surface and mortar. The pair table's body 1 is
+        always the master side.
     """
 
     surface1: int | RigidObstacle
@@ -96,6 +111,8 @@ class Contact:
     search_distance: float | None = None
     initial_gap: Callable | None = None
     name: str | None = None
+    discretisation: str = "auto"
+    slave: int | None = None
 
     def __post_init__(self):
         _real("mu_f", self.mu_f)
@@ -114,6 +131,19 @@ class Contact:
         elif self.search_distance is not None or self.initial_gap is not None:
             raise ValueError("Contact: search_distance and initial_gap apply to node-to-node contact, not to a "
                              "rigid obstacle (its gap is the exact distance)")
+        allowed = DISCRETISATIONS if self.obstacle is None else OBSTACLE_DISCRETISATIONS
+        if self.discretisation not in allowed:
+            why = " (a rigid obstacle's exact surface takes the slave nodes' projections)" if self.obstacle else ""
+            raise ValueError(f"Contact: discretisation = {self.discretisation!r}; expected one of "
+                             f"{', '.join(allowed)}{why}")
+        if self.slave is not None:
+            sides = (self.surface2,) if self.obstacle is not None else (self.surface1, self.surface2)
+            if isinstance(self.slave, bool) or self.slave not in sides:
+                raise ValueError(f"Contact: slave = {self.slave!r}; expected one of the surfaces' tags "
+                                 f"{', '.join(str(t) for t in sides)}")
+        if self.initial_gap is not None and self.discretisation not in ("auto", "node-to-node"):
+            raise ValueError(f"Contact: initial_gap applies to node-to-node contact, not to "
+                             f"discretisation = {self.discretisation!r}")
 
     @property
     def obstacle(self) -> RigidObstacle | None:
@@ -131,8 +161,9 @@ class Contact:
         """The discretised interface (collective)."""
         if self.obstacle is not None:
             return obstacle_pairs(V, facet_tags, int(self.surface2), self.obstacle, tolerance=self.tolerance)
-        return find_pairs(V, facet_tags, int(self.surface1), int(self.surface2), tolerance=self.tolerance,
-                          search_distance=self.search_distance, initial_gap=self.initial_gap)
+        return discretise(V, facet_tags, int(self.surface1), int(self.surface2), self.discretisation,
+                          slave=self.slave, tolerance=self.tolerance, search_distance=self.search_distance,
+                          initial_gap=self.initial_gap)
 
 
 @dataclass(frozen=True, eq=False)
@@ -285,6 +316,7 @@ class ContactModel:
         self.B = rows_matrix(self.comm, self.rows, self.num_global, V.dofmap.index_map)
         self.R = np.concatenate([i.pairs.R for i in interfaces]).reshape(-1, 3, 3)
         self.g0 = np.concatenate([i.pairs.g0 for i in interfaces])
+        self.area = np.concatenate([i.pairs.area for i in interfaces])  #: slave nodes' tributary areas
         self.interface_index = np.concatenate([np.full(i.pairs.num_local, k, dtype=np.int32)
                                                for k, i in enumerate(interfaces)])
         mu_f = np.concatenate([np.full(i.pairs.num_local, float(i.contact.mu_f)) for i in interfaces])

@@ -207,6 +207,7 @@ class ObstaclePairs:
     X_master: np.ndarray
     R: np.ndarray
     g0: np.ndarray
+    area: np.ndarray
     rows: PairRows
     kind: str = "rigid obstacle"
 
@@ -237,7 +238,7 @@ def obstacle_pairs(V: dolfinx.fem.FunctionSpace, facet_tags: dolfinx.mesh.MeshTa
     tolerance = mesh_tolerance(V.mesh) if tolerance is None else float(tolerance)
     nodes = gather_surfaces(V, facet_tags, [surface], roles=["the slave surface"]).nodes[0]
     order = np.lexsort((nodes.x[:, 2], nodes.x[:, 1], nodes.x[:, 0]))
-    index, x, slave_normal = nodes.index[order], nodes.x[order], nodes.normal[order]
+    index, x, slave_normal, area = nodes.index[order], nodes.x[order], nodes.normal[order], nodes.area[order]
     g0, n, p = obstacle.project(x)
     inside = g0 < -tolerance
     if np.any(inside):
@@ -259,7 +260,7 @@ def obstacle_pairs(V: dolfinx.fem.FunctionSpace, facet_tags: dolfinx.mesh.MeshTa
     return ObstaclePairs(
         comm=comm, obstacle=obstacle, surface=int(surface), num_local=len(mine), num_global=num_global,
         offset=offset, slave_blocks=index[mine], X_slave=x[mine], X_master=p[mine], R=R[mine], g0=g0[mine],
-        rows=PairRows.from_blocks(columns, R[mine]),
+        area=area[mine], rows=PairRows.from_blocks(columns, R[mine]),
     )
 
 

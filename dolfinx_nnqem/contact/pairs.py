@@ -173,6 +173,8 @@ class ContactPairs:
         Local frames, shape ``(num_local, 3, 3)``, rows (n, t1, t2), see :func:`local_frames`.
     g0
         Initial gaps, shape ``(num_local,)``.
+    area
+        Tributary areas of the nodes b_i on body 2's surface, shape ``(num_local,)``.
     rows
         B's local rows (:class:`~dolfinx_nnqem.contact.pairset.PairRows`).
     B
@@ -195,6 +197,7 @@ class ContactPairs:
     X_b: np.ndarray
     R: np.ndarray
     g0: np.ndarray
+    area: np.ndarray
     rows: PairRows
     B: PETSc.Mat
     tolerance: float
@@ -443,6 +446,7 @@ def find_pairs(
         X_b=X_b[mine],
         R=R[mine],
         g0=g0[mine],
+        area=body2.area[order2][mine],
         rows=rows,
         B=rows_matrix(comm, rows, num_global, V.dofmap.index_map),
         tolerance=tolerance,

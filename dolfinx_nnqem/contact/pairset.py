@@ -7,7 +7,9 @@ surface, dual mortar), an interface is a set of pairs j, each with
 * three rows of B such that the relative displacement in the frame is
   w_j = (B u)_j + m_j(ℓ), with m_j(ℓ) a known motion of the master side (a moving rigid
   obstacle; zero otherwise),
-* an owner: the rank that owns the pair's slave node.
+* an owner: the rank that owns the pair's slave node,
+* a tributary area A_j of the slave node (∫ N_j dA over the slave surface; D_jj of dual
+  mortar), which turns the pair force into a contact pressure p_n / A_j.
 
 The pair force λ_j = (p_n, q1, q2) acts on the slave side; the global nodal force is Bᵀλ. The
 laws and the solvers see nothing else, so a new discretisation is a new :class:`PairSet`
@@ -75,6 +77,48 @@ class PairRows:
             np.repeat(columns, 3, axis=0).reshape(-1).astype(PETSc.IntType),
             blocks.reshape(-1).copy(),
         )
+
+    @classmethod
+    def from_weighted_nodes(cls, R: np.ndarray, nodes_indptr: np.ndarray, nodes: np.ndarray,
+                            coefficients: np.ndarray) -> PairRows:
+        """Rows w_i = R_i Σ_k a_ik u(k) of pairs with any number of nodes each.
+
+        Parameters
+        ----------
+        R
+            (n, 3, 3) the pairs' frames.
+        nodes_indptr
+            (n + 1,) pair i involves ``nodes[nodes_indptr[i]:nodes_indptr[i + 1]]``.
+        nodes
+            Global dof-block indices, distinct within a pair.
+        coefficients
+            a_ik, one per entry of ``nodes`` (e.g. 1 for the slave node, −N_k for master nodes).
+        """
+        R = np.asarray(R, dtype=np.float64)
+        nodes_indptr = np.asarray(nodes_indptr, dtype=np.int64)
+        nodes = np.asarray(nodes, dtype=np.int64)
+        coefficients = np.asarray(coefficients, dtype=np.float64)
+        n = len(nodes_indptr) - 1
+        m = np.diff(nodes_indptr)  # nodes per pair
+        pair = np.repeat(np.arange(n), m)
+        order = np.lexsort((nodes, pair))  # ascending nodes within each pair: ascending columns
+        nodes, coefficients = nodes[order], coefficients[order]
+        if np.any((nodes[1:] == nodes[:-1]) & (pair[1:] == pair[:-1])):
+            raise ValueError("a pair lists the same node twice")
+        # row 3i + r holds 3 m_i entries: for each node (ascending), its three components
+        row_length = np.repeat(3 * m, 3)
+        indptr = np.concatenate([[0], np.cumsum(row_length)]).astype(PETSc.IntType)
+        e = np.arange(len(nodes))
+        position_in_pair = e - nodes_indptr[pair]
+        r = np.arange(3)[None, :, None]
+        c = np.arange(3)[None, None, :]
+        at = (indptr[3 * pair][:, None, None] + r * (3 * m[pair])[:, None, None]
+              + 3 * position_in_pair[:, None, None] + c)  # (entries, 3 rows, 3 components)
+        columns = np.empty(int(indptr[-1]), dtype=PETSc.IntType)
+        values = np.empty(int(indptr[-1]))
+        columns[at.ravel()] = np.broadcast_to(3 * nodes[:, None, None] + c, at.shape).ravel()
+        values[at.ravel()] = (coefficients[:, None, None] * R[pair]).ravel()
+        return cls(indptr, columns, values)
 
     @classmethod
     def concatenate(cls, parts: list[PairRows]) -> PairRows:
@@ -164,6 +208,7 @@ class PairSet(Protocol):
     X_slave: np.ndarray  #: (num_local, 3) slave node positions
     X_master: np.ndarray  #: (num_local, 3) the facing point of the master side
     slave_blocks: np.ndarray  #: (num_local,) global dof-block indices of the slave nodes
+    area: np.ndarray  #: (num_local,) the slave node's tributary area (pressure = p_n / area)
     kind: str  #: "node-to-node", "rigid obstacle", ...
 
     def motion(self, load_factor: float) -> np.ndarray:

@@ -234,6 +234,7 @@ class SurfaceNodes:
     index: np.ndarray  # (p,) global dof-block indices (sorted)
     x: np.ndarray  # (p, 3)
     normal: np.ndarray  # (p, 3) area-weighted mean of the adjacent facets' outward normals
+    area: np.ndarray  # (p,) tributary area ∫ N_j dA: each facet's area shared equally by its vertices
 
 
 def _surface_nodes(facets: Facets, surface: int, tag: int) -> tuple[SurfaceNodes, str | None]:
@@ -246,14 +247,16 @@ def _surface_nodes(facets: Facets, surface: int, tag: int) -> tuple[SurfaceNodes
     np.add.at(normal, inverse.ravel(), np.repeat(area, k, axis=0))
     length = np.linalg.norm(normal, axis=1)
     xs = x.reshape(-1, 3)[first]
+    # ∫ N_j dA over a triangle or a parallelogram is its area / (number of vertices)
+    tributary = np.bincount(inverse.ravel(), np.repeat(np.linalg.norm(area, axis=1) / k, k), minlength=len(index))
     scale = np.repeat(np.linalg.norm(area, axis=1), k).max(initial=0.0)
     degenerate = length <= 1e-12 * max(scale, np.finfo(float).tiny)
     if np.any(degenerate):
         i = first_by_position(xs, degenerate)
-        return SurfaceNodes(index, xs, normal), (
+        return SurfaceNodes(index, xs, normal, tributary), (
             f"the facets tagged {tag} around the node at {format_point(xs[i])} have normals that cancel"
         )
-    return SurfaceNodes(index, xs, normal / length[:, None]), None
+    return SurfaceNodes(index, xs, normal / length[:, None], tributary), None
 
 
 
@@ -284,6 +287,14 @@ class GatheredSurfaces:
     def facets_of(self, k: int) -> Facets:
         """The facets of the ``k``-th surface (0-based, in the order of :attr:`tags`)."""
         return self.facets.take(np.flatnonzero(self.facets.surface == k + 1))
+
+    def swapped(self) -> GatheredSurfaces:
+        """The same two surfaces in the other order."""
+        if len(self.tags) != 2:
+            raise ValueError(f"swapped() needs two surfaces, got {len(self.tags)}")
+        facets = self.facets.take(np.arange(len(self.facets.surface)))
+        facets.surface = (3 - facets.surface).astype(self.facets.surface.dtype)
+        return GatheredSurfaces((self.tags[1], self.tags[0]), facets, [self.nodes[1], self.nodes[0]])
 
 
 def check_contact_space(V: dolfinx.fem.FunctionSpace, facet_tags) -> None:

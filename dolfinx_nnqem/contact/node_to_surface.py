@@ -1,0 +1,82 @@
+r"""Node-to-surface contact pairs (``formulation.md`` §2b).
+
+Every slave node j is projected onto the master surface: ξ_j is the closest point on the master
+facets (triangles, or bilinear quadrilaterals by a local Newton; edges and corners handled, see
+:mod:`~dolfinx_nnqem.contact.projection`), n_j the master's outward unit normal there, and
+
+    w_j = R_j (u_j − Σ_k N_k(ξ_j) u_k),   g0_j = n_j · (X_j − x(ξ_j)),
+
+over the nodes k of the master facet holding ξ_j. Small deformation: ξ_j, n_j and g0_j are
+computed once, in the reference configuration.
+
+Slave nodes whose closest point is clamped to the master surface's boundary (they lie beyond
+its edge) get no pair. Node-to-surface is cheap and familiar (CalculiX's default) but does not
+pass the contact patch test on non-matching meshes: a uniform pressure is transmitted as
+slave nodal forces that the master's shape functions spread unevenly (``docs/contact.md``
+shows the error); use :mod:`~dolfinx_nnqem.contact.mortar` where stresses at the interface matter.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from dolfinx_nnqem.contact.projection import project_points
+from dolfinx_nnqem.contact.surface_pairs import SurfacePairs, facet_size, surface_pairs
+from dolfinx_nnqem.contact.surfaces import ContactPairError, GatheredSurfaces, first_by_position, format_point
+
+__all__ = ["node_to_surface_pairs"]
+
+
+def node_to_surface_pairs(V, surfaces: GatheredSurfaces, *, tolerance: float, search_distance: float | None = None,
+                          note: str = "") -> SurfacePairs:
+    """Node-to-surface pairs of the second gathered surface (slave) on the first (master).
+
+    Parameters
+    ----------
+    V
+        The displacement space (vector P1).
+    surfaces
+        The master and slave surfaces, in that order (:func:`~dolfinx_nnqem.contact.surfaces.gather_surfaces`).
+    tolerance
+        Gaps within it are zero; slave nodes whose closest point lies farther than it beyond the
+        master's boundary get no pair.
+    search_distance
+        Slave nodes farther than this from the master get no pair; default: twice the larger
+        facet size of the two surfaces.
+    note
+        Extra words for the pair set's ``describe``.
+
+    Raises
+    ------
+    ContactPairError
+        (on every rank) if no slave node faces the master, a slave node lies deep behind it, or
+        the normals at a projection point the same way.
+    """
+    tags = surfaces.tags
+    master, slave = surfaces.facets_of(0), surfaces.facets_of(1)
+    nodes = surfaces.nodes[1]
+    master_size = facet_size(master)
+    if search_distance is None:
+        search_distance = 2.0 * max(master_size, facet_size(slave))
+    p = project_points(nodes.x, master.x, master.area, max_distance=search_distance)
+    found = p.facet >= 0
+    inside = found & (p.tangential_offset <= tolerance)
+    if not np.any(inside):
+        raise ContactPairError(
+            f"no node of the slave surface {tags[1]} projects onto the master surface {tags[0]} within the search "
+            f"distance {search_distance:.6g}: do the surfaces face each other? (pass search_distance for "
+            "larger initial gaps)")
+    facing = np.einsum("ij,ij->i", p.normal[inside], nodes.normal[inside])
+    if np.any(facing >= 0.0):
+        j = first_by_position(nodes.x[inside], facing >= 0.0)
+        raise ContactPairError(
+            f"the contact surfaces do not face each other: the slave node at {format_point(nodes.x[inside][j])} "
+            f"(surface {tags[1]}, outward normal {format_point(nodes.normal[inside][j])}) projects onto surface "
+            f"{tags[0]} where its outward normal is {format_point(p.normal[inside][j])}")
+    keep = np.flatnonzero(inside)
+    k = master.nodes.shape[1]
+    return surface_pairs(
+        V, "node-to-surface", tags, nodes.index[keep], nodes.x[keep], nodes.area[keep], p.normal[keep], p.g0[keep],
+        np.arange(0, k * len(keep) + 1, k), master.nodes[p.facet[keep]].ravel(), p.N[keep].ravel(),
+        master.x[p.facet[keep]].reshape(-1, 3), master_size=master_size, tolerance=tolerance,
+        num_slave_nodes=len(nodes.index), note=note)

@@ -1,0 +1,194 @@
+r"""Pairs of slave nodes against a meshed master surface: node-to-surface and dual mortar.
+
+Both discretisations of non-matching interfaces (``formulation.md`` §2b) give every slave node
+j one pair whose relative displacement involves the slave node and some master nodes k with
+weights c_jk (Σ_k c_jk = 1):
+
+    w_j = R_j (u_j − Σ_k c_jk u_k),   g_j = g0_j + (w_j)_n,
+
+so B's row block is R_j in the slave node's columns and −c_jk R_j in master node k's. The
+nodal force λ_j acts on the slave node; Bᵀλ puts −c_jk R_jᵀλ_j on the master nodes, so the
+two sides' forces balance exactly. Node-to-surface takes c_jk = N_k(ξ_j), the master facet's
+shape functions at the slave node's closest point (:mod:`~dolfinx_nnqem.contact.node_to_surface`);
+dual mortar takes c_jk = M_jk / Σ_k M_jk (:mod:`~dolfinx_nnqem.contact.mortar`). This module
+holds what the two share: the pair set, its assembly and the checks of the geometry.
+
+Like node-to-node pairs, everything is computed on every rank from the gathered surfaces
+(:mod:`~dolfinx_nnqem.contact.surfaces`) in the slave nodes' coordinate order; a rank keeps the
+pairs whose slave node it owns.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from dolfinx_nnqem import compat  # noqa: F401, I001  (first: loads MPI/PETSc for the PyPI wheel)
+
+import numpy as np
+from mpi4py import MPI
+
+from dolfinx_nnqem.contact.pairs import owned_by_slave
+from dolfinx_nnqem.contact.pairset import PairRows
+from dolfinx_nnqem.contact.surfaces import (ContactPairError, Facets, GatheredSurfaces, first_by_position,
+                                            format_point, local_frames)
+
+__all__ = ["MAX_INTERFERENCE", "SurfacePairs", "check_no_shared_nodes", "facet_size", "surface_pairs"]
+
+MAX_INTERFERENCE = 0.1
+"""A slave node may start up to this fraction of the master's mean facet size behind the master
+surface (an initial interference, e.g. where a curved interface is faceted differently on its two
+sides); a deeper one means overlapping bodies or swapped surfaces, and is refused."""
+
+
+@dataclass(eq=False)
+class SurfacePairs:
+    """Pairs of the slave surface's nodes against a meshed master surface, owned by this rank.
+
+    A :class:`~dolfinx_nnqem.contact.pairset.PairSet`. Global order: by the rank owning the
+    slave node, then by the slave node's coordinates (x, then y, then z).
+
+    Attributes
+    ----------
+    kind
+        ``"node-to-surface"`` or ``"mortar"``.
+    master, slave
+        Facet tags of the master and slave surfaces.
+    slave_blocks
+        (num_local,) global dof-block indices of the slave nodes.
+    master_indptr, master_blocks, weights
+        CSR: pair i involves the master nodes ``master_blocks[master_indptr[i]:master_indptr[i+1]]``
+        with the weights c_ik (summing to 1).
+    X_slave, X_master
+        (num_local, 3) slave node positions and the facing master point Σ_k c_ik X_k.
+    R, g0, area
+        Frames (rows n, t1, t2; n points from the master to the slave side), initial gaps, and
+        the slave nodes' tributary areas (D_jj for mortar).
+    rows
+        B's local rows.
+    num_slave_nodes
+        Nodes of the slave surface; those without a pair (beyond the master) are reported.
+    note
+        Extra words for :meth:`describe` (e.g. why this side is the slave).
+    """
+
+    comm: MPI.Comm
+    kind: str
+    master: int
+    slave: int
+    num_local: int
+    num_global: int
+    offset: int
+    slave_blocks: np.ndarray
+    master_indptr: np.ndarray
+    master_blocks: np.ndarray
+    weights: np.ndarray
+    X_slave: np.ndarray
+    X_master: np.ndarray
+    R: np.ndarray
+    g0: np.ndarray
+    area: np.ndarray
+    rows: PairRows
+    num_slave_nodes: int
+    note: str = ""
+
+    def motion(self, load_factor: float) -> np.ndarray:
+        """Zero: both sides are deformable, their motion is in u."""
+        return np.zeros((self.num_local, 3))
+
+    def motion_amplitudes(self, load_factor: float) -> np.ndarray:
+        return np.zeros(0)
+
+    def describe(self) -> str:
+        without = self.num_slave_nodes - self.num_global
+        beyond = f" ({without} slave nodes beyond the master surface have none)" if without else ""
+        return (f"{self.kind}, {self.num_global} pairs{beyond}: slave surface {self.slave} against master "
+                f"surface {self.master}{self.note}")
+
+
+def facet_size(facets: Facets) -> float:
+    """The square root of the mean facet area: a surface's element size."""
+    return float(np.sqrt(np.mean(np.linalg.norm(facets.area, axis=1))))
+
+
+def check_no_shared_nodes(surfaces: GatheredSurfaces) -> None:
+    """Refuse two contact surfaces with common nodes (the bodies must be meshed apart)."""
+    first, second = surfaces.nodes
+    shared = np.intersect1d(first.index, second.index)
+    if len(shared):
+        i = first_by_position(first.x, np.isin(first.index, shared))
+        raise ContactPairError(
+            f"contact surfaces {surfaces.tags[0]} and {surfaces.tags[1]} share {len(shared)} node(s), e.g. at "
+            f"{format_point(first.x[i])}: the two bodies must be meshed without common nodes")
+
+
+def _check_gaps(g0: np.ndarray, x: np.ndarray, master_size: float, tags: tuple[int, int]) -> None:
+    """Refuse slave nodes deeper behind the master than :data:`MAX_INTERFERENCE` × its facet size."""
+    deep = g0 < -MAX_INTERFERENCE * master_size
+    if np.any(deep):
+        i = first_by_position(x, deep)
+        raise ContactPairError(
+            f"the node at {format_point(x[i])} of the slave surface {tags[1]} lies {-g0[i]:.6g} behind the master "
+            f"surface {tags[0]} (more than {MAX_INTERFERENCE:g} × its facet size {master_size:.4g}): are the bodies "
+            "overlapping, or are the surfaces swapped?")
+
+
+def surface_pairs(V, kind: str, tags: tuple[int, int], slave_index: np.ndarray, X_slave: np.ndarray,
+                  area: np.ndarray, normal: np.ndarray, g0: np.ndarray, master_indptr: np.ndarray,
+                  master_index: np.ndarray, weights: np.ndarray, X_master_nodes: np.ndarray, *,
+                  master_size: float, tolerance: float, num_slave_nodes: int, note: str = "") -> SurfacePairs:
+    """Assemble the pair set from per-slave-node data given identically on every rank (collective).
+
+    Parameters
+    ----------
+    V
+        The displacement space.
+    kind
+        ``"node-to-surface"`` or ``"mortar"``.
+    tags
+        (master tag, slave tag).
+    slave_index, X_slave, area
+        (p,) global dof blocks, (p, 3) positions and (p,) tributary areas of the slave nodes that
+        have a pair.
+    normal
+        (p, 3) unit pair normals, pointing from the master side to the slave side.
+    g0
+        (p,) initial gaps (positive: open).
+    master_indptr, master_index, weights, X_master_nodes
+        CSR over the slave nodes: master nodes' global dof blocks, their weights c_jk (summing to
+        1 per slave node) and coordinates.
+    master_size, tolerance
+        The master's facet size (for the interference check) and the length below which a gap
+        is zero.
+    num_slave_nodes, note
+        See :class:`SurfacePairs`.
+    """
+    _check_gaps(g0, X_slave, master_size, tags)
+    g0 = np.where(np.abs(g0) <= tolerance, 0.0, g0)  # touching within the tolerance: no gap (round-off)
+    # deterministic global order for any number of ranks: the slave nodes' coordinates
+    order = np.lexsort((X_slave[:, 2], X_slave[:, 1], X_slave[:, 0]))
+    mine, offset, num_global = owned_by_slave(V.mesh.comm, V.dofmap.index_map, slave_index[order])
+    local = order[mine]
+    counts = np.diff(master_indptr)[local]
+    indptr = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    # entries of the kept rows of the CSR arrays, in the new row order
+    take = np.repeat(master_indptr[local] - indptr[:-1], counts) + np.arange(indptr[-1])
+    masters, c = master_index[take], weights[take]
+    pair = np.repeat(np.arange(len(local)), counts)
+    X_master = np.zeros((len(local), 3))
+    np.add.at(X_master, pair, c[:, None] * X_master_nodes[take])
+    R = local_frames(normal[local]) if len(local) else np.zeros((0, 3, 3))
+    # the pair's nodes: the slave node with coefficient 1, then the master nodes with −c_jk
+    nodes_indptr = indptr + np.arange(len(local) + 1)
+    nodes = np.empty(len(take) + len(local), dtype=np.int64)
+    coefficients = np.empty(len(nodes))
+    slave_at = nodes_indptr[:-1]
+    nodes[slave_at], coefficients[slave_at] = slave_index[local], 1.0
+    rest = np.setdiff1d(np.arange(len(nodes)), slave_at)
+    nodes[rest], coefficients[rest] = masters, -c
+    return SurfacePairs(
+        comm=V.mesh.comm, kind=kind, master=int(tags[0]), slave=int(tags[1]), num_local=len(local),
+        num_global=num_global, offset=offset, slave_blocks=slave_index[local], master_indptr=indptr,
+        master_blocks=masters, weights=c, X_slave=X_slave[local], X_master=X_master, R=R, g0=g0[local],
+        area=area[local], rows=PairRows.from_weighted_nodes(R, nodes_indptr, nodes, coefficients),
+        num_slave_nodes=int(num_slave_nodes), note=note,
+    )
