@@ -523,6 +523,7 @@ def build_block_stack(
     *,
     y0: float = 0.0,
     centred: bool = False,
+    cell_type: str = "hexahedron",
     msh_file: str | os.PathLike | None = None,
 ) -> MeshAndTags:
     """Blocks stacked along y, each meshed on its own (no shared nodes): several contact interfaces.
@@ -530,7 +531,10 @@ def build_block_stack(
     Block k (1 at the bottom) spans y in [y0 + Σ_{i<k} h_i, y0 + Σ_{i≤k} h_i] and x in [0, Lx],
     z in [0, Lz] (or, with ``centred``, [-Lx/2, Lx/2] and [-Lz/2, Lz/2]), with
     ``divisions[k-1] = (nx, ny, nz)`` structured hexahedra. Neighbouring blocks with the same nx
-    and nz have coincident interface nodes; different ones make non-matching interfaces.
+    and nz have coincident interface nodes; different ones make non-matching interfaces. With
+    ``cell_type="tetrahedron"`` the blocks are meshed with unstructured tetrahedra whose edges
+    divide the block's edges into nx, ny, nz parts (the faces are meshed on their own, so even
+    equal divisions give non-matching interfaces).
 
     Returns
     -------
@@ -547,13 +551,16 @@ def build_block_stack(
             raise ValueError(f"block {k}: divisions must be three positive integers, got {n!r}")
     if not (Lx > 0 and Lz > 0):
         raise ValueError(f"Lx and Lz must be positive, got {Lx!r}, {Lz!r}")
-    return _mesh_from_gmsh(comm, "block_stack",
-                           lambda: _build_block_stack_model(Lx, Lz, heights, divisions, y0, centred), msh_file)
+    if cell_type not in ("hexahedron", "tetrahedron"):
+        raise ValueError(f"cell_type must be 'hexahedron' or 'tetrahedron', got {cell_type!r}")
+    return _mesh_from_gmsh(
+        comm, "block_stack",
+        lambda: _build_block_stack_model(Lx, Lz, heights, divisions, y0, centred, cell_type), msh_file)
 
 
 def _build_block_stack_model(Lx: float, Lz: float, heights: Sequence[float],
                              divisions: Sequence[tuple[int, int, int]], y0: float = 0.0,
-                             centred: bool = False) -> None:
+                             centred: bool = False, cell_type: str = "hexahedron") -> None:
     """The gmsh model of :func:`build_block_stack` (current model, rank 0): geometry, groups, mesh."""
     x0 = -Lx / 2 if centred else 0.0
     z0 = -Lz / 2 if centred else 0.0
@@ -563,7 +570,11 @@ def _build_block_stack_model(Lx: float, Lz: float, heights: Sequence[float],
     counts = {}
     for body, (n_x, n_y, n_z) in zip(volumes, divisions):
         counts |= _box_curve_counts(body, lambda d, n=(n_x, n_y, n_z): n[int(np.argmax(d))])
-    _structured_hexahedra(counts)
+    if cell_type == "hexahedron":
+        _structured_hexahedra(counts)
+    else:  # the edges' divisions only: unstructured triangles on the faces, tetrahedra inside
+        for c, n in counts.items():
+            gmsh.model.mesh.setTransfiniteCurve(c, n + 1)
     size = float(np.linalg.norm([Lx, sum(heights), Lz]))
     x1, z1 = x0 + Lx, z0 + Lz
     T = BlockStackTags

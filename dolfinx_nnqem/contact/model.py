@@ -352,6 +352,30 @@ class ContactModel:
         out = y.getArray(readonly=True).reshape(-1, 3) == 0.0
         for obj in (M, free, y):
             obj.destroy()
+        with constrained_dofs.localForm() as c:
+            supported = c.array
+            for interface in self.interfaces:
+                if interface.pairs.pins_supported_slave_tangents:
+                    out[interface.local] |= self._supported_slave_tangents(interface.pairs, supported)
+        return out
+
+    def _supported_slave_tangents(self, pairs: PairSet, supported: np.ndarray) -> np.ndarray:
+        """(num_local, 3) bool: tangential directions t1, t2 lying in the span of the slave node's
+        prescribed components.
+
+        Node-to-surface and mortar rows couple a slave node to several master nodes, so the
+        friction forces of slave nodes held tangentially by a support (a symmetry plane crossing
+        the interface) may combine into forces that act on the supports alone: a null space of the
+        multipliers and a singular Newton matrix. The support carries those components; the
+        contact force there is pinned to zero (``docs/theory.md``). The normal direction is never
+        pinned this way: a supported slave node still keeps the master out.
+        """
+        start = self.V.dofmap.index_map.local_range[0]
+        flags = supported[3 * (pairs.slave_blocks[:, None] - start) + np.arange(3)] != 0.0  # (n, 3) owned slaves
+        # a direction t lies in the span of the prescribed axes when its free components vanish
+        free_part = np.abs(pairs.R[:, 1:, :]) * ~flags[:, None, :]
+        out = np.zeros((pairs.num_local, 3), dtype=bool)
+        out[:, 1:] = np.all(free_part <= 1e-12, axis=2) & np.any(flags, axis=1)[:, None]
         return out
 
     # -- sizes and parallel helpers ------------------------------------------------------------

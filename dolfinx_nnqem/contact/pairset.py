@@ -210,6 +210,9 @@ class PairSet(Protocol):
     slave_blocks: np.ndarray  #: (num_local,) global dof-block indices of the slave nodes
     area: np.ndarray  #: (num_local,) the slave node's tributary area (pressure = p_n / area)
     kind: str  #: "node-to-node", "rigid obstacle", ...
+    #: pin the tangential force of slave nodes whose tangential motion a support prescribes
+    #: (rows coupling one slave node to several master nodes; ``ContactModel``)
+    pins_supported_slave_tangents: bool
 
     def motion(self, load_factor: float) -> np.ndarray:
         """(num_local, 3): m(ℓ), the known part of w (the master side's prescribed motion)."""

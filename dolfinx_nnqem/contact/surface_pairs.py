@@ -90,6 +90,7 @@ class SurfacePairs:
     rows: PairRows
     num_slave_nodes: int
     note: str = ""
+    pins_supported_slave_tangents: bool = True  #: see ContactModel._supported_slave_tangents
 
     def motion(self, load_factor: float) -> np.ndarray:
         """Zero: both sides are deformable, their motion is in u."""
