@@ -173,3 +173,88 @@ def test_sliding_block_non_matching(method, law, discretisation, request):
           f"{abs(total[1] + force) / force:.1e}; states at the end {dict(zip(*np.unique(states, return_counts=True)))}")
     assert err < 1e-8 and abs(total[1] + force) < 1e-10 * force
     assert np.all(states == "slip")
+
+
+# -- problem files ---------------------------------------------------------------------------------------
+
+PATCH_FILE = """
+[mesh]
+file = "stack.msh"
+[materials.1]
+E = 1.0e9
+nu = 0.3
+[materials.2]
+E = 1.0e9
+nu = 0.3
+[[contact]]
+surface1 = 201
+surface2 = 102
+mu_f = 0.3
+{contact}
+[[dirichlet]]
+tag = 101
+components = [1]
+[[dirichlet]]
+tag = 301
+components = [0]
+[[dirichlet]]
+tag = 302
+components = [0]
+[[dirichlet]]
+tag = 501
+components = [2]
+[[dirichlet]]
+tag = 502
+components = [2]
+[[pressure]]
+tag = 202
+p = 1.0e6
+[solver]
+increments = 1
+rtol = 1e-12
+"""
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_mortar_from_a_problem_file(tmp_path, method):
+    """The patch test (4 × 4 against 3 × 3) from a problem file, slave chosen in the file."""
+    import json
+
+    from dolfinx_nnqem.cli import EXIT_OK, main
+
+    if MPI.COMM_WORLD.rank == 0:
+        build_block_stack(MPI.COMM_SELF, 1.0, 1.0, [0.5, 0.5], MESHES["hex 4x4 / 3x3"][1], msh_file=tmp_path / "stack.msh")
+    MPI.COMM_WORLD.barrier()
+    (tmp_path / "p.toml").write_text(PATCH_FILE.format(contact='discretisation = "mortar"\nslave = 102'))
+    assert main(["-q", "run", str(tmp_path / "p.toml"), "--out", str(tmp_path / "out"), "--method", method]) == EXIT_OK
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    pressure = np.array([p["pressure"] for p in summary["pairs"]])
+    err = np.max(np.abs(pressure - P)) / P
+    print(f"\n  {method}: {len(pressure)} mortar pairs (slave 102, the coarser side, by choice), "
+          f"max |pressure − p|/p = {err:.2e}, global imbalance {summary['equilibrium_residual']:.1e}")
+    assert summary["converged"] and len(pressure) == 16 and err < 1e-8
+
+
+@pytest.mark.parametrize("contact, words", [
+    ('discretisation = "segment"', "discretisation = 'segment'"),
+    ("slave = 7", "slave = 7"),
+])
+def test_problem_file_discretisation_errors(tmp_path, contact, words):
+    from dolfinx_nnqem.problem_file import ProblemFileError, load_problem_file
+
+    (tmp_path / "stack.msh").write_text("")  # never read: the keys are checked first
+    (tmp_path / "p.toml").write_text(PATCH_FILE.format(contact=contact))
+    with pytest.raises(ProblemFileError, match=words):
+        load_problem_file(tmp_path / "p.toml")
+
+
+def test_contact_refuses_unsound_combinations():
+    from dolfinx_nnqem.contact.obstacles import Plane
+
+    plane = Plane(point=(0, 0, 0), normal=(0, 1, 0))
+    with pytest.raises(ValueError, match="discretisation = 'mortar'.*exact surface"):
+        Contact(plane, 5, mu_f=0.1, discretisation="mortar")
+    with pytest.raises(ValueError, match="initial_gap applies to node-to-node"):
+        Contact(1, 2, mu_f=0.1, discretisation="mortar", initial_gap=lambda x: x[0])
+    with pytest.raises(ValueError, match="slave = 3"):
+        Contact(1, 2, mu_f=0.1, slave=3)
