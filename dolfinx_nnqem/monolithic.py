@@ -48,6 +48,7 @@ class _Evaluation:
     scale: float  #: the force scale F
     norm_R: float
     norm_H: float
+    lin: object = None  #: the laws' Linearisation (Newton step coordinates), or None without contact
 
 
 class MonolithicSolver:
@@ -176,11 +177,11 @@ class MonolithicSolver:
         self.linear.set_forcing(1.0, record=False)  # the lifted system's residual is not the iterate's
         u0 = p.u.x.array[:ev.R_free.getLocalSize()].copy()
         z0 = p.contact.z.copy() if p.has_contact else None
-        lifted = _Evaluation(R_lifted, H_lifted, ev.law, ev.scale, math.nan, math.nan)
+        lifted = _Evaluation(R_lifted, H_lifted, ev.law, ev.scale, math.nan, math.nan, ev.lin)
         direction = self.newton_direction(lifted)
         if direction is None:
             return False
-        self.set_iterate(u0, z0, direction, 1.0)
+        self.set_iterate(u0, z0, direction, 1.0, ev.lin)
         p.u.x.array[p.bc_dofs] += delta_bc
         return True
 
@@ -192,13 +193,14 @@ class MonolithicSolver:
         F_int = p.assemble_internal_force()
         self._tick("assembly", t0)
         R_free = p.free_residual(p.residual(F_int=F_int))
-        law, H = None, np.zeros((0, 3))
+        law, lin, H = None, None, np.zeros((0, 3))
         if p.has_contact:
             t0 = time.perf_counter()
             law = p.contact.evaluate(p.relative_displacement())
+            lin = p.contact.linearise(law)
             H = law.H
             self._tick("contact", t0)
-        return _Evaluation(R_free, H, law, p.force_scale(F_int), R_free.norm(), global_norm(H, p.comm))
+        return _Evaluation(R_free, H, law, p.force_scale(F_int), R_free.norm(), global_norm(H, p.comm), lin)
 
     def _newton_matrix(self, ev: _Evaluation) -> PETSc.Mat:
         """J as one AIJ matrix (the direct system, and the LM fallback's)."""
@@ -211,7 +213,7 @@ class MonolithicSolver:
         t0 = time.perf_counter()
         if self._matrix is None:
             self._matrix = MonolithicMatrix(p.contact, self._mask)
-        J = self._matrix.assemble(self._K, ev.law.dH_dw, ev.law.dH_dz, p.contact.force_derivative())
+        J = self._matrix.assemble(self._K, ev.law.dH_dw, ev.lin.dH_dy, ev.lin.dlam_dy)
         self._tick("block_matrix", t0)
         return J
 
@@ -222,7 +224,7 @@ class MonolithicSolver:
         self._K = p.assemble_tangent(self._K)
         self._tick("assembly", t0)
         t0 = time.perf_counter()
-        J = self._augmented.matrix(self._K, ev.law.dH_dw, ev.law.dH_dz, p.contact.force_derivative())
+        J = self._augmented.matrix(self._K, ev.law.dH_dw, ev.lin.dH_dy, ev.lin.dlam_dy)
         b = self._augmented.rhs(ev.R_free, ev.H, ev.law.dH_dw)
         self._tick("block_matrix", t0)
         return J, b
@@ -288,14 +290,14 @@ class MonolithicSolver:
         du, dz = self._split(x, ev.R_free.getLocalSize())
         return du, dz, slope
 
-    def set_iterate(self, u0: np.ndarray, z0: np.ndarray | None, direction, alpha: float) -> None:
-        """u = u0 + α du, z = z0 + α dz (owned entries; ghosts updated)."""
+    def set_iterate(self, u0: np.ndarray, z0: np.ndarray | None, direction, alpha: float, lin=None) -> None:
+        """u = u0 + α du, z advanced by α dz in the step coordinates of ``lin`` (owned entries; ghosts updated)."""
         p = self.problem
         du, dz = direction[0], direction[1]
         p.u.x.array[:du.shape[0]] = u0 + alpha * du
         p.u.x.scatter_forward()
         if p.has_contact:
-            p.contact.z = z0 + alpha * dz
+            p.contact.z = p.contact.advance(z0, dz, alpha, None if lin is None else lin.cartesian)
 
     def _tick(self, key: str, t0: float) -> None:
         self._timings[key] = self._timings.get(key, 0.0) + time.perf_counter() - t0
@@ -382,6 +384,6 @@ class _NewtonSystem:
         return self._slope
 
     def move(self, step_length: float) -> Merit:
-        u0, z0, _ = self._start
-        self.solver.set_iterate(u0, z0, self._direction, step_length)
+        u0, z0, ev = self._start
+        self.solver.set_iterate(u0, z0, self._direction, step_length, ev.lin)
         return self.evaluate()

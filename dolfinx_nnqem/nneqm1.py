@@ -170,43 +170,49 @@ class NNEQM1Solver:
             w = cond.w_m + cond.w_free + C @ (lam.reshape(-1) - cond.lam_m)
             return w + cond.BN @ xs[n3:] if n_r else w
 
-        def system(xs, lam, dlam_dz, ev):
-            """The scaled rows and Jacobian for the law evaluation ``ev``."""
-            # J = blockdiag(∂H/∂w) · C · blockdiag(∂λ/∂z) + blockdiag(∂H/∂z)
+        def system(xs, lam, lin, ev):
+            """The scaled rows and Jacobian for the law evaluation ``ev`` in the laws' step coordinates ``lin``."""
+            # J = blockdiag(∂H/∂w) · C · blockdiag(∂λ/∂y) + blockdiag(∂H/∂y)
             DwC = np.einsum("nij,njk->nik", ev.dH_dw, C.reshape(nc, 3, n3))
-            Jz = np.einsum("anj,njk->ank", DwC.reshape(n3, nc, 3), dlam_dz)
+            Jz = np.einsum("anj,njk->ank", DwC.reshape(n3, nc, 3), lin.dlam_dy)
             idx = np.arange(nc)
             Jb = Jz.reshape(nc, 3, nc, 3)
-            Jb[idx, :, idx, :] += ev.dH_dz
+            Jb[idx, :, idx, :] += lin.dH_dy
             if not n_r:
-                return ev.H.reshape(-1) / F, Jz.reshape(n3, n3) * z_scale[None, :] / F
+                return ev.H.reshape(-1) / F, Jz.reshape(n3, n3) * z_scale[None, :] / F, lin.cartesian
             # the free rigid modes: w depends on α, and Nᵀ(r + Bᵀ(λ − λ_m)) = 0
             H = np.concatenate([ev.H.reshape(-1), cond.e + cond.BN.T @ (lam.reshape(-1) - cond.lam_m)])
             J = np.zeros((n3 + n_r, n3 + n_r))
             J[:n3, :n3] = Jz.reshape(n3, n3)
             J[:n3, n3:] = np.einsum("nij,njk->nik", ev.dH_dw, cond.BN.reshape(nc, 3, n_r)).reshape(n3, n_r)
-            J[n3:, :n3] = np.einsum("anj,njk->ank", cond.BN.T.reshape(n_r, nc, 3), dlam_dz).reshape(n_r, n3)
-            return H / F, J * x_scale[None, :] / F
+            J[n3:, :n3] = np.einsum("anj,njk->ank", cond.BN.T.reshape(n_r, nc, 3), lin.dlam_dy).reshape(n_r, n3)
+            return H / F, J * x_scale[None, :] / F, lin.cartesian
 
         def residual(x):
             xs = x * x_scale
             z = xs[:n3].reshape(nc, 3)
-            lam, dlam_dz = laws.force(z)
+            lam, _ = laws.force(z)
             ev = laws.evaluate(w_of(xs, lam).reshape(nc, 3), cond.w_prev, z)
-            return system(xs, lam, dlam_dz, ev)
+            return system(xs, lam, laws.linearise(z, ev), ev)
+
+        def advance(x, dx, alpha, cartesian):
+            """The pair unknowns step in the laws' coordinates; the mode amplitudes linearly."""
+            xs, dxs = x * x_scale, dx * x_scale
+            z = laws.advance(xs[:n3].reshape(nc, 3), dxs[:n3].reshape(nc, 3), alpha, cartesian)
+            return np.concatenate([z.reshape(-1), xs[n3:] + alpha * dxs[n3:]]) / x_scale
 
         g = self.settings.inner
         x0 = np.concatenate([z_m.reshape(-1), rigid_start(cond.BN, cond.w_free)]) / x_scale
         if n_r:  # only a floating body's predictor is out of balance (see _frozen_branch_start)
-            x0 = self._frozen_branch_start(x0, x_scale, laws, cond, z_m, w_of, system)
+            x0 = self._frozen_branch_start(x0, x_scale, laws, cond, z_m, w_of, system, advance)
         result = solve_nonsmooth(residual, x0, tol=tol / F, max_iter=self.settings.inner_max_iterations,
                                  watchdog=g.watchdog, armijo=g.armijo, min_step=g.min_step, lm_c=g.lm_c,
-                                 lm_delta=g.lm_delta, max_increase=g.max_increase)
+                                 lm_delta=g.lm_delta, max_increase=g.max_increase, advance=advance)
         result.x = result.x * x_scale
         return result
 
     @staticmethod
-    def _frozen_branch_start(x0, x_scale, laws, cond, z_m, w_of, system):
+    def _frozen_branch_start(x0, x_scale, laws, cond, z_m, w_of, system, advance):
         """The inner start: one Newton step with every pair's branch frozen at the outer iterate.
 
         The elastic predictor w_free is the response to the out-of-balance load before the pair
@@ -222,16 +228,16 @@ class NNEQM1Solver:
         """
         nc = z_m.shape[0]
         xs = x0 * x_scale
-        lam, dlam_dz = laws.force(z_m)
+        lam, _ = laws.force(z_m)
         ev = laws.evaluate(cond.w_m.reshape(nc, 3), cond.w_prev, z_m)
         w = w_of(xs, lam).reshape(nc, 3)
         H_lin = ev.H + np.einsum("nij,nj->ni", ev.dH_dw, w - cond.w_m.reshape(nc, 3))
-        H, J = system(xs, lam, dlam_dz, ev._replace(H=H_lin))
+        H, J, cartesian = system(xs, lam, laws.linearise(z_m, ev), ev._replace(H=H_lin))
         try:
             step = np.linalg.solve(J, -H)
         except np.linalg.LinAlgError:
             return x0
-        return x0 + step if np.all(np.isfinite(step)) else x0
+        return advance(x0, step, 1.0, cartesian) if np.all(np.isfinite(step)) else x0
 
     def destroy(self) -> None:
         self.condensation.destroy()

@@ -578,9 +578,10 @@ class NNEQM2Solver:
             dg = dgt * gscale
             Hs = np.empty(m)
             J = np.zeros((m, m))
+            chart = None
             if nc:
                 z = (x[:n3] * z_scale).reshape(nc, 3)
-                lam, dlam_dz = laws.force(z)
+                lam, _ = laws.force(z)
                 w = d.w0 + d.WBB @ lam.reshape(-1) + d.WBQ @ dg
                 if n_r:
                     w = w + d.BN @ (x[n3 + NG:] * a_scale)
@@ -589,13 +590,16 @@ class NNEQM2Solver:
                 else:
                     ev, w_f = frozen
                     ev = ev._replace(H=ev.H + np.einsum("nij,nj->ni", ev.dH_dw, w.reshape(nc, 3) - w_f))
+                lin = laws.linearise(z, ev)  # the laws' step coordinates y
+                dlam_dz = lin.dlam_dy
+                chart = lin.cartesian
                 Hs[:n3] = ev.H.reshape(-1) / F
-                # pair rows: blockdiag(∂H/∂w) [W_BB Λ', W_BQ, B N] + [blockdiag(∂H/∂z), 0, 0]
+                # pair rows: blockdiag(∂H/∂w) [W_BB Λ', W_BQ, B N] + [blockdiag(∂H/∂y), 0, 0]
                 DwW = np.einsum("nij,njk->nik", ev.dH_dw, d.WBB.reshape(nc, 3, n3))
                 Jz = np.einsum("anj,njk->ank", DwW.reshape(n3, nc, 3), dlam_dz).reshape(n3, nc, 3)
                 idx = np.arange(nc)
                 Jzb = Jz.reshape(nc, 3, nc, 3)
-                Jzb[idx, :, idx, :] += ev.dH_dz
+                Jzb[idx, :, idx, :] += lin.dH_dy
                 J[:n3, :n3] = Jz.reshape(n3, n3) * z_scale[None, :] / F
                 DwQ = np.einsum("nij,njk->nik", ev.dH_dw, d.WBQ.reshape(nc, 3, NG))
                 J[:n3, n3:n3 + NG] = DwQ.reshape(n3, NG) * gscale[None, :] / F
@@ -629,7 +633,16 @@ class NNEQM2Solver:
             last["Hc"] = float(np.linalg.norm(Hs[:n3]))
             last["H4"] = float(np.linalg.norm(Hs[n3:n3 + NG]))
             last["plastic"] = int(np.count_nonzero(use_a & (b > 0.0)))
-            return Hs, J
+            return Hs, J, chart
+
+        def advance(x, dx, alpha, cartesian):
+            """The pair unknowns step in the laws' coordinates; Δγ and the mode amplitudes linearly."""
+            out = x + alpha * dx
+            if nc:
+                z = laws.advance((x[:n3] * z_scale).reshape(nc, 3), (dx[:n3] * z_scale).reshape(nc, 3), alpha,
+                                 cartesian)
+                out[:n3] = z.reshape(-1) / z_scale
+            return out
 
         records = []
 
@@ -646,10 +659,10 @@ class NNEQM2Solver:
         g = self.settings.inner
         t0 = time.perf_counter()
         if n_r and d.w_start is not None:
-            x0 = self._frozen_branch_start(x0, d, laws, z_scale, residual)
+            x0 = self._frozen_branch_start(x0, d, laws, z_scale, residual, advance)
         result = solve_nonsmooth(residual, x0, tol=tol, max_iter=self.settings.inner_max_iterations, log=log,
                                  watchdog=g.watchdog, armijo=g.armijo, min_step=g.min_step, lm_c=g.lm_c,
-                                 lm_delta=g.lm_delta, max_increase=g.max_increase)
+                                 lm_delta=g.lm_delta, max_increase=g.max_increase, advance=advance)
         self._tick("dense_solve", t0)
         # every rank takes rank 0's decision and solution
         comm = self.problem.comm
@@ -669,16 +682,18 @@ class NNEQM2Solver:
         """
         nc, n_r, F = d.nc, d.n_r, d.F
         n3 = 3 * nc
-        lam, dlam_dz = laws.force(z)
+        lam, _ = laws.force(z)
         w_start = d.w_start.reshape(nc, 3)
         ev = laws.evaluate(w_start, d.w_prev, z)
+        lin = laws.linearise(z, ev)
+        dlam_dz = lin.dlam_dy
         w = (d.w0 + d.WBB @ lam.reshape(-1) + d.BN @ alpha).reshape(nc, 3)
         H = np.concatenate([(ev.H + np.einsum("nij,nj->ni", ev.dH_dw, w - w_start)).reshape(-1),
                             d.e + d.BN.T @ lam.reshape(-1)]) / F
         J = np.zeros((n3 + n_r, n3 + n_r))
         DwW = np.einsum("nij,njk->nik", ev.dH_dw, d.WBB.reshape(nc, 3, n3))
         Jz = np.einsum("anj,njk->ank", DwW.reshape(n3, nc, 3), dlam_dz).reshape(nc, 3, nc, 3)
-        Jz[np.arange(nc), :, np.arange(nc), :] += ev.dH_dz
+        Jz[np.arange(nc), :, np.arange(nc), :] += lin.dH_dy
         J[:n3, :n3] = Jz.reshape(n3, n3)
         J[:n3, n3:] = np.einsum("nij,njk->nik", ev.dH_dw, d.BN.reshape(nc, 3, n_r)).reshape(n3, n_r)
         J[n3:, :n3] = np.einsum("anj,njk->ank", d.BN.T.reshape(n_r, nc, 3), dlam_dz).reshape(n_r, n3)
@@ -688,10 +703,10 @@ class NNEQM2Solver:
             return z, alpha
         if not np.all(np.isfinite(step)):
             return z, alpha
-        return z + step[:n3].reshape(nc, 3), alpha + step[n3:]
+        return laws.advance(z, step[:n3].reshape(nc, 3), 1.0, lin.cartesian), alpha + step[n3:]
 
     @staticmethod
-    def _frozen_branch_start(x0, d: _Increment, laws, z_scale, residual):
+    def _frozen_branch_start(x0, d: _Increment, laws, z_scale, residual, advance):
         """One Newton step with every branch frozen where the increment starts.
 
         As in NNEQM1 (:meth:`NNEQM1Solver._frozen_branch_start`): a floating body's elastic
@@ -706,12 +721,12 @@ class NNEQM2Solver:
         z = (x0[:3 * nc] * z_scale).reshape(nc, 3)
         w_start = d.w_start.reshape(nc, 3)
         ev = laws.evaluate(w_start, d.w_prev, z)
-        H, J = residual(x0, frozen=(ev, w_start), yield_branch=d.dp_n > 0.0)
+        H, J, chart = residual(x0, frozen=(ev, w_start), yield_branch=d.dp_n > 0.0)
         try:
             step = np.linalg.solve(J, -H)
         except np.linalg.LinAlgError:
             return x0
-        return x0 + step if np.all(np.isfinite(step)) else x0
+        return advance(x0, step, 1.0, chart) if np.all(np.isfinite(step)) else x0
 
     # -- checks of the converged increment ----------------------------------------------------
     def _checks(self, sigma, dg_local, F_ext, load_factor, iterations, flow_updates, change) -> dict:

@@ -36,8 +36,14 @@ from dolfinx_nnqem.newton import Globalisation, Merit, solve
 
 __all__ = ["DenseSystem", "NonsmoothResult", "solve_nonsmooth"]
 
-ResidualFunction = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
-"""``residual(x) -> (H, J)``: H (n,) and a dense J (n, n) in the B-subdifferential of H at x."""
+ResidualFunction = Callable[[np.ndarray], tuple]
+"""``residual(x) -> (H, J)``: H (n,) and a dense J (n, n) in the B-subdifferential of H at x; with
+an ``advance`` function, ``(H, J, chart)``: J is then taken in the step coordinates ``chart``
+describes (e.g. the pair laws' :class:`~dolfinx_nnqem.contact.laws.Linearisation`)."""
+
+AdvanceFunction = Callable[[np.ndarray, np.ndarray, float, object], np.ndarray]
+"""``advance(x, dx, alpha, chart) -> x_new``: the point the step α dx from x reaches, dx in the step
+coordinates ``chart`` (returned by the residual at x). Default: x + α dx."""
 
 LogFunction = Callable[[int, float, float, str], None]
 """``log(iteration, norm_H, step_length, kind)``, kind in {"initial", "newton", "lm"}."""
@@ -92,22 +98,28 @@ class DenseSystem:
         J is treated as singular below this reciprocal condition number of D J.
     log
         Optional ``log(iteration, norm, step_length, kind)`` called for every recorded iterate.
+    advance
+        Optional ``advance(x, dx, alpha, chart)``: steps in other coordinates than x (the
+        residual then returns ``(H, J, chart)``).
     """
 
     def __init__(self, residual: ResidualFunction, x0: np.ndarray, tol: float, scale: np.ndarray,
-                 rcond_min: float, log: LogFunction | None = None):
+                 rcond_min: float, log: LogFunction | None = None, advance: AdvanceFunction | None = None):
         self.residual = residual
+        self.advance = advance
         self.x = np.array(x0, dtype=np.float64, copy=True)
         self.tol, self.scale, self.rcond_min, self.log = tol, scale, rcond_min, log
         self.norms: list[float] = []
         self._iteration = 0  # the iterate being evaluated (errors name it)
-        self.F = self.A = None
-        self._x0 = self._F0 = self._A0 = self.dx = None
+        self.F = self.A = self.chart = None
+        self._x0 = self._F0 = self._A0 = self._chart0 = self.dx = None
 
     # -- evaluation ---------------------------------------------------------------------------
     def _evaluate_at(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """D H(x) and D J(x); raise on NaN/inf or wrong shapes."""
-        H, J = self.residual(x)
+        """D H(x) and D J(x) (and the step chart in ``self.chart``); raise on NaN/inf or wrong shapes."""
+        out = self.residual(x)
+        H, J = out[0], out[1]
+        self.chart = out[2] if len(out) > 2 else None
         H = np.asarray(H, dtype=np.float64)
         J = np.asarray(J, dtype=np.float64)
         n = x.size
@@ -141,16 +153,16 @@ class DenseSystem:
             else:
                 self.log(iteration, norm, step_length, "lm" if kind == "lm" else "newton")
 
-    def snapshot(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        return self.x, self.F, self.A
+    def snapshot(self) -> tuple:
+        return self.x, self.F, self.A, self.chart
 
     def restore(self, snapshot) -> Merit:
-        self.x, self.F, self.A = snapshot
+        self.x, self.F, self.A, self.chart = snapshot
         return self._merit()
 
     # -- steps ------------------------------------------------------------------------------------
     def start_step(self) -> None:
-        self._x0, self._F0, self._A0 = self.x, self.F, self.A
+        self._x0, self._F0, self._A0, self._chart0 = self.x, self.F, self.A, self.chart
 
     def newton_direction(self, merit: Merit) -> str | None:
         """Solve A d = −F by LU; no direction when A is singular or too ill-conditioned."""
@@ -196,7 +208,10 @@ class DenseSystem:
         return float((self._A0.T @ self._F0) @ self.dx)
 
     def move(self, step_length: float) -> Merit:
-        self.x = self._x0 + step_length * self.dx
+        if self.advance is None:
+            self.x = self._x0 + step_length * self.dx
+        else:
+            self.x = self.advance(self._x0, self.dx, step_length, self._chart0)
         self.F, self.A = self._evaluate_at(self.x)
         return self._merit()
 
@@ -223,6 +238,7 @@ def solve_nonsmooth(
     log: LogFunction | None = None,
     watchdog: int = 0,
     max_increase: float = 1e8,
+    advance: AdvanceFunction | None = None,
 ) -> NonsmoothResult:
     """Solve H(x) = 0 by the globalised semismooth Newton driver on dense arrays.
 
@@ -256,6 +272,9 @@ def solve_nonsmooth(
     watchdog, max_increase
         The driver's watchdog (:class:`~dolfinx_nnqem.newton.Globalisation`); 0 (the default)
         is the plain monotone method.
+    advance
+        ``advance(x, dx, alpha, chart)`` when steps are taken in other coordinates than x (see
+        :data:`AdvanceFunction`); the residual then returns ``(H, J, chart)``.
 
     Returns
     -------
@@ -288,7 +307,7 @@ def solve_nonsmooth(
         if not (np.isfinite(scale).all() and (scale > 0.0).all()):
             raise ValueError("merit_scale must be finite and > 0")
 
-    system = DenseSystem(residual, x0, tol, scale, rcond_min, log)
+    system = DenseSystem(residual, x0, tol, scale, rcond_min, log, advance)
     outcome = solve(system, globalisation, int(max_iter))
     norm = system.norms[-1]
     result = NonsmoothResult(x=system.x, converged=outcome.converged, iterations=outcome.iterations,

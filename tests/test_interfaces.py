@@ -17,7 +17,6 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from dolfinx_nnqem.convergence import ConvergenceError
 from dolfinx_nnqem.material import VonMises
 from dolfinx_nnqem.meshing import BlockStackTags as T
 from dolfinx_nnqem.meshing import build_block_stack
@@ -60,14 +59,7 @@ def three_blocks(mu_f=(0.3, 0.3), law="alart-curnier", drag=None, comm=MPI.COMM_
     return problem
 
 
-POLAR_AT_ZERO_FRICTION = pytest.mark.xfail(
-    strict=True, raises=ConvergenceError,
-    reason="the polar law's angle θ is undetermined where the friction force and the slip vanish "
-           "(pure pressure): its Jacobian is singular there; the two-block patch test fails the same "
-           "way on the code before the redesign (issue 'Every method and both laws converge')")
-
-
-@pytest.mark.parametrize("law", ["alart-curnier", pytest.param("polar", marks=POLAR_AT_ZERO_FRICTION)])
+@pytest.mark.parametrize("law", ["alart-curnier", "polar"])
 @pytest.mark.parametrize("method", METHODS)
 def test_three_blocks_patch_test(method, law):
     problem = three_blocks(law=law)

@@ -16,7 +16,6 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from dolfinx_nnqem.convergence import ConvergenceError
 from dolfinx_nnqem.material import VonMises
 from dolfinx_nnqem.meshing import BlockStackTags as T
 from dolfinx_nnqem.meshing import StackedBlocksTags as S
@@ -31,13 +30,6 @@ TAU = 0.2 * P
 MU_F = 0.3
 MESHES = {"hex 4x4 / 3x3": ("hexahedron", [(4, 1, 4), (3, 1, 3)]),
           "tet 4x4 / 3x3": ("tetrahedron", [(4, 2, 4), (3, 2, 3)])}
-
-POLAR_AT_ZERO_FRICTION = pytest.mark.xfail(
-    strict=True, raises=ConvergenceError,
-    reason="the polar law's angle θ is undetermined where the friction force and the slip vanish (the "
-           "frictionless first iterate, pure pressure): its Jacobian is singular there; NNEQM2 starts from the "
-           "Cartesian law's solution (issue 'Every method and both laws converge')")
-
 
 def two_blocks(mesh_name, discretisation, law="alart-curnier", drag=False, comm=MPI.COMM_WORLD):
     """Body 1 (y in [0, 0.5]) under body 2 (y in [0.5, 1]); pressure p (and the drag τ) on top."""
@@ -88,9 +80,7 @@ def patch_errors(problem, drag):
 @pytest.mark.parametrize("law", ["alart-curnier", "polar"])
 @pytest.mark.parametrize("method", METHODS)
 @pytest.mark.parametrize("mesh_name", list(MESHES))
-def test_mortar_patch_test(mesh_name, method, law, drag, request):
-    if law == "polar" and method != "nneqm2":
-        request.applymarker(POLAR_AT_ZERO_FRICTION)
+def test_mortar_patch_test(mesh_name, method, law, drag):
     problem = two_blocks(mesh_name, "mortar", law, drag)
     results = solve_load_steps(problem, make_solver(method, problem, SolverOptions(rtol=1e-12)), 1)
     t, err_p, err_t, err_sigma = patch_errors(problem, drag)
@@ -153,9 +143,7 @@ def sliding_block(discretisation, law, comm=MPI.COMM_WORLD):
 @pytest.mark.parametrize("discretisation", ["mortar", "node-to-surface"])
 @pytest.mark.parametrize("law", ["alart-curnier", "polar"])
 @pytest.mark.parametrize("method", METHODS)
-def test_sliding_block_non_matching(method, law, discretisation, request):
-    if law == "polar" and method == "monolithic":
-        request.applymarker(POLAR_AT_ZERO_FRICTION)
+def test_sliding_block_non_matching(method, law, discretisation):
     problem, force = sliding_block(discretisation, law)
     history = []
 

@@ -63,6 +63,7 @@ __all__ = [
     "SLIP",
     "STATE_NAMES",
     "LawEvaluation",
+    "Linearisation",
     "ContactLaw",
     "AlartCurnierLaw",
     "PolarLaw",
@@ -103,6 +104,29 @@ class LawEvaluation(NamedTuple):
     dH_dw: np.ndarray
     dH_dz: np.ndarray
     state: np.ndarray
+
+
+class Linearisation(NamedTuple):
+    """The law's part of a Newton step, in the coordinates y the law steps in.
+
+    A Newton step solves for dy; the new unknowns are ``law.advance(z, dy, α, cartesian)``. For
+    the Cartesian law y = z. For the polar law y = z except on the pairs flagged ``cartesian``,
+    whose tangential step is taken in the friction force itself (see
+    :meth:`PolarLaw.linearise`).
+
+    Attributes
+    ----------
+    dH_dy
+        (nc, 3, 3) ∂H/∂y.
+    dlam_dy
+        (nc, 3, 3) ∂λ/∂y.
+    cartesian
+        (nc,) bool, or None: pairs whose y = (p_n, λ_t1, λ_t2).
+    """
+
+    dH_dy: np.ndarray
+    dlam_dy: np.ndarray
+    cartesian: np.ndarray | None
 
 
 # ---------------------------------------------------------------------------------------------
@@ -388,6 +412,20 @@ class ContactLaw(Protocol):
     def pin(self, evaluation: LawEvaluation, z: npt.ArrayLike, constrained: npt.ArrayLike,
             force_unit: float) -> LawEvaluation: ...
 
+    def initial_unknowns(self, constrained: npt.ArrayLike) -> np.ndarray:
+        """z of pairs without force, (nc, 3), for the pinned directions ``constrained`` (nc, 3)."""
+        ...
+
+    def linearise(self, z: npt.ArrayLike, evaluation: LawEvaluation, constrained: npt.ArrayLike,
+                  force_unit: float) -> Linearisation:
+        """The Jacobian blocks of a Newton step at z (``evaluation`` pinned), in the law's step coordinates."""
+        ...
+
+    def advance(self, z: npt.ArrayLike, dy: npt.ArrayLike, alpha: float,
+                cartesian: np.ndarray | None) -> np.ndarray:
+        """The unknowns after the step α dy from z (``cartesian`` from :meth:`linearise`)."""
+        ...
+
 
 class AlartCurnierLaw:
     """Cartesian Alart--Curnier law; unknowns z = lambda = (p_n, q1, q2).
@@ -451,6 +489,20 @@ class AlartCurnierLaw:
         derivatives[:, 1, 1] = derivatives[:, 2, 2] = 1.0
         return _pin_rows(evaluation, constrained, values, derivatives)
 
+    def initial_unknowns(self, constrained: npt.ArrayLike) -> np.ndarray:
+        """Zero force: z = 0."""
+        return np.zeros((np.shape(constrained)[0], 3))
+
+    def linearise(self, z: npt.ArrayLike, evaluation: LawEvaluation, constrained: npt.ArrayLike,
+                  force_unit: float) -> Linearisation:
+        """The unknowns are the force: y = z, ∂λ/∂y = I."""
+        return Linearisation(evaluation.dH_dz, self.force(z)[1], None)
+
+    def advance(self, z: npt.ArrayLike, dy: npt.ArrayLike, alpha: float,
+                cartesian: np.ndarray | None) -> np.ndarray:
+        """z + α dy."""
+        return np.asarray(z, dtype=np.float64) + alpha * np.asarray(dy, dtype=np.float64)
+
     def __repr__(self) -> str:
         return "AlartCurnierLaw()"
 
@@ -458,9 +510,9 @@ class AlartCurnierLaw:
 class PolarLaw:
     """Polar (seed) law; unknowns z = (p_n, p_r, theta), force (p_n, -p_r d(theta)).
 
-    Singular where p_r = 0 in stick (d q/d theta = 0) and where s = 0 in the open state (H3
-    vanishes identically in theta): solve it with the Levenberg--Marquardt fallback of
-    :func:`dolfinx_nnqem.nonsmooth.solve_nonsmooth`.
+    Its Jacobian in (p_r, theta) is singular where p_r = 0 in stick (d q/d theta = 0) and where
+    s = 0 in the open state (H3 vanishes identically in theta); Newton steps are therefore taken
+    in the coordinates of :meth:`linearise`, which are regular there.
     """
 
     name: str = "polar"
@@ -527,8 +579,8 @@ class PolarLaw:
         """Rows of directions the supports fix (see :func:`_pin_rows`).
 
         When both tangential directions are constrained, H2 = p_r and H3 = force_unit · θ; when
-        only t2 (t1) is, the slip-direction row becomes H3 = force_unit · sin θ (cos θ), so the
-        friction force acts along t1 (t2) only and H2 still enforces Coulomb's law along it.
+        only t2 (t1) is, the slip-direction row becomes H3 = force_unit · θ (force_unit · (θ − π/2)),
+        so the friction force acts along t1 (t2) only and H2 still enforces Coulomb's law along it.
         """
         constrained = np.asarray(constrained, dtype=bool)
         if not constrained.any():
@@ -548,9 +600,94 @@ class PolarLaw:
         rows[:, 2] = both | only_t1 | only_t2
         values[:, 1] = z[:, 1]
         derivatives[:, 1, 1] = 1.0
-        values[:, 2] = force_unit * np.where(both, theta, np.where(only_t2, np.sin(theta), np.cos(theta)))
-        derivatives[:, 2, 2] = force_unit * np.where(both, 1.0, np.where(only_t2, np.cos(theta), -np.sin(theta)))
+        # θ = 0 (force along t1) or θ = π/2 (along t2); the signed p_r gives either sense. Linear
+        # in θ on purpose: sin θ or cos θ would have a zero derivative at the usual start θ = 0.
+        values[:, 2] = force_unit * np.where(only_t1, theta - 0.5 * np.pi, theta)
+        derivatives[:, 2, 2] = force_unit
         return _pin_rows(evaluation, rows, values, derivatives)
+
+    def initial_unknowns(self, constrained: npt.ArrayLike) -> np.ndarray:
+        """Zero force, p_n = p_r = 0; θ = π/2 where only t1 is pinned, else 0.
+
+        With one tangential direction pinned, :meth:`pin` puts θ on θ* (0: the friction force
+        along t1, π/2: along t2). Starting there matters: at θ = 0 with t1 pinned, d(θ) points
+        along the pinned direction, whose force only feeds the supports, and both the force's
+        p_r-derivative and the sticking row −r s·d would vanish from the free equations.
+        """
+        constrained = np.asarray(constrained, dtype=bool)
+        z = np.zeros((constrained.shape[0], 3))
+        z[constrained[:, 1] & ~constrained[:, 2], 2] = 0.5 * np.pi
+        return z
+
+    def linearise(self, z: npt.ArrayLike, evaluation: LawEvaluation, constrained: npt.ArrayLike,
+                  force_unit: float) -> Linearisation:
+        """Newton step coordinates that keep the polar law's step regular.
+
+        The map (p_r, θ) → q = −p_r d(θ) is singular at p_r = 0 (∂q/∂θ = 0): a sticking pair
+        without friction force — every pair at the first iterate, the centre of a pressed face —
+        gives the Newton matrix a zero column, and a step in (p_r, θ) can change q only along
+        d(θ). Two changes of coordinates remove this without changing the equations H = 0:
+
+        * Sticking pairs (interior branch, no pinned direction) step in the friction force
+          itself, y = (p_n, λ_t1, λ_t2): ∂λ/∂y = I. Their rows H2 = −r s·d, H3 = r s×d (a
+          rotation of r s) depend on θ only through terms of order |s|, which vanish at a
+          sticking solution; they are dropped, as a Newton method may drop Jacobian terms of the
+          order of the error without losing its quadratic rate. The step is then the
+          Cartesian law's sticking step, and :meth:`advance` turns the new force back into
+          (p_r, θ) with θ as close as possible to the old one.
+        * Open or frictionless pairs (ρ = 0): H2 = p_r drives the force to zero and θ only has to
+          follow the slip (H3 = r s×d). ∂λ/∂θ = −p_r d' is dropped (it vanishes with p_r at the
+          solution; kept, a large turn of θ where the slip is nearly normal to d would enter
+          every other row of the step), and at rest (s·d = 0, so H3 vanishes for every θ)
+          ∂H3/∂θ is set to r h (``force_unit``): the step then turns θ towards the predicted slip.
+
+        Sliding pairs keep (p_r, θ): there |p_r| = ρ > 0 or |r s·d| ≥ ρ > 0, and the polar Jacobian
+        is regular. (Pairs with one pinned tangential direction start at their angle θ*, see
+        :meth:`initial_unknowns`.)
+        """
+        z = np.asarray(z, dtype=np.float64)
+        constrained = np.asarray(constrained, dtype=bool)
+        _, dlam_dz = self.force(z)
+        dH_dy, dlam_dy = evaluation.dH_dz.copy(), dlam_dz
+        free = ~constrained[:, 1] & ~constrained[:, 2]
+        cartesian = (evaluation.state == STICK) & free
+        dH_dy[cartesian, :, 1:] = 0.0
+        dlam_dy[cartesian, 1:, 1:] = np.eye(2)
+        # no friction bound (open, or frictionless): H2 = p_r drives the force to zero and θ only
+        # has to follow the slip (H3). ∂λ/∂θ = −p_r d' vanishes with p_r at the solution; kept, it
+        # couples a large turn of θ (slip nearly normal to d) into the whole system's step
+        unbounded = free & ((evaluation.state == OPEN)
+                            | ((evaluation.state == SLIP) & (evaluation.dH_dz[:, 1, 0] == 0.0)))
+        dlam_dy[unbounded, 1:, 2] = 0.0
+        tiny = 1e-14 * float(force_unit)
+        at_rest = unbounded & (np.abs(evaluation.dH_dz[:, 2, 2]) <= tiny)
+        dH_dy[at_rest, 2, 2] = float(force_unit)
+        return Linearisation(dH_dy, dlam_dy, cartesian)
+
+    def advance(self, z: npt.ArrayLike, dy: npt.ArrayLike, alpha: float,
+                cartesian: np.ndarray | None) -> np.ndarray:
+        """z + α dy; on ``cartesian`` pairs the new friction force λ_t + α dy_t in polar form.
+
+        Of the two representations (|q|, θ) and (−|q|, θ + π) the one whose angle is nearer the
+        old θ is taken, so that a small change of force is a small change of (p_r, θ) (θ is not
+        wrapped: it moves continuously). A zero force keeps θ.
+        """
+        z = np.asarray(z, dtype=np.float64)
+        dy = np.asarray(dy, dtype=np.float64)
+        out = z + alpha * dy
+        if cartesian is None or not np.any(cartesian):
+            return out
+        c = np.asarray(cartesian, dtype=bool)
+        p_r, theta = z[c, 1], z[c, 2]
+        q = -p_r[:, None] * np.column_stack((np.cos(theta), np.sin(theta))) + alpha * dy[c, 1:]
+        size = np.hypot(q[:, 0], q[:, 1])
+        direction = np.arctan2(-q[:, 1], -q[:, 0])  # d(direction) = −q/|q|: p_r = +|q|
+        turn = np.mod(direction - theta + np.pi, 2.0 * np.pi) - np.pi  # in [−π, π)
+        flip = np.abs(turn) > 0.5 * np.pi  # nearer the other representation (p_r = −|q|, θ + π)
+        turn = np.where(flip, turn - np.copysign(np.pi, turn), turn)
+        out[c, 1] = np.where(flip, -size, size)
+        out[c, 2] = np.where(size > 0.0, theta + turn, theta)
+        return out
 
     def __repr__(self) -> str:
         return "PolarLaw()"

@@ -34,7 +34,7 @@ import numpy.typing as npt
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from dolfinx_nnqem.contact.laws import ContactLaw, LawEvaluation, default_r, get_law
+from dolfinx_nnqem.contact.laws import ContactLaw, LawEvaluation, Linearisation, default_r, get_law
 from dolfinx_nnqem.contact.obstacles import RigidObstacle, obstacle_pairs
 from dolfinx_nnqem.contact.discretisation import DISCRETISATIONS, OBSTACLE_DISCRETISATIONS, discretise
 from dolfinx_nnqem.contact.pairset import PairRows, PairSet, rows_matrix
@@ -225,6 +225,40 @@ class PairLaws:
             lam[group.index], dlam_dz[group.index] = group.law.force(z[group.index])
         return lam, dlam_dz
 
+    def linearise(self, z: np.ndarray, evaluation: LawEvaluation) -> Linearisation:
+        """The Jacobian blocks of a Newton step at z in each law's step coordinates (see
+        :meth:`ContactLaw.linearise`); ``evaluation`` is :meth:`evaluate`'s at z."""
+        if len(self.groups) == 1:
+            group = self.groups[0]
+            return group.law.linearise(z, evaluation, self.constrained, group.force_unit)
+        dH_dy, dlam_dy = np.zeros((self.size, 3, 3)), np.zeros((self.size, 3, 3))
+        cartesian = np.zeros(self.size, dtype=bool)
+        for group in self.groups:
+            i = group.index
+            part = group.law.linearise(z[i], LawEvaluation(*(a[i] for a in evaluation)), self.constrained[i],
+                                       group.force_unit)
+            dH_dy[i], dlam_dy[i] = part.dH_dy, part.dlam_dy
+            if part.cartesian is not None:
+                cartesian[i] = part.cartesian
+        return Linearisation(dH_dy, dlam_dy, cartesian if cartesian.any() else None)
+
+    def advance(self, z: np.ndarray, dy: np.ndarray, alpha: float, cartesian: np.ndarray | None) -> np.ndarray:
+        """The unknowns after the step α dy from z in the step coordinates of :meth:`linearise`."""
+        if len(self.groups) == 1:
+            return self.groups[0].law.advance(z, dy, alpha, cartesian)
+        out = np.empty((self.size, 3))
+        for group in self.groups:
+            i = group.index
+            out[i] = group.law.advance(z[i], dy[i], alpha, None if cartesian is None else cartesian[i])
+        return out
+
+    def initial_unknowns(self) -> np.ndarray:
+        """z of force-free pairs (each law's ``initial_unknowns`` for its pinned directions)."""
+        z = np.zeros((self.size, 3))
+        for group in self.groups:
+            z[group.index] = group.law.initial_unknowns(self.constrained[group.index])
+        return z
+
     def unknowns(self, lam: np.ndarray, slip: np.ndarray | None = None, no_force: float = 0.0) -> np.ndarray:
         """z giving the forces ``lam`` (see each law's ``unknowns``)."""
         z = np.zeros((self.size, 3))
@@ -326,8 +360,8 @@ class ContactModel:
         self._w = self.B.createVecLeft()
 
         n = self.num_local
-        self.z = np.zeros((n, 3))
-        self.z_n = np.zeros((n, 3))
+        self.z = self.laws.initial_unknowns()
+        self.z_n = self.z.copy()
         self.w_n = np.zeros((n, 3))
         self.state_n = np.zeros(n, dtype=np.int8)
         self.slip_n = np.zeros((n, 2))
@@ -484,6 +518,14 @@ class ContactModel:
     def evaluate(self, w: np.ndarray, z: np.ndarray | None = None) -> LawEvaluation:
         """H(w, z) of the local pairs with ∂H/∂w, ∂H/∂z and the states (default: the current z)."""
         return self.laws.evaluate(w, self.w_n, self.z if z is None else z)
+
+    def linearise(self, evaluation: LawEvaluation, z: np.ndarray | None = None) -> Linearisation:
+        """The Jacobian blocks of a Newton step in the laws' step coordinates (default: the current z)."""
+        return self.laws.linearise(self.z if z is None else z, evaluation)
+
+    def advance(self, z: np.ndarray, dy: np.ndarray, alpha: float, cartesian: np.ndarray | None) -> np.ndarray:
+        """The unknowns after the step α dy from z (see :meth:`PairLaws.advance`)."""
+        return self.laws.advance(z, dy, alpha, cartesian)
 
     def unknown_scale(self, force_scale: float) -> np.ndarray:
         """(num_local, 3): the scale of each local unknown when forces are of order ``force_scale``."""
