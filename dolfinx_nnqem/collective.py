@@ -22,6 +22,8 @@ __all__ = ["CollectiveError", "agree", "finish_collectively", "on_rank0", "rebui
 
 ABORT_TIMEOUT_S = float(os.environ.get("NNQEM_ABORT_TIMEOUT", "10"))
 """How long a failing rank waits for the others to fail too before aborting the job (seconds)."""
+ABORT_GRACE_S = 0.5
+"""Time given to mpiexec to forward the failing rank's message before the abort (seconds)."""
 
 
 class CollectiveError(RuntimeError):
@@ -127,6 +129,9 @@ def finish_collectively(code: int, message: str, *, timeout: float | None = None
             sys.stderr.write(f"{message}\n(rank {comm.rank}: the other ranks did not stop within {timeout:g} s; "
                              f"aborting the job with exit code {code})\n")
             sys.stderr.flush()
+            # mpiexec forwards a rank's stderr through a pipe; an abort at once can kill the
+            # forwarding before the message is through (seen on CI: exit code right, no message)
+            time.sleep(ABORT_GRACE_S)
             MPI.COMM_WORLD.Abort(code)
         time.sleep(0.01)
     outcomes = comm.allgather((code, message))
