@@ -116,6 +116,11 @@ def _two_beams(args) -> int:
     return EXIT_OK
 
 
+def _increments_text(increments) -> str:
+    """'15 increments' or 'automatic increments' (for the log and a checkpoint's identity)."""
+    return f"{int(increments)} increments" if isinstance(increments, int) else "automatic increments"
+
+
 def _progress_bar(total: int, method: str):
     """A one-line progress bar on stderr (only on a terminal, only on rank 0)."""
     from mpi4py import MPI
@@ -159,7 +164,7 @@ def _run(args) -> int:
     if rank0 and not args.quiet:
         print(f"{args.problem}: {problem.V.dofmap.index_map.size_global * 3} displacement dofs, "
               f"{problem.num_pairs} contact pairs, {problem.state.num_gauss_points()} Gauss points, "
-              f"method {method}, {increments} increments", flush=True)
+              f"method {method}, {_increments_text(increments)}", flush=True)
         for line in problem.contact.describe() if problem.has_contact else []:
             print(f"  {line}", flush=True)
     if args.check:
@@ -173,7 +178,7 @@ def _run(args) -> int:
     solver = make_solver(method, problem, options, **method_options)
     out = Path(args.out or spec.output["folder"])
     identity = {"problem_sha256": hashlib.sha256(Path(args.problem).read_bytes()).hexdigest(),
-                "method": method, "increments": int(increments)}
+                "method": method, "increments": int(increments) if isinstance(increments, int) else "auto"}
     _install_sigterm()  # again: gmsh and PETSc's set-up may have reset the signal handlers
     writer = ResultsWriter(problem, method, out, increments, probes=spec.output["probes"] or None,
                            fields=spec.output["fields"], extra={"problem_file": str(args.problem)},

@@ -215,7 +215,7 @@ class SummaryWriter:
         self.path = Path(path)
         self.t0 = time.perf_counter()
         self.data = {
-            "method": method, "increments": int(increments), "converged": False, "status": "running",
+            "method": method, "increments": int(increments) if isinstance(increments, int) else "auto", "converged": False, "status": "running",
             "load_factors": [], "iterations": [], "residual_histories": [], "checks": [],
             "plastic_gauss_points": [], "num_gauss_points": problem.state.num_gauss_points(),
             "num_pairs": problem.num_pairs, "wall_time_s": 0.0, "mpi_ranks": problem.comm.size,

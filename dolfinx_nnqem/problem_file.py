@@ -55,13 +55,17 @@ A problem file names a mesh with physical tags and everything :class:`ContactPro
 
     [solver]
     method = "monolithic"                 # "nneqm1", "nneqm2"
-    increments = 15
+    increments = 15                       # or "auto": automatic incrementation, see [solver.auto]
     max_cutbacks = 5
     rtol = 1e-10
     max_iterations = 30
     linear_solver = "direct"              # monolithic: "iterative" (GAMG), "auto" (by size)
     [solver.petsc_options]
     pc_factor_mat_solver_type = "mumps"
+    [solver.auto]                         # only with increments = "auto"; every key optional
+    initial_step = 0.1                    # fractions of the load path
+    max_step = 0.25
+    load_factors = [0.5, 1.0]             # load factors every run stops at (output points)
 
     [checks]                              # the independent check of every converged state
     rtol = 1e-6                           # default: from [solver].rtol (1e-6 for rtol = 1e-10)
@@ -405,15 +409,21 @@ def _body_force_entry(entry: dict, where: str) -> dict:
 
 def _solver_section(solver: dict, where: str) -> dict:
     w = f"{where}: [solver]"
-    solver = _checked_keys(solver, {"method", "increments", "max_cutbacks", "rtol", "atol", "max_iterations",
+    solver = _checked_keys(solver, {"method", "increments", "auto", "max_cutbacks", "rtol", "atol", "max_iterations",
                                     "linear_solver", "petsc_options"}, set(), w)
     solver.setdefault("method", "monolithic")
     if solver["method"] not in METHODS:
         raise ProblemFileError(f"{w}.method = {solver['method']!r}: expected one of {list(METHODS)}")
     from dolfinx_nnqem.validation import MAX_CUTBACKS, MAX_INCREMENTS
 
-    solver["increments"] = int(_number(solver.get("increments", 15), f"{w}.increments", positive=True, integer=True,
-                                       high=MAX_INCREMENTS))
+    increments = solver.get("increments", 15)
+    if isinstance(increments, str) and increments == "auto":
+        solver["increments"] = _automatic_increments(solver.get("auto", {}), f"{w}.auto")
+    else:
+        solver["increments"] = int(_number(increments, f"{w}.increments", positive=True, integer=True,
+                                           high=MAX_INCREMENTS))
+        if "auto" in solver:
+            raise ProblemFileError(f"{w}.auto is given but increments = {increments!r}; write increments = \"auto\"")
     solver["max_cutbacks"] = int(_number(solver.get("max_cutbacks", 5), f"{w}.max_cutbacks",
                                          nonnegative=True, integer=True, high=MAX_CUTBACKS))
     solver["max_iterations"] = int(_number(solver.get("max_iterations", 30), f"{w}.max_iterations",
@@ -432,6 +442,22 @@ def _solver_section(solver: dict, where: str) -> dict:
         raise ProblemFileError(f"{w}.petsc_options must be a table of PETSc option = value")
     solver["petsc_options"] = {k: (str(v).lower() if isinstance(v, bool) else v) for k, v in options.items()}
     return solver
+
+
+def _automatic_increments(table, where: str):
+    """[solver.auto]: the settings of :class:`~dolfinx_nnqem.step_control.AutomaticIncrements`."""
+    from dataclasses import fields
+
+    from dolfinx_nnqem.step_control import AutomaticIncrements
+
+    if not isinstance(table, dict):
+        raise ProblemFileError(f"{where} must be a table")
+    keys = {f.name for f in fields(AutomaticIncrements)}
+    table = _checked_keys(table, keys, set(), where)
+    try:
+        return AutomaticIncrements(**table)
+    except (TypeError, ValueError) as error:
+        raise ProblemFileError(f"{where}: {error}") from None
 
 
 def _output_section(output: dict, where: str) -> dict:

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from dolfinx_nnqem.checks import CheckOptions, StateCheck, check_state, failure_details
 from dolfinx_nnqem.convergence import ConvergenceError, SolveReport, logger
 from dolfinx_nnqem.linalg import free_dropped_objects
+from dolfinx_nnqem.step_control import AutomaticIncrements, as_step_control
 from dolfinx_nnqem.validation import check_stepping_arguments
 
 
@@ -58,7 +59,7 @@ class StepperState:
 def solve_load_steps(
     problem,
     solver,
-    increments: int = 15,
+    increments: int | str | AutomaticIncrements = 15,
     *,
     max_cutbacks: int = 5,
     callbacks: Sequence[Callable[[IncrementResult], None]] = (),
@@ -77,7 +78,9 @@ def solve_load_steps(
     solver
         A :class:`~dolfinx_nnqem.solver.Solver`.
     increments
-        Number of equal increments N (the seed: 15).
+        Number of equal increments N (the seed: 15), or ``"auto"`` / an
+        :class:`~dolfinx_nnqem.step_control.AutomaticIncrements` for automatic incrementation
+        (the increment grows when Newton converges easily and shrinks when it struggles).
     max_cutbacks
         Halvings allowed in a row before giving up.
     callbacks
@@ -103,13 +106,16 @@ def solve_load_steps(
         attribute (a dict: increment, load factor, reason, the worst nodes and pairs) is also
         handed to every callback that has a ``failed`` method before it is raised.
     """
+    increments, control = as_step_control(increments)
     increments, max_cutbacks, final_load_factor, max_displacement = check_stepping_arguments(
-        increments, max_cutbacks, final_load_factor, max_displacement)
+        increments or 1, max_cutbacks, final_load_factor, max_displacement)
     check = check or CheckOptions()
     solver_options = getattr(solver, "options", None)
     if resume is None:
         start = problem.load_factor_n
         step = (final_load_factor - start) / increments
+        if control is not None:
+            step = control.first_step(final_load_factor - start)
         cutbacks, index0 = 0, 0
     else:
         start, step, cutbacks, index0 = resume.start, resume.step, resume.cutbacks, resume.index
@@ -118,9 +124,12 @@ def solve_load_steps(
     direction = 1.0 if final_load_factor >= start else -1.0  # unloading paths run downwards
     span = abs(final_load_factor - start)
     while direction * (final_load_factor - ell) > 1e-12 * span:
-        target = ell + step
-        if direction * (target - final_load_factor) > 0:
-            target = final_load_factor
+        if control is None:
+            target = ell + step
+            if direction * (target - final_load_factor) > 0:
+                target = final_load_factor
+        else:
+            target = control.target(ell, abs(step), final_load_factor, direction, span)
         free_dropped_objects(problem.petsc_comms)
         t0 = time.perf_counter()
         report = solver.solve_increment(target)
@@ -137,7 +146,7 @@ def solve_load_steps(
                 report.message = (f"largest displacement {u_max:.4g} exceeds max_displacement = "
                                   f"{max_displacement:.4g} (collapse)")
         if not report.converged:
-            if cutbacks >= max_cutbacks:
+            if cutbacks >= max_cutbacks or (control is not None and control.too_small(abs(step) / 2.0, span)):
                 failure = {"increment": index0 + len(results) + 1, "load_factor": float(target),
                            "last_converged_load_factor": float(ell), "cutbacks": cutbacks,
                            "reason": report.message, **failure_details(problem)}
@@ -165,7 +174,10 @@ def solve_load_steps(
         for callback in callbacks:
             callback(result)
         result.output_time_s = time.perf_counter() - t_out
-        if cutbacks:  # after a successful cut step, try the original step size again
+        if control is not None:  # automatic: the size follows the Newton iterations
+            step = direction * control.next_step(abs(step), report.iterations, span)
+            cutbacks = 0
+        elif cutbacks:  # after a successful cut step, try the original step size again
             step = direction * min(abs(2.0 * step), span / increments)
             cutbacks = max(cutbacks - 1, 0)
         if checkpoint is not None:
