@@ -436,7 +436,7 @@ def _solver_section(solver: dict, where: str) -> dict:
 
 def _output_section(output: dict, where: str) -> dict:
     w = f"{where}: [output]"
-    output = _checked_keys(output, {"folder", "fields", "probes", "checkpoint_every"}, set(), w)
+    output = _checked_keys(output, {"folder", "fields", "pictures", "probes", "checkpoint_every"}, set(), w)
     output.setdefault("folder", "results/" + Path(where).stem)
     if not isinstance(output["folder"], str):
         raise ProblemFileError(f"{w}.folder must be a string")
@@ -445,8 +445,9 @@ def _output_section(output: dict, where: str) -> dict:
                                "results with the current directory)")
     output["checkpoint_every"] = int(_number(output.get("checkpoint_every", 1), f"{w}.checkpoint_every",
                                              nonnegative=True, integer=True))
-    if not isinstance(output.setdefault("fields", True), bool):
-        raise ProblemFileError(f"{w}.fields must be true or false")
+    for key in ("fields", "pictures"):
+        if not isinstance(output.setdefault(key, True), bool):
+            raise ProblemFileError(f"{w}.{key} must be true or false")
     probes = output.setdefault("probes", {})
     if not isinstance(probes, dict):
         raise ProblemFileError(f"{w}.probes must be a table name = [x, y, z]")
@@ -506,16 +507,17 @@ def _read_msh(file: Path, comm):
     BEFORE the collective distribution starts (no rank is left waiting)."""
     import gmsh
 
-    from dolfinx_nnqem import compat
+    from dolfinx_nnqem import chatter, compat
     from dolfinx_nnqem.collective import on_rank0
 
     started = [False]
+    previous_options: dict = {}
 
     def open_model():
         if not gmsh.isInitialized():
             gmsh.initialize(interruptible=False)  # leave Ctrl-C to the command line
             started[0] = True
-        gmsh.option.setNumber("General.Terminal", 0)
+        previous_options.update(chatter.apply_gmsh_options())  # gmsh's "Info : Reading ..." lines only with -v
         gmsh.model.add("dolfinx_nnqem problem file")
         try:
             gmsh.merge(str(file))
@@ -539,6 +541,9 @@ def _read_msh(file: Path, comm):
             gmsh.model.remove()
             if started[0]:
                 gmsh.finalize()
+            else:  # the caller's session: its options as they were
+                for option, value in previous_options.items():
+                    gmsh.option.setNumber(option, value)
 
     try:
         on_rank0(comm, open_model)
