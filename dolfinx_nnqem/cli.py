@@ -228,6 +228,8 @@ def _run(args) -> int:
         raise
     finally:
         writer.close()
+        if rank0 and not args.quiet and writer.summary.data.get("status") == "not converged":
+            _print_pictures(writer.drawn)  # the converged increments' pictures
     if rank0 and not args.quiet:
         s = writer.summary.data
         print(f"converged: {s['converged']}; iterations {s['iterations']}; global equilibrium "
