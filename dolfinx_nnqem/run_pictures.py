@@ -141,9 +141,12 @@ def draw_deformed(step: dict, rows: list[dict], path: Path, *, title: str = "", 
             plotter.add_points(points[selected], color=colour, point_size=14, render_points_as_spheres=True,
                                label=f"{state} ({int(selected.sum())})")
     if plotter.legend is None and (len(points) or ("p" in grid.cell_data and np.any(grid.cell_data["p"] > 0))):
-        plotter.add_legend(bcolor="lightgrey", face="circle", size=(0.22, 0.18), loc="upper right")
+        plotter.add_legend(bcolor="lightgrey", face="circle", size=(0.2, 0.15), loc="lower left")
     plotter.add_text(f"{title}\ndisplacements x {scale:.3g}", font_size=10)
-    {"iso": plotter.view_isometric, "xy": plotter.view_xy, "xz": plotter.view_xz, "yz": plotter.view_yz}[camera]()
+    # y up, as the problem files of this package have it (gravity along -y, stacks along y)
+    views = {"iso": lambda: plotter.view_vector((1.0, 0.8, 1.4), viewup=(0, 1, 0)), "xy": plotter.view_xy,
+             "xz": plotter.view_xz, "yz": plotter.view_yz}
+    views[camera]()
     plotter.screenshot(str(path))
     plotter.close()
     return path
