@@ -69,11 +69,26 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--method", choices=METHODS, default=None, help="override [solver].method")
     run.add_argument("--increments", type=int, default=None, help="override [solver].increments")
     run.add_argument("--check", action="store_true", help="only check the file and build the problem")
+    run.add_argument("--no-pictures", action="store_true",
+                     help="do not draw the PNG pictures into OUT/pictures at the end of the run")
     mode = run.add_mutually_exclusive_group()
     mode.add_argument("--restart", action="store_true",
                       help="continue the run in the output folder from its last complete checkpoint")
     mode.add_argument("--overwrite", action="store_true",
                       help="replace the results of an earlier run in the output folder (otherwise refused)")
+
+    plot = sub.add_parser("plot", parents=[common], help="(re)draw the pictures of a results folder",
+                          description="Draw the pictures of a run from its results folder (summary.json, "
+                                      "fields.xdmf, pair CSV files), without solving again: deformed.png, "
+                                      "pair_pressure.png, load_curve.png, convergence.png (docs/outputs.md).")
+    plot.add_argument("results", help="a run's output folder")
+    plot.add_argument("--out", default=None, help="where the PNG files go (default RESULTS/pictures)")
+    plot.add_argument("--scale", type=float, default=None,
+                      help="displacement magnification of deformed.png (default: largest displacement "
+                           "drawn as 10%% of the model size)")
+    plot.add_argument("--field", choices=("von_mises", "p"), default="von_mises",
+                      help="colour of deformed.png: von Mises stress or equivalent plastic strain p")
+    plot.add_argument("--camera", choices=("iso", "xy", "xz", "yz"), default="iso", help="view of deformed.png")
     return parser
 
 
@@ -84,6 +99,10 @@ def _configure_logging(verbose: int, quiet: bool) -> None:
     if MPI.COMM_WORLD.rank > 0:
         level = logging.ERROR
     logging.basicConfig(level=level, format="%(message)s")
+    from dolfinx_nnqem.chatter import show_third_party_output
+
+    # gmsh, numba and other libraries' own lines and warnings: only with -v (and not with -q)
+    show_third_party_output(verbose >= 1 and not quiet)
 
 
 def _two_beams(args) -> int:
@@ -180,9 +199,10 @@ def _run(args) -> int:
     identity = {"problem_sha256": hashlib.sha256(Path(args.problem).read_bytes()).hexdigest(),
                 "method": method, "increments": int(increments) if isinstance(increments, int) else "auto"}
     _install_sigterm()  # again: gmsh and PETSc's set-up may have reset the signal handlers
+    pictures = spec.output["pictures"] and not args.no_pictures
     writer = ResultsWriter(problem, method, out, increments, probes=spec.output["probes"] or None,
                            fields=spec.output["fields"], extra={"problem_file": str(args.problem)},
-                           overwrite=args.overwrite, resume=args.restart)
+                           overwrite=args.overwrite, resume=args.restart, pictures=None if pictures else False)
     solving = False  # summary.json records how a run ended only once it has started solving
     try:
         resume = None
@@ -213,11 +233,41 @@ def _run(args) -> int:
         raise
     finally:
         writer.close()
+        if rank0 and not args.quiet and writer.summary.data.get("status") == "not converged":
+            _print_pictures(writer.drawn)  # the converged increments' pictures
     if rank0 and not args.quiet:
         s = writer.summary.data
         print(f"converged: {s['converged']}; iterations {s['iterations']}; global equilibrium "
               f"{s.get('equilibrium_residual', float('nan')):.2e}; results in {out}/", flush=True)
+        _print_pictures(writer.drawn)
     return EXIT_OK
+
+
+def _print_pictures(drawn: dict) -> None:
+    """One line naming the pictures drawn (the reasons of the others are logged as warnings)."""
+    paths = [Path(p) for p in drawn.values() if not isinstance(p, str)]
+    if paths:
+        print(f"pictures: {', '.join(p.name for p in paths)} in {paths[0].parent}/", flush=True)
+
+
+def _plot(args) -> int:
+    """``dolfinx-nnqem plot RESULTS``: the run pictures from the folder, on rank 0."""
+    from mpi4py import MPI
+
+    from dolfinx_nnqem.run_pictures import draw_run_pictures
+
+    if MPI.COMM_WORLD.rank != 0:
+        return EXIT_OK
+    folder = Path(args.results)
+    if not (folder / "summary.json").is_file():
+        raise FileNotFoundError(2, f"{folder} is not a results folder (no summary.json)", str(folder))
+    drawn = draw_run_pictures(folder, out=args.out, scale=args.scale, field=args.field, camera=args.camera)
+    for name, result in drawn.items():
+        if isinstance(result, str):
+            logging.getLogger("dolfinx_nnqem").warning(f"picture {name}: {result}")
+    if not args.quiet:
+        _print_pictures(drawn)
+    return EXIT_OK if any(not isinstance(p, str) for p in drawn.values()) else EXIT_BAD_INPUT
 
 
 def _available(method: str) -> bool:
@@ -319,6 +369,8 @@ def main(argv: list[str] | None = None) -> int:
             code = _two_beams(args)
         elif args.command == "run":
             code = _run(args)
+        elif args.command == "plot":
+            code = _plot(args)
         else:
             code = EXIT_USAGE
     except BaseException as error:  # noqa: BLE001  (every failure becomes a message and an exit code)

@@ -21,6 +21,7 @@ from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
 from dolfinx_nnqem import compat  # noqa: I001  (first: loads MPI/PETSc for the PyPI wheel)
+from dolfinx_nnqem import chatter
 
 import dolfinx
 import gmsh
@@ -192,7 +193,7 @@ def _mesh_from_gmsh(
 
     initialised_here = False
     previous_model = None
-    terminal = None
+    previous_options = None
     added_model = None
     error = None
     try:
@@ -200,8 +201,8 @@ def _mesh_from_gmsh(
             initialised_here = _initialize_gmsh()
             if not initialised_here:
                 previous_model = gmsh.model.getCurrent()
-            terminal = gmsh.option.getNumber("General.Terminal")
-            gmsh.option.setNumber("General.Terminal", 0)
+            # gmsh's own lines only with -v (dolfinx_nnqem.chatter)
+            previous_options = chatter.apply_gmsh_options()
             existing = set(gmsh.model.list())
             while name in existing:  # never touch a model of the caller's with the same name
                 name += "_"
@@ -225,8 +226,8 @@ def _mesh_from_gmsh(
                 gmsh.model.remove()
             if previous_model is not None and previous_model in gmsh.model.list():
                 gmsh.model.setCurrent(previous_model)
-            if terminal is not None:
-                gmsh.option.setNumber("General.Terminal", terminal)
+            for option, value in (previous_options or {}).items():
+                gmsh.option.setNumber(option, value)
     return MeshAndTags(mesh, cell_tags, facet_tags)
 
 

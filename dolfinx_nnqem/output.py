@@ -253,8 +253,11 @@ class SummaryWriter:
         eq = res.equilibrium_check(p)
         d["applied_load"] = eq["applied_load"].tolist()
         d["reactions"] = {str(k): v.tolist() for k, v in eq["reactions"].items()}
+        # per increment, for the load curve (run_pictures): the reactions and the probes' displacements
+        d.setdefault("reaction_history", []).append(d["reactions"])
         if eq["obstacle_forces"]:
             d["obstacle_forces"] = {k: v.tolist() for k, v in eq["obstacle_forces"].items()}
+            d.setdefault("obstacle_force_history", []).append(d["obstacle_forces"])
         d["reaction_sum"] = eq["reaction_sum"].tolist()
         d["equilibrium_residual"] = eq["global_imbalance"]
         d["free_dof_residual"] = eq["residual_norm"]
@@ -262,6 +265,7 @@ class SummaryWriter:
             u = res.values_at_blocks(p, self.probe_blocks)
             d["probes"] = [{"name": n, "position": x.tolist(), "u": ui.tolist()}
                            for n, x, ui in zip(self.probe_names, self.probe_points, u)]
+            d.setdefault("probe_history", []).append([ui.tolist() for ui in u])
         if p.has_contact:
             t = res.pair_table(p)
             d["pairs"] = [
@@ -344,11 +348,17 @@ class ResultsWriter:
     lock
         Hold the folder's lock (:class:`locking.OutputLock`) until :meth:`close`: a second run
         into the same folder refuses to start.
+    pictures
+        Draw the run's pictures into ``folder/pictures`` at :meth:`close`
+        (:mod:`dolfinx_nnqem.run_pictures`): after a completed run, and after one that stopped
+        at an increment that did not converge (its converged increments). None (default): yes,
+        unless the environment sets ``DOLFINX_NNQEM_PICTURES=0``; False: never.
     """
 
     def __init__(self, problem, method: str, folder: str | os.PathLike, increments: int,
                  probes: dict[str, np.ndarray] | None = None, extra: dict | None = None,
-                 fields: bool = True, *, overwrite: bool = True, resume: bool = False, lock: bool = True):
+                 fields: bool = True, *, overwrite: bool = True, resume: bool = False, lock: bool = True,
+                 pictures: bool | None = None):
         from dolfinx_nnqem.field_series import FieldSeriesWriter
         from dolfinx_nnqem.locking import OutputLock, clear_outputs, previous_outputs
         from dolfinx_nnqem.safe_io import remove_stale_temporaries
@@ -357,6 +367,8 @@ class ResultsWriter:
         check_output_folder(folder)
         self.folder = Path(folder)
         self.problem = problem
+        self.pictures = pictures
+        self.drawn: dict = {}  # what close() drew: picture name -> path, or why it was not drawn
         self._lock = OutputLock(self.folder) if lock else None
 
         def prepare():
@@ -417,9 +429,27 @@ class ResultsWriter:
         self.summary.write()
 
     def close(self) -> None:
+        """Close the files, draw the pictures (see ``pictures``), release the folder's lock."""
         for w in self.writers:
             if hasattr(w, "close"):
                 w.close()
+        try:
+            self._draw_pictures()
+        finally:
+            self._release()
+
+    def _draw_pictures(self) -> None:
+        from dolfinx_nnqem.run_pictures import draw_live_pictures, pictures_enabled
+
+        status = self.summary.data.get("status")
+        # only where every rank agrees on how the run ended (drawing is collective): not after
+        # an error or an interrupt, which some ranks may not have seen
+        if (not pictures_enabled(self.pictures) or status not in ("completed", "not converged")
+                or not self.summary.data.get("load_factors")):
+            return
+        self.drawn = draw_live_pictures(self.problem, self.folder, completed=status == "completed")
+
+    def _release(self) -> None:
         if self._lock is not None and self.problem.comm.rank == 0:
             self._lock.release()
 

@@ -75,6 +75,7 @@ A problem file names a mesh with physical tags and everything :class:`ContactPro
     [output]
     folder = "results/my_run"             # relative to the current directory; not empty
     fields = true
+    pictures = true                       # PNG pictures in folder/pictures at the end of the run
     checkpoint_every = 1                  # a restart checkpoint every N increments (0: none)
     [output.probes]
     "tip" = [2.0, 0.0, 0.0]
@@ -102,8 +103,28 @@ class ProblemFileError(ValueError):
     """A problem file is malformed or inconsistent; the message names the key."""
 
 
-SECTIONS = {"mesh", "materials", "contact", "dirichlet", "traction", "pressure", "body_force",
-            "gravity", "solver", "checks", "output"}
+OBSTACLE_KEYS = {"plane": {"point", "normal"}, "sphere": {"centre", "radius"}, "cylinder": {"point", "axis", "radius"}}
+KEYS: dict[str, frozenset[str]] = {
+    "mesh": frozenset({"file", "mesh_name", "cell_tags", "facet_tags"}),
+    "materials.TAG": frozenset({"E", "nu", "sigma_y0", "H", "density"}),
+    "contact": frozenset({"surface1", "surface2", "obstacle", "mu_f", "law", "r", "tolerance", "search_distance",
+                          "name", "discretisation", "slave"}),
+    "contact.obstacle": frozenset({"type", "motion", "amplitude"}.union(*OBSTACLE_KEYS.values())),
+    "dirichlet": frozenset({"tag", "value", "components", "amplitude"}),
+    "traction": frozenset({"tag", "value", "amplitude"}),
+    "pressure": frozenset({"tag", "p", "amplitude"}),
+    "body_force": frozenset({"value", "cell_tag", "amplitude"}),
+    "gravity": frozenset({"g", "amplitude"}),
+    "solver": frozenset({"method", "increments", "auto", "max_cutbacks", "rtol", "atol", "max_iterations",
+                         "linear_solver", "petsc_options"}),
+    "solver.auto": frozenset({"initial_step", "max_step", "min_step", "easy_iterations", "hard_iterations", "grow",
+                              "shrink", "load_factors"}),
+    "checks": frozenset({"rtol", "max_strain", "max_rotation"}),
+    "output": frozenset({"folder", "fields", "pictures", "probes", "checkpoint_every"}),
+}
+"""Every key a problem file may hold, by section (the one list the checks below use;
+``docs/problem-file.md`` documents each, and ``tests/test_problem_file_doc.py`` compares the two)."""
+SECTIONS = {section.split(".")[0] for section in KEYS}
 METHODS = ("monolithic", "nneqm1", "nneqm2")
 
 
@@ -148,7 +169,7 @@ def load_problem_file(path: str | Path) -> ProblemSpec:
                   for i, e in enumerate(_array(data, "body_force", where))]
     gravity = data.get("gravity")
     if gravity is not None:
-        gravity = _checked_keys(gravity, {"g", "amplitude"}, {"g"}, f"{where}: [gravity]")
+        gravity = _checked_keys(gravity, KEYS["gravity"], {"g"}, f"{where}: [gravity]")
         gravity["g"] = _vector(gravity["g"], f"{where}: gravity.g")
         _amplitude_entry(gravity, f"{where}: gravity")
     solver = _solver_section(data.get("solver", {}), where)
@@ -221,7 +242,7 @@ def _vector(value, where: str, length: int = 3) -> list:
 
 
 def _mesh_section(mesh: dict, folder: Path, where: str) -> dict:
-    mesh = _checked_keys(mesh, {"file", "mesh_name", "cell_tags", "facet_tags"}, {"file"}, f"{where}: [mesh]")
+    mesh = _checked_keys(mesh, KEYS["mesh"], {"file"}, f"{where}: [mesh]")
     file = folder / mesh["file"]
     if not file.is_file():
         raise ProblemFileError(f"{where}: mesh.file = {mesh['file']!r}: no such file ({file})")
@@ -246,7 +267,7 @@ def _materials_section(materials: dict, where: str) -> dict:
             tag = int(key)
         except ValueError:
             raise ProblemFileError(f"{w}: the key must be a cell tag (an integer)") from None
-        params = _checked_keys(params, {"E", "nu", "sigma_y0", "H", "density"}, {"E", "nu"}, w)
+        params = _checked_keys(params, KEYS["materials.TAG"], {"E", "nu"}, w)
         for name, value in params.items():
             _number(value, f"{w}.{name}")
         try:
@@ -271,12 +292,9 @@ def _contact_tables(contact, where: str) -> list:
     return out
 
 
-OBSTACLE_KEYS = {"plane": {"point", "normal"}, "sphere": {"centre", "radius"}, "cylinder": {"point", "axis", "radius"}}
-
 
 def _contact_section(contact: dict, w: str) -> dict:
-    contact = _checked_keys(contact, {"surface1", "surface2", "obstacle", "mu_f", "law", "r", "tolerance",
-                                      "search_distance", "name", "discretisation", "slave"}, {"surface2", "mu_f"}, w)
+    contact = _checked_keys(contact, KEYS["contact"], {"surface2", "mu_f"}, w)
     contact["surface2"] = _tag(contact["surface2"], f"{w}.surface2")
     if ("surface1" in contact) == ("obstacle" in contact):
         raise ProblemFileError(f"{w}: give either surface1 (a facet tag) or an obstacle table, not "
@@ -317,8 +335,8 @@ def _obstacle_entry(entry, where: str) -> dict:
     kind = entry.get("type")
     if kind not in OBSTACLE_KEYS:
         raise ProblemFileError(f"{where}.type = {kind!r}: expected one of {sorted(OBSTACLE_KEYS)}")
-    entry = _checked_keys(entry, {"type", "motion", "amplitude"} | OBSTACLE_KEYS[kind],
-                          {"type"} | OBSTACLE_KEYS[kind], where)
+    common = KEYS["contact.obstacle"] - set().union(*OBSTACLE_KEYS.values())  # type, motion, amplitude
+    entry = _checked_keys(entry, common | OBSTACLE_KEYS[kind], {"type"} | OBSTACLE_KEYS[kind], where)
     for key in ("point", "normal", "centre", "axis"):
         if key in entry:
             entry[key] = _vector(entry[key], f"{where}.{key}")
@@ -365,7 +383,7 @@ def _rows(value, where: str) -> list:
 
 
 def _dirichlet_entry(entry: dict, where: str) -> dict:
-    entry = _checked_keys(entry, {"tag", "value", "components", "amplitude"}, {"tag"}, where)
+    entry = _checked_keys(entry, KEYS["dirichlet"], {"tag"}, where)
     _amplitude_entry(entry, where)
     entry["tag"] = _tag(entry["tag"], f"{where}.tag")
     components = entry.get("components")
@@ -383,7 +401,7 @@ def _dirichlet_entry(entry: dict, where: str) -> dict:
 
 
 def _traction_entry(entry: dict, where: str) -> dict:
-    entry = _checked_keys(entry, {"tag", "value", "amplitude"}, {"tag", "value"}, where)
+    entry = _checked_keys(entry, KEYS["traction"], {"tag", "value"}, where)
     _amplitude_entry(entry, where)
     entry["tag"] = _tag(entry["tag"], f"{where}.tag")
     entry["value"] = _vector(entry["value"], f"{where}.value")
@@ -391,7 +409,7 @@ def _traction_entry(entry: dict, where: str) -> dict:
 
 
 def _pressure_entry(entry: dict, where: str) -> dict:
-    entry = _checked_keys(entry, {"tag", "p", "amplitude"}, {"tag", "p"}, where)
+    entry = _checked_keys(entry, KEYS["pressure"], {"tag", "p"}, where)
     _amplitude_entry(entry, where)
     entry["tag"] = _tag(entry["tag"], f"{where}.tag")
     entry["p"] = float(_number(entry["p"], f"{where}.p"))
@@ -399,7 +417,7 @@ def _pressure_entry(entry: dict, where: str) -> dict:
 
 
 def _body_force_entry(entry: dict, where: str) -> dict:
-    entry = _checked_keys(entry, {"value", "cell_tag", "amplitude"}, {"value"}, where)
+    entry = _checked_keys(entry, KEYS["body_force"], {"value"}, where)
     _amplitude_entry(entry, where)
     entry["value"] = _vector(entry["value"], f"{where}.value")
     if "cell_tag" in entry:
@@ -409,8 +427,7 @@ def _body_force_entry(entry: dict, where: str) -> dict:
 
 def _solver_section(solver: dict, where: str) -> dict:
     w = f"{where}: [solver]"
-    solver = _checked_keys(solver, {"method", "increments", "auto", "max_cutbacks", "rtol", "atol", "max_iterations",
-                                    "linear_solver", "petsc_options"}, set(), w)
+    solver = _checked_keys(solver, KEYS["solver"], set(), w)
     solver.setdefault("method", "monolithic")
     if solver["method"] not in METHODS:
         raise ProblemFileError(f"{w}.method = {solver['method']!r}: expected one of {list(METHODS)}")
@@ -446,14 +463,11 @@ def _solver_section(solver: dict, where: str) -> dict:
 
 def _automatic_increments(table, where: str):
     """[solver.auto]: the settings of :class:`~dolfinx_nnqem.step_control.AutomaticIncrements`."""
-    from dataclasses import fields
-
     from dolfinx_nnqem.step_control import AutomaticIncrements
 
     if not isinstance(table, dict):
         raise ProblemFileError(f"{where} must be a table")
-    keys = {f.name for f in fields(AutomaticIncrements)}
-    table = _checked_keys(table, keys, set(), where)
+    table = _checked_keys(table, KEYS["solver.auto"], set(), where)
     try:
         return AutomaticIncrements(**table)
     except (TypeError, ValueError) as error:
@@ -462,7 +476,7 @@ def _automatic_increments(table, where: str):
 
 def _output_section(output: dict, where: str) -> dict:
     w = f"{where}: [output]"
-    output = _checked_keys(output, {"folder", "fields", "probes", "checkpoint_every"}, set(), w)
+    output = _checked_keys(output, KEYS["output"], set(), w)
     output.setdefault("folder", "results/" + Path(where).stem)
     if not isinstance(output["folder"], str):
         raise ProblemFileError(f"{w}.folder must be a string")
@@ -471,8 +485,9 @@ def _output_section(output: dict, where: str) -> dict:
                                "results with the current directory)")
     output["checkpoint_every"] = int(_number(output.get("checkpoint_every", 1), f"{w}.checkpoint_every",
                                              nonnegative=True, integer=True))
-    if not isinstance(output.setdefault("fields", True), bool):
-        raise ProblemFileError(f"{w}.fields must be true or false")
+    for key in ("fields", "pictures"):
+        if not isinstance(output.setdefault(key, True), bool):
+            raise ProblemFileError(f"{w}.{key} must be true or false")
     probes = output.setdefault("probes", {})
     if not isinstance(probes, dict):
         raise ProblemFileError(f"{w}.probes must be a table name = [x, y, z]")
@@ -485,7 +500,7 @@ def _checks_section(checks: dict, where: str) -> dict:
     from dolfinx_nnqem.checks import DEFAULT_MAX_ROTATION, DEFAULT_MAX_STRAIN
 
     w = f"{where}: [checks]"
-    checks = _checked_keys(checks, {"rtol", "max_strain", "max_rotation"}, set(), w)
+    checks = _checked_keys(checks, KEYS["checks"], set(), w)
     if "rtol" in checks:
         checks["rtol"] = float(_number(checks["rtol"], f"{w}.rtol", positive=True, high=1e-2))
     for key, default in (("max_strain", DEFAULT_MAX_STRAIN), ("max_rotation", DEFAULT_MAX_ROTATION)):
@@ -532,16 +547,17 @@ def _read_msh(file: Path, comm):
     BEFORE the collective distribution starts (no rank is left waiting)."""
     import gmsh
 
-    from dolfinx_nnqem import compat
+    from dolfinx_nnqem import chatter, compat
     from dolfinx_nnqem.collective import on_rank0
 
     started = [False]
+    previous_options: dict = {}
 
     def open_model():
         if not gmsh.isInitialized():
             gmsh.initialize(interruptible=False)  # leave Ctrl-C to the command line
             started[0] = True
-        gmsh.option.setNumber("General.Terminal", 0)
+        previous_options.update(chatter.apply_gmsh_options())  # gmsh's "Info : Reading ..." lines only with -v
         gmsh.model.add("dolfinx_nnqem problem file")
         try:
             gmsh.merge(str(file))
@@ -565,6 +581,9 @@ def _read_msh(file: Path, comm):
             gmsh.model.remove()
             if started[0]:
                 gmsh.finalize()
+            else:  # the caller's session: its options as they were
+                for option, value in previous_options.items():
+                    gmsh.option.setNumber(option, value)
 
     try:
         on_rank0(comm, open_model)

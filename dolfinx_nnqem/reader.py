@@ -24,6 +24,8 @@ import numpy as np
 
 __all__ = ["read_fields", "read_pairs", "read_results", "read_summary"]
 
+MPI_LAUNCHER_PREFIXES = ("PMI_", "PMIX_", "HYDRA_", "MPIR_", "MPI_LOCAL", "OMPI_", "PRTE_")
+
 
 def read_summary(folder: str | os.PathLike) -> dict:
     """``summary.json`` (always complete: it is replaced atomically)."""
@@ -64,7 +66,9 @@ def read_fields(folder: str | os.PathLike) -> list[dict]:
                 "steps = read_field_index(sys.argv[1])\n"
                 "arrays = {f'{i}/{k}': np.asarray(v) for i, s in enumerate(steps) for k, v in s.items()}\n"
                 "np.savez(sys.argv[2], **arrays)\n")
-        env = dict(os.environ)
+        # a child of an MPI rank (mpirun) must not take the launcher's variables: it would try to
+        # join the parallel job (MPICH: "PMI_Init returned -1") and fail to start
+        env = {k: v for k, v in os.environ.items() if not k.startswith(MPI_LAUNCHER_PREFIXES)}
         root = str(Path(__file__).resolve().parents[1])
         env["PYTHONPATH"] = root + os.pathsep + env.get("PYTHONPATH", "")
         run = subprocess.run([sys.executable, "-c", code, str(folder), str(out)], capture_output=True, text=True,

@@ -1,9 +1,15 @@
 """Shared fixtures. ``dolfinx_nnqem`` is imported first (the PyPI wheel needs it before dolfinx)."""
 
+import os
+
 import dolfinx_nnqem  # noqa: F401  (must precede dolfinx / petsc4py)
 import numpy as np
 import pytest
 from mpi4py import MPI
+
+# the end-of-run pictures cost seconds per run: off for the suite's many runs, on (the users'
+# default) in tests/test_run_pictures.py, which removes this switch
+os.environ.setdefault("DOLFINX_NNQEM_PICTURES", "0")
 
 
 def box_with_face_tags(n=(2, 2, 2), L=(1.0, 1.0, 1.0), cell="hexahedron"):
