@@ -5,18 +5,24 @@
 * The sliding block (V5) with ``increments="auto"``: it reaches ℓ = 1, stops at the requested load
   factors, saturates friction at μ_f p A as with fixed increments, and needs fewer increments.
 * A load no state can carry ends with ConvergenceError once the step falls below ``min_step``.
-* Problem files: ``increments = "auto"`` with a ``[solver.auto]`` table, and its bad keys.
+* Problem files: ``increments = "auto"`` with a ``[solver.auto]`` table (the seed benchmark), and
+  bad settings there.
 """
+
+import json
+from pathlib import Path
 
 import numpy as np
 import pytest
 from mpi4py import MPI
 from test_contact_verification import ELASTIC, P, sliding_block
 
+from dolfinx_nnqem.cli import EXIT_OK, main
 from dolfinx_nnqem.convergence import ConvergenceError
 from dolfinx_nnqem.meshing import StackedBlocksTags as T
 from dolfinx_nnqem.meshing import build_stacked_blocks
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Traction
+from dolfinx_nnqem.problem_file import ProblemFileError, load_problem_file
 from dolfinx_nnqem.results import pair_table
 from dolfinx_nnqem.solver import SolverOptions, make_solver
 from dolfinx_nnqem.step_control import AutomaticIncrements
@@ -96,3 +102,36 @@ def test_a_load_no_state_can_carry_ends_in_a_clear_error():
     failure = error.value.failure
     print(f"\n  {str(error.value).splitlines()[0]}\n  last converged load factor {failure['last_converged_load_factor']:.4f}")
     assert failure["last_converged_load_factor"] == 0.0 and "did not converge" in str(error.value)
+
+
+def _two_beams_file(tmp_path, solver_lines: str):
+    demo = Path(__file__).resolve().parents[1] / "demos" / "two_beams.toml"
+    text = demo.read_text().replace('file = "../meshes/two_beams.msh"', f'file = "{demo.parent.parent / "meshes" / "two_beams.msh"}"')
+    text = text.replace("increments = 15", solver_lines)
+    path = tmp_path / "auto.toml"
+    path.write_text(text)
+    return path
+
+
+def test_problem_file_with_automatic_increments(tmp_path):
+    """The seed benchmark from its problem file with increments = "auto" and output points."""
+    path = _two_beams_file(tmp_path, 'increments = "auto"\n[solver.auto]\ninitial_step = 0.1\nload_factors = [0.5]')
+    assert main(["-q", "run", str(path), "--out", str(tmp_path / "out"), "--no-pictures"]) == EXIT_OK
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    factors = summary["load_factors"]
+    print(f"\n  two beams, automatic: {len(factors)} increments at {np.round(factors, 4).tolist()}, "
+          f"iterations {summary['iterations']}")
+    assert summary["converged"] and summary["increments"] == "auto"
+    assert factors[-1] == 1.0 and 0.5 in factors and len(factors) < 15
+
+
+@pytest.mark.parametrize("solver_lines, message", [
+    ('increments = "auto"\n[solver.auto]\nbiggest_step = 0.5', "unknown key"),
+    ('increments = "auto"\n[solver.auto]\nmax_step = 2.0', "max_step"),
+    ('increments = 15\n[solver.auto]\nmax_step = 0.5', "increments = \\\"auto\\\""),
+    ('increments = "automatic"', "increments"),
+])
+def test_bad_automatic_increments_in_a_problem_file(tmp_path, solver_lines, message):
+    path = _two_beams_file(tmp_path, solver_lines)
+    with pytest.raises(ProblemFileError, match=message):
+        load_problem_file(path)
