@@ -169,14 +169,17 @@ def _slave_triangles(problem, table: dict) -> np.ndarray | None:
     fdim = mesh.topology.dim - 1
     facets = problem.facet_tags.find(int(problem.contact.interfaces[0].pairs.slave))
     facets = facets[facets < mesh.topology.index_map(fdim).size_local]  # owned: each facet once
-    nodes = dolfinx.mesh.entities_to_geometry(mesh, fdim, facets)
-    parts = problem.comm.gather(mesh.geometry.x[nodes.reshape(-1)].reshape(len(facets), -1, 3), root=0)
+    nodes = np.asarray(dolfinx.mesh.entities_to_geometry(mesh, fdim, facets))
+    nodes = nodes.reshape(len(facets), -1) if len(facets) else np.zeros((0, 0), dtype=np.int32)
+    # (corners, vertices per facet): a rank without slave facets sends an empty block
+    parts = problem.comm.gather((mesh.geometry.x[nodes.reshape(-1)], nodes.shape[1]), root=0)
     if problem.comm.rank != 0:
         return None
-    corners = np.concatenate(parts)
-    if corners.shape[1] != 3 or len(table["position_b"]) == 0:
+    widths = {width for corners, width in parts if len(corners)}
+    if widths != {3} or len(table["position_b"]) == 0:  # quadrilaterals, or nothing to draw
         return None
-    distance, row = cKDTree(table["position_b"]).query(corners.reshape(-1, 3))
+    corners = np.concatenate([corners for corners, _ in parts])
+    distance, row = cKDTree(table["position_b"]).query(corners)
     size = max(np.ptp(table["position_b"], axis=0).max(), 1e-300)
     row = np.where(distance <= 1e-9 * size, row, -1).reshape(-1, 3)
     return row[np.all(row >= 0, axis=1)]
