@@ -15,7 +15,8 @@ computed force F (Σ pair forces × 4):
 
 Tolerances from the issue: a and p0 within 5 % of Hertz on the demo mesh (h = a/7), errors
 falling under refinement (h = a/3, a/5, a/7; a/10 is slow). The solvers and laws are compared
-on a small mesh (R = 5 mm), where NNEQM2's dense system (all Gauss points) stays affordable.
+with monolithic/Alart–Curnier on a small mesh (R = 5 mm), where NNEQM2's dense system (all Gauss
+points) stays affordable, along the load path each method took (friction: path dependent).
 """
 
 import subprocess
@@ -33,7 +34,7 @@ from dolfinx_nnqem.meshing import build_sphere_on_block
 from dolfinx_nnqem.results import pair_table
 from dolfinx_nnqem.solver import SolverOptions, make_solver
 from dolfinx_nnqem.sphere_on_block import A_NOMINAL, measure_sphere_on_block, sphere_on_block_problem
-from dolfinx_nnqem.stepping import solve_load_steps
+from dolfinx_nnqem.stepping import solve_load_path, solve_load_steps
 
 DEMO_H = A_NOMINAL / 7  # the demo's mesh
 SMALL = dict(R=5.0, block=3.0, approach=0.1, h_max=1.0, fine_radius=0.8, contact_radius=1.5)  # h = 0.5
@@ -135,26 +136,34 @@ def test_hertz_nonmatching_finer():
 
 
 # -- the solvers and laws agree -----------------------------------------------------------------------
-_REFERENCE: dict[float, np.ndarray] = {}
+_REFERENCE: dict[tuple, np.ndarray] = {}
+# NNEQM1 at rtol = 1e-10 lands 8.7e-9 from the reference on its two-increment polar path, at the
+# edge of the 1e-8 comparison; the polar law in the monolithic solver stalls near |H|/F = 4e-12,
+# so it keeps 1e-10 (the reference, Alart–Curnier, converges to 1e-12)
+RTOL = {"nneqm1": 1e-12}
 
 
-def solve_small(method: str, law: str, mu_f: float) -> tuple[dict, int]:
+def solve_small(method: str, law: str, mu_f: float) -> tuple[dict, list]:
+    """The small model in one increment (cutbacks allowed): pair table and the increments taken."""
     problem = sphere_on_block_problem(0.5, mu_f=mu_f, law=law, **SMALL)
-    results = solve_load_steps(problem, make_solver(method, problem, SolverOptions(rtol=1e-10, max_iterations=40)), 1)
-    return pair_table(problem), results[0].iterations
+    options = SolverOptions(rtol=RTOL.get(method, 1e-10), max_iterations=40)
+    results = solve_load_steps(problem, make_solver(method, problem, options), 1)
+    return pair_table(problem), results
 
 
-def reference(mu_f: float) -> np.ndarray:
-    """The monolithic solver with the Alart–Curnier law: pair forces (global frame)."""
-    if mu_f not in _REFERENCE:
-        _REFERENCE[mu_f] = solve_small("monolithic", "alart-curnier", mu_f)[0]["force_on_body1"]
-    return _REFERENCE[mu_f]
+def reference(mu_f: float, path: tuple[float, ...]) -> np.ndarray:
+    """The monolithic solver with the Alart–Curnier law along the same load path: pair forces.
 
-
-NNEQM1_POLAR_FRICTION = pytest.mark.xfail(
-    strict=True,
-    reason="measured: NNEQM1 with the polar law and μ_f = 0.1 converges (2 iterations) to pair forces 5 % away "
-           "from the monolithic solver's (both laws) and NNEQM2's, which agree to 1e-10: to be investigated")
+    With friction the solution depends on the path, so a method that cut an increment back is
+    compared with the reference along the increments it took.
+    """
+    key = (mu_f, path)
+    if key not in _REFERENCE:
+        problem = sphere_on_block_problem(0.5, mu_f=mu_f, **SMALL)
+        solve_load_path(problem, make_solver("monolithic", problem, SolverOptions(rtol=1e-12, max_iterations=40)),
+                        path)
+        _REFERENCE[key] = pair_table(problem)["force_on_body1"]
+    return _REFERENCE[key]
 
 
 @pytest.mark.parametrize("method, law, mu_f", [
@@ -163,19 +172,22 @@ NNEQM1_POLAR_FRICTION = pytest.mark.xfail(
     ("monolithic", "polar", 0.0),  # converges here (10 iterations); stopped on R = 20 mm, h = 0.33 mm (see docs)
     ("nneqm1", "alart-curnier", 0.1),
     ("monolithic", "polar", 0.1),
-    pytest.param("nneqm1", "polar", 0.1, marks=NNEQM1_POLAR_FRICTION),
+    ("nneqm1", "polar", 0.1),  # cuts the increment in two: compared along that path
     pytest.param("nneqm2", "alart-curnier", 0.0, marks=pytest.mark.slow),
     pytest.param("nneqm2", "polar", 0.1, marks=pytest.mark.slow),
 ])
 def test_solvers_and_laws_agree_with_monolithic(method, law, mu_f):
-    """Small mesh (R = 5 mm, h = 0.5 mm): the same pair forces as monolithic/Alart–Curnier, to 1e-8."""
+    """Small mesh (R = 5 mm, h = 0.5 mm): the same pair forces as monolithic/Alart–Curnier along the
+    same load path, to 1e-8."""
     t0 = time.perf_counter()
-    table, iterations = solve_small(method, law, mu_f)
+    table, results = solve_small(method, law, mu_f)
     elapsed = time.perf_counter() - t0
-    ref = reference(mu_f)
+    path = tuple(round(r.load_factor, 12) for r in results)
+    ref = reference(mu_f, path)
     diff = np.abs(table["force_on_body1"] - ref).max() / np.abs(ref).max()
-    print(f"\n  {method}/{law}, μ_f = {mu_f}: {len(ref)} pairs, {iterations} iterations, {elapsed:.1f} s; "
-          f"max |Δ pair force| / max |f| = {diff:.1e} (tolerance 1e-8)")
+    print(f"\n  {method}/{law}, μ_f = {mu_f}: {len(ref)} pairs, load path {list(path)}, iterations "
+          f"{[r.iterations for r in results]}, {elapsed:.1f} s; max |Δ pair force| / max |f| = {diff:.1e} "
+          "(tolerance 1e-8)")
     assert diff < 1e-8
 
 
@@ -206,7 +218,7 @@ def test_measure_and_plot_on_two_ranks(tmp_path):
         "from dolfinx_nnqem.plots import plot_contact_pressure\n"
         "from dolfinx_nnqem.solver import SolverOptions, make_solver\n"
         "from dolfinx_nnqem.sphere_on_block import measure_sphere_on_block, sphere_on_block_problem\n"
-        "from dolfinx_nnqem.stepping import solve_load_steps\n"
+        "from dolfinx_nnqem.stepping import solve_load_path, solve_load_steps\n"
         f"p = sphere_on_block_problem(0.5, **{SMALL!r})\n"
         "solve_load_steps(p, make_solver('monolithic', p, SolverOptions()), 1)\n"
         f"m = measure_sphere_on_block(p, R={SMALL['R']!r})\n"
