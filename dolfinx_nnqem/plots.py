@@ -153,3 +153,102 @@ def plot_deformed(problem, path: str | os.PathLike, *, field: str = "von_mises",
         plotter.camera.zoom(zoom)
     plotter.screenshot(str(path))
     plotter.close()
+
+
+def _slave_triangles(problem, table: dict) -> np.ndarray | None:
+    """Rank 0: the slave surface's triangles as rows of the pair table (None elsewhere).
+
+    The facets' vertex coordinates are gathered and matched to the pairs' slave nodes
+    (``position_b``); facets with a vertex that carries no pair (beyond the master) are left
+    out. None as well for a surface of quadrilaterals (then the points alone are drawn).
+    """
+    import dolfinx
+    from scipy.spatial import cKDTree
+
+    mesh = problem.mesh
+    fdim = mesh.topology.dim - 1
+    facets = problem.facet_tags.find(int(problem.contact.interfaces[0].pairs.slave))
+    facets = facets[facets < mesh.topology.index_map(fdim).size_local]  # owned: each facet once
+    nodes = np.asarray(dolfinx.mesh.entities_to_geometry(mesh, fdim, facets))
+    nodes = nodes.reshape(len(facets), -1) if len(facets) else np.zeros((0, 0), dtype=np.int32)
+    # (corners, vertices per facet): a rank without slave facets sends an empty block
+    parts = problem.comm.gather((mesh.geometry.x[nodes.reshape(-1)], nodes.shape[1]), root=0)
+    if problem.comm.rank != 0:
+        return None
+    widths = {width for corners, width in parts if len(corners)}
+    if widths != {3} or len(table["position_b"]) == 0:  # quadrilaterals, or nothing to draw
+        return None
+    corners = np.concatenate([corners for corners, _ in parts])
+    distance, row = cKDTree(table["position_b"]).query(corners)
+    size = max(np.ptp(table["position_b"], axis=0).max(), 1e-300)
+    row = np.where(distance <= 1e-9 * size, row, -1).reshape(-1, 3)
+    return row[np.all(row >= 0, axis=1)]
+
+
+def plot_contact_pressure(problem_or_table, path: str | os.PathLike, *, problem=None, title: str = "",
+                          unit: str = "MPa", camera: str | Sequence[float] = "bottom", point_size: float = 12.0,
+                          interface: int | None = None, circle: float | None = None) -> None:
+    """The contact pressure on the slave surface: its facets interpolated, with a scalar bar.
+
+    ``problem_or_table``: a problem (collective: call on every rank; its pair table is gathered
+    and its slave facets are drawn as triangles coloured by the nodal pressures interpolated),
+    or a pair table (:func:`dolfinx_nnqem.results.pair_table`; the slave nodes are drawn as
+    points coloured by pressure). ``interface`` restricts to one interface of the table.
+    ``camera``: "bottom" (looking up the y axis onto the contact face), "top", "iso", or a
+    direction from the centre to the camera. ``circle``: the radius of a reference contact
+    circle about the y axis (e.g. Hertz's a), drawn just below the surface. Rank 0 writes the PNG.
+    """
+    if isinstance(problem_or_table, dict):
+        table, problem = problem_or_table, problem
+        triangles = None
+    else:
+        problem = problem_or_table
+        table = res.pair_table(problem)
+        triangles = _slave_triangles(problem, table) if len(problem.contact.interfaces) == 1 else None
+    comm = None if problem is None else problem.comm
+    if comm is not None and comm.rank != 0:
+        return
+    select = np.ones(len(table["pressure"]), dtype=bool)
+    if interface is not None:
+        select = table["interface"] == interface
+    import pyvista
+
+    pyvista.OFF_SCREEN = True
+    points = table["position_b"]
+    pressure = np.where(select, table["pressure"], np.nan)
+    plotter = pyvista.Plotter(off_screen=True, window_size=(1000, 800))
+    bar = {"title": f"contact pressure ({unit})"}
+    finite = pressure[np.isfinite(pressure)]
+    clim = (0.0, float(finite.max()) if len(finite) and finite.max() > 0 else 1.0)
+    if triangles is not None and len(triangles):
+        faces = np.hstack([np.full((len(triangles), 1), 3), triangles]).reshape(-1)
+        surface = pyvista.PolyData(points, faces)
+        surface.point_data["pressure"] = pressure
+        plotter.add_mesh(surface, scalars="pressure", cmap="plasma", show_edges=True, edge_color="grey",
+                         scalar_bar_args=bar, nan_color="lightgrey", clim=clim)
+    else:
+        cloud = pyvista.PolyData(points[select])
+        cloud.point_data["pressure"] = pressure[select]
+        plotter.add_mesh(cloud, scalars="pressure", cmap="plasma", point_size=point_size,
+                         render_points_as_spheres=True, scalar_bar_args=bar, clim=clim)
+    if circle is not None:
+        # only the sector the surface covers (a quarter for a quarter model), so that the camera
+        # frames the surface
+        covered = np.arctan2(points[:, 2], points[:, 0])
+        angle = np.linspace(covered.min(), covered.max(), 91)
+        y = points[:, 1].min() - 1e-3 * max(np.ptp(points, axis=0).max(), 1e-300)
+        ring = np.column_stack([circle * np.cos(angle), np.full_like(angle, y), circle * np.sin(angle)])
+        plotter.add_mesh(pyvista.lines_from_points(ring), color="white", line_width=3)
+    plotter.add_text(title or "contact pressure on the slave surface", font_size=11)
+    plotter.show_axes()
+    if isinstance(camera, str):
+        views = {"bottom": lambda: plotter.view_vector((0.0, -1.0, 0.0), viewup=(0, 0, 1)),
+                 "top": lambda: plotter.view_vector((0.0, 1.0, 0.0), viewup=(0, 0, 1)),
+                 "iso": plotter.view_isometric}
+        if camera not in views:
+            raise ValueError(f"camera {camera!r}: expected one of {sorted(views)} or a direction")
+        views[camera]()
+    else:
+        plotter.view_vector(tuple(float(c) for c in camera), viewup=(0, 1, 0))
+    plotter.screenshot(str(path))
+    plotter.close()
