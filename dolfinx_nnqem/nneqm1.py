@@ -170,8 +170,15 @@ class NNEQM1Solver:
             w = cond.w_m + cond.w_free + C @ (lam.reshape(-1) - cond.lam_m)
             return w + cond.BN @ xs[n3:] if n_r else w
 
+        def step_scale(cartesian):
+            """x_scale of the step coordinates (friction forces of pairs in the Cartesian chart)."""
+            if cartesian is None:
+                return x_scale
+            return np.concatenate([laws.step_scale(F, cartesian).reshape(-1), x_scale[n3:]])
+
         def system(xs, lam, lin, ev):
             """The scaled rows and Jacobian for the law evaluation ``ev`` in the laws' step coordinates ``lin``."""
+            y_scale = step_scale(lin.cartesian)
             # J = blockdiag(∂H/∂w) · C · blockdiag(∂λ/∂y) + blockdiag(∂H/∂y)
             DwC = np.einsum("nij,njk->nik", ev.dH_dw, C.reshape(nc, 3, n3))
             Jz = np.einsum("anj,njk->ank", DwC.reshape(n3, nc, 3), lin.dlam_dy)
@@ -179,14 +186,14 @@ class NNEQM1Solver:
             Jb = Jz.reshape(nc, 3, nc, 3)
             Jb[idx, :, idx, :] += lin.dH_dy
             if not n_r:
-                return ev.H.reshape(-1) / F, Jz.reshape(n3, n3) * z_scale[None, :] / F, lin.cartesian
+                return ev.H.reshape(-1) / F, Jz.reshape(n3, n3) * y_scale[None, :n3] / F, lin.cartesian
             # the free rigid modes: w depends on α, and Nᵀ(r + Bᵀ(λ − λ_m)) = 0
             H = np.concatenate([ev.H.reshape(-1), cond.e + cond.BN.T @ (lam.reshape(-1) - cond.lam_m)])
             J = np.zeros((n3 + n_r, n3 + n_r))
             J[:n3, :n3] = Jz.reshape(n3, n3)
             J[:n3, n3:] = np.einsum("nij,njk->nik", ev.dH_dw, cond.BN.reshape(nc, 3, n_r)).reshape(n3, n_r)
             J[n3:, :n3] = np.einsum("anj,njk->ank", cond.BN.T.reshape(n_r, nc, 3), lin.dlam_dy).reshape(n_r, n3)
-            return H / F, J * x_scale[None, :] / F, lin.cartesian
+            return H / F, J * y_scale[None, :] / F, lin.cartesian
 
         def residual(x):
             xs = x * x_scale
@@ -197,7 +204,7 @@ class NNEQM1Solver:
 
         def advance(x, dx, alpha, cartesian):
             """The pair unknowns step in the laws' coordinates; the mode amplitudes linearly."""
-            xs, dxs = x * x_scale, dx * x_scale
+            xs, dxs = x * x_scale, dx * step_scale(cartesian)
             z = laws.advance(xs[:n3].reshape(nc, 3), dxs[:n3].reshape(nc, 3), alpha, cartesian)
             return np.concatenate([z.reshape(-1), xs[n3:] + alpha * dxs[n3:]]) / x_scale
 

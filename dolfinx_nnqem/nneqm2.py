@@ -394,7 +394,7 @@ class NNEQM2Solver:
             lam_start, _ = laws.force(z_start)
             scale = max(scale, model.global_force(model.force()).norm(),
                         model.motion_force_scale(p.load_factor, p.load_factor_n))
-        F = max(scale, opts.atol)
+        F = max(scale, opts.atol, p.force_floor)
         tol = opts.rtol + opts.atol / F
 
         # -- Gauss-point data (global order)
@@ -593,6 +593,7 @@ class NNEQM2Solver:
                 lin = laws.linearise(z, ev)  # the laws' step coordinates y
                 dlam_dz = lin.dlam_dy
                 chart = lin.cartesian
+                y_scale = laws.step_scale(F, chart).reshape(-1)  # of the step coordinates
                 Hs[:n3] = ev.H.reshape(-1) / F
                 # pair rows: blockdiag(∂H/∂w) [W_BB Λ', W_BQ, B N] + [blockdiag(∂H/∂y), 0, 0]
                 DwW = np.einsum("nij,njk->nik", ev.dH_dw, d.WBB.reshape(nc, 3, n3))
@@ -600,7 +601,7 @@ class NNEQM2Solver:
                 idx = np.arange(nc)
                 Jzb = Jz.reshape(nc, 3, nc, 3)
                 Jzb[idx, :, idx, :] += lin.dH_dy
-                J[:n3, :n3] = Jz.reshape(n3, n3) * z_scale[None, :] / F
+                J[:n3, :n3] = Jz.reshape(n3, n3) * y_scale[None, :] / F
                 DwQ = np.einsum("nij,njk->nik", ev.dH_dw, d.WBQ.reshape(nc, 3, NG))
                 J[:n3, n3:n3 + NG] = DwQ.reshape(n3, NG) * gscale[None, :] / F
                 if n_r:
@@ -609,7 +610,7 @@ class NNEQM2Solver:
                     # self-equilibrium of the floating bodies: Nᵀ(b + Bᵀλ + QΔγ) = 0
                     Hs[n3 + NG:] = (d.e + d.BN.T @ lam.reshape(-1) + d.NtQ @ dg) / F
                     JE = np.einsum("anj,njk->ank", d.BN.T.reshape(n_r, nc, 3), dlam_dz).reshape(n_r, n3)
-                    J[n3 + NG:, :n3] = JE * z_scale[None, :] / F
+                    J[n3 + NG:, :n3] = JE * y_scale[None, :] / F
                     J[n3 + NG:, n3:n3 + NG] = d.NtQ * gscale[None, :] / F
                 last["states"] = ev.state
             a, b, s, q = self._yield_rows(x, d, laws)
@@ -627,7 +628,7 @@ class NNEQM2Solver:
                 if nc:
                     JgB = np.einsum("ja,jak->jk", gr, SB[rows])  # (r, 3nc) w.r.t. λ
                     JgZ = np.einsum("rnj,njk->rnk", JgB.reshape(rows.size, nc, 3), dlam_dz)
-                    J[n3 + rows, :n3] = -(JgZ.reshape(rows.size, n3) * z_scale[None, :]) / su[rows, None]
+                    J[n3 + rows, :n3] = -(JgZ.reshape(rows.size, n3) * y_scale[None, :]) / su[rows, None]
             other = np.flatnonzero(~use_a)
             J[n3 + other, n3 + other] = 1.0
             last["Hc"] = float(np.linalg.norm(Hs[:n3]))
@@ -639,8 +640,8 @@ class NNEQM2Solver:
             """The pair unknowns step in the laws' coordinates; Δγ and the mode amplitudes linearly."""
             out = x + alpha * dx
             if nc:
-                z = laws.advance((x[:n3] * z_scale).reshape(nc, 3), (dx[:n3] * z_scale).reshape(nc, 3), alpha,
-                                 cartesian)
+                dy = dx[:n3] * laws.step_scale(F, cartesian).reshape(-1)
+                z = laws.advance((x[:n3] * z_scale).reshape(nc, 3), dy.reshape(nc, 3), alpha, cartesian)
                 out[:n3] = z.reshape(-1) / z_scale
             return out
 

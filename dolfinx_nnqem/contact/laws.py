@@ -405,7 +405,7 @@ class ContactLaw(Protocol):
     def force(self, z: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]: ...
 
     def unknowns(self, lam: npt.ArrayLike, slip: npt.ArrayLike | None = None,
-                 no_force: float = 0.0) -> np.ndarray: ...
+                 no_force: float = 0.0, constrained: npt.ArrayLike | None = None) -> np.ndarray: ...
 
     def unknown_scale(self, force_scale: float) -> np.ndarray: ...
 
@@ -466,8 +466,8 @@ class AlartCurnierLaw:
         return z.copy(), np.broadcast_to(np.eye(3), (z.shape[0], 3, 3)).copy()
 
     def unknowns(self, lam: npt.ArrayLike, slip: npt.ArrayLike | None = None,
-                 no_force: float = 0.0) -> np.ndarray:
-        """Unknowns z = lambda (``slip`` and ``no_force`` are not needed)."""
+                 no_force: float = 0.0, constrained: npt.ArrayLike | None = None) -> np.ndarray:
+        """Unknowns z = lambda (``slip``, ``no_force`` and ``constrained`` are not needed)."""
         return _check_z("lam", lam).copy()
 
     def unknown_scale(self, force_scale: float) -> np.ndarray:
@@ -505,6 +505,10 @@ class AlartCurnierLaw:
 
     def __repr__(self) -> str:
         return "AlartCurnierLaw()"
+
+
+MAX_TURN = 0.25 * np.pi
+"""Largest turn of a polar angle θ in one Newton step (radians); see :meth:`PolarLaw.advance`."""
 
 
 class PolarLaw:
@@ -552,11 +556,12 @@ class PolarLaw:
         return lam, dlam_dz
 
     def unknowns(self, lam: npt.ArrayLike, slip: npt.ArrayLike | None = None,
-                 no_force: float = 0.0) -> np.ndarray:
+                 no_force: float = 0.0, constrained: npt.ArrayLike | None = None) -> np.ndarray:
         """(p_n, p_r, theta) with p_r = |q| >= 0 and d(theta) = -q/|q|.
 
         Where |q| <= ``no_force`` the force gives no direction: theta is the direction of
-        ``slip`` (n, 2) if given (H3 needs slip parallel to d), else 0.
+        ``slip`` (n, 2) if given (H3 needs slip parallel to d), else 0. Pairs with pinned
+        tangential directions (``constrained`` (n, 3)) take the angle :meth:`pin` holds them at.
         """
         lam = _check_z("lam", lam)
         q1, q2 = lam[:, 1], lam[:, 2]
@@ -568,6 +573,13 @@ class PolarLaw:
             slip = np.asarray(slip, dtype=np.float64)
             undirected = p_r <= no_force
             z[undirected, 2] = np.arctan2(slip[undirected, 1], slip[undirected, 0])
+        if constrained is not None:  # pinned directions: θ on θ* (see pin), p_r the signed force along d(θ*)
+            constrained = np.asarray(constrained, dtype=bool)
+            only_t1, only_t2 = constrained[:, 1] & ~constrained[:, 2], constrained[:, 2] & ~constrained[:, 1]
+            both = constrained[:, 1] & constrained[:, 2]
+            z[only_t2, 1], z[only_t2, 2] = -q1[only_t2], 0.0  # d = (1, 0)
+            z[only_t1, 1], z[only_t1, 2] = -q2[only_t1], 0.5 * np.pi  # d = (0, 1)
+            z[both, 1], z[both, 2] = 0.0, 0.0
         return z
 
     def unknown_scale(self, force_scale: float) -> np.ndarray:
@@ -666,7 +678,8 @@ class PolarLaw:
 
     def advance(self, z: npt.ArrayLike, dy: npt.ArrayLike, alpha: float,
                 cartesian: np.ndarray | None) -> np.ndarray:
-        """z + α dy; on ``cartesian`` pairs the new friction force λ_t + α dy_t in polar form.
+        """z + α dy, θ turned by at most :data:`MAX_TURN`; on ``cartesian`` pairs the new friction
+        force λ_t + α dy_t in polar form.
 
         Of the two representations (|q|, θ) and (−|q|, θ + π) the one whose angle is nearer the
         old θ is taken, so that a small change of force is a small change of (p_r, θ) (θ is not
@@ -675,6 +688,10 @@ class PolarLaw:
         z = np.asarray(z, dtype=np.float64)
         dy = np.asarray(dy, dtype=np.float64)
         out = z + alpha * dy
+        # H3 = r |s| sin(θ − θ_s) (θ_s the slip's angle): far from its zero, where the slope r s·d
+        # is small, a Newton step spins θ by many turns; near the solution steps are small, so
+        # clipping them (pair by pair: θ of an open pair is decoupled) keeps the local rate
+        out[:, 2] = z[:, 2] + np.clip(alpha * dy[:, 2], -MAX_TURN, MAX_TURN)
         if cartesian is None or not np.any(cartesian):
             return out
         c = np.asarray(cartesian, dtype=bool)

@@ -264,7 +264,7 @@ class PairLaws:
         z = np.zeros((self.size, 3))
         for group in self.groups:
             z[group.index] = group.law.unknowns(lam[group.index], None if slip is None else slip[group.index],
-                                                no_force)
+                                                no_force, self.constrained[group.index])
         return z
 
     def unknown_scale(self, force_scale: float) -> np.ndarray:
@@ -272,6 +272,13 @@ class PairLaws:
         scale = np.zeros((self.size, 3))
         for group in self.groups:
             scale[group.index] = group.law.unknown_scale(force_scale)
+        return scale
+
+    def step_scale(self, force_scale: float, cartesian: np.ndarray | None) -> np.ndarray:
+        """(n, 3): the scale of each step coordinate of :meth:`linearise` (forces on ``cartesian`` pairs)."""
+        scale = self.unknown_scale(force_scale)
+        if cartesian is not None:
+            scale[np.asarray(cartesian, dtype=bool)] = float(force_scale)
         return scale
 
     def regularised(self) -> PairLaws | None:
