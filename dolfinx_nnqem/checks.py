@@ -182,7 +182,7 @@ def check_state(problem, report=None, solver_options=None, options: CheckOptions
     else:
         F_int = problem.assemble_internal_force()
     F_ext = problem.external_force()
-    scale = max(F_ext.norm(), F_int.norm())
+    scale = max(F_ext.norm(), F_int.norm(), problem.force_floor)
     lam = Bl = None
     if problem.has_contact:
         lam = problem.contact.force()
@@ -281,7 +281,7 @@ def failure_details(problem) -> dict:
     try:
         F_int = problem.assemble_internal_force()
         F_ext = problem.external_force()
-        scale = max(F_ext.norm(), F_int.norm())
+        scale = max(F_ext.norm(), F_int.norm(), problem.force_floor)
         out = {}
         if problem.has_contact:
             model = problem.contact

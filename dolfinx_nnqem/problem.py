@@ -44,6 +44,10 @@ from dolfinx_nnqem.validation import check_cell_tag, check_mesh
 
 
 # -- problem data ---------------------------------------------------------------------------
+FORCE_FLOOR_STRAIN = 1e-6
+"""The force scale F is never below the force this strain sets up over one cell face (E_max h²)."""
+
+
 @dataclass(frozen=True)
 class Dirichlet:
     """Prescribed displacement ``u_i = ℓ · value_i`` on the facets tagged ``tag``.
@@ -168,8 +172,10 @@ class ContactProblem:
         self.load_factor_n = 0.0  # ℓ of the last converged increment
         self._previous = None  # (ℓ, u, z) of the increment before the last: the secant predictor
         self.contact: ContactModel | None = None
+        E_max = self.comm.allreduce(float(np.max(self.state.E.x.array, initial=0.0)), op=MPI.MAX)
+        self.force_floor = FORCE_FLOOR_STRAIN * E_max * self.characteristic_length() ** 2
+        """The smallest force scale F (N): what a strain of 1e-6 sets up over one cell face."""
         if contacts:
-            E_max = self.comm.allreduce(float(np.max(self.state.E.x.array, initial=0.0)), op=MPI.MAX)
             self.contact = ContactModel(self.V, facet_tags, contacts, E=E_max, h=self.characteristic_length(),
                                         constrained_dofs=self.constrained_flags())
         self.bodies = find_bodies(self.V, cell_tags)
@@ -363,11 +369,13 @@ class ContactProblem:
     def force_scale(self, F_int: PETSc.Vec) -> float:
         """The problem's force scale F at the current iterate, for convergence tests.
 
-        F = max(‖F_ext(ℓ)‖, ‖F_int‖, ‖Bᵀλ(z)‖, r ‖Δm‖): the applied loads, the internal forces
-        (which carry the prescribed displacements), the contact forces, and the forces a moving
-        rigid obstacle sets up over the increment (``ContactModel.motion_force_scale``).
+        F = max(‖F_ext(ℓ)‖, ‖F_int‖, ‖Bᵀλ(z)‖, r ‖Δm‖, F_floor): the applied loads, the internal
+        forces (which carry the prescribed displacements), the contact forces, the forces a moving
+        rigid obstacle sets up over the increment (``ContactModel.motion_force_scale``), and
+        ``force_floor``: a state without forces (a body moved rigidly before it touches, every
+        pair open) would otherwise be judged by its rounding errors against zero.
         """
-        scale = max(self.external_force().norm(), F_int.norm())
+        scale = max(self.external_force().norm(), F_int.norm(), self.force_floor)
         if self.has_contact:
             scale = max(scale, self.contact.global_force(self.contact.force()).norm(),
                         self.contact.motion_force_scale(self.load_factor, self.load_factor_n))
