@@ -348,8 +348,11 @@ def draw_live_pictures(problem, folder: str | os.PathLike, *, completed: bool) -
     plot_contact_pressure = getattr(plots, "plot_contact_pressure", None)
     if plot_contact_pressure is not None and problem.has_contact and completed:
         path = folder / PICTURE_FOLDER / "contact_pressure.png"
-        plot_contact_pressure(problem, path)
-        done["contact_pressure.png"] = path
+        try:  # the gather inside is reached on every rank before anything can fail; rank 0 draws
+            plot_contact_pressure(problem, path)
+            done["contact_pressure.png"] = path
+        except Exception as error:  # noqa: BLE001  (as above: a picture never ends the run)
+            done["contact_pressure.png"] = f"not drawn: {type(error).__name__}: {error}"
     for name, result in done.items():
         if isinstance(result, str):
             _log.warning(f"picture {name}: {result}")
