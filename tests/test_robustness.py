@@ -1,0 +1,75 @@
+"""The fast part of the robustness suite (benchmarks/robustness.py) and force-free states.
+
+* The suite's fast cases (pressure and drag together from rest on elastoplastic blocks, the two
+  beams in 15 increments, the sliding block) with every method and both laws: each cell must
+  converge; cutbacks are printed (the polar law still needs some with NNEQM1 on the two beams:
+  see docs/robustness.md), never hidden.
+* A load no state can carry (drag 0.35 p > μ_f p) ends in ConvergenceError for every method.
+* A state without forces (body 2 pulled off, every pair open; or moved down before it touches)
+  converges: the force scale has a floor (``ContactProblem.force_floor``), else the relative
+  test would compare rounding errors with zero.
+"""
+
+import sys
+from pathlib import Path
+
+import pytest
+from mpi4py import MPI
+
+from dolfinx_nnqem.material import VonMises
+from dolfinx_nnqem.meshing import StackedBlocksTags as T
+from dolfinx_nnqem.meshing import build_stacked_blocks
+from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet
+from dolfinx_nnqem.results import pair_table
+from dolfinx_nnqem.solver import METHODS, SolverOptions, make_solver
+from dolfinx_nnqem.stepping import solve_load_steps
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+import robustness  # noqa: E402
+
+FAST = {case.name: case for case in robustness.CASES if case.fast}
+
+
+@pytest.mark.parametrize("law", robustness.LAWS)
+@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("case", ["drag-0.2-hex", "sliding-block-v5"])
+def test_fast_cases_converge(case, method, law):
+    cell = robustness.run_cell(FAST[case], method, law, FAST[case].increments)
+    print(f"\n  {case} {method}/{law}: {robustness.cell_text(cell)} {'' if cell.converged else cell.message}")
+    assert cell.converged, cell.message
+
+
+@pytest.mark.parametrize("law", robustness.LAWS)
+@pytest.mark.parametrize("method", ["monolithic", "nneqm1", pytest.param("nneqm2", marks=pytest.mark.slow)])
+def test_two_beams_in_15_increments(method, law):
+    case = FAST["two-beams-15"]
+    cell = robustness.run_cell(case, method, law, case.increments)
+    print(f"\n  two beams {method}/{law}: {robustness.cell_text(cell)}")
+    assert cell.converged, cell.message
+    if law == "alart-curnier":
+        assert cell.cutbacks == 0
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_a_drag_beyond_friction_is_reported_not_converged(method):
+    case = next(c for c in robustness.CASES if c.name == "drag-0.35-hex")
+    cell = robustness.run_cell(case, method, "alart-curnier", case.increments)
+    print(f"\n  {method}: {cell.message}")
+    assert not cell.converged and "did not converge" in cell.message
+
+
+@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("lift", [3.0e-4, -2.0e-4])
+def test_force_free_states_converge(method, lift):
+    """Body 2's top moved up (pairs open at once) or down across a 3e-4 m gap it never closes."""
+    mesh, ct, ft = build_stacked_blocks(MPI.COMM_WORLD, 1.0, 0.5, 0.5, 1.0, 2, 1, 1, 2, gap=3.0e-4)
+    elastic = VonMises(E=2.0e10, nu=0.2)
+    problem = ContactProblem(mesh, ct, ft, materials={T.BODY1: elastic, T.BODY2: elastic},
+                             dirichlet=[Dirichlet(T.BOTTOM), Dirichlet(T.TOP, (0.0, lift, 0.0))],
+                             contact=Contact(T.CONTACT1, T.CONTACT2, mu_f=0.3, search_distance=4.0e-4))
+    results = solve_load_steps(problem, make_solver(method, problem, SolverOptions()), 2)
+    t = pair_table(problem)
+    print(f"\n  {method}, top moved {lift:+.0e} m: iterations {[r.iterations for r in results]}, "
+          f"force floor {problem.force_floor:.3g} N, pairs {set(t['state_name'])}")
+    assert [r.load_factor for r in results] == [0.5, 1.0] and set(t["state_name"]) == {"open"}
+    assert abs(problem.u.x.array).max() == pytest.approx(abs(lift), rel=1e-12)
