@@ -196,7 +196,10 @@ def run_cell(case: Case, method: str, law: str, increments) -> Cell:
     if not case.contact and law != LAWS[0]:
         return Cell(converged=False, message="n/a: no contact, the law plays no part", green=True)
     problem = case.build(law)
-    solver = make_solver(method, problem, SolverOptions())
+    try:
+        solver = make_solver(method, problem, SolverOptions())
+    except ValueError as error:  # a method refusing the problem before solving, with its reason
+        return Cell(converged=False, message=f"refused before solving: {error}", green=True)
     t0 = time.perf_counter()
     try:
         results = solve_load_steps(problem, solver, increments, max_displacement=case.max_displacement)
@@ -219,6 +222,8 @@ def run_cell(case: Case, method: str, law: str, increments) -> Cell:
 def cell_text(cell: Cell) -> str:
     if cell.message.startswith("n/a"):
         return "n/a"
+    if cell.message.startswith("refused before solving"):
+        return "refused (size)" if "dense system" in cell.message else "refused"
     if not cell.converged:
         return "refused ✓" if cell.green else "FAILED"
     mark = "" if cell.green else " !"

@@ -185,6 +185,13 @@ class NNEQM2Solver:
         self.options = options or SolverOptions()
         self.settings = nneqm2 or NNEQM2Options()
         self.flow_rtol = 100.0 * self.options.rtol if self.settings.flow_rtol is None else self.settings.flow_rtol
+        order = 3 * problem.num_pairs + problem.state.num_gauss_points()
+        if order > self.settings.max_dense_order:
+            raise ValueError(
+                f"nneqm2: the dense system would have order 3 NC + NG = {order} ({problem.num_pairs} pairs, "
+                f"{problem.state.num_gauss_points()} Gauss points), {8e-9 * order**2:.2g} GB per matrix, above "
+                f"NNEQM2Options.max_dense_order = {self.settings.max_dense_order}; use the monolithic solver or NNEQM1 "
+                "(their size grows with the mesh, not its square), or raise max_dense_order")
         self.condensation = Condensation(problem, self.name, self.options.petsc_options)
         self.warm_start_iterations = 0  #: iterations spent in regular warm starts (polar law)
         self._timings: dict[str, float] = {}

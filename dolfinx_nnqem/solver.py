@@ -172,6 +172,10 @@ class NNEQM2Options:
         False starts them from the previous increment (the seed's procedure).
     inner
         Damping of the dense nonsmooth solves.
+    max_dense_order
+        Largest order 3 NC + NG of the dense system accepted (NG: every Gauss point of the
+        mesh). Its matrices grow as the order squared (8 bytes each entry; 20 000 is 3.2 GB per
+        matrix); a larger problem is refused before anything is assembled.
     """
 
     update_flow_directions: bool = False
@@ -181,8 +185,10 @@ class NNEQM2Options:
     flow_rtol: float | None = None
     regular_start: bool = True
     inner: Globalisation = field(default_factory=lambda: Globalisation(min_step=1e-10, watchdog=0))
+    max_dense_order: int = 20_000
 
     def __post_init__(self):
+        _check_integer("NNEQM2Options", "max_dense_order", self.max_dense_order, 1)
         if self.flow_update not in ("trial", "stress"):
             raise ValueError(f"NNEQM2Options: flow_update = {self.flow_update!r}; expected 'trial' or 'stress'")
         _check_integer("NNEQM2Options", "inner_max_iterations", self.inner_max_iterations, 1)

@@ -73,3 +73,12 @@ def test_force_free_states_converge(method, lift):
           f"force floor {problem.force_floor:.3g} N, pairs {set(t['state_name'])}")
     assert [r.load_factor for r in results] == [0.5, 1.0] and set(t["state_name"]) == {"open"}
     assert abs(problem.u.x.array).max() == pytest.approx(abs(lift), rel=1e-12)
+
+
+def test_nneqm2_refuses_a_dense_system_too_large_before_solving():
+    from dolfinx_nnqem.solver import NNEQM2Options
+
+    problem = robustness.pressed_and_dragged(0.2)("alart-curnier")
+    with pytest.raises(ValueError, match="dense system would have order") as error:
+        make_solver("nneqm2", problem, SolverOptions(), nneqm2=NNEQM2Options(max_dense_order=100))
+    print(f"\n  {error.value}")
