@@ -123,7 +123,6 @@ def test_mortar_equals_node_to_node_on_the_matching_mesh(matching):
     assert max(d.values()) < 1e-10
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("method", ["nneqm1"])
 def test_mortar_beams_other_methods(method, mortar):
     """The same non-matching problem, Cartesian law, with the nonsmooth-Newton methods: the monolithic answer."""
