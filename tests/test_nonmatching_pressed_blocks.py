@@ -56,11 +56,7 @@ def direct():
     return solve("monolithic/direct")
 
 
-@pytest.mark.parametrize("name", [
-    "monolithic/direct", "monolithic/iterative",
-    # NNEQM1 needs cutbacks in the drag phase (its inner nonsmooth solve fails at some outer iterations, as
-    # on the matching mesh) and takes ~100 s under pytest here: opt-in
-    pytest.param("nneqm1", marks=pytest.mark.slow)])
+@pytest.mark.parametrize("name", list(SOLVERS))
 def test_plastic_pressed_blocks_non_matching(name, direct):
     s = direct if name == "monolithic/direct" else solve(name)
     same_path = len(s["path"]) == len(direct["path"]) and np.allclose(s["path"], direct["path"], rtol=0, atol=1e-14)
