@@ -58,7 +58,7 @@ def direct():
 
 @pytest.mark.parametrize("name", [
     "monolithic/direct", "monolithic/iterative",
-    # NNEQM1 takes 9-12 s alone, but 116-131 s while another job holds one of the 2 cores (OpenBLAS's
+    # NNEQM1 takes about 11 s alone, but 116-131 s while another job holds one of the 2 cores (OpenBLAS's
     # 2 threads in its dense inner solves; 8.7 s with OPENBLAS_NUM_THREADS=1 under the same load): opt-in
     pytest.param("nneqm1", marks=pytest.mark.slow)])
 def test_plastic_pressed_blocks_non_matching(name, direct):
