@@ -294,7 +294,12 @@ def check_rigid_modes(modes: RigidModes, contact=None) -> None:
     A = np.concatenate(rows, axis=0)
     if A.shape[0] == 0:
         _raise_drifting(modes, np.eye(modes.count), "no contact pair sees it")
-    _, s, vt = np.linalg.svd(A, full_matrices=True)
+    # Only s and vt are needed: full_matrices=True would also build U, (3 pairs)² numbers (7.5 GB
+    # at 10⁴ pairs). Zero rows up to the number of modes keep vt square (the null space's rows
+    # included) without changing AᵀA, hence s and vt.
+    if A.shape[0] < A.shape[1]:
+        A = np.vstack([A, np.zeros((A.shape[1] - A.shape[0], A.shape[1]))])
+    _, s, vt = np.linalg.svd(A, full_matrices=False)
     scale = max(float(s.max(initial=0.0)), 1.0)
     rank = int(np.count_nonzero(s > 1e-10 * scale))
     if rank < modes.count:

@@ -371,6 +371,8 @@ def build_two_beams(
     comm: MPI.Comm = MPI.COMM_WORLD,
     refine: int = 1,
     msh_file: str | os.PathLike | None = None,
+    *,
+    refine2: int | None = None,
 ) -> MeshAndTags:
     """The seed benchmark's two overlapping cantilever beams (``benchmark-two-beams.md``).
 
@@ -379,7 +381,8 @@ def build_two_beams(
     (``refine = 1``: 10 x 2 x 2 = 40 per beam). Each beam is built from two boxes fragmented
     with each other only (beam 1 split at x = 1.6, beam 2 at x = 2.0), so the contact surfaces
     are exactly the overlap x in [1.6, 2.0] on y = 0.4 and the beams share no nodes
-    (``(2 refine + 1)**2`` coincident node pairs there).
+    (``(2 refine + 1)**2`` coincident node pairs there). With ``refine2``, beam 2's edge is
+    ``0.2 / refine2`` m instead: the contact surfaces no longer match (non-matching interface).
 
     Parameters
     ----------
@@ -389,14 +392,18 @@ def build_two_beams(
         Positive integer dividing the element edge 0.2 m.
     msh_file
         If given, the gmsh model is also written to this ``.msh`` file (by rank 0).
+    refine2
+        Positive integer dividing beam 2's element edge 0.2 m; default ``refine`` (matching
+        interface meshes).
 
     Returns
     -------
     MeshAndTags
         The mesh and its tags, numbered as in :class:`TwoBeamsTags`.
     """
-    if int(refine) != refine or refine < 1:
-        raise ValueError(f"refine must be a positive integer, got {refine!r}")
+    for label, n in (("refine", refine), ("refine2", refine if refine2 is None else refine2)):
+        if int(n) != n or n < 1:
+            raise ValueError(f"{label} must be a positive integer, got {n!r}")
     h = 0.2 / int(refine)
     width = 0.4  # beam height (y) and width (z)
 
@@ -406,6 +413,9 @@ def build_two_beams(
         gmsh.model.occ.synchronize()
 
         counts = _box_curve_counts(beam1 + beam2, lambda d: max(1, round(float(d.max()) / h)))
+        if refine2 is not None:  # the beams share no curve: beam 2's counts are its own
+            h2 = 0.2 / int(refine2)
+            counts |= _box_curve_counts(beam2, lambda d: max(1, round(float(d.max()) / h2)))
         _structured_hexahedra(counts)
 
         size = 3.6

@@ -11,6 +11,9 @@ Level k has 4k × 2k × 4k hexahedra per block and (4k + 1)² node-to-node pairs
 
     level   1     2      4       8        10       17
     dofs    450   2 430  15 606   111 078  211 806  999 810
+
+With ``n2``, body 2 has n2 × 2k × n2 hexahedra instead (a non-matching interface when
+n2 ≠ 4k; the contact is then discretised by dual mortar, body 2 the slave when it is the finer).
 """
 
 from __future__ import annotations
@@ -42,12 +45,31 @@ def drag_amplitude(load_factor: float) -> float:
     return max(2.0 * load_factor - 1.0, 0.0)
 
 
-def pressed_blocks_problem(level: int, comm: MPI.Comm = MPI.COMM_WORLD, mu_f: float = 0.1) -> ContactProblem:
-    """The problem of level ``level`` (see the module docstring)."""
+def pressed_blocks_problem(level: int, comm: MPI.Comm = MPI.COMM_WORLD, mu_f: float = 0.1, *,
+                           n2: int | None = None, discretisation: str = "auto") -> ContactProblem:
+    """The problem of level ``level`` (see the module docstring).
+
+    Parameters
+    ----------
+    level
+        Body 1 has 4 level × 2 level × 4 level hexahedra (so has body 2 by default).
+    comm
+        Communicator of the mesh.
+    mu_f
+        Friction coefficient.
+    n2
+        Body 2's element count in x and z (default ``4 level``: matching interface meshes).
+    discretisation
+        The contact's discretisation (see :class:`~dolfinx_nnqem.problem.Contact`); ``"auto"``
+        takes node-to-node on matching meshes, mortar otherwise.
+    """
     if isinstance(level, bool) or not isinstance(level, int) or level < 1:
         raise ValueError(f"level = {level!r}; expected an integer >= 1")
+    if n2 is not None and (isinstance(n2, bool) or not isinstance(n2, int) or n2 < 1):
+        raise ValueError(f"n2 = {n2!r}; expected an integer >= 1")
     n = 4 * level
-    mesh, cell_tags, facet_tags = build_stacked_blocks(comm, 1.0, 0.5, 0.5, 1.0, n, 2 * level, 2 * level, n)
+    mesh, cell_tags, facet_tags = build_stacked_blocks(comm, 1.0, 0.5, 0.5, 1.0, n, 2 * level, 2 * level, n,
+                                                       nx2=n2, nz2=n2)
     return ContactProblem(
         mesh, cell_tags, facet_tags, materials={T.BODY1: MATERIAL, T.BODY2: MATERIAL},
         dirichlet=[
@@ -57,5 +79,5 @@ def pressed_blocks_problem(level: int, comm: MPI.Comm = MPI.COMM_WORLD, mu_f: fl
             Dirichlet(T.BODY2_ZMIN, 0.0, [2]), Dirichlet(T.BODY2_ZMAX, 0.0, [2]),
         ],
         tractions=[Pressure(T.TOP, PRESSURE, amplitude=pressure_amplitude)],
-        contact=Contact(T.CONTACT1, T.CONTACT2, mu_f=mu_f),
+        contact=Contact(T.CONTACT1, T.CONTACT2, mu_f=mu_f, discretisation=discretisation),
     )

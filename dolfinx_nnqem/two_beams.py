@@ -46,16 +46,22 @@ Cartesian law (robust, fewer iterations). Both give the same solution (V10)."""
 
 
 def two_beams_problem(comm: MPI.Comm = MPI.COMM_WORLD, *, law: str = "alart-curnier",
-                      refine: int = 1, r: float | None = None) -> ContactProblem:
-    """The benchmark as a :class:`ContactProblem` (mesh built with gmsh)."""
-    mesh, cell_tags, facet_tags = build_two_beams(comm, refine=refine)
+                      refine: int = 1, r: float | None = None, refine2: int | None = None,
+                      discretisation: str = "auto") -> ContactProblem:
+    """The benchmark as a :class:`ContactProblem` (mesh built with gmsh).
+
+    ``refine2`` meshes beam 2 at edge 0.2 / ``refine2`` m (a non-matching interface, see
+    :func:`~dolfinx_nnqem.meshing.build_two_beams`); ``discretisation`` is the contact's (see
+    :class:`~dolfinx_nnqem.problem.Contact`).
+    """
+    mesh, cell_tags, facet_tags = build_two_beams(comm, refine=refine, refine2=refine2)
     return ContactProblem(
         mesh, cell_tags, facet_tags,
         materials={T.BODY1: MATERIAL, T.BODY2: MATERIAL},
         dirichlet=[Dirichlet(T.CLAMP1), Dirichlet(T.CLAMP2)],
         tractions=[Traction(T.LOAD, TRACTION)],
         body_forces=[Gravity(GRAVITY)],
-        contact=Contact(T.CONTACT1, T.CONTACT2, mu_f=MU_F, law=law, r=r),
+        contact=Contact(T.CONTACT1, T.CONTACT2, mu_f=MU_F, law=law, r=r, discretisation=discretisation),
     )
 
 

@@ -106,3 +106,9 @@ def test_unphysical_augmentation_is_refused(augmentation):
 def test_bad_level_is_refused(level):
     with pytest.raises(ValueError, match="level"):
         pressed_blocks_problem(level, MPI.COMM_SELF)
+
+
+@pytest.mark.parametrize("n2", [0, 2.5, True])
+def test_bad_body2_division_is_refused(n2):
+    with pytest.raises(ValueError, match="n2"):
+        pressed_blocks_problem(1, MPI.COMM_SELF, n2=n2)

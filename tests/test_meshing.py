@@ -88,6 +88,20 @@ def test_two_beams_refined():
         meshing.build_two_beams(refine=0)
 
 
+def test_two_beams_with_beam_2_meshed_finer():
+    """refine2: beam 2 at edge 0.1 m, beam 1 at 0.2 m; the contact surfaces share only their 4 corners."""
+    mesh, cell_tags, facet_tags = meshing.build_two_beams(refine2=2)
+    T = TwoBeamsTags
+    facets = tag_counts(mesh, facet_tags)
+    shared = coincident(body_nodes(mesh, cell_tags, T.BODY1), body_nodes(mesh, cell_tags, T.BODY2))
+    print(f"\n  refine2 = 2: {num_cells(mesh)} cells, facets {facets}, coincident nodes {len(shared)}")
+    assert num_cells(mesh) == 40 + 320
+    assert facets == {T.CLAMP1: 4, T.CLAMP2: 16, T.LOAD: 80, T.CONTACT1: 4, T.CONTACT2: 16}
+    assert len(shared) == 9  # beam 1's 3 x 3 interface nodes all lie on beam 2's 5 x 5 grid
+    with pytest.raises(ValueError, match="refine2"):
+        meshing.build_two_beams(refine2=0)
+
+
 def test_two_beams_msh_file_round_trip(tmp_path):
     path = tmp_path / "beams.msh"
     meshing.build_two_beams(MPI.COMM_SELF, msh_file=path)
