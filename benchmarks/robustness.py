@@ -253,12 +253,17 @@ def main(argv=None) -> int:
             row[key] = asdict(cell)
             print(f"{case.name:20s} {key:28s} {cell_text(cell):40s} {'' if cell.green else cell.message[:120]}",
                   flush=True)
+            save(Path(args.json), cases, matrix)  # after every cell: a long run killed keeps what it measured
     print_matrix(cases, matrix)
-    out = Path(args.json)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"cases": {c.name: c.what for c in cases}, "matrix": matrix}, indent=1))
-    print(f"saved {out}")
+    print(f"saved {args.json}")
     return 0
+
+
+def save(out: Path, cases, matrix) -> None:
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_suffix(".tmp")
+    tmp.write_text(json.dumps({"cases": {c.name: c.what for c in cases}, "matrix": matrix}, indent=1))
+    tmp.replace(out)
 
 
 def print_matrix(cases, matrix) -> None:

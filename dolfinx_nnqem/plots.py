@@ -160,14 +160,18 @@ def _slave_triangles(problem, table: dict) -> np.ndarray | None:
 
     The facets' vertex coordinates are gathered and matched to the pairs' slave nodes
     (``position_b``); facets with a vertex that carries no pair (beyond the master) are left
-    out. None as well for a surface of quadrilaterals (then the points alone are drawn).
+    out. None as well for a surface of quadrilaterals or pairs without slave facets (node-to-node,
+    obstacles): then the points alone are drawn.
     """
     import dolfinx
     from scipy.spatial import cKDTree
 
+    slave = getattr(problem.contact.interfaces[0].pairs, "slave", None)
+    if slave is None:  # node-to-node pairs and obstacles name no slave facets: points are drawn
+        return None  # (the same answer on every rank: no collective call is skipped by one)
     mesh = problem.mesh
     fdim = mesh.topology.dim - 1
-    facets = problem.facet_tags.find(int(problem.contact.interfaces[0].pairs.slave))
+    facets = problem.facet_tags.find(int(slave))
     facets = facets[facets < mesh.topology.index_map(fdim).size_local]  # owned: each facet once
     nodes = np.asarray(dolfinx.mesh.entities_to_geometry(mesh, fdim, facets))
     nodes = nodes.reshape(len(facets), -1) if len(facets) else np.zeros((0, 0), dtype=np.int32)
