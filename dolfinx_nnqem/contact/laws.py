@@ -653,8 +653,10 @@ class PolarLaw:
           every other row of the step), and at rest (s·d = 0, so H3 vanishes for every θ)
           ∂H3/∂θ is set to r h (``force_unit``): the step then turns θ towards the predicted slip.
 
-        Sliding pairs keep (p_r, θ): there |p_r| = ρ > 0 or |r s·d| ≥ ρ > 0, and the polar Jacobian
-        is regular. (Pairs with one pinned tangential direction start at their angle θ*, see
+        * Sliding pairs (a friction bound, p_r ≠ 0) step in the friction force too, with the exact
+          Jacobian by the chain rule (∂p_r/∂q = −d, ∂θ/∂q = −d'/p_r): the same Newton direction,
+          but the force moves along a chord instead of θ turning (where the slip has just
+          started, ∂H3/∂θ = r s·d is small and a step in θ large). (Pairs with one pinned tangential direction start at their angle θ*, see
         :meth:`initial_unknowns`.)
         """
         z = np.asarray(z, dtype=np.float64)
@@ -674,6 +676,19 @@ class PolarLaw:
         tiny = 1e-14 * float(force_unit)
         at_rest = unbounded & (np.abs(evaluation.dH_dz[:, 2, 2]) <= tiny)
         dH_dy[at_rest, 2, 2] = float(force_unit)
+        # sliding pairs with a friction force: the same Newton direction, taken in the force
+        # (∂H/∂q = ∂H/∂p_r ∂p_r/∂q + ∂H/∂θ ∂θ/∂q with ∂p_r/∂q = −d, ∂θ/∂q = −d'/p_r), so that the
+        # step moves q along a chord instead of turning θ (a slip just started, |s| small, makes
+        # ∂H3/∂θ = r s·d small and the step in θ large)
+        sliding = free & (evaluation.state == SLIP) & ~unbounded & (np.abs(z[:, 1]) > tiny)
+        if np.any(sliding):
+            p_r, theta = z[sliding, 1], z[sliding, 2]
+            d = np.column_stack((np.cos(theta), np.sin(theta)))
+            d_prime = np.column_stack((-np.sin(theta), np.cos(theta)))
+            dz_dq = -np.stack((d, d_prime / p_r[:, None]), axis=1)  # rows p_r, θ; columns q1, q2
+            dH_dy[sliding, :, 1:] = np.einsum("nij,njk->nik", evaluation.dH_dz[sliding, :, 1:], dz_dq)
+            dlam_dy[sliding, 1:, 1:] = np.eye(2)
+            cartesian = cartesian | sliding
         return Linearisation(dH_dy, dlam_dy, cartesian)
 
     def advance(self, z: npt.ArrayLike, dy: npt.ArrayLike, alpha: float,
