@@ -417,7 +417,7 @@ class ContactLaw(Protocol):
         ...
 
     def linearise(self, z: npt.ArrayLike, evaluation: LawEvaluation, constrained: npt.ArrayLike,
-                  force_unit: float) -> Linearisation:
+                  force_unit: float, sliding_in_force: bool = True) -> Linearisation:
         """The Jacobian blocks of a Newton step at z (``evaluation`` pinned), in the law's step coordinates."""
         ...
 
@@ -494,7 +494,7 @@ class AlartCurnierLaw:
         return np.zeros((np.shape(constrained)[0], 3))
 
     def linearise(self, z: npt.ArrayLike, evaluation: LawEvaluation, constrained: npt.ArrayLike,
-                  force_unit: float) -> Linearisation:
+                  force_unit: float, sliding_in_force: bool = True) -> Linearisation:
         """The unknowns are the force: y = z, ∂λ/∂y = I."""
         return Linearisation(evaluation.dH_dz, self.force(z)[1], None)
 
@@ -632,7 +632,7 @@ class PolarLaw:
         return z
 
     def linearise(self, z: npt.ArrayLike, evaluation: LawEvaluation, constrained: npt.ArrayLike,
-                  force_unit: float) -> Linearisation:
+                  force_unit: float, sliding_in_force: bool = True) -> Linearisation:
         """Newton step coordinates that keep the polar law's step regular.
 
         The map (p_r, θ) → q = −p_r d(θ) is singular at p_r = 0 (∂q/∂θ = 0): a sticking pair
@@ -653,10 +653,12 @@ class PolarLaw:
           every other row of the step), and at rest (s·d = 0, so H3 vanishes for every θ)
           ∂H3/∂θ is set to r h (``force_unit``): the step then turns θ towards the predicted slip.
 
-        * Sliding pairs (a friction bound, p_r ≠ 0) step in the friction force too, with the exact
-          Jacobian by the chain rule (∂p_r/∂q = −d, ∂θ/∂q = −d'/p_r): the same Newton direction,
-          but the force moves along a chord instead of θ turning (where the slip has just
-          started, ∂H3/∂θ = r s·d is small and a step in θ large). (Pairs with one pinned tangential direction start at their angle θ*, see
+        * With ``sliding_in_force`` (the dense solvers), sliding pairs (p_r ≠ 0) step in the
+          force too, with the exact Jacobian by the chain rule (∂p_r/∂q = −d, ∂θ/∂q = −d'/p_r):
+          the same Newton direction, but the force moves along a chord instead of θ turning
+          (where the slip has just started, ∂H3/∂θ = r s·d is small and a step in θ large).
+
+        (Pairs with one pinned tangential direction start at their angle θ*, see
         :meth:`initial_unknowns`.)
         """
         z = np.asarray(z, dtype=np.float64)
@@ -680,7 +682,7 @@ class PolarLaw:
         # (∂H/∂q = ∂H/∂p_r ∂p_r/∂q + ∂H/∂θ ∂θ/∂q with ∂p_r/∂q = −d, ∂θ/∂q = −d'/p_r), so that the
         # step moves q along a chord instead of turning θ (a slip just started, |s| small, makes
         # ∂H3/∂θ = r s·d small and the step in θ large)
-        sliding = free & (evaluation.state == SLIP) & ~unbounded & (np.abs(z[:, 1]) > tiny)
+        sliding = free & (evaluation.state == SLIP) & ~unbounded & (np.abs(z[:, 1]) > tiny) & sliding_in_force
         if np.any(sliding):
             p_r, theta = z[sliding, 1], z[sliding, 2]
             d = np.column_stack((np.cos(theta), np.sin(theta)))

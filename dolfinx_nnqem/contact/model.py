@@ -225,18 +225,18 @@ class PairLaws:
             lam[group.index], dlam_dz[group.index] = group.law.force(z[group.index])
         return lam, dlam_dz
 
-    def linearise(self, z: np.ndarray, evaluation: LawEvaluation) -> Linearisation:
+    def linearise(self, z: np.ndarray, evaluation: LawEvaluation, sliding_in_force: bool = True) -> Linearisation:
         """The Jacobian blocks of a Newton step at z in each law's step coordinates (see
         :meth:`ContactLaw.linearise`); ``evaluation`` is :meth:`evaluate`'s at z."""
         if len(self.groups) == 1:
             group = self.groups[0]
-            return group.law.linearise(z, evaluation, self.constrained, group.force_unit)
+            return group.law.linearise(z, evaluation, self.constrained, group.force_unit, sliding_in_force)
         dH_dy, dlam_dy = np.zeros((self.size, 3, 3)), np.zeros((self.size, 3, 3))
         cartesian = np.zeros(self.size, dtype=bool)
         for group in self.groups:
             i = group.index
             part = group.law.linearise(z[i], LawEvaluation(*(a[i] for a in evaluation)), self.constrained[i],
-                                       group.force_unit)
+                                       group.force_unit, sliding_in_force)
             dH_dy[i], dlam_dy[i] = part.dH_dy, part.dlam_dy
             if part.cartesian is not None:
                 cartesian[i] = part.cartesian
@@ -527,8 +527,13 @@ class ContactModel:
         return self.laws.evaluate(w, self.w_n, self.z if z is None else z)
 
     def linearise(self, evaluation: LawEvaluation, z: np.ndarray | None = None) -> Linearisation:
-        """The Jacobian blocks of a Newton step in the laws' step coordinates (default: the current z)."""
-        return self.laws.linearise(self.z if z is None else z, evaluation)
+        """The Jacobian blocks of a Newton step in the laws' step coordinates (default: the current z).
+
+        For the monolithic solver: sliding pairs keep their polar coordinates (stepping them in
+        the force, as the dense solvers do, cost it cutbacks and iterations on the robustness
+        suite: docs/robustness.md).
+        """
+        return self.laws.linearise(self.z if z is None else z, evaluation, sliding_in_force=False)
 
     def advance(self, z: np.ndarray, dy: np.ndarray, alpha: float, cartesian: np.ndarray | None) -> np.ndarray:
         """The unknowns after the step α dy from z (see :meth:`PairLaws.advance`)."""
