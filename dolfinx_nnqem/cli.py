@@ -228,6 +228,11 @@ def _run(args) -> int:
     except Exception as error:
         from dolfinx_nnqem.convergence import ConvergenceError
 
+        interrupt = _interrupt_behind(error)
+        if interrupt is not None:  # a signal that arrived inside compiled code (numba wraps it)
+            if solving:
+                writer.ended("interrupted")
+            raise interrupt from None
         if solving and not isinstance(error, ConvergenceError):
             writer.ended("error", f"{type(error).__name__}: {error}")
         raise
@@ -274,6 +279,21 @@ def _available(method: str) -> bool:
     import importlib.util
 
     return importlib.util.find_spec(f"dolfinx_nnqem.{method}") is not None
+
+
+def _interrupt_behind(error: BaseException) -> KeyboardInterrupt | None:
+    """The Ctrl-C or SIGTERM behind ``error``, if any.
+
+    A KeyboardInterrupt raised while numba-compiled code runs comes back as a SystemError
+    ("returned a result with an exception set") whose cause is the interrupt.
+    """
+    seen = set()
+    while error is not None and id(error) not in seen:
+        if isinstance(error, KeyboardInterrupt):
+            return error
+        seen.add(id(error))
+        error = error.__cause__ or error.__context__
+    return None
 
 
 def _classify(error: BaseException, args) -> tuple[int, str]:

@@ -125,3 +125,18 @@ def test_three_blocks_problem_file(tmp_path):
     print(f"\n  friction per interface {friction}, states {states}: |F_lower − μ_low p A| / μ_low p A = {err:.1e}")
     assert summary["converged"] and err < 1e-8 and abs(friction["upper"] - friction["lower"]) < 1e-8 * 2e5
     assert "stick" not in states["lower"] and "stick" in states["upper"]
+
+
+def test_an_interrupt_inside_compiled_code_is_still_an_interrupt():
+    """numba returns a SystemError caused by the KeyboardInterrupt when Ctrl-C lands in a kernel."""
+    from dolfinx_nnqem.cli import Terminated, _interrupt_behind
+
+    for signal_error in (KeyboardInterrupt(), Terminated()):
+        try:
+            try:
+                raise signal_error
+            except KeyboardInterrupt as interrupt:
+                raise SystemError("CPUDispatcher(<function kernel>) returned a result with an exception set") from interrupt
+        except SystemError as error:
+            assert _interrupt_behind(error) is signal_error
+    assert _interrupt_behind(ValueError("a bad value")) is None
