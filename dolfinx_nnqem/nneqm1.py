@@ -11,6 +11,13 @@ For the load factor ℓ of an increment, outer iteration m (``formulation.md`` �
 4. du = x_r + X (λ − λ_m); u ← u + du, then the return map at the Gauss points;
 5. converged when ‖R‖ and ‖H‖ are below tolerance relative to the load scale.
 
+Where prescribed displacements move in the increment, the first outer iteration starts from the
+converged state with their jump lifted into the right-hand side (as the monolithic solver does):
+r_0 = −R(u_n) − K_t(u_n) Δu_D on the free rows and du = Δu_D on the constrained ones. Moving
+the constrained dofs first and factorising there would linearise at a state whose boundary
+layer alone has been moved; in a plastic body that layer yields spuriously, and the first step
+(and the pair states it predicts) is then far off.
+
 The outer iteration is the same Newton driver with full steps (no line search): its step is a
 whole condensed contact solve.
 
@@ -34,13 +41,14 @@ import time
 from dataclasses import asdict, dataclass
 
 import numpy as np
+from mpi4py import MPI
 
 from dolfinx_nnqem.condensation import Condensation
 from dolfinx_nnqem.contact.model import PairLaws
 from dolfinx_nnqem.convergence import IterationRecord, SolveReport, count_states, logger
 from dolfinx_nnqem.linalg import free_dropped_objects, global_norm
 from dolfinx_nnqem.newton import Globalisation, Merit, solve
-from dolfinx_nnqem.nonsmooth import solve_nonsmooth
+from dolfinx_nnqem.nonsmooth import solve_dense
 from dolfinx_nnqem.problem import ContactProblem
 from dolfinx_nnqem.solver import NNEQM1Options, SolverOptions
 
@@ -135,12 +143,22 @@ class NNEQM1Solver:
 
     def solve_increment(self, load_factor: float) -> SolveReport:
         p = self.problem
+        u_bc = p.u.x.array[p.bc_dofs].copy()
         p.apply_prescribed_displacements(load_factor)
         p.predict_contact()
+        delta_bc = p.u.x.array[p.bc_dofs] - u_bc
         report = SolveReport(converged=False, iterations=0,
                              system_order=3 * p.num_pairs + self.condensation.num_modes)
         system = _OuterSystem(self, report)
-        outcome = solve(system, FULL_STEPS, self.options.max_iterations)
+        lifted = False
+        if p.comm.allreduce(bool(np.any(delta_bc != 0.0)), op=MPI.LOR):
+            p.u.x.array[p.bc_dofs] = u_bc
+            lifted = system.lifted_step(delta_bc)
+        if system.inner_failure is not None:
+            report.message = system.inner_failure
+            return report
+        outcome = solve(system, FULL_STEPS, self.options.max_iterations, first_iteration=1 if lifted else 0,
+                        first_kind="lifted" if lifted else "", first_step_length=1.0 if lifted else math.nan)
         report.iterations, report.converged = outcome.iterations, outcome.converged
         final = report.final
         if outcome.converged:
@@ -208,13 +226,11 @@ class NNEQM1Solver:
             z = laws.advance(xs[:n3].reshape(nc, 3), dxs[:n3].reshape(nc, 3), alpha, cartesian)
             return np.concatenate([z.reshape(-1), xs[n3:] + alpha * dxs[n3:]]) / x_scale
 
-        g = self.settings.inner
         x0 = np.concatenate([z_m.reshape(-1), rigid_start(cond.BN, cond.w_free)]) / x_scale
         if n_r:  # only a floating body's predictor is out of balance (see _frozen_branch_start)
             x0 = self._frozen_branch_start(x0, x_scale, laws, cond, z_m, w_of, system, advance)
-        result = solve_nonsmooth(residual, x0, tol=tol / F, max_iter=self.settings.inner_max_iterations,
-                                 watchdog=g.watchdog, armijo=g.armijo, min_step=g.min_step, lm_c=g.lm_c,
-                                 lm_delta=g.lm_delta, max_increase=g.max_increase, advance=advance)
+        result = solve_dense(residual, x0, tol=tol / F, max_iter=self.settings.inner_max_iterations,
+                             globalisations=self.settings.inner_globalisations, advance=advance)
         result.x = result.x * x_scale
         return result
 
@@ -303,8 +319,27 @@ class _OuterSystem:
     def start_step(self) -> None:
         """Nothing to keep: every step is taken in full."""
 
-    def newton_direction(self, merit: Merit) -> str | None:
-        """One condensed contact solve: the step (du, z_new)."""
+    def lifted_step(self, delta_bc: np.ndarray) -> bool:
+        """The first outer iteration from the converged state, the prescribed jump ``delta_bc``
+        (at ``problem.bc_dofs``) lifted; the iterate then holds the new prescribed values.
+
+        Returns False (and sets :attr:`inner_failure`) when the condensed contact solve failed.
+        """
+        p = self.problem
+        self.evaluate()
+        delta = np.zeros_like(p.u.x.array)
+        delta[p.bc_dofs] = delta_bc
+        if self.newton_direction(None, lift=delta) is not None:
+            return False
+        self.move(1.0)
+        return True
+
+    def newton_direction(self, merit: Merit | None, lift: np.ndarray | None = None) -> str | None:
+        """One condensed contact solve: the step (du, z_new).
+
+        ``lift``: a jump of the prescribed displacements (local array, zero off the constrained
+        dofs) that the step makes, with K_t δ on the right-hand side (:meth:`lifted_step`).
+        """
         p, s, cond_solver = self.problem, self.solver, self.solver.condensation
         model = p.contact
         R_free, w, _, scale, _, _ = self.current
@@ -312,7 +347,14 @@ class _OuterSystem:
             cond_solver.factorise(p.assemble_tangent, "the tangent stiffness K_t")
             self._X, self._C = cond_solver.pair_flexibility()
         r = R_free.copy()
+        if lift is not None:
+            K_delta = p.tangent_action(lift)
+            r.axpy(1.0, p.free_residual(K_delta))
+            K_delta.destroy()
         r.scale(-1.0)
+        if lift is not None:  # the constrained rows of the right-hand side are du there (identity rows)
+            owned = p.owned_bc_dofs()
+            r.getArray()[owned] = lift[owned]
         x_r = cond_solver.solve(r)
         z_m = model.gather(model.z)
         lam_m, _ = self.laws.force(z_m)

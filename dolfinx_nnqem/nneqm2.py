@@ -98,7 +98,7 @@ from dolfinx_nnqem.linalg import free_dropped_objects
 from dolfinx_nnqem.material import (DEVIATORIC_BASIS, GaussPointValues, deviator_coordinates, deviator_tensors,
                                     elastic_stress, equivalent_stress, flow_direction, strain)
 from dolfinx_nnqem.nneqm1 import rigid_start
-from dolfinx_nnqem.nonsmooth import solve_nonsmooth
+from dolfinx_nnqem.nonsmooth import solve_dense
 from dolfinx_nnqem.problem import ContactProblem, assemble_vector
 from dolfinx_nnqem.solver import NNEQM2Options, SolverOptions
 
@@ -664,13 +664,11 @@ class NNEQM2Solver:
             logger.debug(f"[{self.name}] it {it_offset + k}: |H̃| = {norm:.3e} (pairs {last['Hc']:.3e}, "
                          f"yield {last['H4']:.3e}) {kind} t={t:.2e}")
 
-        g = self.settings.inner
         t0 = time.perf_counter()
         if n_r and d.w_start is not None:
             x0 = self._frozen_branch_start(x0, d, laws, z_scale, residual, advance)
-        result = solve_nonsmooth(residual, x0, tol=tol, max_iter=self.settings.inner_max_iterations, log=log,
-                                 watchdog=g.watchdog, armijo=g.armijo, min_step=g.min_step, lm_c=g.lm_c,
-                                 lm_delta=g.lm_delta, max_increase=g.max_increase, advance=advance)
+        result = solve_dense(residual, x0, tol=tol, max_iter=self.settings.inner_max_iterations, log=log,
+                             globalisations=self.settings.inner_globalisations, advance=advance)
         self._tick("dense_solve", t0)
         # every rank takes rank 0's decision and solution
         comm = self.problem.comm

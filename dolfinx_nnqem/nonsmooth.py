@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -34,7 +34,7 @@ from scipy.linalg.lapack import dgecon
 
 from dolfinx_nnqem.newton import Globalisation, Merit, solve
 
-__all__ = ["DenseSystem", "NonsmoothResult", "solve_nonsmooth"]
+__all__ = ["DenseSystem", "NonsmoothResult", "solve_dense", "solve_nonsmooth"]
 
 ResidualFunction = Callable[[np.ndarray], tuple]
 """``residual(x) -> (H, J)``: H (n,) and a dense J (n, n) in the B-subdifferential of H at x; with
@@ -320,4 +320,61 @@ def solve_nonsmooth(
         result.message = f"{outcome.message}; |H| = {norm:.3e} > tol = {tol:.3e}"
     else:
         result.message = f"not converged after max_iter = {max_iter} iterations: |H| = {norm:.3e} > tol = {tol:.3e}"
+    return result
+
+
+def _describe(globalisation: Globalisation) -> str:
+    return "monotone" if globalisation.watchdog == 0 else f"watchdog {globalisation.watchdog}"
+
+
+def solve_dense(residual: ResidualFunction, x0: npt.ArrayLike, *, tol: float, max_iter: int,
+                globalisations: Sequence[Globalisation], advance: AdvanceFunction | None = None,
+                log: LogFunction | None = None) -> NonsmoothResult:
+    """:func:`solve_nonsmooth` from ``x0`` with each globalisation in turn, until one converges.
+
+    The contact systems of NNEQM1 and NNEQM2 meet two kinds of trouble that no single damping
+    rule handles: full semismooth Newton steps can cycle between pair states (stick ↔ slip, Ψ
+    alternating between two values: a monotone line search breaks the cycle, a watchdog lets it
+    run), and Ψ can have narrow curved valleys and kinks (the polar law's angle) where monotone
+    steps shrink to nothing while a few non-monotone full steps cross them. The first
+    globalisation is tried; if it stops without converging, the next starts again from ``x0``.
+
+    Parameters
+    ----------
+    residual, x0, tol, max_iter, advance
+        As for :func:`solve_nonsmooth` (``max_iter`` per attempt).
+    globalisations
+        The damping rules, in the order they are tried (at least one).
+    log
+        As for :func:`solve_nonsmooth`; later attempts continue the iteration numbers.
+
+    Returns
+    -------
+    NonsmoothResult
+        The first converged attempt's result, or the last attempt's; ``iterations``,
+        ``residual_norms`` and the step counts cover every attempt; a failure's message names
+        each attempt and why it stopped.
+    """
+    if not globalisations:
+        raise ValueError("solve_dense needs at least one globalisation")
+    iterations, norms, counts, failures = 0, [], [0, 0, 0], []
+    for g in globalisations:
+        offset = iterations
+        attempt_log = None if log is None else (lambda k, norm, step, kind, o=offset: log(o + k, norm, step, kind))
+        result = solve_nonsmooth(residual, x0, tol=tol, max_iter=max_iter, log=attempt_log, watchdog=g.watchdog,
+                                 armijo=g.armijo, min_step=g.min_step, lm_c=g.lm_c, lm_delta=g.lm_delta,
+                                 max_increase=g.max_increase, advance=advance)
+        iterations += result.iterations
+        norms += result.residual_norms
+        counts = [counts[0] + result.newton_steps, counts[1] + result.lm_steps,
+                  counts[2] + result.line_search_steps]
+        if result.converged:
+            break
+        failures.append(f"{_describe(g)}: {result.message}")
+    result.iterations, result.residual_norms = iterations, norms
+    result.newton_steps, result.lm_steps, result.line_search_steps = counts
+    if result.converged and failures:
+        result.message = f"{_describe(g)} after {'; '.join(failures)}: {result.message}"
+    elif len(failures) > 1:
+        result.message = "; then ".join(failures)
     return result

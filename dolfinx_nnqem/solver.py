@@ -136,15 +136,27 @@ class NNEQM1Options:
     inner_max_iterations
         Iteration limit of the dense nonsmooth solve.
     inner
-        Damping of the dense nonsmooth solve (ν = lm_c |H̃|^lm_delta on its scaled rows).
+        Damping of the dense nonsmooth solve (ν = lm_c |H̃|^lm_delta on its scaled rows). The
+        default watchdog crosses the kinks and curved valleys of the merit function (the polar
+        law's angle) where monotone steps shrink to nothing.
+    inner_retry
+        Tried from the same start when ``inner`` stops without converging (None: no retry).
+        The default, monotone Armijo steps, breaks the stick ↔ slip cycles that full steps
+        can fall into (:func:`~dolfinx_nnqem.nonsmooth.solve_dense`).
     """
 
     modified: bool = False
     inner_max_iterations: int = 100
     inner: Globalisation = field(default_factory=lambda: Globalisation(min_step=1e-10, watchdog=6))
+    inner_retry: Globalisation | None = field(default_factory=lambda: Globalisation(min_step=1e-10, watchdog=0))
 
     def __post_init__(self):
         _check_integer("NNEQM1Options", "inner_max_iterations", self.inner_max_iterations, 1)
+
+    @property
+    def inner_globalisations(self) -> tuple[Globalisation, ...]:
+        """The dense solve's damping rules in the order they are tried."""
+        return (self.inner,) if self.inner_retry is None else (self.inner, self.inner_retry)
 
 
 @dataclass
@@ -172,6 +184,10 @@ class NNEQM2Options:
         False starts them from the previous increment (the seed's procedure).
     inner
         Damping of the dense nonsmooth solves.
+    inner_retry
+        Tried from the same start when ``inner`` stops without converging (None: no retry):
+        by default a watchdog, which crosses kinks of the merit function where the monotone
+        steps of ``inner`` shrink to nothing (see :class:`NNEQM1Options`).
     max_dense_order
         Largest order 3 NC + NG of the dense system accepted (NG: every Gauss point of the
         mesh). Its matrices grow as the order squared (8 bytes each entry; 20 000 is 3.2 GB per
@@ -185,6 +201,7 @@ class NNEQM2Options:
     flow_rtol: float | None = None
     regular_start: bool = True
     inner: Globalisation = field(default_factory=lambda: Globalisation(min_step=1e-10, watchdog=0))
+    inner_retry: Globalisation | None = field(default_factory=lambda: Globalisation(min_step=1e-10, watchdog=6))
     max_dense_order: int = 20_000
 
     def __post_init__(self):
@@ -195,6 +212,11 @@ class NNEQM2Options:
         _check_integer("NNEQM2Options", "max_flow_updates", self.max_flow_updates, 0)
         if self.flow_rtol is not None:
             _check_real("NNEQM2Options", "flow_rtol", self.flow_rtol, 0.0, 1.0)
+
+    @property
+    def inner_globalisations(self) -> tuple[Globalisation, ...]:
+        """The dense solves' damping rules in the order they are tried."""
+        return (self.inner,) if self.inner_retry is None else (self.inner, self.inner_retry)
 
 
 def make_solver(method: str, problem, options: SolverOptions | None = None, **method_options) -> Solver:

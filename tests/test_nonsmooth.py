@@ -189,3 +189,33 @@ def test_invalid_options_raise(options, name):
 def test_wrong_residual_shape_raises():
     with pytest.raises(ValueError, match="shape"):
         solve_nonsmooth(lambda x: (np.zeros(3), np.eye(3)), np.zeros(2), tol=1e-8)
+
+
+def _arctan(x):
+    """H(x) = arctan(x): full Newton steps from |x0| > 1.39 diverge, damped ones converge."""
+    return np.arctan(x), np.diag(1.0 / (1.0 + x * x))
+
+
+def test_solve_dense_retries_from_the_start_with_the_next_globalisation():
+    from dolfinx_nnqem.newton import Globalisation
+    from dolfinx_nnqem.nonsmooth import solve_dense
+
+    full, monotone = Globalisation(min_step=1e-10, watchdog=6), Globalisation(min_step=1e-10, watchdog=0)
+    x0 = np.array([3.0])
+    alone = solve_dense(_arctan, x0, tol=1e-10, max_iter=6, globalisations=(full,))
+    retried = solve_dense(_arctan, x0, tol=1e-10, max_iter=6, globalisations=(full, monotone))
+    direct = solve_nonsmooth(_arctan, x0, tol=1e-10, max_iter=6, watchdog=0)
+    print(f"\n  watchdog alone: {alone.message}\n  then monotone: {retried.message}")
+    assert not alone.converged and "not converged" in alone.message
+    assert retried.converged and abs(retried.x[0]) < 1e-10
+    assert retried.iterations == alone.iterations + direct.iterations  # the retry starts again from x0
+    assert len(retried.residual_norms) == len(alone.residual_norms) + len(direct.residual_norms)
+    np.testing.assert_array_equal(retried.x, direct.x)
+    # a first globalisation that converges is the only one run
+    first = solve_dense(_arctan, x0, tol=1e-10, max_iter=6, globalisations=(monotone, full))
+    assert first.converged and first.iterations == direct.iterations
+    both_fail = solve_dense(_arctan, x0, tol=1e-10, max_iter=2, globalisations=(full, monotone))
+    assert not both_fail.converged
+    assert both_fail.message.startswith("watchdog 6: ") and "; then monotone: " in both_fail.message
+    with pytest.raises(ValueError, match="at least one globalisation"):
+        solve_dense(_arctan, x0, tol=1e-10, max_iter=6, globalisations=())

@@ -3,6 +3,8 @@
 * The suite's fast cases (pressure and drag together from rest on elastoplastic blocks, the
   sliding block) with every method and both laws must converge (cutbacks printed); the two beams
   in 15 increments without a cutback, with both laws (docs/robustness.md).
+* NNEQM1 on prescribed-displacement paths (the cyclic path, a gap closed and re-opened) without
+  cutback, equal to the monolithic solver along the whole cyclic path.
 * A load no state can carry (drag 0.35 p > μ_f p) ends in ConvergenceError for every method.
 * A state without forces (body 2 pulled off, every pair open; or moved down before it touches)
   converges: the force scale has a floor (``ContactProblem.force_floor``), else the relative
@@ -48,6 +50,46 @@ def test_two_beams_in_15_increments(method, law):
     cell = robustness.run_cell(case, method, law, case.increments)
     print(f"\n  two beams {method}/{law}: {robustness.cell_text(cell)}")
     assert cell.converged and cell.cutbacks == 0, cell.message
+
+
+def solve_along_the_path(case: robustness.Case, method: str, law: str):
+    """The case solved at its increments: (load factors, cutbacks, {ℓ: (pair forces on body 1, u)})."""
+    problem = case.build(law)
+    states = {}
+
+    def keep(result):
+        states[round(result.load_factor, 12)] = (pair_table(problem)["force_on_body1"].copy(), problem.u.x.array.copy())
+
+    results = solve_load_steps(problem, make_solver(method, problem, SolverOptions(rtol=1e-12)), case.increments,
+                               callbacks=[keep])
+    return [r.load_factor for r in results], sum(1 for r in results if r.cutbacks), states
+
+
+@pytest.mark.parametrize("law", robustness.LAWS)
+def test_nneqm1_on_the_cyclic_path_equals_the_monolithic_solver(law):
+    """Press, drag forward, drag back past the reversal, lift off (prescribed displacements): NNEQM1
+    lifts each jump of the prescribed values into its first outer iteration and takes no cutback
+    (26 with both laws when it factorised at the moved boundary layer); every increment equals
+    the monolithic solver's to 1e-8."""
+    case = next(c for c in robustness.CASES if c.name == "cyclic")
+    factors, cutbacks, nneqm1 = solve_along_the_path(case, "nneqm1", law)
+    _, _, monolithic = solve_along_the_path(case, "monolithic", law)
+    assert cutbacks == 0 and len(factors) == case.increments and set(nneqm1) == set(monolithic)
+    F_max = max(abs(forces).max() for forces, _ in monolithic.values())
+    u_max = max(abs(u).max() for _, u in monolithic.values())
+    dF = max(abs(nneqm1[ell][0] - monolithic[ell][0]).max() for ell in monolithic) / F_max
+    du = max(abs(nneqm1[ell][1] - monolithic[ell][1]).max() for ell in monolithic) / u_max
+    print(f"\n  cyclic {law}: NNEQM1 against monolithic over {len(monolithic)} increments: pair forces {dF:.1e}, "
+          f"u {du:.1e}")
+    assert dF < 1e-8 and du < 1e-8
+
+
+@pytest.mark.parametrize("law", robustness.LAWS)
+def test_nneqm1_closes_and_reopens_a_gap_without_cutback(law):
+    case = next(c for c in robustness.CASES if c.name == "gap-closes-reopens")
+    factors, cutbacks, _ = solve_along_the_path(case, "nneqm1", law)
+    print(f"\n  gap {law}: load factors {factors}, cutbacks {cutbacks}")
+    assert cutbacks == 0 and len(factors) == case.increments
 
 
 @pytest.mark.parametrize("method", ["monolithic", "nneqm1", SLOW_NNEQM2])
