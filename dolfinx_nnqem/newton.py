@@ -6,10 +6,14 @@ backend so that they are comparable),
 * a generalized Newton step J_k d = −H(x_k), J_k ∈ ∂_B H(x_k);
 * Armijo backtracking on Ψ: Ψ(x + α d) ≤ Ψ(x) + σ α ∇Ψ·d, α = 1, ½, ¼, ... ≥ ``min_step``;
 * Chamberlain's watchdog: a full step that increases Ψ (by at most ``max_increase``) is
-  accepted, up to ``watchdog`` steps in a row without a new best iterate; then the iteration
-  returns to the best iterate and takes one line-searched step from there. A change of pair
-  state makes Ψ jump (an open pair's trial penetration enters H as r·g) although the full step
-  is the one semismooth Newton needs;
+  accepted, up to ``watchdog`` steps in a row without progress (Ψ below ``watchdog_progress``
+  times its value at the last progress); then the iteration returns to the best iterate (the
+  lowest Ψ) and takes one line-searched step from there. After ``watchdog_restarts`` such
+  returns the rest of the solve is monotone. A change of pair state makes Ψ jump (an open
+  pair's trial penetration enters H as r·g) although the full step is the one semismooth
+  Newton needs; but full steps can also cycle between pair states (stick ↔ slip) with Ψ
+  creeping down by a fraction of a percent per cycle, which a watchdog that counted every
+  decrease as progress would follow to the iteration limit;
 * Levenberg–Marquardt (JᵀJ + ν I) d = −JᵀH when there is no Newton direction (a singular J,
   a failed linear solve) or it fails the line search; if the LM direction fails the line search
   too, Ψ is (numerically) stationary and the driver stops and says so.
@@ -48,6 +52,12 @@ class Globalisation:
         Full steps accepted in a row without a new best Ψ (0: a monotone method).
     max_increase
         The watchdog accepts a full step only if Ψ grows by at most this factor.
+    watchdog_progress
+        Progress, for the watchdog, is Ψ below this fraction of its value at the last progress;
+        None: 1 − 2·armijo, any sufficient decrease (Chamberlain's rule).
+    watchdog_restarts
+        Returns to the best iterate after which the solve continues with monotone steps only;
+        None: no limit.
     lm_c, lm_delta
         The LM parameter ν = lm_c · (residual size)^lm_delta, in the backend's units (see the
         backends); lm_delta in [1, 2] keeps LM locally superlinear.
@@ -59,6 +69,8 @@ class Globalisation:
     min_step: float = 1.0 / 64
     watchdog: int = 6
     max_increase: float = 1e8
+    watchdog_progress: float | None = None
+    watchdog_restarts: int | None = None
     lm_c: float = 1.0
     lm_delta: float = 1.0
 
@@ -71,6 +83,11 @@ class Globalisation:
             raise ValueError(f"watchdog must be an integer >= 0, got {self.watchdog!r}")
         if not (math.isfinite(self.max_increase) and self.max_increase >= 1.0):
             raise ValueError(f"max_increase must be finite and >= 1, got {self.max_increase!r}")
+        if self.watchdog_progress is not None and not 0.0 < self.watchdog_progress < 1.0:
+            raise ValueError(f"watchdog_progress must be in (0, 1) or None, got {self.watchdog_progress!r}")
+        if self.watchdog_restarts is not None and not (isinstance(self.watchdog_restarts, int)
+                                                       and self.watchdog_restarts >= 1):
+            raise ValueError(f"watchdog_restarts must be an integer >= 1 or None, got {self.watchdog_restarts!r}")
         if not (math.isfinite(self.lm_c) and self.lm_c > 0.0):
             raise ValueError(f"lm_c must be finite and > 0, got lm_c = {self.lm_c!r}")
         if not 1.0 <= self.lm_delta <= 2.0:
@@ -188,8 +205,14 @@ def solve(system: NewtonSystem, globalisation: Globalisation, max_iterations: in
     result = NewtonResult(iterations=first_iteration)
     merit = system.evaluate()
     step_length, kind = first_step_length, first_kind
+    # the watchdog's best iterate: the last progress (Chamberlain), or the lowest Ψ when progress
+    # is measured by its own fraction
     best: tuple[Merit, object] | None = None
-    nonmonotone = 0  # steps taken since the best iterate
+    track_lowest = g.watchdog_progress is not None
+    progress = 1.0 - 2.0 * g.armijo if g.watchdog_progress is None else g.watchdog_progress
+    progress_psi = math.inf  # Ψ at the last progress
+    nonmonotone = 0  # steps taken since the last progress
+    watchdog = g.watchdog  # 0 once the watchdog has returned to the best iterate watchdog_restarts times
     for iteration in range(first_iteration, max_iterations + 1):
         result.iterations = iteration
         system.record(iteration, step_length, kind)
@@ -202,18 +225,24 @@ def solve(system: NewtonSystem, globalisation: Globalisation, max_iterations: in
             return result
         if iteration == max_iterations:
             break
-        if g.line_search and g.watchdog > 0:
-            if best is None or merit.psi < (1.0 - 2.0 * g.armijo) * best[0].psi:
-                best, nonmonotone = (merit, system.snapshot()), 0
-            elif nonmonotone >= g.watchdog:
-                merit = system.restore(best[1])  # the watchdog ran out: monotone steps from the best
-                result.watchdog_restarts += 1
-                nonmonotone = -1
+        if g.line_search and watchdog > 0:
+            if best is None or merit.psi < progress * progress_psi:
+                best, progress_psi, nonmonotone = (merit, system.snapshot()), merit.psi, 0
+            else:
+                if track_lowest and merit.psi < best[0].psi:
+                    best = (merit, system.snapshot())
+                if nonmonotone >= watchdog:  # the watchdog ran out: a monotone step from the best
+                    if not track_lowest or best[0].psi < merit.psi:
+                        merit = system.restore(best[1])
+                    progress_psi, nonmonotone = best[0].psi, -1
+                    result.watchdog_restarts += 1
+                    if g.watchdog_restarts is not None and result.watchdog_restarts >= g.watchdog_restarts:
+                        watchdog = 0
         system.start_step()
         why_not = system.newton_direction(merit)
         step = None
         if why_not is None:
-            step, rejected = _take_step(system, merit, g, allow_increase=g.watchdog > 0 and nonmonotone >= 0)
+            step, rejected = _take_step(system, merit, g, allow_increase=watchdog > 0 and nonmonotone >= 0)
             result.line_search_steps += rejected
             if step is None:
                 why_not = "the Newton direction failed the line search"

@@ -112,7 +112,8 @@ class MonolithicOptions:
     extrapolate: bool = True
     augmentation: float = 1.0
     lag_preconditioner: bool = True
-    globalisation: Globalisation = field(default_factory=lambda: Globalisation(min_step=1.0 / 64, watchdog=6))
+    globalisation: Globalisation = field(default_factory=lambda: Globalisation(
+        min_step=1.0 / 64, watchdog=6, watchdog_progress=0.5, watchdog_restarts=2))
 
     def __post_init__(self):
         if self.linear_solver not in ("direct", "iterative", "auto"):

@@ -219,3 +219,78 @@ def test_solve_dense_retries_from_the_start_with_the_next_globalisation():
     assert both_fail.message.startswith("watchdog 6: ") and "; then monotone: " in both_fail.message
     with pytest.raises(ValueError, match="at least one globalisation"):
         solve_dense(_arctan, x0, tol=1e-10, max_iter=6, globalisations=())
+
+
+class _CreepingCycle:
+    """A Newton backend whose full steps cycle A → B → A' → ... with Ψ(A) creeping down by 0.1 %
+    a cycle (Ψ(B) = 2); a damped step from A lands on the solution. The pattern of the monolithic
+    solver on a gap closed with slip inside one increment (stick ↔ slip between two pair sets)."""
+
+    def __init__(self):
+        self.x, self._x0 = ("A", 0), None
+
+    def _merit(self, x=None):
+        from dolfinx_nnqem.newton import Merit
+
+        kind, k = x or self.x
+        psi = {"A": 0.999 ** k, "B": 2.0, "solution": 0.0}[kind]
+        return Merit(psi, psi == 0.0)
+
+    def evaluate(self):
+        return self._merit()
+
+    def record(self, iteration, step_length, kind):
+        pass
+
+    def snapshot(self):
+        return self.x
+
+    def restore(self, snapshot):
+        self.x = snapshot
+        return self._merit()
+
+    def start_step(self):
+        self._x0 = self.x
+
+    def newton_direction(self, merit):
+        return None
+
+    def lm_direction(self, merit, globalisation):
+        return "none here"
+
+    def slope(self):
+        return -2.0 * self._merit(self._x0).psi
+
+    def move(self, step_length):
+        kind, k = self._x0
+        if step_length < 1.0:
+            self.x = ("solution", 0)
+        else:
+            self.x = ("B", k) if kind == "A" else ("A", k + 1)
+        return self._merit()
+
+
+def test_watchdog_breaks_a_creeping_cycle_of_full_steps():
+    """Chamberlain's rule counts every sufficient decrease as progress and follows the cycle to the
+    iteration limit; with progress measured as halving Ψ the watchdog returns to the best iterate
+    and its monotone step converges (the monolithic solver's default)."""
+    from dolfinx_nnqem.newton import Globalisation, solve
+    from dolfinx_nnqem.solver import MonolithicOptions
+
+    classic = solve(_CreepingCycle(), Globalisation(watchdog=6), 40)
+    default = MonolithicOptions().globalisation
+    broken = solve(_CreepingCycle(), default, 40)
+    print(f"\n  Chamberlain's rule: {classic.message}; progress = halving Ψ: {broken.message}, "
+          f"{broken.watchdog_restarts} return(s) to the best iterate")
+    assert not classic.converged and classic.iterations == 40 and classic.watchdog_restarts == 0
+    assert broken.converged and broken.watchdog_restarts == 1 and broken.iterations <= default.watchdog + 2
+
+
+@pytest.mark.parametrize("options, name", [({"watchdog_progress": 1.0}, "watchdog_progress"),
+                                           ({"watchdog_progress": 0.0}, "watchdog_progress"),
+                                           ({"watchdog_restarts": 0}, "watchdog_restarts")])
+def test_invalid_watchdog_options_raise(options, name):
+    from dolfinx_nnqem.newton import Globalisation
+
+    with pytest.raises(ValueError, match=name):
+        Globalisation(**options)
