@@ -298,6 +298,7 @@ class MonolithicSolver:
         p.u.x.scatter_forward()
         if p.has_contact:
             p.contact.z = p.contact.advance(z0, dz, alpha, None if lin is None else lin.cartesian)
+            p.contact.follow_slip(p.relative_displacement())
 
     def _tick(self, key: str, t0: float) -> None:
         self._timings[key] = self._timings.get(key, 0.0) + time.perf_counter() - t0

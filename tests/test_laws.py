@@ -669,3 +669,26 @@ def test_spring_pair_outside_the_well_posed_class_never_returns_a_wrong_solution
     for law_name in LAW_NAMES:
         print(f"  {law_name}: converged {converged[law_name]}/{n_cases}")
     assert converged["alart-curnier"] >= 0.9 * n_cases
+
+
+def test_polar_follow_slip_sets_the_angle_of_pairs_without_friction_bound():
+    """Open (p_n − r g ≤ 0) and frictionless pairs: θ on the zero of H3 nearest the old θ; pairs
+    with a friction bound, pinned pairs and pairs at rest keep θ; the Cartesian law changes nothing."""
+    from dolfinx_nnqem.contact.laws import AlartCurnierLaw, PolarLaw
+
+    law, r = PolarLaw(), 1.0e6
+    w_prev = np.zeros((5, 3))
+    #               open (gap)         in contact, μ>0      frictionless       open, pinned t2     open, at rest
+    w = np.array([[1e-3, 2e-4, 2e-4], [-1e-3, 2e-4, 0.0], [-1e-3, 0.0, 3e-4], [1e-3, 1e-4, 1e-4], [1e-3, 0.0, 0.0]])
+    z = np.array([[0.0, 0.0, 4.0], [5e2, 1e2, 1.0], [5e2, 0.0, -2.0], [0.0, 0.0, 0.3], [0.0, 0.0, 0.7]])
+    g0, mu_f = np.zeros(5), np.array([0.3, 0.3, 0.0, 0.3, 0.3])
+    constrained = np.zeros((5, 3), dtype=bool)
+    constrained[3, 2] = True
+    out = law.follow_slip(z, w, w_prev, g0, mu_f, r, constrained)
+    assert out[0, 2] == pytest.approx(np.pi / 4 + np.pi)  # nearest to 4.0 of π/4 + kπ
+    assert out[2, 2] == pytest.approx(-np.pi / 2)  # slip along t2; nearest to −2.0
+    np.testing.assert_array_equal(out[[1, 3, 4]], z[[1, 3, 4]])
+    np.testing.assert_array_equal(out[:, :2], z[:, :2])  # only θ moves
+    H = law.evaluate(w, w_prev, out, g0, mu_f, r).H
+    assert abs(H[0, 2]) < 1e-12 * r * 1e-3 and abs(H[2, 2]) < 1e-12 * r * 1e-3
+    np.testing.assert_array_equal(AlartCurnierLaw().follow_slip(z, w, w_prev, g0, mu_f, r, constrained), z)

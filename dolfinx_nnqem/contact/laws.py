@@ -426,6 +426,12 @@ class ContactLaw(Protocol):
         """The unknowns after the step α dy from z (``cartesian`` from :meth:`linearise`)."""
         ...
 
+    def follow_slip(self, z: npt.ArrayLike, w: npt.ArrayLike, w_prev: npt.ArrayLike, g0: npt.ArrayLike,
+                    mu_f: npt.ArrayLike, r: float, constrained: npt.ArrayLike) -> np.ndarray:
+        """z with the unknowns that only follow the slip (no force depends on them) set to where
+        their rows vanish at (w, z); the others as they are."""
+        ...
+
 
 class AlartCurnierLaw:
     """Cartesian Alart--Curnier law; unknowns z = lambda = (p_n, q1, q2).
@@ -502,6 +508,11 @@ class AlartCurnierLaw:
                 cartesian: np.ndarray | None) -> np.ndarray:
         """z + α dy."""
         return np.asarray(z, dtype=np.float64) + alpha * np.asarray(dy, dtype=np.float64)
+
+    def follow_slip(self, z: npt.ArrayLike, w: npt.ArrayLike, w_prev: npt.ArrayLike, g0: npt.ArrayLike,
+                    mu_f: npt.ArrayLike, r: float, constrained: npt.ArrayLike) -> np.ndarray:
+        """z as it is: every Cartesian unknown is a force."""
+        return np.asarray(z, dtype=np.float64)
 
     def __repr__(self) -> str:
         return "AlartCurnierLaw()"
@@ -722,6 +733,27 @@ class PolarLaw:
         out[c, 1] = np.where(flip, -size, size)
         out[c, 2] = np.where(size > 0.0, theta + turn, theta)
         return out
+
+    def follow_slip(self, z: npt.ArrayLike, w: npt.ArrayLike, w_prev: npt.ArrayLike, g0: npt.ArrayLike,
+                    mu_f: npt.ArrayLike, r: float, constrained: npt.ArrayLike) -> np.ndarray:
+        """θ of the pairs without a friction bound (open, p_n − r g ≤ 0, or μ_f = 0; no pinned
+        direction) set on their slip: θ_s + kπ, the zero of H3 = r (s1 sin θ − s2 cos θ) nearest θ.
+
+        Their force does not depend on θ (H2 = p_r drives it to zero), so θ is a slave of the
+        slip; left to Newton steps of at most :data:`MAX_TURN`, an open pair whose slip turns
+        takes several iterations to follow it, and its H3, of the order r |s|, dominates the
+        residual although it carries no physics. Pairs at rest (s = 0) keep θ.
+        """
+        z = np.array(z, dtype=np.float64, copy=True)
+        w = np.asarray(w, dtype=np.float64)
+        constrained = np.asarray(constrained, dtype=bool)
+        s = w[:, 1:] - np.asarray(w_prev, dtype=np.float64)[:, 1:]
+        gap = np.asarray(g0, dtype=np.float64) + w[:, 0]
+        unbounded = (z[:, 0] - r * gap <= 0.0) | (np.asarray(mu_f, dtype=np.float64) == 0.0)
+        follow = unbounded & ~constrained[:, 1] & ~constrained[:, 2] & (np.hypot(s[:, 0], s[:, 1]) > 0.0)
+        theta_s = np.arctan2(s[follow, 1], s[follow, 0])
+        z[follow, 2] = theta_s + np.pi * np.round((z[follow, 2] - theta_s) / np.pi)
+        return z
 
     def __repr__(self) -> str:
         return "PolarLaw()"

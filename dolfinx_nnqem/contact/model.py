@@ -252,6 +252,15 @@ class PairLaws:
             out[i] = group.law.advance(z[i], dy[i], alpha, None if cartesian is None else cartesian[i])
         return out
 
+    def follow_slip(self, z: np.ndarray, w: np.ndarray, w_prev: np.ndarray) -> np.ndarray:
+        """z with the unknowns that only follow the slip set on it (each law's ``follow_slip``)."""
+        out = np.array(z, dtype=np.float64, copy=True)
+        for group in self.groups:
+            i = group.index
+            out[i] = group.law.follow_slip(z[i], w[i], w_prev[i], self.g0[i], self.mu_f[i], group.r,
+                                           self.constrained[i])
+        return out
+
     def initial_unknowns(self) -> np.ndarray:
         """z of force-free pairs (each law's ``initial_unknowns`` for its pinned directions)."""
         z = np.zeros((self.size, 3))
@@ -538,6 +547,11 @@ class ContactModel:
     def advance(self, z: np.ndarray, dy: np.ndarray, alpha: float, cartesian: np.ndarray | None) -> np.ndarray:
         """The unknowns after the step α dy from z (see :meth:`PairLaws.advance`)."""
         return self.laws.advance(z, dy, alpha, cartesian)
+
+    def follow_slip(self, w: np.ndarray) -> None:
+        """Set the unknowns that only follow the slip (the polar angle of pairs without a friction
+        bound) on the slip of the relative displacement ``w`` (see :meth:`PairLaws.follow_slip`)."""
+        self.z = self.laws.follow_slip(self.z, w, self.w_n)
 
     def unknown_scale(self, force_scale: float) -> np.ndarray:
         """(num_local, 3): the scale of each local unknown when forces are of order ``force_scale``."""
