@@ -154,9 +154,9 @@ class NNEQM1Solver:
         if p.comm.allreduce(bool(np.any(delta_bc != 0.0)), op=MPI.LOR):
             p.u.x.array[p.bc_dofs] = u_bc
             lifted = system.lifted_step(delta_bc)
-        if system.inner_failure is not None:
-            report.message = system.inner_failure
-            return report
+            if not lifted:  # its contact solve failed: the plain start, from the moved boundary
+                p.apply_prescribed_displacements(load_factor)
+                system.inner_failure = None
         outcome = solve(system, FULL_STEPS, self.options.max_iterations, first_iteration=1 if lifted else 0,
                         first_kind="lifted" if lifted else "", first_step_length=1.0 if lifted else math.nan)
         report.iterations, report.converged = outcome.iterations, outcome.converged
@@ -323,7 +323,8 @@ class _OuterSystem:
         """The first outer iteration from the converged state, the prescribed jump ``delta_bc``
         (at ``problem.bc_dofs``) lifted; the iterate then holds the new prescribed values.
 
-        Returns False (and sets :attr:`inner_failure`) when the condensed contact solve failed.
+        Returns False (and sets :attr:`inner_failure`) when the condensed contact solve failed;
+        the iterate is then the converged state.
         """
         p = self.problem
         self.evaluate()
@@ -349,8 +350,10 @@ class _OuterSystem:
         r = R_free.copy()
         if lift is not None:
             K_delta = p.tangent_action(lift)
-            r.axpy(1.0, p.free_residual(K_delta))
-            K_delta.destroy()
+            K_delta_free = p.free_residual(K_delta)
+            r.axpy(1.0, K_delta_free)
+            for vec in (K_delta, K_delta_free):
+                vec.destroy()
         r.scale(-1.0)
         if lift is not None:  # the constrained rows of the right-hand side are du there (identity rows)
             owned = p.owned_bc_dofs()
