@@ -409,7 +409,8 @@ class ContactProblem:
         return np.concatenate([np.array(values), motion])
 
     def extrapolate(self, load_factor: float) -> bool:
-        """Secant predictor: u ← u_n + β (u_n − u_{n−1}), z likewise; True if it was applied.
+        """Secant predictor: u ← u_n + β (u_n − u_{n−1}), the contact force likewise (see
+        :meth:`ContactModel.extrapolate`); True if it was applied.
 
         Starts Newton from the linear extrapolation of the last two converged increments
         instead of from the last one (constrained dofs are set afterwards by
@@ -434,7 +435,7 @@ class ContactProblem:
         u_n = self.state.u_n.x.array
         self.u.x.array[:] = u_n + beta * (u_n - u_prev)
         if self.has_contact:
-            self.contact.z = self.contact.z_n + beta * (self.contact.z_n - z_prev)
+            self.contact.extrapolate(z_prev, beta)
         return True
 
     @property

@@ -692,3 +692,35 @@ def test_polar_follow_slip_sets_the_angle_of_pairs_without_friction_bound():
     H = law.evaluate(w, w_prev, out, g0, mu_f, r).H
     assert abs(H[0, 2]) < 1e-12 * r * 1e-3 and abs(H[2, 2]) < 1e-12 * r * 1e-3
     np.testing.assert_array_equal(AlartCurnierLaw().follow_slip(z, w, w_prev, g0, mu_f, r, constrained), z)
+
+
+def test_secant_prediction_extrapolates_the_force_for_both_laws():
+    """PairLaws.extrapolate: the force λ_n + β (λ_n − λ_prev) for both laws; the Cartesian
+    unknowns are exactly z_n + β (z_n − z_prev); the polar angle is taken nearest θ_n (no line
+    through the meaningless angle of a pair that had no friction force), a zero force keeps θ_n."""
+    from dolfinx_nnqem.contact.laws import AlartCurnierLaw, PolarLaw
+    from dolfinx_nnqem.contact.model import LawGroup, PairLaws
+
+    n, beta = 4, 0.5
+    #                    no friction force before      turning          reversing       open now and before
+    lam_prev = np.array([[1e3, 0.0, 0.0], [1e3, 2e2, 0.0], [1e3, 1e2, 1e2], [0.0, 0.0, 0.0]])
+    lam_n = np.array([[2e3, -3e2, 4e2], [2e3, 3e2, 3e2], [2e3, -1e1, -1e1], [0.0, 0.0, 0.0]])
+    expected = lam_n + beta * (lam_n - lam_prev)
+    common = dict(g0=np.zeros(n), mu_f=np.full(n, 0.3), constrained=np.zeros((n, 3), dtype=bool))
+
+    cartesian = PairLaws((LawGroup(AlartCurnierLaw(), 1e6, 1e5, np.arange(n)),), **common)
+    z = cartesian.extrapolate(lam_n, lam_prev, beta)
+    np.testing.assert_array_equal(z, lam_n + beta * (lam_n - lam_prev))
+
+    polar_law = PolarLaw()
+    polar = PairLaws((LawGroup(polar_law, 1e6, 1e5, np.arange(n)),), **common)
+    z_prev = polar_law.unknowns(lam_prev)
+    z_prev[0, 2] = 2.5  # any angle: the pair had no friction force
+    z_n = polar_law.unknowns(lam_n)
+    z_n[3, 2] = -1.0
+    z = polar.extrapolate(z_n, z_prev, beta)
+    np.testing.assert_allclose(polar_law.force(z)[0], expected, rtol=1e-14, atol=1e-10)
+    assert np.all(np.abs(z[:, 2] - z_n[:, 2]) <= 0.5 * np.pi + 1e-14)  # nearest representation
+    assert z[3, 2] == -1.0 and z[3, 1] == 0.0
+    # the old line through z gave another force wherever θ_prev was meaningless
+    assert not np.allclose(polar_law.force(z_n + beta * (z_n - z_prev))[0][0], expected[0])

@@ -252,6 +252,18 @@ class PairLaws:
             out[i] = group.law.advance(z[i], dy[i], alpha, None if cartesian is None else cartesian[i])
         return out
 
+    def extrapolate(self, z_n: np.ndarray, z_prev: np.ndarray, beta: float) -> np.ndarray:
+        """Secant prediction: the unknowns of the force λ_n + β (λ_n − λ_prev), taken nearest z_n.
+
+        The force is extrapolated, not z (for the Cartesian law, z = λ, this is the same): the
+        polar angle of a pair without friction force at the previous increment means nothing,
+        and a line through it turns the predicted force by an arbitrary angle. The new unknowns
+        come from :meth:`advance` with every pair stepping in the force.
+        """
+        lam_n, _ = self.force(z_n)
+        lam_prev, _ = self.force(z_prev)
+        return self.advance(z_n, lam_n - lam_prev, beta, np.ones(self.size, dtype=bool))
+
     def follow_slip(self, z: np.ndarray, w: np.ndarray, w_prev: np.ndarray) -> np.ndarray:
         """z with the unknowns that only follow the slip set on it (each law's ``follow_slip``)."""
         out = np.array(z, dtype=np.float64, copy=True)
@@ -547,6 +559,11 @@ class ContactModel:
     def advance(self, z: np.ndarray, dy: np.ndarray, alpha: float, cartesian: np.ndarray | None) -> np.ndarray:
         """The unknowns after the step α dy from z (see :meth:`PairLaws.advance`)."""
         return self.laws.advance(z, dy, alpha, cartesian)
+
+    def extrapolate(self, z_prev: np.ndarray, beta: float) -> None:
+        """Secant prediction of the unknowns from z_n and the previous increment's ``z_prev``
+        (see :meth:`PairLaws.extrapolate`)."""
+        self.z = self.laws.extrapolate(self.z_n, z_prev, beta)
 
     def follow_slip(self, w: np.ndarray) -> None:
         """Set the unknowns that only follow the slip (the polar angle of pairs without a friction
