@@ -48,7 +48,7 @@ from dolfinx_nnqem.contact.model import PairLaws
 from dolfinx_nnqem.convergence import IterationRecord, SolveReport, count_states, logger
 from dolfinx_nnqem.linalg import free_dropped_objects, global_norm
 from dolfinx_nnqem.newton import Globalisation, Merit, solve
-from dolfinx_nnqem.nonsmooth import solve_dense
+from dolfinx_nnqem.nonsmooth import Fallback, solve_dense
 from dolfinx_nnqem.problem import ContactProblem
 from dolfinx_nnqem.solver import NNEQM1Options, SolverOptions
 
@@ -226,11 +226,26 @@ class NNEQM1Solver:
             z = laws.advance(xs[:n3].reshape(nc, 3), dxs[:n3].reshape(nc, 3), alpha, cartesian)
             return np.concatenate([z.reshape(-1), xs[n3:] + alpha * dxs[n3:]]) / x_scale
 
+        def advance_following(x, dx, alpha, cartesian):
+            """:func:`advance`, then the unknowns no force depends on (the polar angle of pairs
+            without friction force) set on the slip there (:meth:`PairLaws.follow_slip`)."""
+            xs = advance(x, dx, alpha, cartesian) * x_scale
+            z = xs[:n3].reshape(nc, 3)
+            lam, _ = laws.force(z)
+            z = laws.follow_slip(z, w_of(xs, lam).reshape(nc, 3), cond.w_prev)
+            return np.concatenate([z.reshape(-1), xs[n3:]]) / x_scale
+
         x0 = np.concatenate([z_m.reshape(-1), rigid_start(cond.BN, cond.w_free)]) / x_scale
         if n_r:  # only a floating body's predictor is out of balance (see _frozen_branch_start)
             x0 = self._frozen_branch_start(x0, x_scale, laws, cond, z_m, w_of, system, advance)
+        # The polar angles follow the slip only if the plain iteration fails: measured on the
+        # robustness suite, following always costs cutbacks elsewhere (docs/robustness.md)
+        fallback = None
+        if laws.slip_following:
+            fallback = Fallback("with the polar angles on the slip", advance_following(x0, np.zeros_like(x0), 0.0, None),
+                                advance_following)
         result = solve_dense(residual, x0, tol=tol / F, max_iter=self.settings.inner_max_iterations,
-                             globalisations=self.settings.inner_globalisations, advance=advance)
+                             globalisations=self.settings.inner_globalisations, advance=advance, fallback=fallback)
         result.x = result.x * x_scale
         return result
 

@@ -26,6 +26,7 @@ import math
 import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -34,7 +35,7 @@ from scipy.linalg.lapack import dgecon
 
 from dolfinx_nnqem.newton import Globalisation, Merit, solve
 
-__all__ = ["DenseSystem", "NonsmoothResult", "solve_dense", "solve_nonsmooth"]
+__all__ = ["DenseSystem", "Fallback", "NonsmoothResult", "solve_dense", "solve_nonsmooth"]
 
 ResidualFunction = Callable[[np.ndarray], tuple]
 """``residual(x) -> (H, J)``: H (n,) and a dense J (n, n) in the B-subdifferential of H at x; with
@@ -327,9 +328,18 @@ def _describe(globalisation: Globalisation) -> str:
     return "monotone" if globalisation.watchdog == 0 else f"watchdog {globalisation.watchdog}"
 
 
+class Fallback(NamedTuple):
+    """A second way through a dense system, tried with every globalisation when the first fails:
+    a start and a step rule (``label`` names it in messages)."""
+
+    label: str
+    x0: np.ndarray
+    advance: AdvanceFunction
+
+
 def solve_dense(residual: ResidualFunction, x0: npt.ArrayLike, *, tol: float, max_iter: int,
                 globalisations: Sequence[Globalisation], advance: AdvanceFunction | None = None,
-                log: LogFunction | None = None) -> NonsmoothResult:
+                log: LogFunction | None = None, fallback: Fallback | None = None) -> NonsmoothResult:
     """:func:`solve_nonsmooth` from ``x0`` with each globalisation in turn, until one converges.
 
     The contact systems of NNEQM1 and NNEQM2 meet two kinds of trouble that no single damping
@@ -347,6 +357,9 @@ def solve_dense(residual: ResidualFunction, x0: npt.ArrayLike, *, tol: float, ma
         The damping rules, in the order they are tried (at least one).
     log
         As for :func:`solve_nonsmooth`; later attempts continue the iteration numbers.
+    fallback
+        If no globalisation converges from ``x0`` with ``advance``, each is tried again from
+        ``fallback.x0`` with ``fallback.advance``.
 
     Returns
     -------
@@ -357,24 +370,27 @@ def solve_dense(residual: ResidualFunction, x0: npt.ArrayLike, *, tol: float, ma
     """
     if not globalisations:
         raise ValueError("solve_dense needs at least one globalisation")
+    attempts = [(g, x0, advance, _describe(g)) for g in globalisations]
+    if fallback is not None:
+        attempts += [(g, fallback.x0, fallback.advance, f"{_describe(g)} {fallback.label}") for g in globalisations]
     iterations, norms, counts, failures = 0, [], [0, 0, 0], []
-    for g in globalisations:
+    for g, start, step_rule, label in attempts:
         offset = iterations
         attempt_log = None if log is None else (lambda k, norm, step, kind, o=offset: log(o + k, norm, step, kind))
-        result = solve_nonsmooth(residual, x0, tol=tol, max_iter=max_iter, log=attempt_log, watchdog=g.watchdog,
+        result = solve_nonsmooth(residual, start, tol=tol, max_iter=max_iter, log=attempt_log, watchdog=g.watchdog,
                                  armijo=g.armijo, min_step=g.min_step, lm_c=g.lm_c, lm_delta=g.lm_delta,
-                                 max_increase=g.max_increase, advance=advance)
+                                 max_increase=g.max_increase, advance=step_rule)
         iterations += result.iterations
         norms += result.residual_norms
         counts = [counts[0] + result.newton_steps, counts[1] + result.lm_steps,
                   counts[2] + result.line_search_steps]
         if result.converged:
             break
-        failures.append(f"{_describe(g)}: {result.message}")
+        failures.append(f"{label}: {result.message}")
     result.iterations, result.residual_norms = iterations, norms
     result.newton_steps, result.lm_steps, result.line_search_steps = counts
     if result.converged and failures:
-        result.message = f"{_describe(g)} after {'; '.join(failures)}: {result.message}"
+        result.message = f"{label} after {'; '.join(failures)}: {result.message}"
     elif len(failures) > 1:
         result.message = "; then ".join(failures)
     return result

@@ -671,27 +671,43 @@ def test_spring_pair_outside_the_well_posed_class_never_returns_a_wrong_solution
     assert converged["alart-curnier"] >= 0.9 * n_cases
 
 
-def test_polar_follow_slip_sets_the_angle_of_pairs_without_friction_bound():
-    """Open (p_n − r g ≤ 0) and frictionless pairs: θ on the zero of H3 nearest the old θ; pairs
-    with a friction bound, pinned pairs and pairs at rest keep θ; the Cartesian law changes nothing."""
+def test_polar_follow_slip_sets_the_angle_of_pairs_without_friction_force():
+    """Pairs with p_r = 0 (open, closed or frictionless): θ on the zero of H3 nearest the old θ,
+    and a closed one then takes the Cartesian law's branch; pairs with a friction force (even
+    open ones), pinned pairs and pairs at rest keep θ; the Cartesian law changes nothing."""
     from dolfinx_nnqem.contact.laws import AlartCurnierLaw, PolarLaw
 
-    law, r = PolarLaw(), 1.0e6
-    w_prev = np.zeros((5, 3))
-    #               open (gap)         in contact, μ>0      frictionless       open, pinned t2     open, at rest
-    w = np.array([[1e-3, 2e-4, 2e-4], [-1e-3, 2e-4, 0.0], [-1e-3, 0.0, 3e-4], [1e-3, 1e-4, 1e-4], [1e-3, 0.0, 0.0]])
-    z = np.array([[0.0, 0.0, 4.0], [5e2, 1e2, 1.0], [5e2, 0.0, -2.0], [0.0, 0.0, 0.3], [0.0, 0.0, 0.7]])
-    g0, mu_f = np.zeros(5), np.array([0.3, 0.3, 0.0, 0.3, 0.3])
-    constrained = np.zeros((5, 3), dtype=bool)
+    law, r, force_unit = PolarLaw(), 1.0e6, 1.0e5
+    w_prev = np.zeros((7, 3))
+    w = np.array([[1e-3, 2e-4, 2e-4],  # open, p_r = 0
+                  [-1e-3, 2e-4, 0.0],  # closed, friction force
+                  [-1e-3, 0.0, 3e-4],  # frictionless, p_r = 0
+                  [1e-3, 1e-4, 1e-4],  # open, pinned t2
+                  [1e-3, 0.0, 0.0],  # open, at rest
+                  [-1e-3, 4e-4, -4e-4],  # closed, p_r = 0 (round-off), θ nearly across the slip
+                  [1e-3, 2e-4, 2e-4]])  # open, p_r ≠ 0 (a damped step)
+    z = np.array([[0.0, 0.0, 4.0], [5e2, 1e2, 1.0], [5e2, 0.0, -2.0], [0.0, 0.0, 0.3], [0.0, 0.0, 0.7],
+                  [5e2, 1e-12, 0.3 * np.pi], [0.0, 3e1, 0.5]])
+    g0, mu_f = np.zeros(7), np.array([0.3, 0.3, 0.0, 0.3, 0.3, 0.3, 0.3])
+    constrained = np.zeros((7, 3), dtype=bool)
     constrained[3, 2] = True
-    out = law.follow_slip(z, w, w_prev, g0, mu_f, r, constrained)
+    out = law.follow_slip(z, w, w_prev, constrained, force_unit)
     assert out[0, 2] == pytest.approx(np.pi / 4 + np.pi)  # nearest to 4.0 of π/4 + kπ
     assert out[2, 2] == pytest.approx(-np.pi / 2)  # slip along t2; nearest to −2.0
-    np.testing.assert_array_equal(out[[1, 3, 4]], z[[1, 3, 4]])
+    assert out[5, 2] == pytest.approx(0.75 * np.pi)  # −π/4 + π, nearest to 0.3π
+    np.testing.assert_array_equal(out[[1, 3, 4, 6]], z[[1, 3, 4, 6]])
     np.testing.assert_array_equal(out[:, :2], z[:, :2])  # only θ moves
     H = law.evaluate(w, w_prev, out, g0, mu_f, r).H
-    assert abs(H[0, 2]) < 1e-12 * r * 1e-3 and abs(H[2, 2]) < 1e-12 * r * 1e-3
-    np.testing.assert_array_equal(AlartCurnierLaw().follow_slip(z, w, w_prev, g0, mu_f, r, constrained), z)
+    assert np.all(np.abs(H[[0, 2, 5], 2]) < 1e-12 * r * 1e-3)
+    # the closed pair with θ nearly across its slip sticks (|y| = r |s·d| = 88 < ρ = μ_f (p_n − r g)
+    # = 450); on its slip it takes the Cartesian law's branch: |q − r s| = r |s| = 566 > ρ, slip
+    before = law.evaluate(w[5:6], w_prev[5:6], z[5:6], g0[5:6], mu_f[5:6], r).state[0]
+    after = law.evaluate(w[5:6], w_prev[5:6], out[5:6], g0[5:6], mu_f[5:6], r).state[0]
+    cartesian = AlartCurnierLaw().evaluate(w[5:6], w_prev[5:6], np.zeros((1, 3)) + [5e2, 0, 0], g0[5:6], mu_f[5:6],
+                                           r).state[0]
+    assert (before, after, cartesian) == (STICK, SLIP, SLIP)
+    np.testing.assert_array_equal(AlartCurnierLaw().follow_slip(z, w, w_prev, constrained, force_unit), z)
+    assert PolarLaw.slip_following and not AlartCurnierLaw.slip_following
 
 
 def test_secant_prediction_extrapolates_the_force_for_both_laws():

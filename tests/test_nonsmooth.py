@@ -221,6 +221,37 @@ def test_solve_dense_retries_from_the_start_with_the_next_globalisation():
         solve_dense(_arctan, x0, tol=1e-10, max_iter=6, globalisations=())
 
 
+def test_solve_dense_falls_back_to_another_start_and_step_rule():
+    """Every globalisation fails from x0; the fallback's start (inside the basin) and step rule
+    are then tried with each in turn; a first attempt that converges leaves the fallback unused."""
+    from dolfinx_nnqem.newton import Globalisation
+    from dolfinx_nnqem.nonsmooth import Fallback, solve_dense
+
+    full, monotone = Globalisation(min_step=1e-10, watchdog=6), Globalisation(min_step=1e-10, watchdog=0)
+    x0 = np.array([3.0])
+    calls = []
+
+    def recorded(x, dx, alpha, chart):  # the plain step, recorded
+        calls.append(alpha)
+        return x + alpha * dx
+
+    plain = solve_dense(_arctan, x0, tol=1e-10, max_iter=3, globalisations=(full, monotone))
+    out = solve_dense(_arctan, x0, tol=1e-10, max_iter=6, globalisations=(full,),
+                      fallback=Fallback("near", np.array([0.5]), recorded))
+    print(f"\n  {out.message}")
+    assert not plain.converged
+    assert out.converged and abs(out.x[0]) < 1e-10 and calls
+    assert out.message.startswith("watchdog 6 near after watchdog 6: not converged")
+    calls.clear()
+    unused = solve_dense(_arctan, x0, tol=1e-10, max_iter=6, globalisations=(monotone,),
+                         fallback=Fallback("near", np.array([0.5]), recorded))
+    assert unused.converged and not calls
+    failed = solve_dense(_arctan, x0, tol=1e-10, max_iter=2, globalisations=(full, monotone),
+                         fallback=Fallback("near", np.array([0.5]), recorded))
+    assert not failed.converged and failed.message.count("; then ") == 3
+    assert "; then watchdog 6 near: " in failed.message and "; then monotone near: " in failed.message
+
+
 class _CreepingCycle:
     """A Newton backend whose full steps cycle A → B → A' → ... with Ψ(A) creeping down by 0.1 %
     a cycle (Ψ(B) = 2); a damped step from A lands on the solution. The pattern of the monolithic

@@ -426,10 +426,13 @@ class ContactLaw(Protocol):
         """The unknowns after the step α dy from z (``cartesian`` from :meth:`linearise`)."""
         ...
 
-    def follow_slip(self, z: npt.ArrayLike, w: npt.ArrayLike, w_prev: npt.ArrayLike, g0: npt.ArrayLike,
-                    mu_f: npt.ArrayLike, r: float, constrained: npt.ArrayLike) -> np.ndarray:
-        """z with the unknowns that only follow the slip (no force depends on them) set to where
-        their rows vanish at (w, z); the others as they are."""
+    slip_following: bool
+    """True if :meth:`follow_slip` can change z (the law has unknowns no force depends on)."""
+
+    def follow_slip(self, z: npt.ArrayLike, w: npt.ArrayLike, w_prev: npt.ArrayLike, constrained: npt.ArrayLike,
+                    force_unit: float) -> np.ndarray:
+        """z with the unknowns on which no force depends at z set to where their rows vanish at
+        (w, z); the others as they are."""
         ...
 
 
@@ -440,6 +443,7 @@ class AlartCurnierLaw:
     """
 
     name: str = "alart-curnier"
+    slip_following: bool = False
     regular = None
 
     def evaluate(
@@ -509,8 +513,8 @@ class AlartCurnierLaw:
         """z + α dy."""
         return np.asarray(z, dtype=np.float64) + alpha * np.asarray(dy, dtype=np.float64)
 
-    def follow_slip(self, z: npt.ArrayLike, w: npt.ArrayLike, w_prev: npt.ArrayLike, g0: npt.ArrayLike,
-                    mu_f: npt.ArrayLike, r: float, constrained: npt.ArrayLike) -> np.ndarray:
+    def follow_slip(self, z: npt.ArrayLike, w: npt.ArrayLike, w_prev: npt.ArrayLike, constrained: npt.ArrayLike,
+                    force_unit: float) -> np.ndarray:
         """z as it is: every Cartesian unknown is a force."""
         return np.asarray(z, dtype=np.float64)
 
@@ -531,6 +535,7 @@ class PolarLaw:
     """
 
     name: str = "polar"
+    slip_following: bool = True
 
     @property
     def regular(self) -> ContactLaw:
@@ -734,23 +739,27 @@ class PolarLaw:
         out[c, 2] = np.where(size > 0.0, theta + turn, theta)
         return out
 
-    def follow_slip(self, z: npt.ArrayLike, w: npt.ArrayLike, w_prev: npt.ArrayLike, g0: npt.ArrayLike,
-                    mu_f: npt.ArrayLike, r: float, constrained: npt.ArrayLike) -> np.ndarray:
-        """θ of the pairs without a friction bound (open, p_n − r g ≤ 0, or μ_f = 0; no pinned
+    def follow_slip(self, z: npt.ArrayLike, w: npt.ArrayLike, w_prev: npt.ArrayLike, constrained: npt.ArrayLike,
+                    force_unit: float) -> np.ndarray:
+        """θ of the pairs without friction force (|p_r| ≤ 1e-14 ``force_unit``; no pinned
         direction) set on their slip: θ_s + kπ, the zero of H3 = r (s1 sin θ − s2 cos θ) nearest θ.
 
-        Their force does not depend on θ (H2 = p_r drives it to zero), so θ is a slave of the
-        slip; left to Newton steps of at most :data:`MAX_TURN`, an open pair whose slip turns
-        takes several iterations to follow it, and its H3, of the order r |s|, dominates the
-        residual although it carries no physics. Pairs at rest (s = 0) keep θ.
+        Where p_r = 0 no force depends on θ, so moving it changes neither a force nor the
+        equilibrium, only two things that should not depend on a meaningless angle: H3, and the
+        branch of H2, decided by y = p_r + r s·d, whose projection of the slip on an arbitrary
+        d(θ) makes a pair stick or slip at random. On the slip (d = ±s/|s|), y = ±r |s| and the
+        branch is the Cartesian law's (|q − r s| = r |s| against ρ). This concerns every pair at
+        rest before its first slip, and open pairs after a full Newton step (H2 = p_r); an open
+        pair whose slip turns would otherwise need several steps of at most :data:`MAX_TURN`,
+        with its H3 (of order r |s|, no physics) dominating the residual. Pairs at rest (s = 0)
+        keep θ.
         """
         z = np.array(z, dtype=np.float64, copy=True)
         w = np.asarray(w, dtype=np.float64)
         constrained = np.asarray(constrained, dtype=bool)
         s = w[:, 1:] - np.asarray(w_prev, dtype=np.float64)[:, 1:]
-        gap = np.asarray(g0, dtype=np.float64) + w[:, 0]
-        unbounded = (z[:, 0] - r * gap <= 0.0) | (np.asarray(mu_f, dtype=np.float64) == 0.0)
-        follow = unbounded & ~constrained[:, 1] & ~constrained[:, 2] & (np.hypot(s[:, 0], s[:, 1]) > 0.0)
+        no_friction_force = np.abs(z[:, 1]) <= 1e-14 * float(force_unit)
+        follow = no_friction_force & ~constrained[:, 1] & ~constrained[:, 2] & (np.hypot(s[:, 0], s[:, 1]) > 0.0)
         theta_s = np.arctan2(s[follow, 1], s[follow, 0])
         z[follow, 2] = theta_s + np.pi * np.round((z[follow, 2] - theta_s) / np.pi)
         return z

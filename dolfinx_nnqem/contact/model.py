@@ -264,13 +264,17 @@ class PairLaws:
         lam_prev, _ = self.force(z_prev)
         return self.advance(z_n, lam_n - lam_prev, beta, np.ones(self.size, dtype=bool))
 
+    @property
+    def slip_following(self) -> bool:
+        """True if some law has unknowns that :meth:`follow_slip` may move (the polar angle)."""
+        return any(group.law.slip_following for group in self.groups)
+
     def follow_slip(self, z: np.ndarray, w: np.ndarray, w_prev: np.ndarray) -> np.ndarray:
-        """z with the unknowns that only follow the slip set on it (each law's ``follow_slip``)."""
+        """z with the unknowns no force depends on set on the slip (each law's ``follow_slip``)."""
         out = np.array(z, dtype=np.float64, copy=True)
         for group in self.groups:
             i = group.index
-            out[i] = group.law.follow_slip(z[i], w[i], w_prev[i], self.g0[i], self.mu_f[i], group.r,
-                                           self.constrained[i])
+            out[i] = group.law.follow_slip(z[i], w[i], w_prev[i], self.constrained[i], group.force_unit)
         return out
 
     def initial_unknowns(self) -> np.ndarray:
@@ -566,8 +570,8 @@ class ContactModel:
         self.z = self.laws.extrapolate(self.z_n, z_prev, beta)
 
     def follow_slip(self, w: np.ndarray) -> None:
-        """Set the unknowns that only follow the slip (the polar angle of pairs without a friction
-        bound) on the slip of the relative displacement ``w`` (see :meth:`PairLaws.follow_slip`)."""
+        """Set the unknowns no force depends on (the polar angle of pairs without friction force)
+        on the slip of the relative displacement ``w`` (see :meth:`PairLaws.follow_slip`)."""
         self.z = self.laws.follow_slip(self.z, w, self.w_n)
 
     def unknown_scale(self, force_scale: float) -> np.ndarray:
