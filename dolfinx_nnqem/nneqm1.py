@@ -226,14 +226,17 @@ class NNEQM1Solver:
             z = laws.advance(xs[:n3].reshape(nc, 3), dxs[:n3].reshape(nc, 3), alpha, cartesian)
             return np.concatenate([z.reshape(-1), xs[n3:] + alpha * dxs[n3:]]) / x_scale
 
-        def advance_following(x, dx, alpha, cartesian):
-            """:func:`advance`, then the unknowns no force depends on (the polar angle of pairs
-            without friction force) set on the slip there (:meth:`PairLaws.follow_slip`)."""
-            xs = advance(x, dx, alpha, cartesian) * x_scale
+        def on_the_slip(x):
+            """x with the unknowns no force depends on (the polar angle of pairs without friction
+            force) set on the slip there (:meth:`PairLaws.follow_slip`)."""
+            xs = x * x_scale
             z = xs[:n3].reshape(nc, 3)
             lam, _ = laws.force(z)
             z = laws.follow_slip(z, w_of(xs, lam).reshape(nc, 3), cond.w_prev)
             return np.concatenate([z.reshape(-1), xs[n3:]]) / x_scale
+
+        def advance_following(x, dx, alpha, cartesian):
+            return on_the_slip(advance(x, dx, alpha, cartesian))
 
         x0 = np.concatenate([z_m.reshape(-1), rigid_start(cond.BN, cond.w_free)]) / x_scale
         if n_r:  # only a floating body's predictor is out of balance (see _frozen_branch_start)
@@ -242,8 +245,7 @@ class NNEQM1Solver:
         # robustness suite, following always costs cutbacks elsewhere (docs/robustness.md)
         fallback = None
         if laws.slip_following:
-            fallback = Fallback("with the polar angles on the slip", advance_following(x0, np.zeros_like(x0), 0.0, None),
-                                advance_following)
+            fallback = Fallback("with the polar angles on the slip", on_the_slip(x0), advance_following)
         result = solve_dense(residual, x0, tol=tol / F, max_iter=self.settings.inner_max_iterations,
                              globalisations=self.settings.inner_globalisations, advance=advance, fallback=fallback)
         result.x = result.x * x_scale

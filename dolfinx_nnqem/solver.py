@@ -126,6 +126,11 @@ class MonolithicOptions:
                              "(the u block's penalty on closed pair directions, in units of r)")
 
 
+def _in_turn(inner: Globalisation, retry: Globalisation | None) -> tuple[Globalisation, ...]:
+    """The damping rules a dense solve tries in turn: ``inner``, then ``retry`` if given."""
+    return (inner,) if retry is None else (inner, retry)
+
+
 @dataclass
 class NNEQM1Options:
     """Options of NNEQM1 (nonsmooth Newton on the pair unknowns nested in Newton–Raphson).
@@ -157,7 +162,7 @@ class NNEQM1Options:
     @property
     def inner_globalisations(self) -> tuple[Globalisation, ...]:
         """The dense solve's damping rules in the order they are tried."""
-        return (self.inner,) if self.inner_retry is None else (self.inner, self.inner_retry)
+        return _in_turn(self.inner, self.inner_retry)
 
 
 @dataclass
@@ -217,7 +222,7 @@ class NNEQM2Options:
     @property
     def inner_globalisations(self) -> tuple[Globalisation, ...]:
         """The dense solves' damping rules in the order they are tried."""
-        return (self.inner,) if self.inner_retry is None else (self.inner, self.inner_retry)
+        return _in_turn(self.inner, self.inner_retry)
 
 
 def make_solver(method: str, problem, options: SolverOptions | None = None, **method_options) -> Solver:

@@ -525,6 +525,9 @@ class AlartCurnierLaw:
 MAX_TURN = 0.25 * np.pi
 """Largest turn of a polar angle θ in one Newton step (radians); see :meth:`PolarLaw.advance`."""
 
+NO_FORCE = 1e-14
+"""A polar force component at most this times the force unit r h is zero (rounding)."""
+
 
 class PolarLaw:
     """Polar (seed) law; unknowns z = (p_n, p_r, theta), force (p_n, -p_r d(theta)).
@@ -691,7 +694,7 @@ class PolarLaw:
         unbounded = free & ((evaluation.state == OPEN)
                             | ((evaluation.state == SLIP) & (evaluation.dH_dz[:, 1, 0] == 0.0)))
         dlam_dy[unbounded, 1:, 2] = 0.0
-        tiny = 1e-14 * float(force_unit)
+        tiny = NO_FORCE * float(force_unit)
         at_rest = unbounded & (np.abs(evaluation.dH_dz[:, 2, 2]) <= tiny)
         dH_dy[at_rest, 2, 2] = float(force_unit)
         # sliding pairs with a friction force: the same Newton direction, taken in the force
@@ -741,7 +744,7 @@ class PolarLaw:
 
     def follow_slip(self, z: npt.ArrayLike, w: npt.ArrayLike, w_prev: npt.ArrayLike, constrained: npt.ArrayLike,
                     force_unit: float) -> np.ndarray:
-        """θ of the pairs without friction force (|p_r| ≤ 1e-14 ``force_unit``; no pinned
+        """θ of the pairs without friction force (|p_r| ≤ :data:`NO_FORCE` · ``force_unit``; no pinned
         direction) set on their slip: θ_s + kπ, the zero of H3 = r (s1 sin θ − s2 cos θ) nearest θ.
 
         Where p_r = 0 no force depends on θ, so moving it changes neither a force nor the
@@ -758,7 +761,7 @@ class PolarLaw:
         w = np.asarray(w, dtype=np.float64)
         constrained = np.asarray(constrained, dtype=bool)
         s = w[:, 1:] - np.asarray(w_prev, dtype=np.float64)[:, 1:]
-        no_friction_force = np.abs(z[:, 1]) <= 1e-14 * float(force_unit)
+        no_friction_force = np.abs(z[:, 1]) <= NO_FORCE * float(force_unit)
         follow = no_friction_force & ~constrained[:, 1] & ~constrained[:, 2] & (np.hypot(s[:, 0], s[:, 1]) > 0.0)
         theta_s = np.arctan2(s[follow, 1], s[follow, 0])
         z[follow, 2] = theta_s + np.pi * np.round((z[follow, 2] - theta_s) / np.pi)
