@@ -14,7 +14,9 @@ is Newton–Raphson with the consistent tangent.
 
 Each increment starts from a predictor: the secant extrapolation of the last two increments
 where the load path goes on in the same direction, else — where prescribed displacements jump —
-a Newton step from the converged state with the jump lifted into the right-hand side.
+a Newton step from the converged state with the jump lifted into the right-hand side. With the
+polar law, an increment that fails is tried once more from the same prediction with the angle of
+sliding pairs put on their slip after every step (``docs/theory.md``, the polar law).
 """
 
 from __future__ import annotations
@@ -31,7 +33,7 @@ from dolfinx_nnqem.block_system import AugmentedSystem, MonolithicMatrix, free_m
 from dolfinx_nnqem.convergence import IterationRecord, SolveReport, count_states, logger
 from dolfinx_nnqem.linalg import clear_options, create_ksp, direct_options, free_dropped_objects, global_norm
 from dolfinx_nnqem.linear_solver import DirectSolver, IterativeSolver
-from dolfinx_nnqem.newton import Globalisation, Merit, solve
+from dolfinx_nnqem.newton import Globalisation, Merit, NewtonResult, solve
 from dolfinx_nnqem.problem import ContactProblem
 from dolfinx_nnqem.solver import MonolithicOptions, SolverOptions
 
@@ -115,12 +117,19 @@ class MonolithicSolver:
         p = self.problem
         report = SolveReport(converged=False, iterations=0,
                              system_order=p.V.dofmap.index_map.size_global * 3 + 3 * p.num_pairs)
-        self.linear.begin_increment()
-        lifted = self._predict(load_factor)
-        system = _NewtonSystem(self, report)
-        outcome = solve(system, self.settings.globalisation, self.options.max_iterations,
-                        first_iteration=1 if lifted else 0, first_kind="lifted" if lifted else "",
-                        first_step_length=1.0 if lifted else math.nan)
+        outcome = self._attempt(load_factor, report, align_sliding=False)
+        if not outcome.converged and p.has_contact and p.contact.laws.slip_following and outcome.iterations > 0:
+            # The polar law's H3 = r |s| sin(θ − θ_s) is a sine that a Newton step can follow only
+            # within a quarter turn; where slips are small and turn between iterates, steps clipped
+            # to that turn can stall. Put θ of sliding pairs on the slip after every step instead
+            # (PolarLaw.follow_slip). Only as a second attempt: measured always on, it cost
+            # iterations on other cases of the robustness suite (docs/robustness.md).
+            logger.info(f"[{self.name}] increment to load factor {load_factor:.6g}: {outcome.message}; "
+                        "trying again with the angle of sliding pairs on their slip after every step")
+            tried = outcome.iterations
+            p.restore()
+            outcome = self._attempt(load_factor, report, align_sliding=True)
+            outcome.iterations += tried
         report.iterations = outcome.iterations
         report.converged = outcome.converged
         final = report.final
@@ -131,6 +140,15 @@ class MonolithicSolver:
         else:
             report.message = outcome.message
         return report
+
+    def _attempt(self, load_factor: float, report: SolveReport, align_sliding: bool) -> NewtonResult:
+        """Newton from the increment's prediction; ``align_sliding``: see :meth:`set_iterate`."""
+        self.linear.begin_increment()
+        lifted = self._predict(load_factor)
+        system = _NewtonSystem(self, report, align_sliding)
+        return solve(system, self.settings.globalisation, self.options.max_iterations,
+                     first_iteration=1 if lifted else 0, first_kind="lifted" if lifted else "",
+                     first_step_length=1.0 if lifted else math.nan)
 
     def _predict(self, load_factor: float) -> bool:
         """The increment's starting point; True if it was reached by a lifted Newton step.
@@ -290,15 +308,18 @@ class MonolithicSolver:
         du, dz = self._split(x, ev.R_free.getLocalSize())
         return du, dz, slope
 
-    def set_iterate(self, u0: np.ndarray, z0: np.ndarray | None, direction, alpha: float, lin=None) -> None:
-        """u = u0 + α du, z advanced by α dz in the step coordinates of ``lin`` (owned entries; ghosts updated)."""
+    def set_iterate(self, u0: np.ndarray, z0: np.ndarray | None, direction, alpha: float, lin=None,
+                    align_sliding: bool = False) -> None:
+        """u = u0 + α du, z advanced by α dz in the step coordinates of ``lin`` (owned entries; ghosts
+        updated); then the unknowns no force depends on follow the slip, with ``align_sliding`` also
+        the direction of the friction force of sliding pairs (:meth:`ContactModel.follow_slip`)."""
         p = self.problem
         du, dz = direction[0], direction[1]
         p.u.x.array[:du.shape[0]] = u0 + alpha * du
         p.u.x.scatter_forward()
         if p.has_contact:
             p.contact.z = p.contact.advance(z0, dz, alpha, None if lin is None else lin.cartesian)
-            p.contact.follow_slip(p.relative_displacement())
+            p.contact.follow_slip(p.relative_displacement(), sliding_too=align_sliding)
 
     def _tick(self, key: str, t0: float) -> None:
         self._timings[key] = self._timings.get(key, 0.0) + time.perf_counter() - t0
@@ -317,10 +338,11 @@ class MonolithicSolver:
 class _NewtonSystem:
     """The monolithic system as a backend of the Newton driver (one per increment)."""
 
-    def __init__(self, solver: MonolithicSolver, report: SolveReport):
+    def __init__(self, solver: MonolithicSolver, report: SolveReport, align_sliding: bool = False):
         self.solver = solver
         self.problem = solver.problem
         self.report = report
+        self.align_sliding = align_sliding  #: see MonolithicSolver.set_iterate
         self.current: _Evaluation | None = None
         self._start = None  # (u0, z0, evaluation) of the step being taken
         self._direction = None
@@ -386,5 +408,5 @@ class _NewtonSystem:
 
     def move(self, step_length: float) -> Merit:
         u0, z0, ev = self._start
-        self.solver.set_iterate(u0, z0, self._direction, step_length, ev.lin)
+        self.solver.set_iterate(u0, z0, self._direction, step_length, ev.lin, self.align_sliding)
         return self.evaluate()

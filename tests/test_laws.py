@@ -740,3 +740,43 @@ def test_secant_prediction_extrapolates_the_force_for_both_laws():
     assert z[3, 2] == -1.0 and z[3, 1] == 0.0
     # the old line through z gave another force wherever θ_prev was meaningless
     assert not np.allclose(polar_law.force(z_n + beta * (z_n - z_prev))[0][0], expected[0])
+
+
+def test_polar_follow_slip_with_sliding_pairs_puts_their_friction_force_on_the_slip_line():
+    """With ``sliding``, θ of the given pairs goes to θ_s + kπ nearest θ with p_r kept (their H3
+    vanishes, the friction force's size does not change); pinned pairs and pairs at rest keep θ;
+    through PairLaws, only pairs in the slip state with a slip above rounding are sliding."""
+    from dolfinx_nnqem.contact.laws import AlartCurnierLaw, PolarLaw
+    from dolfinx_nnqem.contact.model import LawGroup, PairLaws
+
+    law, r, force_unit = PolarLaw(), 1.0e6, 1.0e5
+    w_prev = np.zeros((5, 3))
+    w = np.array([[-1e-3, 3e-3, 1e-3],  # closed, sliding, θ a radian off the slip line
+                  [-1e-3, 1e-5, 0.0],  # closed, sticking
+                  [-1e-3, 3e-4, 1e-4],  # closed, sliding, pinned t2
+                  [-1e-3, 0.0, 0.0],  # closed, at rest
+                  [-1e-3, 1e-25, 0.0]])  # closed, a slip of rounding size
+    theta_s = np.arctan2(1e-3, 3e-3)
+    z = np.array([[5e2, 150.0, theta_s + np.pi + 1.0], [5e2, 1e2, 0.1], [5e2, 150.0, 0.0], [5e2, 1e2, 0.4],
+                  [5e2, 600.0, 2.0]])
+    g0, mu_f = np.zeros(5), np.full(5, 0.3)
+    constrained = np.zeros((5, 3), dtype=bool)
+    constrained[2, 2] = True
+    sliding = np.array([True, False, True, True, False])
+    out = law.follow_slip(z, w, w_prev, constrained, force_unit, sliding)
+    assert out[0, 2] == pytest.approx(theta_s + np.pi)  # nearest to 2.0 of θ_s + kπ
+    np.testing.assert_array_equal(out[1:], z[1:])
+    np.testing.assert_array_equal(out[:, :2], z[:, :2])
+    H = law.evaluate(w, w_prev, out, g0, mu_f, r).H
+    assert abs(H[0, 2]) < 1e-12 * r * 1e-3
+    np.testing.assert_array_equal(law.follow_slip(z, w, w_prev, constrained, force_unit), z)  # no sliding given
+    np.testing.assert_array_equal(AlartCurnierLaw().follow_slip(z, w, w_prev, constrained, force_unit, sliding), z)
+
+    # PairLaws decides which pairs slide: the law's slip state and r |s| above NO_FORCE · force unit
+    laws = PairLaws((LawGroup(law, r, force_unit, np.arange(5)),), g0, mu_f, constrained)
+    states = law.evaluate(w, w_prev, z, g0, mu_f, r).state
+    assert list(states[[0, 1, 4]]) == [SLIP, STICK, SLIP]
+    aligned = laws.follow_slip(z, w, w_prev, sliding_too=True)
+    assert aligned[0, 2] == pytest.approx(theta_s + np.pi)
+    np.testing.assert_array_equal(aligned[1:], z[1:])  # sticking, pinned, at rest, rounding-size slip
+    np.testing.assert_array_equal(laws.follow_slip(z, w, w_prev), z)

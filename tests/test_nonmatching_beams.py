@@ -133,6 +133,19 @@ def test_mortar_beams_other_methods(method, mortar):
     assert s["imbalance"] < 1e-10 and s["states"] == mortar["states"] and max(d.values()) < 1e-8
 
 
+def test_polar_law_on_the_mortar_beams_equals_the_cartesian_law(mortar):
+    """The polar law, monolithic solver: no cutback (the plain attempt of the first increment
+    stalls; the second, with sliding pairs aligned on their slip, converges) and the Cartesian
+    law's answer to 1e-8."""
+    s = solve_beams("mortar", refine2=2, law="polar")
+    report("beam 2 at 0.1 m, mortar, polar law", s)
+    d = differences(mortar, s)
+    print("    relative to the Cartesian law: " + ", ".join(f"{k} {v:.1e}" for k, v in d.items())
+          + " (tolerance 1e-8)")
+    assert len(s["iterations"]) == INCREMENTS, "cutbacks"
+    assert s["imbalance"] < 1e-10 and s["states"] == mortar["states"] and max(d.values()) < 1e-8
+
+
 @pytest.mark.slow
 def test_difference_to_the_matching_mesh_shrinks_with_the_beams_mesh():
     """The non-matching/matching difference is the beams' discretisation error: halving both meshes

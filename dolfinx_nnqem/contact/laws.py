@@ -430,9 +430,10 @@ class ContactLaw(Protocol):
     """True if :meth:`follow_slip` can change z (the law has unknowns no force depends on)."""
 
     def follow_slip(self, z: npt.ArrayLike, w: npt.ArrayLike, w_prev: npt.ArrayLike, constrained: npt.ArrayLike,
-                    force_unit: float) -> np.ndarray:
+                    force_unit: float, sliding: npt.ArrayLike | None = None) -> np.ndarray:
         """z with the unknowns on which no force depends at z set to where their rows vanish at
-        (w, z); the others as they are."""
+        (w, z), and on the ``sliding`` pairs (nc,) bool, if given, the unknowns that give the
+        friction force its direction; the others as they are."""
         ...
 
 
@@ -514,8 +515,8 @@ class AlartCurnierLaw:
         return np.asarray(z, dtype=np.float64) + alpha * np.asarray(dy, dtype=np.float64)
 
     def follow_slip(self, z: npt.ArrayLike, w: npt.ArrayLike, w_prev: npt.ArrayLike, constrained: npt.ArrayLike,
-                    force_unit: float) -> np.ndarray:
-        """z as it is: every Cartesian unknown is a force."""
+                    force_unit: float, sliding: npt.ArrayLike | None = None) -> np.ndarray:
+        """z as it is: every Cartesian unknown is a force, and no row fixes a direction alone."""
         return np.asarray(z, dtype=np.float64)
 
     def __repr__(self) -> str:
@@ -743,7 +744,7 @@ class PolarLaw:
         return out
 
     def follow_slip(self, z: npt.ArrayLike, w: npt.ArrayLike, w_prev: npt.ArrayLike, constrained: npt.ArrayLike,
-                    force_unit: float) -> np.ndarray:
+                    force_unit: float, sliding: npt.ArrayLike | None = None) -> np.ndarray:
         """θ of the pairs without friction force (|p_r| ≤ :data:`NO_FORCE` · ``force_unit``; no pinned
         direction) set on their slip: θ_s + kπ, the zero of H3 = r (s1 sin θ − s2 cos θ) nearest θ.
 
@@ -756,13 +757,22 @@ class PolarLaw:
         pair whose slip turns would otherwise need several steps of at most :data:`MAX_TURN`,
         with its H3 (of order r |s|, no physics) dominating the residual. Pairs at rest (s = 0)
         keep θ.
+
+        With ``sliding`` (pairs at the Coulomb bound whose slip is above rounding, see
+        :meth:`PairLaws.follow_slip`), θ of those pairs is put on the slip line too (θ_s + kπ
+        nearest θ, p_r kept), which zeroes their H3 = r |s| sin(θ − θ_s) exactly. That does move
+        a force; it replaces Newton's linearisation of a sine, which a step can only trust within
+        :data:`MAX_TURN` while the slip is small and turns, by the exact local solution of the
+        row. The monolithic solver uses it to retry an increment that failed without it.
         """
         z = np.array(z, dtype=np.float64, copy=True)
         w = np.asarray(w, dtype=np.float64)
         constrained = np.asarray(constrained, dtype=bool)
         s = w[:, 1:] - np.asarray(w_prev, dtype=np.float64)[:, 1:]
-        no_friction_force = np.abs(z[:, 1]) <= NO_FORCE * float(force_unit)
-        follow = no_friction_force & ~constrained[:, 1] & ~constrained[:, 2] & (np.hypot(s[:, 0], s[:, 1]) > 0.0)
+        turned = np.abs(z[:, 1]) <= NO_FORCE * float(force_unit)  # no friction force
+        if sliding is not None:
+            turned |= np.asarray(sliding, dtype=bool)
+        follow = turned & ~constrained[:, 1] & ~constrained[:, 2] & (np.hypot(s[:, 0], s[:, 1]) > 0.0)
         theta_s = np.arctan2(s[follow, 1], s[follow, 0])
         z[follow, 2] = theta_s + np.pi * np.round((z[follow, 2] - theta_s) / np.pi)
         return z

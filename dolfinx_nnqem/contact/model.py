@@ -34,7 +34,8 @@ import numpy.typing as npt
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from dolfinx_nnqem.contact.laws import ContactLaw, LawEvaluation, Linearisation, default_r, get_law
+from dolfinx_nnqem.contact.laws import (NO_FORCE, SLIP, ContactLaw, LawEvaluation, Linearisation, default_r,
+                                         get_law)
 from dolfinx_nnqem.contact.obstacles import RigidObstacle, obstacle_pairs
 from dolfinx_nnqem.contact.discretisation import DISCRETISATIONS, OBSTACLE_DISCRETISATIONS, discretise
 from dolfinx_nnqem.contact.pairset import PairRows, PairSet, rows_matrix
@@ -269,12 +270,21 @@ class PairLaws:
         """True if some law has unknowns that :meth:`follow_slip` may move (the polar angle)."""
         return any(group.law.slip_following for group in self.groups)
 
-    def follow_slip(self, z: np.ndarray, w: np.ndarray, w_prev: np.ndarray) -> np.ndarray:
-        """z with the unknowns no force depends on set on the slip (each law's ``follow_slip``)."""
+    def follow_slip(self, z: np.ndarray, w: np.ndarray, w_prev: np.ndarray, sliding_too: bool = False
+                    ) -> np.ndarray:
+        """z with the unknowns no force depends on set on the slip (each law's ``follow_slip``);
+        with ``sliding_too`` also the direction of the friction force of sliding pairs: those in
+        the slip state at (w, z) whose slip r |s| is above rounding (:data:`laws.NO_FORCE` times
+        the force unit; below it the slip has no direction)."""
         out = np.array(z, dtype=np.float64, copy=True)
         for group in self.groups:
             i = group.index
-            out[i] = group.law.follow_slip(z[i], w[i], w_prev[i], self.constrained[i], group.force_unit)
+            sliding = None
+            if sliding_too and group.law.slip_following:
+                state = self._evaluate_group(group, w, w_prev, z, i).state
+                s = w[i, 1:] - w_prev[i, 1:]
+                sliding = (state == SLIP) & (group.r * np.hypot(s[:, 0], s[:, 1]) > NO_FORCE * group.force_unit)
+            out[i] = group.law.follow_slip(z[i], w[i], w_prev[i], self.constrained[i], group.force_unit, sliding)
         return out
 
     def initial_unknowns(self) -> np.ndarray:
@@ -569,10 +579,11 @@ class ContactModel:
         (see :meth:`PairLaws.extrapolate`)."""
         self.z = self.laws.extrapolate(self.z_n, z_prev, beta)
 
-    def follow_slip(self, w: np.ndarray) -> None:
+    def follow_slip(self, w: np.ndarray, sliding_too: bool = False) -> None:
         """Set the unknowns no force depends on (the polar angle of pairs without friction force)
-        on the slip of the relative displacement ``w`` (see :meth:`PairLaws.follow_slip`)."""
-        self.z = self.laws.follow_slip(self.z, w, self.w_n)
+        on the slip of the relative displacement ``w``, with ``sliding_too`` also the angle of
+        sliding pairs (see :meth:`PairLaws.follow_slip`)."""
+        self.z = self.laws.follow_slip(self.z, w, self.w_n, sliding_too)
 
     def unknown_scale(self, force_scale: float) -> np.ndarray:
         """(num_local, 3): the scale of each local unknown when forces are of order ``force_scale``."""
