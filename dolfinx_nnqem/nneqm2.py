@@ -353,6 +353,10 @@ class NNEQM2Solver:
         if not self._factorised:
             self._factorise()
         t_start = time.perf_counter()
+        if self.settings.extrapolate:
+            # the pair unknowns start from the secant extrapolation of the last two increments
+            # (u too, though only z is used: the displacement comes from the elastic predictor)
+            p.extrapolate(load_factor)
         p.apply_prescribed_displacements(load_factor)
         p.predict_contact()
         nc = p.num_pairs

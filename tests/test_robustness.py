@@ -7,6 +7,7 @@
 * NNEQM1 on prescribed-displacement paths (the cyclic path, a gap closed and re-opened) without
   cutback, equal to the monolithic solver along the whole cyclic path; the monolithic solver on
   the gap without cutback.
+* NNEQM2 on the two beams in 3 increments without cutback, the polar law equal to the Cartesian.
 * A load no state can carry (drag 0.35 p > μ_f p) ends in ConvergenceError for every method.
 * A state without forces (body 2 pulled off, every pair open; or moved down before it touches)
   converges: the force scale has a floor (``ContactProblem.force_floor``), else the relative
@@ -118,6 +119,23 @@ def test_polar_law_on_the_two_beams_in_few_increments_equals_the_cartesian_law(m
         cell = robustness.run_cell(case, method, "polar", increments)
         print(f"  {robustness.cell_text(cell)}")
         assert cell.converged and cell.median_per_increment <= 4
+
+
+def test_nneqm2_on_the_two_beams_in_3_increments_without_cutback():
+    """NNEQM2 starts its dense solve from the secant extrapolation of the pair forces: no cutback
+    in 3 increments with either law (before: one, and 155 iterations with 123 in one increment),
+    and the polar law equal to the Cartesian law (1e-8) at every increment."""
+    case = robustness.Case("two-beams-3", robustness.two_beams, 3, "")
+    runs = {law: solve_along_the_path(case, "nneqm2", law) for law in robustness.LAWS}
+    (_, _, polar), (_, _, cartesian) = runs["polar"], runs["alart-curnier"]
+    F_max = max(abs(forces).max() for forces, _ in cartesian.values())
+    dF = max(abs(polar[ell][0] - cartesian[ell][0]).max() for ell in cartesian) / F_max
+    print(f"\n  two beams in 3, NNEQM2: cutbacks {[runs[law][1] for law in robustness.LAWS]} "
+          f"({', '.join(robustness.LAWS)}); polar against Cartesian pair forces {dF:.1e}")
+    for law in robustness.LAWS:
+        factors, cutbacks, _ = runs[law]
+        assert cutbacks == 0 and len(factors) == 3, law
+    assert set(polar) == set(cartesian) and dF < 1e-8
 
 
 @pytest.mark.parametrize("method", ["monolithic", "nneqm1", SLOW_NNEQM2])
