@@ -118,7 +118,7 @@ class MonolithicSolver:
         report = SolveReport(converged=False, iterations=0,
                              system_order=p.V.dofmap.index_map.size_global * 3 + 3 * p.num_pairs)
         outcome = self._attempt(load_factor, report, align_sliding=False)
-        if not outcome.converged and p.has_contact and p.contact.laws.slip_following and outcome.iterations > 0:
+        if not outcome.converged and p.has_contact and p.contact.slip_following and outcome.iterations > 0:
             # The polar law's H3 = r |s| sin(θ − θ_s) is a sine that a Newton step can follow only
             # within a quarter turn; where slips are small and turn between iterates, steps clipped
             # to that turn can stall. Put θ of sliding pairs on the slip after every step instead

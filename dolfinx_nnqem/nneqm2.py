@@ -354,8 +354,9 @@ class NNEQM2Solver:
             self._factorise()
         t_start = time.perf_counter()
         if self.settings.extrapolate:
-            # the pair unknowns start from the secant extrapolation of the last two increments
-            # (u too, though only z is used: the displacement comes from the elastic predictor)
+            # the pair unknowns start from the secant extrapolation of the last two increments; so
+            # does u, where w_start (the pair branches a floating body's start freezes) is read;
+            # the displacement increment itself comes from the elastic predictor below
             p.extrapolate(load_factor)
         p.apply_prescribed_displacements(load_factor)
         p.predict_contact()

@@ -579,6 +579,11 @@ class ContactModel:
         (see :meth:`PairLaws.extrapolate`)."""
         self.z = self.laws.extrapolate(self.z_n, z_prev, beta)
 
+    @property
+    def slip_following(self) -> bool:
+        """True if some interface's law has unknowns :meth:`follow_slip` may move (the polar angle)."""
+        return self.laws.slip_following
+
     def follow_slip(self, w: np.ndarray, sliding_too: bool = False) -> None:
         """Set the unknowns no force depends on (the polar angle of pairs without friction force)
         on the slip of the relative displacement ``w``, with ``sliding_too`` also the angle of
