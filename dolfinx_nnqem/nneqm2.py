@@ -166,7 +166,7 @@ class NNEQM2Solver:
     Notes
     -----
     Reporting: ``SolveReport.system_order`` = 3NC + NG (+ n_r); ``iterations`` counts the dense
-    nonsmooth iterations (all passes, regular warm starts included); in ``history`` the
+    nonsmooth iterations (all passes and attempts); in ``history`` the
     ``contact`` field holds the norm of the whole scaled system [H/F; H4] and ``equilibrium``
     is 0 for the intermediate iterates (equilibrium holds by construction for every iterate) and,
     in the last record, the measured own-stress residual. ``increment_info`` (one dict per
@@ -193,7 +193,6 @@ class NNEQM2Solver:
                 f"NNEQM2Options.max_dense_order = {self.settings.max_dense_order}; use the monolithic solver or NNEQM1 "
                 "(their size grows with the mesh, not its square), or raise max_dense_order")
         self.condensation = Condensation(problem, self.name, self.options.petsc_options)
-        self.warm_start_iterations = 0  #: iterations spent in regular warm starts (polar law)
         self._timings: dict[str, float] = {}
         self.increment_info: list[dict] = []  #: per converged solve: checks and counts
         self._factorised = False
@@ -447,7 +446,7 @@ class NNEQM2Solver:
             Q.destroy()
             self._tick("plastic_matrix", t0)
             d.N, d.SQ, d.WBQ = N, SQ, WBQ
-            result, records = self._solve_system(x, d, tol, total_its)
+            result, records = self._dense_solve(x, d, tol, total_its)
             report.history.extend(records)
             total_its += result.iterations
             report.iterations = total_its
@@ -537,44 +536,9 @@ class NNEQM2Solver:
         f = q - d.sy - d.Hh * (d.p_n + dg)
         return -f / d.su, dgt, s, q
 
-    def _solve_system(self, x0, d: _Increment, tol, it_offset):
-        """The dense system with the problem's laws, warm-started for laws that are singular at q = 0.
-
-        With ``regular_start``, laws that have a regular companion with the same solutions (the
-        polar law: the Cartesian one) are first solved with it; their unknowns are read off its
-        solution (θ of a pair without friction force from its slip direction, which H3 needs)
-        and the system is then solved with the problem's laws from there, usually in one or two
-        Newton steps. The damped Newton/LM iteration on the polar form from the previous
-        increment's unknowns crawls with tiny line-search steps on the two-beam benchmark.
-        """
-        laws = d.laws
-        regular = laws.regularised() if (d.nc and self.settings.regular_start) else None
-        if regular is None:
-            return self._dense_solve(x0, d, tol, it_offset, laws)
-        nc, F, NG = d.nc, d.F, d.NG
-        z0 = (x0[:3 * nc] * self._z_scale(d, laws)).reshape(nc, 3)
-        lam0 = laws.force(z0)[0]
-        xc = np.concatenate([lam0.reshape(-1) / self._z_scale(d, regular), x0[3 * nc:]])
-        first, records = self._dense_solve(xc, d, tol, it_offset, regular)
-        if not first.converged:
-            first.message = f"regular (Cartesian) warm start: {first.message}"
-            return first, records
-        lam = first.x[:3 * nc].reshape(nc, 3) * self._z_scale(d, regular).reshape(nc, 3)
-        dg = first.x[3 * nc:3 * nc + NG] * d.gscale
-        w = d.w0 + d.WBB @ lam.reshape(-1) + d.WBQ @ dg
-        if d.n_r:
-            w = w + d.BN @ (first.x[3 * nc + NG:] * (F / d.r))
-        slip = w.reshape(nc, 3)[:, 1:3] - d.w_prev[:, 1:3]
-        z = laws.unknowns(lam, slip, no_force=1e-12 * F)
-        xp = np.concatenate([z.reshape(-1) / self._z_scale(d, laws), first.x[3 * nc:]])
-        second, more = self._dense_solve(xp, d, tol, it_offset + first.iterations, laws)
-        second.iterations += first.iterations
-        self.warm_start_iterations += first.iterations
-        return second, records + more[1:]
-
-    def _dense_solve(self, x0, d: _Increment, tol, it_offset, laws):
+    def _dense_solve(self, x0, d: _Increment, tol, it_offset):
         """The driver on the scaled [pair rows / F; H4; self-equilibrium / F] with the chain-rule Jacobian."""
-        nc, NG, F, n_r = d.nc, d.NG, d.F, d.n_r
+        nc, NG, F, n_r, laws = d.nc, d.NG, d.F, d.n_r, d.laws
         z_scale = self._z_scale(d, laws)
         gscale, mu, su, Hh, N, SQ, SB = d.gscale, d.mu, d.su, d.Hh, d.N, d.SQ, d.SB
         a_scale = F / d.r  # α = α̃ · F / r
@@ -669,11 +633,32 @@ class NNEQM2Solver:
             logger.debug(f"[{self.name}] it {it_offset + k}: |H̃| = {norm:.3e} (pairs {last['Hc']:.3e}, "
                          f"yield {last['H4']:.3e}) {kind} t={t:.2e}")
 
+        def on_the_slip(x):
+            """x with the unknowns no force depends on (the polar angle of pairs without friction
+            force) set on the slip there (:meth:`PairLaws.follow_slip`)."""
+            z = (x[:n3] * z_scale).reshape(nc, 3)
+            lam, _ = laws.force(z)
+            w = d.w0 + d.WBB @ lam.reshape(-1) + d.WBQ @ (x[n3:n3 + NG] * gscale)
+            if n_r:
+                w = w + d.BN @ (x[n3 + NG:] * a_scale)
+            out = x.copy()
+            out[:n3] = laws.follow_slip(z, w.reshape(nc, 3), d.w_prev).reshape(-1) / z_scale
+            return out
+
+        def advance_following(x, dx, alpha, cartesian):
+            return on_the_slip(advance(x, dx, alpha, cartesian))
+
         t0 = time.perf_counter()
         if n_r and d.w_start is not None:
             x0 = self._frozen_branch_start(x0, d, laws, z_scale, residual, advance)
+        step_rule = advance
+        if nc and laws.slip_following:
+            # The polar angle of a pair without friction force follows the slip at every step, as
+            # in the monolithic solver: its H3 row then holds no meaningless residual and its H2
+            # branch is the Cartesian law's (theory page, "The polar law's Newton step")
+            x0, step_rule = on_the_slip(x0), advance_following
         result = solve_dense(residual, x0, tol=tol, max_iter=self.settings.inner_max_iterations, log=log,
-                             globalisations=self.settings.inner_globalisations, advance=advance)
+                             globalisations=self.settings.inner_globalisations, advance=step_rule)
         self._tick("dense_solve", t0)
         # every rank takes rank 0's decision and solution
         comm = self.problem.comm

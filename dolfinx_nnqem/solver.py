@@ -184,10 +184,6 @@ class NNEQM2Options:
         Limit of the N fixed-point passes.
     flow_rtol
         Convergence of the N fixed point (stress over σ_y); default 100 · rtol.
-    regular_start
-        Start laws that are singular where the friction force vanishes (the polar law) from the
-        solution of their regular companion (the Cartesian law), which has the same solutions;
-        False starts them from the previous increment (the seed's procedure).
     extrapolate
         Start each increment's dense solve from the secant extrapolation of the last two
         increments' pair forces (:meth:`ContactProblem.extrapolate`) instead of the last ones.
@@ -208,7 +204,6 @@ class NNEQM2Options:
     inner_max_iterations: int = 100
     max_flow_updates: int = 50
     flow_rtol: float | None = None
-    regular_start: bool = True
     extrapolate: bool = True
     inner: Globalisation = field(default_factory=lambda: Globalisation(min_step=1e-10, watchdog=0))
     inner_retry: Globalisation | None = field(default_factory=lambda: Globalisation(min_step=1e-10, watchdog=6))

@@ -388,9 +388,6 @@ class ContactLaw(Protocol):
     """What callers may use of a pair law (the contact model; solvers never look inside)."""
 
     name: str
-    regular: ContactLaw | None
-    """A law with exactly the same solutions and a regular Jacobian where this one is singular,
-    for warm starts (the Cartesian law for the polar one); None if this law is regular."""
 
     def evaluate(
         self,
@@ -445,7 +442,6 @@ class AlartCurnierLaw:
 
     name: str = "alart-curnier"
     slip_following: bool = False
-    regular = None
 
     def evaluate(
         self,
@@ -540,11 +536,6 @@ class PolarLaw:
 
     name: str = "polar"
     slip_following: bool = True
-
-    @property
-    def regular(self) -> ContactLaw:
-        """The Cartesian law: the same solutions, regular where p_r = 0."""
-        return AlartCurnierLaw()
 
     def evaluate(
         self,

@@ -294,14 +294,6 @@ class PairLaws:
             z[group.index] = group.law.initial_unknowns(self.constrained[group.index])
         return z
 
-    def unknowns(self, lam: np.ndarray, slip: np.ndarray | None = None, no_force: float = 0.0) -> np.ndarray:
-        """z giving the forces ``lam`` (see each law's ``unknowns``)."""
-        z = np.zeros((self.size, 3))
-        for group in self.groups:
-            z[group.index] = group.law.unknowns(lam[group.index], None if slip is None else slip[group.index],
-                                                no_force, self.constrained[group.index])
-        return z
-
     def unknown_scale(self, force_scale: float) -> np.ndarray:
         """(n, 3): the scale of each unknown when forces are of order ``force_scale``."""
         scale = np.zeros((self.size, 3))
@@ -315,14 +307,6 @@ class PairLaws:
         if cartesian is not None:
             scale[np.asarray(cartesian, dtype=bool)] = float(force_scale)
         return scale
-
-    def regularised(self) -> PairLaws | None:
-        """The same pairs with every law replaced by its regular companion; None if all are regular."""
-        if all(group.law.regular is None for group in self.groups):
-            return None
-        groups = tuple(LawGroup(group.law.regular or group.law, group.r, group.force_unit, group.index)
-                       for group in self.groups)
-        return PairLaws(groups, self.g0, self.mu_f, self.constrained)
 
 
 @dataclass(frozen=True, eq=False)
