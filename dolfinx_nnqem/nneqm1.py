@@ -143,6 +143,10 @@ class NNEQM1Solver:
 
     def solve_increment(self, load_factor: float) -> SolveReport:
         p = self.problem
+        # the outer iteration starts where the monolithic solver's Newton does: from the secant
+        # extrapolation of the last two increments (u and the pair unknowns) while the load path
+        # goes on in the same direction, else with the jump of the prescribed values lifted
+        extrapolated = self.settings.extrapolate and p.extrapolate(load_factor)
         u_bc = p.u.x.array[p.bc_dofs].copy()
         p.apply_prescribed_displacements(load_factor)
         p.predict_contact()
@@ -151,7 +155,7 @@ class NNEQM1Solver:
                              system_order=3 * p.num_pairs + self.condensation.num_modes)
         system = _OuterSystem(self, report)
         lifted = False
-        if p.comm.allreduce(bool(np.any(delta_bc != 0.0)), op=MPI.LOR):
+        if not extrapolated and p.comm.allreduce(bool(np.any(delta_bc != 0.0)), op=MPI.LOR):
             p.u.x.array[p.bc_dofs] = u_bc
             lifted = system.lifted_step(delta_bc)
             if not lifted:  # its contact solve failed: the plain start, from the moved boundary

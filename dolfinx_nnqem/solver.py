@@ -139,6 +139,11 @@ class NNEQM1Options:
     ----------
     modified
         Keep K, X and C from the first iteration of the increment (modified Newton).
+    extrapolate
+        Start each increment's outer iteration from the secant extrapolation of the last two
+        increments (u and the pair unknowns, :meth:`ContactProblem.extrapolate`), as the
+        monolithic solver does; where it does not apply (the first two increments, a turn of
+        the load path), from the converged state with the prescribed jump lifted.
     inner_max_iterations
         Iteration limit of the dense nonsmooth solve.
     inner
@@ -152,6 +157,7 @@ class NNEQM1Options:
     """
 
     modified: bool = False
+    extrapolate: bool = True
     inner_max_iterations: int = 100
     inner: Globalisation = field(default_factory=lambda: Globalisation(min_step=1e-10, watchdog=6))
     inner_retry: Globalisation | None = field(default_factory=lambda: Globalisation(min_step=1e-10, watchdog=0))
