@@ -308,6 +308,16 @@ class PlasticState:
         return imap.size_global * self.W_scalar.dofmap.index_map_bs
 
 
+ELASTIC_YIELD_STRESS = np.finfo(float).max / 1e10
+"""How the yield stress σ_y0 = inf of an elastic material is stored in the cell-wise fields
+(finite, so that the UFL expressions of the yield function stay finite)."""
+
+
+def can_yield(sigma_y0: np.ndarray) -> np.ndarray:
+    """True where ``sigma_y0`` is a real yield stress, False where it stands for an elastic material."""
+    return np.asarray(sigma_y0) < ELASTIC_YIELD_STRESS
+
+
 def _materials_by_tag(materials, cell_tags, mesh) -> dict:
     if isinstance(materials, VonMises):
         return {None: materials}
@@ -337,8 +347,7 @@ def _fill_cellwise(state: PlasticState, materials: dict, cell_tags, Q0) -> None:
         assigned[cells] = True
         for name, f in fields.items():
             value = getattr(material, name)
-            # an elastic material (σ_y0 = inf) is stored as a huge finite yield stress
-            f.x.array[dofs] = value if math.isfinite(value) else np.finfo(float).max / 1e10
+            f.x.array[dofs] = value if math.isfinite(value) else ELASTIC_YIELD_STRESS
     n_owned = state.mesh.topology.index_map(tdim).size_local
     missing = np.flatnonzero(~assigned[:n_owned])
     n_missing = state.mesh.comm.allreduce(len(missing), op=MPI.SUM)

@@ -4,7 +4,10 @@ For the load factor ℓ of an increment from the converged state (u_n, σ_n, p_n
 the pair unknowns z (3NC; the law's unknowns, force λ(z)) and the plastic multiplier increment
 Δγ_j ≥ 0 at EVERY Gauss point j (NG): a dense nonsmooth system of order 3NC + NG
 (``formulation.md`` §5), solved by the package's Newton driver on dense arrays
-(:func:`dolfinx_nnqem.nonsmooth.solve_nonsmooth`).
+(:func:`dolfinx_nnqem.nonsmooth.solve_nonsmooth`). "Every Gauss point" means every Gauss point of
+a material that can yield: at a point of an elastic material (σ_y0 = inf) Δγ_j = 0 always, so it
+carries no unknown and no row (the solution is the same; an elastic body adds nothing to the
+order). NG below counts the Gauss points that can yield.
 
 Displacement. The ELASTIC stiffness K_e (Dirichlet rows and columns identity) is factorised once
 per run (:class:`~dolfinx_nnqem.condensation.Condensation`). With the Gauss-point load matrix Q, Q_{:,j} = w_j B_jᵀ C N_j (the nodal load of the
@@ -95,8 +98,8 @@ from dolfinx_nnqem.condensation import Condensation
 from dolfinx_nnqem.contact.model import PairLaws
 from dolfinx_nnqem.convergence import IterationRecord, SolveReport, logger
 from dolfinx_nnqem.linalg import free_dropped_objects
-from dolfinx_nnqem.material import (DEVIATORIC_BASIS, GaussPointValues, deviator_coordinates, deviator_tensors,
-                                    elastic_stress, equivalent_stress, flow_direction, strain)
+from dolfinx_nnqem.material import (DEVIATORIC_BASIS, GaussPointValues, can_yield, deviator_coordinates,
+                                    deviator_tensors, elastic_stress, equivalent_stress, flow_direction, strain)
 from dolfinx_nnqem.nneqm1 import rigid_start
 from dolfinx_nnqem.nonsmooth import solve_dense
 from dolfinx_nnqem.problem import ContactProblem, assemble_vector
@@ -112,7 +115,7 @@ class _Increment:
     Pairs: ``laws`` (their laws, gaps, μ_f), ``w_prev`` (NC, 3), ``w0`` = B(u_n + du_0) + m(ℓ)
     (3NC,), the flexibilities W_BB = B G Bᵀ (3NC, 3NC) and W_BQ = B G Q (3NC, NG), the free
     rigid modes B N (3NC, n_r), with their loads e = Nᵀ b (n_r,) and Nᵀ Q (n_r, NG).
-    Gauss points (NG): the converged deviators ``s_n`` (NG, 5) and p_n, the material values μ,
+    Gauss points that can yield (NG): the converged deviators ``s_n`` (NG, 5) and p_n, the material values μ,
     σ_y0, H, the stress unit σ_u and the scale of Δγ, the deviatoric strains of du_0 (``e0``,
     (NG, 5)), of G Bᵀ (``SB``, (NG, 5, 3NC)) and of G Q (``SQ``, (NG, 5, NG)), and the frozen
     flow directions N (NG, 5).
@@ -185,19 +188,19 @@ class NNEQM2Solver:
         self.options = options or SolverOptions()
         self.settings = nneqm2 or NNEQM2Options()
         self.flow_rtol = 100.0 * self.options.rtol if self.settings.flow_rtol is None else self.settings.flow_rtol
-        order = 3 * problem.num_pairs + problem.state.num_gauss_points()
-        if order > self.settings.max_dense_order:
-            raise ValueError(
-                f"nneqm2: the dense system would have order 3 NC + NG = {order} ({problem.num_pairs} pairs, "
-                f"{problem.state.num_gauss_points()} Gauss points), {8e-9 * order**2:.2g} GB per matrix, above "
-                f"NNEQM2Options.max_dense_order = {self.settings.max_dense_order}; use the monolithic solver or NNEQM1 "
-                "(their size grows with the mesh, not its square), or raise max_dense_order")
-        self.condensation = Condensation(problem, self.name, self.options.petsc_options)
         self._timings: dict[str, float] = {}
         self.increment_info: list[dict] = []  #: per converged solve: checks and counts
         self._factorised = False
         self._YB = None
         self._setup_gauss_point_operators()
+        order = 3 * problem.num_pairs + self.num_yield_points
+        if order > self.settings.max_dense_order:
+            raise ValueError(
+                f"nneqm2: the dense system would have order 3 NC + NG = {order} ({problem.num_pairs} pairs, "
+                f"{self.num_yield_points} Gauss points that can yield), {8e-9 * order**2:.2g} GB per matrix, above "
+                f"NNEQM2Options.max_dense_order = {self.settings.max_dense_order}; use the monolithic solver or NNEQM1 "
+                "(their size grows with the mesh, not its square), or raise max_dense_order")
+        self.condensation = Condensation(problem, self.name, self.options.petsc_options)
 
     @property
     def timings(self) -> dict[str, float]:
@@ -220,8 +223,6 @@ class NNEQM2Solver:
         wv = assemble_vector(jit.form(phi * st.dx), Ws)
         imap = Ws.dofmap.index_map
         self.n_gp = imap.size_local
-        self.gp_offset = imap.local_range[0]
-        self.num_gauss_points = imap.size_global
         self._w = wv.getArray(readonly=True)[:self.n_gp].copy()
         wv.destroy()
         if self._A.getLocalSize()[0] != 9 * self.n_gp:
@@ -237,6 +238,13 @@ class NNEQM2Solver:
         self._lmbda = at_points(st.lmbda)
         self._sy = at_points(st.sigma_y0)
         self._Hh = at_points(st.H)
+        # Only the Gauss points of a material that can yield carry an unknown Δγ: at an elastic
+        # one (σ_y0 = inf) Δγ = 0 always, and its row would only add to the dense system's order
+        self._yields = can_yield(self._sy)
+        self.n_yp = int(np.count_nonzero(self._yields))
+        counts = p.comm.allgather(self.n_yp)
+        self.yp_offset = int(sum(counts[:p.comm.rank]))
+        self.num_yield_points = int(sum(counts))
         E = at_points(st.E)
         self._su = np.minimum(self._sy, 1e-2 * E)  # stress unit of the yield rows
         self._gscale = self._su / (3.0 * self._mu + self._Hh)  # Δγ = Δγ̃ · gscale
@@ -265,6 +273,10 @@ class NNEQM2Solver:
     def _influence(self, loads: PETSc.Mat):
         """Y = G loads (owned rows), S = dev ε(Y) gathered (NG, 5, m), B Y gathered (3NC, m)."""
         p = self.problem
+        if loads.getSize()[1] == 0:  # no Gauss point can yield (MUMPS refuses zero right-hand sides)
+            n_u = loads.getLocalSize()[0]
+            WB = np.zeros((3 * p.contact.num_global, 0)) if p.has_contact else None
+            return np.zeros((n_u, 0)), np.zeros((self.num_yield_points, 5, 0)), WB
         Y = self.condensation.solve_columns(loads)
         S = self._dev_strains_of(Y)
         WB = None
@@ -279,14 +291,15 @@ class NNEQM2Solver:
         return Y_local, S, WB
 
     def _dev_strains_of(self, Y: PETSc.Mat) -> np.ndarray:
-        """dev ε_j of every column of the dense matrix Y, gathered: (NG, 5, ncols)."""
+        """dev ε_j of every column of the dense matrix Y at the Gauss points that can yield,
+        gathered: (NG, 5, ncols)."""
         AY = self._A.matMult(Y)
         ncols = Y.getSize()[1]
         e9 = AY.getDenseArray().reshape(self.n_gp, 9, ncols)
         e5 = (DEVIATORIC_BASIS @ e9.transpose(1, 0, 2).reshape(9, -1)).reshape(5, self.n_gp, ncols)
         e5 = e5.transpose(1, 0, 2) / self._w[:, None, None]
         AY.destroy()
-        return self._gather_gp(e5)
+        return self._gather_yielding(e5)
 
     # -- small helpers -------------------------------------------------------------------------
     def _gather_gp(self, local: np.ndarray) -> np.ndarray:
@@ -296,8 +309,21 @@ class NNEQM2Solver:
             return np.asarray(local)
         return np.concatenate(comm.allgather(np.ascontiguousarray(local)), axis=0)
 
-    def _local_gp(self, array_global: np.ndarray) -> np.ndarray:
-        return array_global[self.gp_offset:self.gp_offset + self.n_gp]
+    def _gather_yielding(self, local: np.ndarray) -> np.ndarray:
+        """The rows of the owned Gauss points that can yield, gathered (global order, every rank)."""
+        return self._gather_gp(np.asarray(local)[self._yields])
+
+    def _local_yielding(self, array_global: np.ndarray) -> np.ndarray:
+        """This rank's rows of a gathered array over the Gauss points that can yield."""
+        return array_global[self.yp_offset:self.yp_offset + self.n_yp]
+
+    def _owned(self, array_global: np.ndarray) -> np.ndarray:
+        """A gathered array over the Gauss points that can yield, at every owned Gauss point (0 at
+        the elastic ones)."""
+        local = self._local_yielding(array_global)
+        out = np.zeros((self.n_gp,) + local.shape[1:])
+        out[self._yields] = local
+        return out
 
     def _strains9(self, vec: PETSc.Vec) -> np.ndarray:
         """ε_j(u) at the owned Gauss points, (n_gp, 3, 3), for a vector laid out like V."""
@@ -315,13 +341,16 @@ class NNEQM2Solver:
         return assemble_vector(self._Fsig_form, self.problem.V)
 
     def _flow_matrix(self, N5_local: np.ndarray) -> PETSc.Mat:
-        """Q = Aᵀ G (AIJ, V rows × NG): column j is the load w_j B_jᵀ (2μ_j N_j) of Δγ_j = 1."""
-        n, off, NG = self.n_gp, self.gp_offset, self.num_gauss_points
-        vals = (2.0 * self._mu[:, None] * (N5_local @ DEVIATORIC_BASIS)).reshape(-1)
+        """Q = Aᵀ G (AIJ, V rows × NG): column j is the load w_j B_jᵀ (2μ_j N_j) of Δγ_j = 1, for
+        the owned Gauss points that can yield (``N5_local``: their directions, (n, 5))."""
+        n, NG = self.n_yp, self.num_yield_points
+        vals = (2.0 * self._mu[self._yields, None] * (N5_local @ DEVIATORIC_BASIS)).reshape(-1)
+        # rows: the 9 strain components of every owned Gauss point; one entry where it can yield
+        row_counts = np.repeat(self._yields.astype(PETSc.IntType), 9)
+        indptr = np.concatenate([[0], np.cumsum(row_counts)]).astype(PETSc.IntType)
         G = PETSc.Mat().createAIJ(
-            size=((9 * n, 9 * NG), (n, NG)),
-            csr=(np.arange(9 * n + 1, dtype=PETSc.IntType),
-                 np.repeat(off + np.arange(n), 9).astype(PETSc.IntType), vals),
+            size=((9 * self.n_gp, 9 * self.problem.state.num_gauss_points()), (n, NG)),
+            csr=(indptr, np.repeat(self.yp_offset + np.arange(n), 9).astype(PETSc.IntType), vals),
             comm=self.problem.comm)
         G.assemble()
         Q = self._A.transposeMatMult(G)
@@ -337,7 +366,7 @@ class NNEQM2Solver:
             Q.multTranspose(v, out)
             rows.append(self._gather_gp(out.getArray(readonly=True).copy()))
             out.destroy()
-        return np.array(rows).reshape(len(rows), self.num_gauss_points)
+        return np.array(rows).reshape(len(rows), self.num_yield_points)
 
     def _z_scale(self, d: _Increment, laws: PairLaws | None) -> np.ndarray:
         """Scale of the pair unknowns (forces with the load scale F, the polar angle 1)."""
@@ -360,7 +389,7 @@ class NNEQM2Solver:
         p.apply_prescribed_displacements(load_factor)
         p.predict_contact()
         nc = p.num_pairs
-        NG = self.num_gauss_points
+        NG = self.num_yield_points
         n_r = self.condensation.num_modes
         report = SolveReport(converged=False, iterations=0, system_order=3 * nc + NG + n_r)
         n_u = p.V.dofmap.index_map.size_local * 3
@@ -384,7 +413,7 @@ class NNEQM2Solver:
         self._tick("assembly", t0)
         du0 = self.condensation.solve(b)
         du0_arr = du0.getArray(readonly=True).copy()
-        e0 = self._gather_gp(deviator_coordinates(self._strains9(du0)))
+        e0 = self._gather_yielding(deviator_coordinates(self._strains9(du0)))
         # F_n and F_ext, the lifted prescribed increments and an obstacle's motion (not yet in F_n)
         scale = max(F_ext.norm(), F_n.norm(), lift.norm())
 
@@ -409,16 +438,16 @@ class NNEQM2Solver:
         tol = opts.rtol + opts.atol / F
 
         # -- Gauss-point data (global order)
-        s_n = self._gather_gp(deviator_coordinates(sigma_n))
-        mu, sy, Hh, su, gscale = (self._gather_gp(a) for a in (self._mu, self._sy, self._Hh, self._su,
-                                                                self._gscale))
+        s_n = self._gather_yielding(deviator_coordinates(sigma_n))
+        mu, sy, Hh, su, gscale = (self._gather_yielding(a) for a in (self._mu, self._sy, self._Hh, self._su,
+                                                                      self._gscale))
         d = _Increment(
             nc=nc, NG=NG, F=F, laws=laws, w_prev=w_prev, w0=w0, WBB=self._WBB if nc else None,
             BN=self.condensation.mode_coupling() if nc else np.zeros((0, n_r)),
-            e=self.condensation.mode_loads(b), s_n=s_n, p_n=self._gather_gp(st.p_n.x.array[:self.n_gp]),
+            e=self.condensation.mode_loads(b), s_n=s_n, p_n=self._gather_yielding(st.p_n.x.array[:self.n_gp]),
             mu=mu, sy=sy, Hh=Hh, su=su, gscale=gscale, e0=e0, SB=self._SB if nc else np.zeros((NG, 5, 0)),
             r=max(group.r for group in laws.groups) if nc else 1.0, w_start=w_start,
-            dp_n=self._gather_gp(st.dp_n.x.array[:self.n_gp]))
+            dp_n=self._gather_yielding(st.dp_n.x.array[:self.n_gp]))
 
         alpha_0 = rigid_start(d.BN, w0 - w_prev.reshape(-1)) if n_r else np.zeros(0)
         if n_r and nc:  # a floating body: the pair forces from an equilibrated elastic prediction
@@ -440,7 +469,7 @@ class NNEQM2Solver:
             free_dropped_objects(p.petsc_comms)
             # -- Q, G Q and its strains/relative displacements for the current N
             t0 = time.perf_counter()
-            Q = self._flow_matrix(self._local_gp(N))
+            Q = self._flow_matrix(self._local_yielding(N))
             d.NtQ = self._mode_loads_of(Q)
             YQ, SQ, WBQ = self._influence(Q)
             Q.destroy()
@@ -484,7 +513,7 @@ class NNEQM2Solver:
 
         # -- displacement, stress, the proposed Gauss-point state
         t0 = time.perf_counter()
-        dg_local = self._local_gp(dg)
+        dg_local = self._owned(dg)
         du = du0_arr + YQ @ dg
         if nc:
             du += self._YB @ lam
@@ -500,7 +529,7 @@ class NNEQM2Solver:
         du_vec.getArray()[:] = du
         eps = self._strains9(du_vec)
         du_vec.destroy()
-        N9 = deviator_tensors(self._local_gp(N))
+        N9 = deviator_tensors(self._owned(N))
         eps_e = eps - dg_local[:, None, None] * N9
         sigma = sigma_n + elastic_stress(eps_e, self._lmbda, self._mu)
         report.gauss_point_values = GaussPointValues(p.u.x.array.copy(), sigma, dg_local.copy())
@@ -744,11 +773,11 @@ class NNEQM2Solver:
         rm.interpolate(self._rm_expr)
         sig_rm = rm.x.array[:9 * self.n_gp].reshape(self.n_gp, 3, 3)
         diff = np.linalg.norm((sigma - sig_rm).reshape(self.n_gp, 9), axis=1) / self._su
-        f = (equivalent_stress(deviator_coordinates(sigma)) - self._sy
-             - self._Hh * (st.p_n.x.array[:self.n_gp] + dg_local)) / self._su
+        f = ((equivalent_stress(deviator_coordinates(sigma)) - self._sy
+              - self._Hh * (st.p_n.x.array[:self.n_gp] + dg_local)) / self._su)[self._yields]
         return {
             "load_factor": float(load_factor),
-            "system_order": 3 * p.num_pairs + self.num_gauss_points + self.condensation.num_modes,
+            "system_order": 3 * p.num_pairs + self.num_yield_points + self.condensation.num_modes,
             "iterations": int(iterations),
             "flow_updates": int(flow_updates),
             "flow_change": change,
