@@ -2,8 +2,9 @@
 
     mpiexec -n N python contact_cases.py CASE METHOD OUT.npz
 
-CASE: "three_blocks" (two interfaces, the drag making the lower one slide) or "sphere" (a rigid
-sphere pressed on a graded block, then sliding sideways). Rank 0 writes the pair table's slave
+CASE: "three_blocks" (two interfaces, the drag making the lower one slide), "elastic_on_plastic"
+(pressed and dragged blocks, the lower one elastic) or "sphere" (a rigid sphere pressed on a graded
+block, then sliding sideways). Rank 0 writes the pair table's slave
 positions, interfaces, forces on body 1 and slave displacements (global pair order) and the
 iterations per increment.
 """
@@ -22,11 +23,30 @@ from dolfinx_nnqem.solver import SolverOptions, make_solver  # noqa: E402
 from dolfinx_nnqem.stepping import solve_load_steps  # noqa: E402
 
 
+def elastic_on_plastic_blocks(comm):
+    """The pressed blocks of the robustness suite (drag 0.2 p), the lower block elastic: NNEQM2
+    has Δγ unknowns in the upper block only, numbered across ranks."""
+    from dolfinx_nnqem.material import VonMises
+    from dolfinx_nnqem.meshing import BlockStackTags as B
+    from dolfinx_nnqem.meshing import build_block_stack
+    from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Pressure, Traction
+
+    mesh, ct, ft = build_block_stack(comm, 1.0, 1.0, (0.5, 0.5), ((4, 2, 4), (4, 2, 4)))
+    plastic = VonMises(E=2.0e10, nu=0.2, sigma_y0=2.0e7, H=2.0e9)
+    return ContactProblem(
+        mesh, ct, ft, materials={1: VonMises(E=2.0e10, nu=0.2), 2: plastic},
+        dirichlet=[Dirichlet(B.bottom(1))] + [Dirichlet(f(k), 0.0, [2]) for k in (1, 2) for f in (B.zmin, B.zmax)],
+        tractions=[Pressure(B.top(2), 3.0e7), Traction(B.top(2), (0.2 * 3.0e7, 0.0, 0.0))],
+        contact=Contact(B.top(1), B.bottom(2), mu_f=0.3))
+
+
 def solve_case(case: str, method: str, comm=MPI.COMM_WORLD) -> dict:
     if case == "three_blocks":
         from test_interfaces import three_blocks
 
         problem, increments = three_blocks(mu_f=(0.2, 0.4), drag=1.0e-2, comm=comm), 10
+    elif case == "elastic_on_plastic":
+        problem, increments = elastic_on_plastic_blocks(comm), 5
     elif case == "sphere":
         from test_obstacles import sphere_problem_sliding
 
