@@ -1,4 +1,5 @@
-"""Several interfaces, a rigid obstacle and NNEQM2 with an elastic body on 2 ranks: the same answer as serially, to 1e-8.
+"""Several interfaces, a rigid obstacle and NNEQM2 with an elastic body on 2 ranks: the same answer
+as serially, to 1e-8.
 
 Pairs are owned by the rank of their slave node, so their global order depends on the number of
 ranks: results are compared pair by pair after sorting by (interface, slave position).
