@@ -153,7 +153,7 @@ class _Increment:
 
 
 class NNEQM2Solver:
-    """One dense nonsmooth system in the pair unknowns and all Gauss points' Δγ.
+    """One dense nonsmooth system in the pair unknowns and the Δγ of all Gauss points that can yield.
 
     Parameters
     ----------

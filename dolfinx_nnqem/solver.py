@@ -200,8 +200,8 @@ class NNEQM2Options:
         by default a watchdog, which crosses kinks of the merit function where the monotone
         steps of ``inner`` shrink to nothing (see :class:`NNEQM1Options`).
     max_dense_order
-        Largest order 3 NC + NG of the dense system accepted (NG: every Gauss point of the
-        mesh). Its matrices grow as the order squared (8 bytes each entry; 20 000 is 3.2 GB per
+        Largest order 3 NC + NG of the dense system accepted (NG: the Gauss points of the
+        materials that can yield; an elastic body's carry no unknown). Its matrices grow as the order squared (8 bytes each entry; 20 000 is 3.2 GB per
         matrix); a larger problem is refused before anything is assembled.
     """
 
