@@ -115,10 +115,10 @@ class _Increment:
     Pairs: ``laws`` (their laws, gaps, μ_f), ``w_prev`` (NC, 3), ``w0`` = B(u_n + du_0) + m(ℓ)
     (3NC,), the flexibilities W_BB = B G Bᵀ (3NC, 3NC) and W_BQ = B G Q (3NC, NG), the free
     rigid modes B N (3NC, n_r), with their loads e = Nᵀ b (n_r,) and Nᵀ Q (n_r, NG).
-    Gauss points that can yield (NG): the converged deviators ``s_n`` (NG, 5) and p_n, the material values μ,
-    σ_y0, H, the stress unit σ_u and the scale of Δγ, the deviatoric strains of du_0 (``e0``,
-    (NG, 5)), of G Bᵀ (``SB``, (NG, 5, 3NC)) and of G Q (``SQ``, (NG, 5, NG)), and the frozen
-    flow directions N (NG, 5).
+    Gauss points that can yield (NG): the converged deviators ``s_n`` (NG, 5) and p_n, the
+    material values μ, σ_y0, H, the stress unit σ_u and the scale of Δγ, the deviatoric strains of
+    du_0 (``e0``, (NG, 5)), of G Bᵀ (``SB``, (NG, 5, 3NC)) and of G Q (``SQ``, (NG, 5, NG)), and
+    the frozen flow directions N (NG, 5).
     """
 
     nc: int
