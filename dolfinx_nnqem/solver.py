@@ -201,8 +201,9 @@ class NNEQM2Options:
         steps of ``inner`` shrink to nothing (see :class:`NNEQM1Options`).
     max_dense_order
         Largest order 3 NC + NG of the dense system accepted (NG: the Gauss points of the
-        materials that can yield; an elastic body's carry no unknown). Its matrices grow as the order squared (8 bytes each entry; 20 000 is 3.2 GB per
-        matrix); a larger problem is refused before anything is assembled.
+        materials that can yield; an elastic body's carry no unknown). Its matrices grow as the
+        order squared (8 bytes each entry; 20 000 is 3.2 GB per matrix); a larger problem is
+        refused before anything is assembled.
     """
 
     update_flow_directions: bool = False

@@ -70,6 +70,13 @@ def solve_along_the_path(case: robustness.Case, method: str, law: str):
     return [r.load_factor for r in results], sum(1 for r in results if r.cutbacks), states
 
 
+def path_difference(states: dict, reference: dict, which: int = 0) -> float:
+    """Largest difference over the increments of ``reference`` (``which``: 0 the pair forces, 1 u),
+    relative to the largest value of ``reference``."""
+    scale = max(abs(values[which]).max() for values in reference.values())
+    return max(abs(states[ell][which] - reference[ell][which]).max() for ell in reference) / scale
+
+
 @pytest.mark.parametrize("law", robustness.LAWS)
 def test_nneqm1_on_the_cyclic_path_equals_the_monolithic_solver(law):
     """Press, drag forward, drag back past the reversal, lift off (prescribed displacements): NNEQM1
@@ -80,10 +87,7 @@ def test_nneqm1_on_the_cyclic_path_equals_the_monolithic_solver(law):
     factors, cutbacks, nneqm1 = solve_along_the_path(case, "nneqm1", law)
     _, _, monolithic = solve_along_the_path(case, "monolithic", law)
     assert cutbacks == 0 and len(factors) == case.increments and set(nneqm1) == set(monolithic)
-    F_max = max(abs(forces).max() for forces, _ in monolithic.values())
-    u_max = max(abs(u).max() for _, u in monolithic.values())
-    dF = max(abs(nneqm1[ell][0] - monolithic[ell][0]).max() for ell in monolithic) / F_max
-    du = max(abs(nneqm1[ell][1] - monolithic[ell][1]).max() for ell in monolithic) / u_max
+    dF, du = path_difference(nneqm1, monolithic), path_difference(nneqm1, monolithic, 1)
     print(f"\n  cyclic {law}: NNEQM1 against monolithic over {len(monolithic)} increments: pair forces {dF:.1e}, "
           f"u {du:.1e}")
     assert dF < 1e-8 and du < 1e-8
@@ -112,8 +116,7 @@ def test_polar_law_on_the_two_beams_in_few_increments_equals_the_cartesian_law(m
     case = robustness.Case(f"two-beams-{increments}", robustness.two_beams, increments, "")
     runs = {law: solve_along_the_path(case, method, law) for law in robustness.LAWS}
     (factors, cutbacks, polar), (_, _, cartesian) = runs["polar"], runs["alart-curnier"]
-    F_max = max(abs(forces).max() for forces, _ in cartesian.values())
-    dF = max(abs(polar[ell][0] - cartesian[ell][0]).max() for ell in cartesian) / F_max
+    dF = path_difference(polar, cartesian)
     print(f"\n  two beams in {increments}, {method}/polar: cutbacks {cutbacks}; pair forces against the "
           f"Cartesian law {dF:.1e}")
     assert cutbacks == 0 and len(factors) == increments and set(polar) == set(cartesian) and dF < 1e-8
@@ -130,8 +133,7 @@ def test_nneqm2_on_the_two_beams_in_3_increments_without_cutback():
     case = robustness.Case("two-beams-3", robustness.two_beams, 3, "")
     runs = {law: solve_along_the_path(case, "nneqm2", law) for law in robustness.LAWS}
     (_, _, polar), (_, _, cartesian) = runs["polar"], runs["alart-curnier"]
-    F_max = max(abs(forces).max() for forces, _ in cartesian.values())
-    dF = max(abs(polar[ell][0] - cartesian[ell][0]).max() for ell in cartesian) / F_max
+    dF = path_difference(polar, cartesian)
     print(f"\n  two beams in 3, NNEQM2: cutbacks {[runs[law][1] for law in robustness.LAWS]} "
           f"({', '.join(robustness.LAWS)}); polar against Cartesian pair forces {dF:.1e}")
     for law in robustness.LAWS:
@@ -154,8 +156,7 @@ def test_nneqm2_solves_the_polar_law_without_the_cartesian_law(monkeypatch):
     monkeypatch.setattr(AlartCurnierLaw, "evaluate", refuse)
     monkeypatch.setattr(AlartCurnierLaw, "linearise", refuse)
     factors, cutbacks, polar = solve_along_the_path(case, "nneqm2", "polar")
-    F_max = max(abs(forces).max() for forces, _ in cartesian.values())
-    dF = max(abs(polar[ell][0] - cartesian[ell][0]).max() for ell in cartesian) / F_max
+    dF = path_difference(polar, cartesian)
     print(f"\n  two beams in 15, NNEQM2/polar: cutbacks {cutbacks}; pair forces against the Cartesian law {dF:.1e}")
     assert cutbacks == 0 and len(factors) == case.increments and set(polar) == set(cartesian) and dF < 1e-8
 
