@@ -13,6 +13,9 @@ API only, before committing it:
 * **contact**: every pair's law H(w, z) (force units, the supports' pinned directions applied),
   ‖H‖ ≤ tol · F, and, independently of how a law is written, the Coulomb conditions of
   the forces λ(z): p_n ≥ −tol·F and |λ_t| ≤ μ_f max(p_n, 0) + tol·F at every pair;
+* **plastic admissibility** of a solver's own Gauss-point values (NNEQM2): the stress lies in the
+  yield surface, q(σ) − σ_y0 − H (p_n + Δp) ≤ tol · σ_u with σ_u = min(σ_y0, 10⁻² E) (the yield
+  rows' stress unit), and Δp ≥ 0 (the radial return's stresses are admissible by construction);
 * **finite values**: u and z hold no NaN or infinity;
 * **small strain**: the package solves small-strain problems, so a state with a strain (the
   largest ‖sym ∇u‖ at a Gauss point, Frobenius norm) above ``max_strain`` or an infinitesimal
@@ -96,6 +99,7 @@ class StateCheck:
     force_scale: float  #: F
     tolerance: float  #: the relative tolerance used
     own_stresses: bool  #: equilibrium measured with the solver's own Gauss-point stresses
+    yield_violation: float = 0.0  #: own stresses: largest f / σ_u outside the yield surface (0 inside; inf if Δp < 0)
     worst_pairs: list = field(default_factory=list)  #: [{pair, position, state, H/F}] (failed checks)
     worst_nodes: list = field(default_factory=list)  #: [{position, |R|/F}] (failed checks)
 
@@ -118,6 +122,27 @@ class _Forms:
         self.grad_expr = jit.expression(ufl.grad(problem.u), compat.interpolation_points(st.W_tensor))
         self.sigma = fem.Function(st.W_tensor)
         self.own_force = jit.form(ufl.inner(self.sigma, strain(ufl.TestFunction(problem.V))) * st.dx)
+        self._material = None
+        self._state = st
+
+    def material_at_points(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """σ_y0, H and σ_u = min(σ_y0, 10⁻² E) at the owned Gauss points (computed once)."""
+        if self._material is None:
+            import dolfinx.fem as fem
+
+            from dolfinx_nnqem import compat, jit
+
+            st = self._state
+            n_gp = st.W_scalar.dofmap.index_map.size_local
+            points = compat.interpolation_points(st.W_scalar)
+            values = []
+            for field_ in (st.sigma_y0, st.H, st.E):
+                f = fem.Function(st.W_scalar)
+                f.interpolate(jit.expression(field_, points))
+                values.append(f.x.array[:n_gp].copy())
+            sy, H, E = values
+            self._material = (sy, H, np.minimum(sy, 1e-2 * E))
+        return self._material
 
 
 _FORMS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
@@ -199,6 +224,15 @@ def check_state(problem, report=None, solver_options=None, options: CheckOptions
                 if atol > limit * F else "")
         reasons.append(f"equilibrium residual |R|/F = {eq:.3e} > {limit:.1e} (F = {F:.4g} N){hint}")
 
+    # -- plastic admissibility of the solver's own Gauss-point values
+    yield_violation = 0.0
+    if own:
+        yield_violation = _yield_violation(problem, forms, gpv)
+        if not yield_violation <= tol:
+            reasons.append("the solver's Gauss-point values have Δp < 0" if math.isinf(yield_violation) else
+                           f"the solver's Gauss-point stresses leave the yield surface: max (q − σ_y)/σ_u = "
+                           f"{yield_violation:.3e} > {tol:.1e}")
+
     # -- contact
     contact = coulomb = 0.0
     pair_violation = None
@@ -238,7 +272,7 @@ def check_state(problem, report=None, solver_options=None, options: CheckOptions
                        "far outside the small-rotation setting (a mechanism or collapse?)")
 
     result = StateCheck(not reasons, "; ".join(reasons), float(eq), float(contact), float(coulomb),
-                        float(strain), float(rotation), float(F), float(tol), own)
+                        float(strain), float(rotation), float(F), float(tol), own, float(yield_violation))
     if reasons:
         result.worst_nodes = _worst_nodes(problem, Rf, F)
         if pair_violation is not None:
@@ -246,6 +280,23 @@ def check_state(problem, report=None, solver_options=None, options: CheckOptions
     for obj in (F_int, F_ext, R, Rf):
         obj.destroy()
     return result
+
+
+def _yield_violation(problem, forms: _Forms, gpv) -> float:
+    """Largest (q(σ) − σ_y0 − H (p_n + Δp)) / σ_u over the Gauss points of all ranks, or 0 when the
+    solver's values lie in the yield surface; +inf if some Δp < 0."""
+    from dolfinx_nnqem.material import can_yield, deviator_coordinates, equivalent_stress
+
+    sy, H, su = forms.material_at_points()
+    n_gp = sy.size
+    sigma = np.asarray(gpv.sigma, dtype=float).reshape(n_gp, 3, 3)
+    dp = np.asarray(gpv.dp, dtype=float).reshape(n_gp)
+    p_n = problem.state.p_n.x.array[:n_gp]
+    f = equivalent_stress(deviator_coordinates(sigma)) - sy - H * (p_n + dp)
+    worst = np.max(np.where(can_yield(sy), f / su, -np.inf), initial=-np.inf)  # elastic materials: nothing to violate
+    if np.any(dp < 0.0):
+        worst = np.inf
+    return max(_allmax(problem.comm, float(worst)), 0.0)
 
 
 def _worst_nodes(problem, Rf, F: float, count: int = 5) -> list:

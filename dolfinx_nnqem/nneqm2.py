@@ -58,13 +58,19 @@ integration is an explicit-direction (forward) rule: exact for radial (proportio
 paths, first-order accurate in the increment otherwise. ``update_flow_directions=True``
 recomputes N_j from the current iterate after each nonsmooth solve and solves the whole system
 again with the new Q (a fixed point on N; each pass warm-started from the last solution) until
-the plastic strain increments stop changing: max_j 2μ_j Δγ_j |N_new − N_old| / σ_u,j ≤
-``flow_rtol``. By default (``flow_update="trial"``) N_new is the direction of the current trial
+the plastic strain increments stop changing and the stress lies in the yield surface:
+max_j 2μ_j Δγ_j |N_new − N_old| / σ_u,j ≤ ``flow_rtol`` and max_j f_j(q) / σ_u,j ≤ ``flow_rtol``. By default (``flow_update="trial"``) N_new is the direction of the current trial
 stress σ_n + C ε(du); ``flow_update="stress"`` takes the current stress σ_n + C (ε(du) − Δγ N).
 Both have the same fixed point, the backward-Euler (radial return) update — for von Mises the
 returned stress is parallel to the trial stress — i.e. the solution of the monolithic and NNEQM1
 solvers; the trial direction removes the Gauss point's own Δγ N from the loop and needs about
 half the passes or fewer (11 instead of 25–44 per increment on the tension-then-shear test).
+The passes solve the yield rows projected on their N, q_N = N : s instead of q(s): affine in Δγ,
+so a pass always has a solution, and equal to q where N ∥ s, i.e. at the fixed point. The fixed
+point is accelerated by Anderson mixing (``flow_acceleration``). With frozen N the yield rows may
+have no solution (the stress turns in a large plastic increment); then, before the load stepping
+cuts back, the increment is solved again with updated directions from the elastic predictor's
+trial directions (``retry_updating_directions``; ``increment_info[k]["directions"]``).
 
 State commit. :meth:`PlasticState.commit` would re-integrate with the radial return, which is
 not NNEQM2's stress when N is frozen. The solver therefore returns the converged Gauss-point
@@ -94,6 +100,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from dolfinx_nnqem import compat, jit
+from dolfinx_nnqem.anderson import AndersonMixing
 from dolfinx_nnqem.condensation import Condensation
 from dolfinx_nnqem.contact.model import PairLaws
 from dolfinx_nnqem.convergence import IterationRecord, SolveReport, logger
@@ -146,6 +153,7 @@ class _Increment:
     SQ: np.ndarray | None = None
     WBQ: np.ndarray | None = None
     NtQ: np.ndarray | None = None
+    projected: bool = False  #: the yield rows take q_N = N : s (the flow directions' pass) instead of q(s)
 
     @property
     def n_r(self) -> int:
@@ -455,16 +463,19 @@ class NNEQM2Solver:
             lam_start, _ = laws.force(z_start)
 
         # -- flow directions at the start of the increment
+        s_tr = s_n + 2.0 * mu[:, None] * (e0 + d.SB @ lam_start.reshape(-1))  # the elastic predictor's trial
         s_dir = s_n.copy()
         flat = equivalent_stress(s_n) <= 1e-8 * su
-        if np.any(flat):
-            s_tr = s_n + 2.0 * mu[:, None] * (e0 + d.SB @ lam_start.reshape(-1))
-            s_dir[flat] = s_tr[flat]
+        s_dir[flat] = s_tr[flat]
         N = flow_direction(s_dir, su)
 
-        x = np.concatenate([z_start.reshape(-1) / self._z_scale(d, laws), np.zeros(NG), alpha_0 / (F / d.r)])
+        x_start = np.concatenate([z_start.reshape(-1) / self._z_scale(d, laws), np.zeros(NG),
+                                  alpha_0 / (F / d.r)])
+        x = x_start
         flow_updates, change = 0, float("nan")
         total_its = 0
+        updating, retried = self.settings.update_flow_directions, False
+        mixing = AndersonMixing(self.settings.flow_acceleration)
         while True:
             free_dropped_objects(p.petsc_comms)
             # -- Q, G Q and its strains/relative displacements for the current N
@@ -475,10 +486,22 @@ class NNEQM2Solver:
             Q.destroy()
             self._tick("plastic_matrix", t0)
             d.N, d.SQ, d.WBQ = N, SQ, WBQ
+            d.projected = updating
             result, records = self._dense_solve(x, d, tol, total_its)
             report.history.extend(records)
             total_its += result.iterations
             report.iterations = total_its
+            if not result.converged and not updating and self.settings.retry_updating_directions:
+                # With N frozen at σ_n the yield rows may have no solution: where the stress turns
+                # within a large plastic increment, q(σ_tr − 2μ Δγ N) stays above the yield stress
+                # for every Δγ. The radial return's directions always admit one; start their fixed
+                # point from the elastic predictor's trial directions, from the increment's start.
+                logger.info(f"[{self.name}] ℓ = {load_factor:.6g}: no solution with the flow directions frozen "
+                            f"at the start ({result.message}); solving with updated directions")
+                updating, retried = True, True
+                x = x_start
+                N = flow_direction(s_tr, su, fallback=N)
+                continue
             if not result.converged:
                 report.message = (f"dense nonsmooth solve failed (flow-direction pass {flow_updates}): "
                                   f"{result.message}")
@@ -495,13 +518,18 @@ class NNEQM2Solver:
             # stresses at the end of this pass
             s_end = s_n + 2.0 * mu[:, None] * (e0 + d.SB @ lam + np.einsum("jak,k->ja", SQ, dg)
                                                - N * dg[:, None])
-            if not self.settings.update_flow_directions:
+            if not updating:
                 break
             s_new = s_end if self.settings.flow_update == "stress" else s_end + 2.0 * mu[:, None] * N * dg[:, None]
             N_new = flow_direction(s_new, su, fallback=N)
-            change = float(np.max(2.0 * mu * dg * np.linalg.norm(N_new - N, axis=1) / su, initial=0.0))
-            logger.info(f"[{self.name}] flow-direction pass {flow_updates}: "
-                        f"max 2μ Δγ |ΔN| / σ_y = {change:.3e}")
+            # settled when the plastic strains stop turning AND the stress lies in the yield surface
+            # with q itself: a point the pass's q_N = N : s left elastic (N ⟂ s, or N = 0 before
+            # any stress) has Δγ = 0, so only q can show it should yield
+            turn = float(np.max(2.0 * mu * dg * np.linalg.norm(N_new - N, axis=1) / su, initial=0.0))
+            outside = float(np.max((equivalent_stress(s_end) - d.sy - d.Hh * (d.p_n + dg)) / su, initial=0.0))
+            change = max(turn, outside)
+            logger.info(f"[{self.name}] flow-direction pass {flow_updates}: max 2μ Δγ |ΔN| / σ_y = {turn:.3e}, "
+                        f"max f/σ_y = {outside:.3e}")
             if change <= self.flow_rtol:
                 break
             flow_updates += 1
@@ -509,7 +537,7 @@ class NNEQM2Solver:
                 report.message = (f"flow directions did not settle in {self.settings.max_flow_updates} passes "
                                   f"(last change {change:.3e} > {self.flow_rtol:.1e})")
                 return report
-            N = N_new
+            N = flow_direction(mixing.next(N, N_new), su, fallback=N_new)
 
         # -- displacement, stress, the proposed Gauss-point state
         t0 = time.perf_counter()
@@ -534,6 +562,7 @@ class NNEQM2Solver:
         sigma = sigma_n + elastic_stress(eps_e, self._lmbda, self._mu)
         report.gauss_point_values = GaussPointValues(p.u.x.array.copy(), sigma, dg_local.copy())
         info = self._checks(sigma, dg_local, F_ext, load_factor, total_its, flow_updates, change)
+        info["directions"] = "frozen" if not updating else "updated after frozen failed" if retried else "updated"
         self._tick("stress_update", t0)
         info["wall_time_s"] = time.perf_counter() - t_start
         self.increment_info.append(info)
@@ -549,7 +578,8 @@ class NNEQM2Solver:
 
     # -- the dense nonsmooth system -------------------------------------------------------------
     def _yield_rows(self, x, d: _Increment, laws):
-        """a = −f/σ_u, b = Δγ̃, the stress deviators s and q at the scaled unknowns ``x``."""
+        """a = −f/σ_u, b = Δγ̃, the stress deviators s and q at the scaled unknowns ``x``
+        (q_N = N : s in place of q when ``d.projected``)."""
         nc, NG = d.nc, d.NG
         dgt = x[3 * nc:3 * nc + NG]
         dg = dgt * d.gscale
@@ -561,7 +591,7 @@ class NNEQM2Solver:
             e = d.e0
         e = e + np.einsum("jak,k->ja", d.SQ, dg)
         s = d.s_n + 2.0 * d.mu[:, None] * (e - d.N * dg[:, None])
-        q = equivalent_stress(s)
+        q = np.einsum("ja,ja->j", d.N, s) if d.projected else equivalent_stress(s)
         f = q - d.sy - d.Hh * (d.p_n + dg)
         return -f / d.su, dgt, s, q
 
@@ -621,9 +651,12 @@ class NNEQM2Solver:
             a, b, s, q = self._yield_rows(x, d, laws)
             use_a = a <= b if yield_branch is None else yield_branch  # tie: the first argument (yield branch)
             Hs[n3:n3 + NG] = np.where(use_a, a, b)
-            # ∂(−f/σ_u): g_j = 2μ_j (3/2) s_j / q_j
-            qs = np.where(q > 0.0, q, 1.0)
-            gvec = np.where((q > 0.0)[:, None], 1.5 * s / qs[:, None], 0.0) * (2.0 * mu)[:, None]
+            # ∂(−f/σ_u): g_j = 2μ_j (3/2) s_j / q_j, or 2μ_j N_j for the projected q_N = N_j : s_j
+            if d.projected:
+                gvec = N * (2.0 * mu)[:, None]
+            else:
+                qs = np.where(q > 0.0, q, 1.0)
+                gvec = np.where((q > 0.0)[:, None], 1.5 * s / qs[:, None], 0.0) * (2.0 * mu)[:, None]
             rows = np.flatnonzero(use_a)
             if rows.size:
                 gr = gvec[rows]

@@ -190,6 +190,15 @@ class NNEQM2Options:
         Limit of the N fixed-point passes.
     flow_rtol
         Convergence of the N fixed point (stress over σ_y); default 100 · rtol.
+    flow_acceleration
+        Anderson depth of the N fixed point (:class:`~dolfinx_nnqem.anderson.AndersonMixing`;
+        0: the plain passes).
+    retry_updating_directions
+        With frozen directions: when the dense solve fails, solve the increment again with
+        updated directions (the fixed point of ``update_flow_directions``, from the elastic
+        predictor's trial directions) before the load stepping cuts back. Frozen directions may
+        admit no solution where the stress turns within a large plastic increment; the
+        increment then ends at the radial return (``increment_info[...]["directions"]``).
     extrapolate
         Start each increment's dense solve from the secant extrapolation of the last two
         increments' pair forces (:meth:`ContactProblem.extrapolate`) instead of the last ones.
@@ -211,6 +220,8 @@ class NNEQM2Options:
     inner_max_iterations: int = 100
     max_flow_updates: int = 50
     flow_rtol: float | None = None
+    flow_acceleration: int = 5
+    retry_updating_directions: bool = True
     extrapolate: bool = True
     inner: Globalisation = field(default_factory=lambda: Globalisation(min_step=1e-10, watchdog=0))
     inner_retry: Globalisation | None = field(default_factory=lambda: Globalisation(min_step=1e-10, watchdog=6))
@@ -222,6 +233,7 @@ class NNEQM2Options:
             raise ValueError(f"NNEQM2Options: flow_update = {self.flow_update!r}; expected 'trial' or 'stress'")
         _check_integer("NNEQM2Options", "inner_max_iterations", self.inner_max_iterations, 1)
         _check_integer("NNEQM2Options", "max_flow_updates", self.max_flow_updates, 0)
+        _check_integer("NNEQM2Options", "flow_acceleration", self.flow_acceleration, 0)
         if self.flow_rtol is not None:
             _check_real("NNEQM2Options", "flow_rtol", self.flow_rtol, 0.0, 1.0)
 

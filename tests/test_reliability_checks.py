@@ -99,6 +99,27 @@ def test_nneqm2_is_checked_with_its_own_stresses():
     assert good.ok and good.own_stresses and not bad.ok and bad.equilibrium > 1e-3
 
 
+def test_nneqm2_stresses_outside_the_yield_surface_fail_the_check():
+    """A solver's own Gauss-point values must be plastically admissible: the stress of a point that
+    yielded, committed with a smaller Δp (the equilibrium unchanged), lies outside the hardened
+    yield surface; a negative Δp is refused too."""
+    problem = _box(tractions=(Traction(2, (3e8, 2e7, 0.0)),))  # beyond first yield
+    solver = make_solver("nneqm2", problem)
+    report = solver.solve_increment(1.0)
+    good = check_state(problem, report, solver.options)
+    gpv = report.gauss_point_values
+    assert np.count_nonzero(gpv.dp > 0) > 0
+    report.gauss_point_values = replace(gpv, dp=0.5 * gpv.dp)
+    softer = check_state(problem, report, solver.options)
+    report.gauss_point_values = replace(gpv, dp=np.where(gpv.dp > 0, -gpv.dp, 0.0))
+    negative = check_state(problem, report, solver.options)
+    print(f"\n  own values: yield violation {good.yield_violation:.1e}; Δp halved: {softer.yield_violation:.2e} "
+          f"({softer.reason}); Δp negative: {negative.yield_violation}")
+    assert good.ok and good.yield_violation < good.tolerance
+    assert not softer.ok and "yield surface" in softer.reason and softer.equilibrium == good.equilibrium
+    assert not negative.ok and negative.yield_violation == np.inf
+
+
 def test_broken_pair_forces_fail_the_contact_check():
     from dolfinx_nnqem.two_beams import two_beams_problem
 
