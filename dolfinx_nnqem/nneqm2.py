@@ -59,7 +59,8 @@ paths, first-order accurate in the increment otherwise. ``update_flow_directions
 recomputes N_j from the current iterate after each nonsmooth solve and solves the whole system
 again with the new Q (a fixed point on N; each pass warm-started from the last solution) until
 the plastic strain increments stop changing and the stress lies in the yield surface:
-max_j 2μ_j Δγ_j |N_new − N_old| / σ_u,j ≤ ``flow_rtol`` and max_j f_j(q) / σ_u,j ≤ ``flow_rtol``. By default (``flow_update="trial"``) N_new is the direction of the current trial
+max_j 2μ_j Δγ_j |N_new − N_old| / σ_u,j ≤ ``flow_rtol`` and max_j f_j(q) / σ_u,j ≤ ``flow_rtol``.
+By default (``flow_update="trial"``) N_new is the direction of the current trial
 stress σ_n + C ε(du); ``flow_update="stress"`` takes the current stress σ_n + C (ε(du) − Δγ N).
 Both have the same fixed point, the backward-Euler (radial return) update — for von Mises the
 returned stress is parallel to the trial stress — i.e. the solution of the monolithic and NNEQM1
