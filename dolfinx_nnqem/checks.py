@@ -126,22 +126,13 @@ class _Forms:
         self._state = st
 
     def material_at_points(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """σ_y0, H and σ_u = min(σ_y0, 10⁻² E) at the owned Gauss points (computed once)."""
+        """σ_y0, H and the stress unit σ_u at the owned Gauss points (computed once)."""
         if self._material is None:
-            import dolfinx.fem as fem
-
-            from dolfinx_nnqem import compat, jit
+            from dolfinx_nnqem.material import yield_stress_unit
 
             st = self._state
-            n_gp = st.W_scalar.dofmap.index_map.size_local
-            points = compat.interpolation_points(st.W_scalar)
-            values = []
-            for field_ in (st.sigma_y0, st.H, st.E):
-                f = fem.Function(st.W_scalar)
-                f.interpolate(jit.expression(field_, points))
-                values.append(f.x.array[:n_gp].copy())
-            sy, H, E = values
-            self._material = (sy, H, np.minimum(sy, 1e-2 * E))
+            sy = st.values_at_points(st.sigma_y0)
+            self._material = (sy, st.values_at_points(st.H), yield_stress_unit(sy, st.values_at_points(st.E)))
         return self._material
 
 

@@ -307,10 +307,22 @@ class PlasticState:
         imap = self.W_scalar.dofmap.index_map
         return imap.size_global * self.W_scalar.dofmap.index_map_bs
 
+    def values_at_points(self, expr) -> np.ndarray:
+        """A scalar UFL expression (e.g. a material field) at this rank's owned Gauss points."""
+        f = fem.Function(self.W_scalar)
+        f.interpolate(jit.expression(expr, self._points))
+        return f.x.array[:self.W_scalar.dofmap.index_map.size_local].copy()
+
 
 ELASTIC_YIELD_STRESS = np.finfo(float).max / 1e10
 """How the yield stress σ_y0 = inf of an elastic material is stored in the cell-wise fields
 (finite, so that the UFL expressions of the yield function stay finite)."""
+
+
+def yield_stress_unit(sigma_y0: np.ndarray, E: np.ndarray) -> np.ndarray:
+    """σ_u = min(σ_y0, 10⁻² E): the stress unit of yield-function values (the cap only matters for
+    an elastic material, stored with a huge σ_y0)."""
+    return np.minimum(sigma_y0, 1e-2 * np.asarray(E))
 
 
 def can_yield(sigma_y0: np.ndarray) -> np.ndarray:

@@ -107,7 +107,8 @@ from dolfinx_nnqem.contact.model import PairLaws
 from dolfinx_nnqem.convergence import IterationRecord, SolveReport, logger
 from dolfinx_nnqem.linalg import free_dropped_objects
 from dolfinx_nnqem.material import (DEVIATORIC_BASIS, GaussPointValues, can_yield, deviator_coordinates,
-                                    deviator_tensors, elastic_stress, equivalent_stress, flow_direction, strain)
+                                    deviator_tensors, elastic_stress, equivalent_stress, flow_direction, strain,
+                                    yield_stress_unit)
 from dolfinx_nnqem.nneqm1 import rigid_start
 from dolfinx_nnqem.nonsmooth import solve_dense
 from dolfinx_nnqem.problem import ContactProblem, assemble_vector
@@ -236,13 +237,7 @@ class NNEQM2Solver:
         wv.destroy()
         if self._A.getLocalSize()[0] != 9 * self.n_gp:
             raise RuntimeError("NNEQM2: the strain operator's rows do not match the Gauss points")
-        points = compat.interpolation_points(Ws)
-
-        def at_points(expr):
-            f = fem.Function(Ws)
-            f.interpolate(jit.expression(expr, points))
-            return f.x.array[:self.n_gp].copy()
-
+        at_points = st.values_at_points
         self._mu = at_points(st.mu)
         self._lmbda = at_points(st.lmbda)
         self._sy = at_points(st.sigma_y0)
@@ -254,8 +249,7 @@ class NNEQM2Solver:
         counts = p.comm.allgather(self.n_yp)
         self.yp_offset = int(sum(counts[:p.comm.rank]))
         self.num_yield_points = int(sum(counts))
-        E = at_points(st.E)
-        self._su = np.minimum(self._sy, 1e-2 * E)  # stress unit of the yield rows
+        self._su = yield_stress_unit(self._sy, at_points(st.E))  # stress unit of the yield rows
         self._gscale = self._su / (3.0 * self._mu + self._Hh)  # Δγ = Δγ̃ · gscale
         # ∫ σ : ε(v) for a quadrature stress (NNEQM2's own internal force)
         v = ufl.TestFunction(V)
