@@ -16,7 +16,12 @@ backend so that they are comparable),
   decrease as progress would follow to the iteration limit;
 * Levenberg–Marquardt (JᵀJ + ν I) d = −JᵀH when there is no Newton direction (a singular J,
   a failed linear solve) or it fails the line search; if the LM direction fails the line search
-  too, Ψ is (numerically) stationary and the driver stops and says so.
+  too, Ψ is (numerically) stationary and the driver stops and says so;
+* optionally, a stall test: when the lowest Ψ reached has not fallen below ``stall_progress``
+  times its value ``stall_window`` iterations earlier, the driver stops and says so. A system
+  with no solution near the start (a local minimum of Ψ with Ψ > 0, where damped steps crawl
+  along a plateau and watchdog steps cycle) otherwise runs to the iteration limit before the
+  caller can try something else.
 
 The driver makes every one of these decisions; what a system *is* lives in a backend
 (:class:`NewtonSystem`): the dense arrays of NNEQM1's and NNEQM2's contact systems
@@ -61,6 +66,12 @@ class Globalisation:
     lm_c, lm_delta
         The LM parameter ν = lm_c · (residual size)^lm_delta, in the backend's units (see the
         backends); lm_delta in [1, 2] keeps LM locally superlinear.
+    stall_window, stall_progress
+        Stop as stalled when the lowest Ψ reached is above ``stall_progress`` times the lowest
+        Ψ reached ``stall_window`` iterations earlier; None: no stall test. The default
+        fraction, 0.81 of Ψ, asks |H| to fall by a tenth in the window. Stricter fractions cut
+        damped attempts that crawl (a few per cent a step) before they find the right pair
+        states and converge quadratically.
     """
 
     line_search: bool = True
@@ -73,6 +84,8 @@ class Globalisation:
     watchdog_restarts: int | None = None
     lm_c: float = 1.0
     lm_delta: float = 1.0
+    stall_window: int | None = None
+    stall_progress: float = 0.81
 
     def __post_init__(self):
         if not 0.0 < self.armijo < 0.5:
@@ -92,6 +105,10 @@ class Globalisation:
             raise ValueError(f"lm_c must be finite and > 0, got lm_c = {self.lm_c!r}")
         if not 1.0 <= self.lm_delta <= 2.0:
             raise ValueError(f"lm_delta must be in [1, 2], got {self.lm_delta!r}")
+        if self.stall_window is not None and not (isinstance(self.stall_window, int) and self.stall_window >= 1):
+            raise ValueError(f"stall_window must be an integer >= 1 or None, got {self.stall_window!r}")
+        if not 0.0 < self.stall_progress < 1.0:
+            raise ValueError(f"stall_progress must be in (0, 1), got {self.stall_progress!r}")
 
 
 @dataclass(frozen=True)
@@ -213,6 +230,7 @@ def solve(system: NewtonSystem, globalisation: Globalisation, max_iterations: in
     progress_psi = math.inf  # Ψ at the last progress
     nonmonotone = 0  # steps taken since the last progress
     watchdog = g.watchdog  # 0 once the watchdog has returned to the best iterate watchdog_restarts times
+    lowest: list[float] = []  # the lowest Ψ reached, after each iteration (the stall test)
     for iteration in range(first_iteration, max_iterations + 1):
         result.iterations = iteration
         system.record(iteration, step_length, kind)
@@ -225,6 +243,12 @@ def solve(system: NewtonSystem, globalisation: Globalisation, max_iterations: in
             return result
         if iteration == max_iterations:
             break
+        lowest.append(min(merit.psi, lowest[-1]) if lowest else merit.psi)
+        if _stalled(lowest, g):
+            result.message = (f"stopped at iteration {iteration}: stalled, the lowest |H| fell by less than "
+                              f"{1.0 - math.sqrt(g.stall_progress):.0%} in the last {g.stall_window} iterations "
+                              "(a local minimum, a plateau or a cycle of the merit function)")
+            return result
         if g.line_search and watchdog > 0:
             if best is None or merit.psi < progress * progress_psi:
                 best, progress_psi, nonmonotone = (merit, system.snapshot()), merit.psi, 0
@@ -270,6 +294,12 @@ def solve(system: NewtonSystem, globalisation: Globalisation, max_iterations: in
         nonmonotone += 1
     result.message = f"no convergence in {max_iterations} iterations"
     return result
+
+
+def _stalled(lowest: list[float], g: Globalisation) -> bool:
+    """The stall test on the lowest Ψ after each iteration (see :class:`Globalisation`)."""
+    w = g.stall_window
+    return w is not None and len(lowest) > w and lowest[-1] > g.stall_progress * lowest[-1 - w]
 
 
 def _take_step(system: NewtonSystem, merit: Merit, g: Globalisation,

@@ -290,13 +290,22 @@ def solve_nonsmooth(
     ValueError
         On invalid options or residual shapes.
     """
+    globalisation = Globalisation(armijo=armijo, min_step=min_step, watchdog=int(watchdog),
+                                  max_increase=max_increase, lm_c=_check_positive("lm_c", lm_c),
+                                  lm_delta=lm_delta)
+    return _solve_with(residual, x0, tol, max_iter, globalisation, merit_scale=merit_scale, rcond_min=rcond_min,
+                       log=log, advance=advance)
+
+
+def _solve_with(residual: ResidualFunction, x0: npt.ArrayLike, tol: float, max_iter: int,
+                globalisation: Globalisation, *, merit_scale: float | npt.ArrayLike | None = None,
+                rcond_min: float = 1e-12, log: LogFunction | None = None,
+                advance: AdvanceFunction | None = None) -> NonsmoothResult:
+    """:func:`solve_nonsmooth` with its damping given as a :class:`Globalisation`."""
     tol = _check_positive("tol", tol)
     if int(max_iter) != max_iter or max_iter < 0:
         raise ValueError(f"max_iter must be a non-negative integer, got {max_iter!r}")
     rcond_min = _check_positive("rcond_min", rcond_min)
-    globalisation = Globalisation(armijo=armijo, min_step=min_step, watchdog=int(watchdog),
-                                  max_increase=max_increase, lm_c=_check_positive("lm_c", lm_c),
-                                  lm_delta=lm_delta)
     x0 = np.array(x0, dtype=np.float64, copy=True)
     if x0.ndim != 1:
         raise ValueError(f"x0 must be one-dimensional, got shape {x0.shape}")
@@ -377,9 +386,7 @@ def solve_dense(residual: ResidualFunction, x0: npt.ArrayLike, *, tol: float, ma
     for g, start, step_rule, label in attempts:
         offset = iterations
         attempt_log = None if log is None else (lambda k, norm, step, kind, o=offset: log(o + k, norm, step, kind))
-        result = solve_nonsmooth(residual, start, tol=tol, max_iter=max_iter, log=attempt_log, watchdog=g.watchdog,
-                                 armijo=g.armijo, min_step=g.min_step, lm_c=g.lm_c, lm_delta=g.lm_delta,
-                                 max_increase=g.max_increase, advance=step_rule)
+        result = _solve_with(residual, start, tol, max_iter, g, log=attempt_log, advance=step_rule)
         iterations += result.iterations
         norms += result.residual_norms
         counts = [counts[0] + result.newton_steps, counts[1] + result.lm_steps,

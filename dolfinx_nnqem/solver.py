@@ -85,6 +85,14 @@ class SolverOptions:
             raise ValueError(f"SolverOptions: petsc_options = {self.petsc_options!r}; expected a dict")
 
 
+STALL_WINDOW = 10
+"""Every solver's Newton solves (monolithic, NNEQM1's and NNEQM2's dense ones) stop an attempt
+whose lowest |H| has not fallen by a tenth in this many iterations
+(:class:`~dolfinx_nnqem.newton.Globalisation`), so that the next attempt (the other damping,
+sliding pairs aligned, NNEQM2's updated flow directions, a cutback) starts early instead of
+after a crawl to the iteration limit."""
+
+
 @dataclass
 class MonolithicOptions:
     """Options of the monolithic semismooth Newton solver.
@@ -113,7 +121,8 @@ class MonolithicOptions:
     augmentation: float = 1.0
     lag_preconditioner: bool = True
     globalisation: Globalisation = field(default_factory=lambda: Globalisation(
-        min_step=1.0 / 64, watchdog=6, watchdog_progress=0.5, watchdog_restarts=2))
+        min_step=1.0 / 64, watchdog=6, watchdog_progress=0.5, watchdog_restarts=2,
+        stall_window=STALL_WINDOW))
 
     def __post_init__(self):
         if self.linear_solver not in ("direct", "iterative", "auto"):
@@ -159,8 +168,10 @@ class NNEQM1Options:
     modified: bool = False
     extrapolate: bool = True
     inner_max_iterations: int = 100
-    inner: Globalisation = field(default_factory=lambda: Globalisation(min_step=1e-10, watchdog=6))
-    inner_retry: Globalisation | None = field(default_factory=lambda: Globalisation(min_step=1e-10, watchdog=0))
+    inner: Globalisation = field(default_factory=lambda: Globalisation(min_step=1e-10, watchdog=6,
+                                                                       stall_window=STALL_WINDOW))
+    inner_retry: Globalisation | None = field(default_factory=lambda: Globalisation(min_step=1e-10, watchdog=0,
+                                                                                    stall_window=STALL_WINDOW))
 
     def __post_init__(self):
         _check_integer("NNEQM1Options", "inner_max_iterations", self.inner_max_iterations, 1)
@@ -223,8 +234,10 @@ class NNEQM2Options:
     flow_acceleration: int = 5
     retry_updating_directions: bool = True
     extrapolate: bool = True
-    inner: Globalisation = field(default_factory=lambda: Globalisation(min_step=1e-10, watchdog=0))
-    inner_retry: Globalisation | None = field(default_factory=lambda: Globalisation(min_step=1e-10, watchdog=6))
+    inner: Globalisation = field(default_factory=lambda: Globalisation(min_step=1e-10, watchdog=0,
+                                                                       stall_window=STALL_WINDOW))
+    inner_retry: Globalisation | None = field(default_factory=lambda: Globalisation(min_step=1e-10, watchdog=6,
+                                                                                    stall_window=STALL_WINDOW))
     max_dense_order: int = 20_000
 
     def __post_init__(self):

@@ -317,9 +317,51 @@ def test_watchdog_breaks_a_creeping_cycle_of_full_steps():
     assert broken.converged and broken.watchdog_restarts == 1 and broken.iterations <= default.watchdog + 2
 
 
+def _no_root(x):
+    """H = x² + 1 > 0: Ψ is least at x = 0, |H| = 1; full Newton steps x ← (x − 1/x)/2 are chaotic."""
+    return np.array([x[0] ** 2 + 1.0]), np.array([[2.0 * x[0]]])
+
+
+def test_stall_test_stops_an_attempt_that_cannot_converge():
+    """Without a root the watchdog's full steps wander to the iteration limit; with the stall test
+    the attempt stops once the lowest |H| has not fallen by a tenth in ``stall_window`` iterations
+    and says so, so that the caller's next attempt starts early."""
+    from dolfinx_nnqem.newton import Globalisation
+    from dolfinx_nnqem.nonsmooth import solve_dense
+
+    x0 = np.array([0.3])
+    wander = solve_dense(_no_root, x0, tol=1e-10, max_iter=100, globalisations=(Globalisation(watchdog=6),))
+    stall = solve_dense(_no_root, x0, tol=1e-10, max_iter=100,
+                        globalisations=(Globalisation(watchdog=6, stall_window=10),))
+    print(f"\n  without the stall test: {wander.message}\n  with it: {stall.message}")
+    assert not wander.converged and wander.iterations == 100
+    assert not stall.converged and "stalled" in stall.message and "10 iterations" in stall.message
+    assert stall.iterations < 30
+    assert min(stall.residual_norms) >= 1.0  # nothing was given up: |H| >= 1 everywhere
+
+
+@pytest.mark.parametrize("residual, x0", [(_smooth_residual, [3.0, 7.0]), (_arctan, [1.2]),
+                                          (lambda x: (x ** 3, np.diag(3.0 * x ** 2)), [1.0])])
+def test_stall_test_leaves_converging_solves_alone(residual, x0):
+    """A solve that converges, however slowly (H = x³: |H| falls by 8/27 a step), takes the
+    same iterates with and without the stall test."""
+    from dolfinx_nnqem.newton import Globalisation
+    from dolfinx_nnqem.nonsmooth import solve_dense
+
+    plain, tested = (solve_dense(residual, np.array(x0), tol=1e-12, max_iter=100,
+                                 globalisations=(Globalisation(min_step=1e-10, watchdog=0, stall_window=w),))
+                     for w in (None, 3))
+    print(f"\n  {tested.message}")
+    assert plain.converged and tested.converged
+    assert tested.iterations == plain.iterations
+    np.testing.assert_array_equal(tested.x, plain.x)
+
+
 @pytest.mark.parametrize("options, name", [({"watchdog_progress": 1.0}, "watchdog_progress"),
                                            ({"watchdog_progress": 0.0}, "watchdog_progress"),
-                                           ({"watchdog_restarts": 0}, "watchdog_restarts")])
+                                           ({"watchdog_restarts": 0}, "watchdog_restarts"),
+                                           ({"stall_window": 0}, "stall_window"),
+                                           ({"stall_progress": 1.0}, "stall_progress")])
 def test_invalid_watchdog_options_raise(options, name):
     from dolfinx_nnqem.newton import Globalisation
 
