@@ -246,3 +246,21 @@ def test_contact_refuses_unsound_combinations():
         Contact(1, 2, mu_f=0.1, discretisation="mortar", initial_gap=lambda x: x[0])
     with pytest.raises(ValueError, match="slave = 3"):
         Contact(1, 2, mu_f=0.1, slave=3)
+
+
+def test_symmetry_normals_keep_normals_a_support_does_not_make_symmetric():
+    """Moved into the plane of the free components: a normal tilted out of a symmetry plane. Kept:
+    no support, all three components supported, and a support along the normal itself (which
+    would leave less than half the normal: no symmetry plane across the surface)."""
+    from dolfinx_nnqem.contact.surfaces import symmetry_normals
+
+    tilted = np.array([0.05, 1.0, -0.02]) / np.linalg.norm([0.05, 1.0, -0.02])
+    along_x = np.array([0.9, 0.3, 0.0]) / np.linalg.norm([0.9, 0.3, 0.0])
+    normals = np.array([tilted, tilted, tilted, tilted, along_x])
+    supported = np.array([[True, False, False], [True, False, True], [False, False, False],
+                          [True, True, True], [True, False, False]])
+    out = symmetry_normals(normals, supported)
+    np.testing.assert_allclose(out[0], [0.0, 1.0, -0.02] / np.linalg.norm([1.0, 0.02]), rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(out[1], [0.0, 1.0, 0.0])
+    np.testing.assert_array_equal(out[2:], normals[2:])
+    np.testing.assert_allclose(np.linalg.norm(out, axis=1), 1.0, rtol=0, atol=1e-15)

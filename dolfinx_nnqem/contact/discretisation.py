@@ -59,7 +59,7 @@ def slave_side(surfaces: GatheredSurfaces, slave: int | None) -> tuple[int, str]
 
 def discretise(V, facet_tags, surface1: int, surface2: int, discretisation: str = "auto", *,
                slave: int | None = None, tolerance: float | None = None, search_distance: float | None = None,
-               initial_gap=None) -> PairSet:
+               initial_gap=None, supported: np.ndarray | None = None) -> PairSet:
     """The pair set of an interface between the meshed surfaces ``surface1`` and ``surface2`` (collective).
 
     Parameters
@@ -76,6 +76,9 @@ def discretise(V, facet_tags, surface1: int, surface2: int, discretisation: str 
         See :class:`~dolfinx_nnqem.contact.model.Contact`.
     initial_gap
         Node-to-node only.
+    supported
+        Node-to-surface and mortar: V's local dofs, non-zero at prescribed ones; slave normals on
+        symmetry planes are moved into the plane (:func:`~dolfinx_nnqem.contact.surfaces.symmetry_normals`).
     """
     if discretisation not in DISCRETISATIONS:
         raise ValueError(f"discretisation = {discretisation!r}; expected one of {', '.join(DISCRETISATIONS)}")
@@ -94,4 +97,4 @@ def discretise(V, facet_tags, surface1: int, surface2: int, discretisation: str 
     if slave == tags[0]:
         surfaces = surfaces.swapped()  # the builders take (master, slave)
     build = node_to_surface_pairs if discretisation == "node-to-surface" else mortar_pairs
-    return build(V, surfaces, tolerance=tolerance, search_distance=search_distance, note=note)
+    return build(V, surfaces, tolerance=tolerance, search_distance=search_distance, note=note, supported=supported)

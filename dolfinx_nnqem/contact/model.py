@@ -39,7 +39,7 @@ from dolfinx_nnqem.contact.laws import (NO_FORCE, SLIP, ContactLaw, LawEvaluatio
 from dolfinx_nnqem.contact.obstacles import RigidObstacle, obstacle_pairs
 from dolfinx_nnqem.contact.discretisation import DISCRETISATIONS, OBSTACLE_DISCRETISATIONS, discretise
 from dolfinx_nnqem.contact.pairset import PairRows, PairSet, rows_matrix
-from dolfinx_nnqem.contact.surfaces import ContactPairError
+from dolfinx_nnqem.contact.surfaces import ContactPairError, owned_supports
 
 __all__ = ["Contact", "ContactModel", "Interface", "PairLaws"]
 
@@ -158,13 +158,14 @@ class Contact:
         master = type(self.obstacle).__name__.lower() if self.obstacle is not None else str(self.surface1)
         return f"{master}-{self.surface2}"
 
-    def pair_set(self, V, facet_tags) -> PairSet:
-        """The discretised interface (collective)."""
+    def pair_set(self, V, facet_tags, supported: np.ndarray | None = None) -> PairSet:
+        """The discretised interface (collective); ``supported``: see
+        :func:`~dolfinx_nnqem.contact.discretisation.discretise`."""
         if self.obstacle is not None:
             return obstacle_pairs(V, facet_tags, int(self.surface2), self.obstacle, tolerance=self.tolerance)
         return discretise(V, facet_tags, int(self.surface1), int(self.surface2), self.discretisation,
                           slave=self.slave, tolerance=self.tolerance, search_distance=self.search_distance,
-                          initial_gap=self.initial_gap)
+                          initial_gap=self.initial_gap, supported=supported)
 
 
 @dataclass(frozen=True, eq=False)
@@ -214,8 +215,20 @@ class PairLaws:
         return LawEvaluation(H, dH_dw, dH_dz, state)
 
     def _evaluate_group(self, group: LawGroup, w, w_prev, z, index) -> LawEvaluation:
-        ev = group.law.evaluate(w[index], w_prev[index], z[index], self.g0[index], self.mu_f[index], group.r)
-        return group.law.pin(ev, z[index], self.constrained[index], group.force_unit)
+        pinned = self.constrained[index]
+        w, w_prev = w[index], w_prev[index]
+        tangential = pinned & (np.arange(3) > 0)
+        if tangential.any():
+            # A pinned tangential direction takes no part in the friction law: its force is zero
+            # and its relative motion is the supports' business (on a symmetry plane, master nodes
+            # off the plane move along it although the mirrored half would cancel that). Left in,
+            # it would widen the slip test and shrink the free direction's share of the friction
+            # disk below μ_f p_n.
+            w, w_prev = np.where(tangential, 0.0, w), np.where(tangential, 0.0, w_prev)
+        ev = group.law.evaluate(w, w_prev, z[index], self.g0[index], self.mu_f[index], group.r)
+        if tangential.any():
+            ev = ev._replace(dH_dw=ev.dH_dw * ~tangential[:, None, :])
+        return group.law.pin(ev, z[index], pinned, group.force_unit)
 
     def force(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """λ(z) (n, 3) and ∂λ/∂z (n, 3, 3)."""
@@ -359,7 +372,8 @@ class ContactModel:
             raise ValueError(f"contact interfaces need distinct names, got {labels}")
         interfaces, start = [], 0
         for contact in contacts:
-            pairs = contact.pair_set(V, facet_tags)
+            with constrained_dofs.localForm() as c:
+                pairs = contact.pair_set(V, facet_tags, supported=c.array.copy())
             if pairs.num_global == 0:
                 raise ContactPairError(f"contact {contact.label}: no pairs found")
             r = float(default_r(E, h)) if contact.r is None else float(contact.r)
@@ -430,8 +444,7 @@ class ContactModel:
         contact force there is pinned to zero (``docs/theory.md``). The normal direction is never
         pinned this way: a supported slave node still keeps the master out.
         """
-        start = self.V.dofmap.index_map.local_range[0]
-        flags = supported[3 * (pairs.slave_blocks[:, None] - start) + np.arange(3)] != 0.0  # (n, 3) owned slaves
+        flags = owned_supports(self.V, supported, pairs.slave_blocks)  # (n, 3) owned slaves
         # a direction t lies in the span of the prescribed axes when its free components vanish
         free_part = np.abs(pairs.R[:, 1:, :]) * ~flags[:, None, :]
         out = np.zeros((pairs.num_local, 3), dtype=bool)

@@ -28,6 +28,9 @@ Documented choices:
   is fully covered.
 * Crosspoints and slave nodes on supported edges keep their pairs like any other node; a pair
   direction whose every dof is prescribed is pinned by the contact model (``ContactLaw.pin``).
+  The averaged normal of a slave node on a symmetry plane is moved into the plane (the facets
+  on the plane's other side are not modelled; :func:`~dolfinx_nnqem.contact.surfaces.symmetry_normals`),
+  so that its frame holds the supported axis exactly and that friction direction is pinned.
 * A master surface that overlaps itself in projection (coverage > 1, a folded or two-sided
   master) is refused.
 """
@@ -50,7 +53,7 @@ MAX_COVERAGE = 1.0 + 1e-6
 
 
 def mortar_pairs(V, surfaces: GatheredSurfaces, *, tolerance: float, search_distance: float | None = None,
-                 note: str = "") -> SurfacePairs:
+                 note: str = "", supported: np.ndarray | None = None) -> SurfacePairs:
     """Dual mortar pairs of the second gathered surface (slave) against the first (master).
 
     Parameters
@@ -66,6 +69,9 @@ def mortar_pairs(V, surfaces: GatheredSurfaces, *, tolerance: float, search_dist
         larger facet size of the two surfaces.
     note
         Extra words for the pair set's ``describe``.
+    supported
+        Laid out like V's local dofs, non-zero at prescribed ones (None: no support is known): the
+        normals of slave nodes on symmetry planes lie in the plane (:func:`surface_pairs`).
 
     Raises
     ------
@@ -104,4 +110,5 @@ def mortar_pairs(V, surfaces: GatheredSurfaces, *, tolerance: float, search_dist
     return surface_pairs(
         V, "mortar", tags, mi.slave_index[keep], mi.x[keep], mi.D[keep], -mi.normal[keep],
         mi.weighted_gap[keep] / m[keep], M.indptr, mi.master_index[M.indices], weights, master_x[M.indices],
-        master_size=master_size, tolerance=tolerance, num_slave_nodes=len(mi.slave_index), note=note)
+        master_size=master_size, tolerance=tolerance, num_slave_nodes=len(mi.slave_index), note=note,
+        supported=supported)

@@ -28,7 +28,7 @@ __all__ = ["node_to_surface_pairs"]
 
 
 def node_to_surface_pairs(V, surfaces: GatheredSurfaces, *, tolerance: float, search_distance: float | None = None,
-                          note: str = "") -> SurfacePairs:
+                          note: str = "", supported: np.ndarray | None = None) -> SurfacePairs:
     """Node-to-surface pairs of the second gathered surface (slave) on the first (master).
 
     Parameters
@@ -45,6 +45,9 @@ def node_to_surface_pairs(V, surfaces: GatheredSurfaces, *, tolerance: float, se
         facet size of the two surfaces.
     note
         Extra words for the pair set's ``describe``.
+    supported
+        Laid out like V's local dofs, non-zero at prescribed ones (None: no support is known): the
+        normals of slave nodes on symmetry planes lie in the plane (:func:`surface_pairs`).
 
     Raises
     ------
@@ -79,4 +82,4 @@ def node_to_surface_pairs(V, surfaces: GatheredSurfaces, *, tolerance: float, se
         V, "node-to-surface", tags, nodes.index[keep], nodes.x[keep], nodes.area[keep], p.normal[keep], p.g0[keep],
         np.arange(0, k * len(keep) + 1, k), master.nodes[p.facet[keep]].ravel(), p.N[keep].ravel(),
         master.x[p.facet[keep]].reshape(-1, 3), master_size=master_size, tolerance=tolerance,
-        num_slave_nodes=len(nodes.index), note=note)
+        num_slave_nodes=len(nodes.index), note=note, supported=supported)

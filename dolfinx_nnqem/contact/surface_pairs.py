@@ -30,7 +30,7 @@ from mpi4py import MPI
 from dolfinx_nnqem.contact.pairs import owned_by_slave
 from dolfinx_nnqem.contact.pairset import PairRows
 from dolfinx_nnqem.contact.surfaces import (ContactPairError, Facets, GatheredSurfaces, first_by_position,
-                                            format_point, local_frames)
+                                            format_point, local_frames, owned_supports, symmetry_normals)
 
 __all__ = ["MAX_INTERFERENCE", "SurfacePairs", "check_no_shared_nodes", "facet_size", "surface_pairs"]
 
@@ -136,7 +136,8 @@ def _check_gaps(g0: np.ndarray, x: np.ndarray, master_size: float, tags: tuple[i
 def surface_pairs(V, kind: str, tags: tuple[int, int], slave_index: np.ndarray, X_slave: np.ndarray,
                   area: np.ndarray, normal: np.ndarray, g0: np.ndarray, master_indptr: np.ndarray,
                   master_index: np.ndarray, weights: np.ndarray, X_master_nodes: np.ndarray, *,
-                  master_size: float, tolerance: float, num_slave_nodes: int, note: str = "") -> SurfacePairs:
+                  master_size: float, tolerance: float, num_slave_nodes: int, note: str = "",
+                  supported: np.ndarray | None = None) -> SurfacePairs:
     """Assemble the pair set from per-slave-node data given identically on every rank (collective).
 
     Parameters
@@ -162,6 +163,10 @@ def surface_pairs(V, kind: str, tags: tuple[int, int], slave_index: np.ndarray, 
         is zero.
     num_slave_nodes, note
         See :class:`SurfacePairs`.
+    supported
+        Laid out like V's local dofs, non-zero at prescribed ones: the normals of slave nodes on
+        symmetry planes are moved into the plane (:func:`~dolfinx_nnqem.contact.surfaces.symmetry_normals`).
+        None: the normals as given.
     """
     _check_gaps(g0, X_slave, master_size, tags)
     g0 = np.where(np.abs(g0) <= tolerance, 0.0, g0)  # touching within the tolerance: no gap (round-off)
@@ -177,7 +182,10 @@ def surface_pairs(V, kind: str, tags: tuple[int, int], slave_index: np.ndarray, 
     pair = np.repeat(np.arange(len(local)), counts)
     X_master = np.zeros((len(local), 3))
     np.add.at(X_master, pair, c[:, None] * X_master_nodes[take])
-    R = local_frames(normal[local]) if len(local) else np.zeros((0, 3, 3))
+    normal = normal[local]
+    if supported is not None:
+        normal = symmetry_normals(normal, owned_supports(V, supported, slave_index[local]))
+    R = local_frames(normal) if len(local) else np.zeros((0, 3, 3))
     # the pair's nodes: the slave node with coefficient 1, then the master nodes with −c_jk
     nodes_indptr = indptr + np.arange(len(local) + 1)
     nodes = np.empty(len(take) + len(local), dtype=np.int64)

@@ -22,8 +22,8 @@ import numpy.typing as npt
 from mpi4py import MPI
 
 __all__ = ["ContactPairError", "Facets", "GatheredSurfaces", "SurfaceNodes", "check_contact_space", "first_by_position",
-           "format_point", "gather_surfaces", "local_frames", "raise_together",
-           "mesh_tolerance"]
+           "format_point", "gather_surfaces", "local_frames", "owned_supports", "raise_together",
+           "mesh_tolerance", "symmetry_normals"]
 
 TANGENT_AXIS_BOUND = 0.8
 """t1 is built from the first coordinate axis e_k (in the order x, y, z) with |n_k| <= this
@@ -59,6 +59,59 @@ def local_frames(normals: npt.ArrayLike) -> np.ndarray:
     t1 /= np.linalg.norm(t1, axis=1)[:, None]
     t2 = np.cross(n, t1)  # t1 x t2 = n: right-handed
     return np.stack([n, t1, t2], axis=1) + 0.0  # + 0.0: no -0.0 entries in printed frames
+
+
+SYMMETRY_NORMAL_MIN = 0.5
+""":func:`symmetry_normals` moves a normal into the plane of the free components only if at least
+this much of its length lies there (the support is a plane crossing the surface)."""
+
+
+def symmetry_normals(normals: npt.ArrayLike, supported: npt.ArrayLike) -> np.ndarray:
+    """Unit normals with the components along a node's supported axes removed.
+
+    A node on a symmetry plane (a support prescribing the displacement component normal to the
+    plane, as the planes of a quarter model do) has its surface normal in that plane. The nodal
+    normal averaged from the facets on one side of the plane, the only ones the model has, tilts
+    out of it, and the tangent frame built on it then mixes the supported axis with a free one:
+    the friction force along the support is then nearly undetermined (the support carries it) and
+    the Newton matrix nearly singular. With the tilt removed the frame contains the supported axis
+    exactly and the contact model pins that direction
+    (:meth:`~dolfinx_nnqem.contact.model.ContactModel` ``._supported_slave_tangents``).
+
+    Parameters
+    ----------
+    normals
+        (m, 3) unit normals.
+    supported
+        (m, 3) bool: the node's displacement components that a support prescribes.
+
+    Returns
+    -------
+    np.ndarray
+        (m, 3) unit normals. A node with no supported component, or all three, keeps its normal;
+        so does one whose normal would keep less than :data:`SYMMETRY_NORMAL_MIN` of its length
+        (a support that prescribes the normal motion is no symmetry plane across the surface).
+    """
+    n = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
+    flags = np.asarray(supported, dtype=bool).reshape(-1, 3)
+    projected = np.where(flags, 0.0, n)
+    length = np.linalg.norm(projected, axis=1)
+    some = flags.any(axis=1) & ~flags.all(axis=1)
+    move = some & (length >= SYMMETRY_NORMAL_MIN)
+    out = n.copy()
+    out[move] = projected[move] / length[move, None]
+    return out
+
+
+def owned_supports(V: dolfinx.fem.FunctionSpace, supported: np.ndarray, blocks: npt.ArrayLike) -> np.ndarray:
+    """(m, 3) bool: the prescribed components of the owned dof blocks ``blocks`` (global indices).
+
+    ``supported`` is laid out like V's local dofs (owned, then ghosts), non-zero at prescribed
+    ones. Every block must be owned by this rank (a pair set's slave nodes are).
+    """
+    start = V.dofmap.index_map.local_range[0]
+    local = np.asarray(blocks, dtype=np.int64).reshape(-1) - start
+    return np.asarray(supported)[3 * local[:, None] + np.arange(3)] != 0.0
 
 
 # --------------------------------------------------------------------------------------------
