@@ -75,8 +75,8 @@ def symmetry_normals(normals: npt.ArrayLike, supported: npt.ArrayLike) -> np.nda
     out of it, and the tangent frame built on it then mixes the supported axis with a free one:
     the friction force along the support is then nearly undetermined (the support carries it) and
     the Newton matrix nearly singular. With the tilt removed the frame contains the supported axis
-    exactly and the contact model pins that direction
-    (:meth:`~dolfinx_nnqem.contact.model.ContactModel` ``._supported_slave_tangents``).
+    exactly and the contact model pins that direction (``_supported_slave_tangents`` of
+    :class:`~dolfinx_nnqem.contact.model.ContactModel`).
 
     Parameters
     ----------
