@@ -58,7 +58,7 @@ A problem file names a mesh with physical tags and everything :class:`ContactPro
     increments = 15                       # or "auto": automatic incrementation, see [solver.auto]
     max_cutbacks = 5
     rtol = 1e-10
-    max_iterations = 30
+    max_iterations = 50
     linear_solver = "direct"              # monolithic: "iterative" (GAMG), "auto" (by size)
     [solver.petsc_options]
     pc_factor_mat_solver_type = "mumps"
@@ -443,8 +443,8 @@ def _solver_section(solver: dict, where: str) -> dict:
             raise ProblemFileError(f"{w}.auto is given but increments = {increments!r}; write increments = \"auto\"")
     solver["max_cutbacks"] = int(_number(solver.get("max_cutbacks", 5), f"{w}.max_cutbacks",
                                          nonnegative=True, integer=True, high=MAX_CUTBACKS))
-    solver["max_iterations"] = int(_number(solver.get("max_iterations", 30), f"{w}.max_iterations",
-                                           positive=True, integer=True, high=10_000))
+    solver["max_iterations"] = int(_number(solver.get("max_iterations", 50), f"{w}.max_iterations",
+                                           positive=True, integer=True, high=10_000))  # SolverOptions' default
     solver["rtol"] = float(_number(solver.get("rtol", 1e-10), f"{w}.rtol", positive=True, high=1e-2))
     solver["atol"] = float(_number(solver.get("atol", 1e-12), f"{w}.atol", nonnegative=True))
     solver.setdefault("linear_solver", "direct")

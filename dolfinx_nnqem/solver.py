@@ -64,7 +64,10 @@ class SolverOptions:
     rtol, atol
         Tolerances (0 < rtol ≤ 1e-2; 0 ≤ atol).
     max_iterations
-        Newton iterations per increment (NNEQM1: outer iterations).
+        Newton iterations per increment (NNEQM1: outer iterations). An attempt that stops making
+        progress ends earlier (the stall test, :data:`STALL_WINDOW`), so the limit only bounds
+        attempts that still converge, slowly (50: the monolithic polar law on the frictional
+        sphere-on-block demo mesh converges at 32).
     petsc_options
         PETSc options of the displacement solves (the monolithic Newton system, or NNEQM1's and
         NNEQM2's stiffness), merged over the package's defaults (MUMPS LU).
@@ -72,7 +75,7 @@ class SolverOptions:
 
     rtol: float = 1e-10
     atol: float = 1e-12
-    max_iterations: int = 30
+    max_iterations: int = 50
     petsc_options: dict = field(default_factory=dict)
 
     def __post_init__(self):
