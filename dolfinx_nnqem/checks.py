@@ -276,14 +276,14 @@ def check_state(problem, report=None, solver_options=None, options: CheckOptions
 def _yield_violation(problem, forms: _Forms, gpv) -> float:
     """Largest (q(σ) − σ_y0 − H (p_n + Δp)) / σ_u over the Gauss points of all ranks, or 0 when the
     solver's values lie in the yield surface; +inf if some Δp < 0."""
-    from dolfinx_nnqem.material import can_yield, deviator_coordinates, equivalent_stress
+    from dolfinx_nnqem.material import can_yield, deviator_coordinates, equivalent_stress, yield_function
 
     sy, H, su = forms.material_at_points()
     n_gp = sy.size
     sigma = np.asarray(gpv.sigma, dtype=float).reshape(n_gp, 3, 3)
     dp = np.asarray(gpv.dp, dtype=float).reshape(n_gp)
     p_n = problem.state.p_n.x.array[:n_gp]
-    f = equivalent_stress(deviator_coordinates(sigma)) - sy - H * (p_n + dp)
+    f = yield_function(equivalent_stress(deviator_coordinates(sigma)), sy, H, p_n + dp)
     worst = np.max(np.where(can_yield(sy), f / su, -np.inf), initial=-np.inf)  # elastic materials: nothing to violate
     if np.any(dp < 0.0):
         worst = np.inf

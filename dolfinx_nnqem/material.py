@@ -319,6 +319,11 @@ ELASTIC_YIELD_STRESS = np.finfo(float).max / 1e10
 (finite, so that the UFL expressions of the yield function stay finite)."""
 
 
+def yield_function(q: np.ndarray, sigma_y0: np.ndarray, H: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """f = q − σ_y0 − H p: von Mises with linear isotropic hardening at equivalent plastic strain p."""
+    return q - sigma_y0 - H * p
+
+
 def yield_stress_unit(sigma_y0: np.ndarray, E: np.ndarray) -> np.ndarray:
     """σ_u = min(σ_y0, 10⁻² E): the stress unit of yield-function values (the cap only matters for
     an elastic material, stored with a huge σ_y0)."""
@@ -426,6 +431,6 @@ def radial_return(sigma_n: np.ndarray, deps: np.ndarray, p_n: np.ndarray, lmbda:
     sigma_tr = sigma_n + elastic_stress(deps, lmbda, mu)
     s_tr = sigma_tr - np.trace(sigma_tr, axis1=1, axis2=2)[:, None, None] * np.eye(3) / 3.0
     q_tr = np.sqrt(1.5 * np.einsum("nij,nij->n", s_tr, s_tr))
-    dp = np.maximum(q_tr - sigma_y0 - H * p_n, 0.0) / (3.0 * mu + H)
+    dp = np.maximum(yield_function(q_tr, sigma_y0, H, p_n), 0.0) / (3.0 * mu + H)
     q_safe = np.where(dp > 0.0, q_tr, 1.0)
     return sigma_tr - (3.0 * mu * dp / q_safe)[:, None, None] * s_tr, dp

@@ -108,7 +108,7 @@ from dolfinx_nnqem.convergence import IterationRecord, SolveReport, logger
 from dolfinx_nnqem.linalg import free_dropped_objects
 from dolfinx_nnqem.material import (DEVIATORIC_BASIS, GaussPointValues, can_yield, deviator_coordinates,
                                     deviator_tensors, elastic_stress, equivalent_stress, flow_direction, strain,
-                                    yield_stress_unit)
+                                    yield_function, yield_stress_unit)
 from dolfinx_nnqem.nneqm1 import rigid_start
 from dolfinx_nnqem.nonsmooth import solve_dense
 from dolfinx_nnqem.problem import ContactProblem, assemble_vector
@@ -510,18 +510,16 @@ class NNEQM2Solver:
             dg = dgt * gscale
             alpha = x[3 * nc + NG:] * (F / d.r)
             lam = laws.force(z)[0].reshape(-1) if nc else np.zeros(0)
-            # stresses at the end of this pass
-            s_end = s_n + 2.0 * mu[:, None] * (e0 + d.SB @ lam + np.einsum("jak,k->ja", SQ, dg)
-                                               - N * dg[:, None])
             if not updating:
                 break
+            s_end = self._yield_rows(x, d, laws)[2]  # stress deviators at the end of this pass (cleaned Δγ)
             s_new = s_end if self.settings.flow_update == "stress" else s_end + 2.0 * mu[:, None] * N * dg[:, None]
             N_new = flow_direction(s_new, su, fallback=N)
             # settled when the plastic strains stop turning AND the stress lies in the yield surface
             # with q itself: a point the pass's q_N = N : s left elastic (N ⟂ s, or N = 0 before
             # any stress) has Δγ = 0, so only q can show it should yield
             turn = float(np.max(2.0 * mu * dg * np.linalg.norm(N_new - N, axis=1) / su, initial=0.0))
-            outside = float(np.max((equivalent_stress(s_end) - d.sy - d.Hh * (d.p_n + dg)) / su, initial=0.0))
+            outside = float(np.max(yield_function(equivalent_stress(s_end), d.sy, d.Hh, d.p_n + dg) / su, initial=0.0))
             change = max(turn, outside)
             logger.info(f"[{self.name}] flow-direction pass {flow_updates}: max 2μ Δγ |ΔN| / σ_y = {turn:.3e}, "
                         f"max f/σ_y = {outside:.3e}")
@@ -587,8 +585,7 @@ class NNEQM2Solver:
         e = e + np.einsum("jak,k->ja", d.SQ, dg)
         s = d.s_n + 2.0 * d.mu[:, None] * (e - d.N * dg[:, None])
         q = np.einsum("ja,ja->j", d.N, s) if d.projected else equivalent_stress(s)
-        f = q - d.sy - d.Hh * (d.p_n + dg)
-        return -f / d.su, dgt, s, q
+        return -yield_function(q, d.sy, d.Hh, d.p_n + dg) / d.su, dgt, s, q
 
     def _dense_solve(self, x0, d: _Increment, tol, it_offset):
         """The driver on the scaled [pair rows / F; H4; self-equilibrium / F] with the chain-rule Jacobian."""
@@ -801,8 +798,8 @@ class NNEQM2Solver:
         rm.interpolate(self._rm_expr)
         sig_rm = rm.x.array[:9 * self.n_gp].reshape(self.n_gp, 3, 3)
         diff = np.linalg.norm((sigma - sig_rm).reshape(self.n_gp, 9), axis=1) / self._su
-        f = ((equivalent_stress(deviator_coordinates(sigma)) - self._sy
-              - self._Hh * (st.p_n.x.array[:self.n_gp] + dg_local)) / self._su)[self._yields]
+        f = (yield_function(equivalent_stress(deviator_coordinates(sigma)), self._sy, self._Hh,
+                            st.p_n.x.array[:self.n_gp] + dg_local) / self._su)[self._yields]
         return {
             "load_factor": float(load_factor),
             "system_order": 3 * p.num_pairs + self.num_yield_points + self.condensation.num_modes,
