@@ -1,7 +1,10 @@
-"""Every DOLFINx version difference the package relies on (0.9 and 0.11).
+"""Every difference between the software stacks the package runs on, in one place.
 
-The rest of the package calls these functions and never tests versions itself.
-Each entry was checked on both stacks (``../shared/spec/environments.md``).
+DOLFINx 0.9 (Debian 13) and 0.11 (the PyPI wheel), and the libraries around it: gmsh (Debian's
+is built without Netgen) and pyvista (Debian 13 has 0.44, PyPI 0.49). The rest of the package
+calls these functions and never tests versions itself. DOLFINx differences are told apart by
+version (checked on both stacks, ``../shared/spec/environments.md``); gmsh's and pyvista's by
+capability (what the installed build offers), since both vary with how they were built.
 
 The PyPI wheel ``dolfinx-solver-real`` requires ``import dolfinx_solver`` before
 ``dolfinx``/``petsc4py``: this module does it, and ``dolfinx_nnqem/__init__.py``
@@ -123,3 +126,57 @@ def geometry_dofmap(mesh) -> np.ndarray:
     if _NEW:
         return mesh.geometry.dofmaps[0]
     return mesh.geometry.dofmap
+
+
+def entities_to_geometry(mesh, dim: int, entities: np.ndarray) -> np.ndarray:
+    """Geometry nodes of the given mesh entities, ``(len(entities), nodes per entity)``.
+
+    DOLFINx 0.9 dies with an integer division by zero (SIGFPE) when asked for no entities (a rank
+    that owns none of a surface's facets), so no entities give a ``(0, 0)`` array without asking.
+    """
+    entities = np.asarray(entities, dtype=np.int32)
+    if len(entities) == 0:
+        return np.zeros((0, 0), dtype=np.int32)
+    nodes = np.asarray(dolfinx.mesh.entities_to_geometry(mesh, dim, entities))
+    return nodes.reshape(len(entities), -1)
+
+
+def gmsh_has_netgen() -> bool:
+    """Whether the gmsh in use was built with Netgen (its tetrahedron optimizer).
+
+    gmsh lists its compiled-in modules in the read-only option ``General.BuildOptions``; Debian's
+    gmsh 4.13 has no Netgen, the PyPI wheel does. gmsh must be initialised.
+    """
+    import gmsh
+
+    return "Netgen" in gmsh.option.getString("General.BuildOptions").split()
+
+
+def optimize_tetrahedra() -> str:
+    """Improve the current gmsh model's tetrahedra with the best optimizer this gmsh has.
+
+    Netgen's optimizer where gmsh was built with it, otherwise gmsh's own ("", the default
+    tetrahedron optimizer). Returns the name of the optimizer used ("Netgen" or "gmsh"): the two
+    give different (equally valid) meshes, so a figure measured on one mesh is quoted with it.
+    """
+    import gmsh
+
+    if gmsh_has_netgen():
+        gmsh.model.mesh.optimize("Netgen")
+        return "Netgen"
+    gmsh.model.mesh.optimize("")
+    return "gmsh"
+
+
+def extract_outer_surface(dataset):
+    """The outer surface of a pyvista dataset as PolyData, by VTK's dataset surface filter.
+
+    pyvista 0.49 asks which algorithm to use (``algorithm="dataset_surface"``, the filter older
+    versions always used, and it warns when the keyword is left out); pyvista 0.44 (Debian 13)
+    has no such keyword.
+    """
+    import inspect
+
+    if "algorithm" in inspect.signature(type(dataset).extract_surface).parameters:
+        return dataset.extract_surface(algorithm="dataset_surface")
+    return dataset.extract_surface()

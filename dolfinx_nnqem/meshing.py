@@ -1000,4 +1000,4 @@ def _build_sphere_on_block_model(R: float, block: float, depth: float, h_contact
         _add_group(2, surfaces, tag, names[tag])
     _size_field(h_contact, fine_radius, growth, h_max)
     gmsh.model.mesh.generate(3)
-    gmsh.model.mesh.optimize("Netgen")  # better-shaped tetrahedra than the default pass leaves
+    compat.optimize_tetrahedra()  # better-shaped tetrahedra than the default pass leaves

@@ -12,6 +12,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from dolfinx_nnqem import compat
 from dolfinx_nnqem import results as res
 from dolfinx_nnqem.output import von_mises
 
@@ -163,7 +164,6 @@ def _slave_triangles(problem, table: dict) -> np.ndarray | None:
     out. None as well for a surface of quadrilaterals or pairs without slave facets (node-to-node,
     obstacles): then the points alone are drawn.
     """
-    import dolfinx
     from scipy.spatial import cKDTree
 
     slave = getattr(problem.contact.interfaces[0].pairs, "slave", None)
@@ -173,8 +173,7 @@ def _slave_triangles(problem, table: dict) -> np.ndarray | None:
     fdim = mesh.topology.dim - 1
     facets = problem.facet_tags.find(int(slave))
     facets = facets[facets < mesh.topology.index_map(fdim).size_local]  # owned: each facet once
-    nodes = np.asarray(dolfinx.mesh.entities_to_geometry(mesh, fdim, facets))
-    nodes = nodes.reshape(len(facets), -1) if len(facets) else np.zeros((0, 0), dtype=np.int32)
+    nodes = compat.entities_to_geometry(mesh, fdim, facets)
     # (corners, vertices per facet): a rank without slave facets sends an empty block
     parts = problem.comm.gather((mesh.geometry.x[nodes.reshape(-1)], nodes.shape[1]), root=0)
     if problem.comm.rank != 0:

@@ -34,6 +34,8 @@ from pathlib import Path
 
 import numpy as np
 
+from dolfinx_nnqem import compat
+
 __all__ = ["PICTURE_FOLDER", "PICTURES", "draw_live_pictures", "draw_run_pictures", "pictures_enabled"]
 
 PICTURE_FOLDER = "pictures"
@@ -131,8 +133,8 @@ def draw_deformed(step: dict, rows: list[dict], path: Path, *, title: str = "", 
     if "p" in grid.cell_data and np.any(grid.cell_data["p"] > 0):
         plastic = grid.extract_cells(np.flatnonzero(grid.cell_data["p"] > 0))
         # the outline of the plastic zone (not its inner cell faces), drawn over the colours
-        edges = plastic.extract_surface(algorithm="dataset_surface").extract_feature_edges(boundary_edges=True, feature_edges=True,
-                                                                manifold_edges=False, non_manifold_edges=False)
+        edges = compat.extract_outer_surface(plastic).extract_feature_edges(
+            boundary_edges=True, feature_edges=True, manifold_edges=False, non_manifold_edges=False)
         plotter.add_mesh(edges, color="darkorange", line_width=4, label="plastic zone (p > 0)")
     points, states = _pair_points(rows, scale)
     for state, colour in STATE_COLOURS.items():

@@ -110,18 +110,26 @@ def check_level(m: dict) -> None:
 
 
 def test_hertz_nonmatching_refinement():
-    """h = a/3, a/5, a/7 (the demo mesh): a and p0 within 5 % on the demo mesh, errors falling."""
+    """h = a/3, a/5, a/7 (the demo mesh): a and p0 within 5 %, the errors of a and of the fitted p0
+    falling.
+
+    The centre node's p0 is only held within 5 %: it is the pressure at one node, and which node
+    sits at the centre, and how its neighbours are shaped, depends on the mesh generator. On
+    Netgen-optimised meshes (gmsh 4.15, PyPI) it was −6.32, −3.77, −2.76 %; on gmsh's own
+    optimiser (Debian's gmsh 4.13 has no Netgen) −2.29, −4.32, −2.48 %, and at a/14 −2.87 %: it
+    does not fall steadily at these sizes, so no order is asserted of it.
+    """
     levels = [run_level(A_NOMINAL / n) for n in (3, 5, 7)]
     print_levels(levels)
     for m in levels:
         check_level(m)
+        assert abs(m["err_p0"]) < 0.07  # the centre node: within 7 % already at a/3
     demo = levels[-1]
     assert abs(demo["err_a"]) < 0.05 and abs(demo["err_p0"]) < 0.05 and abs(demo["err_p0_fit"]) < 0.05
     errors_a = [abs(m["err_a"]) for m in levels]
     errors_p0_fit = [abs(m["err_p0_fit"]) for m in levels]
     assert errors_a == sorted(errors_a, reverse=True) and errors_a[-1] < errors_a[0]
     assert errors_p0_fit == sorted(errors_p0_fit, reverse=True) and errors_p0_fit[-1] < errors_p0_fit[0]
-    assert abs(demo["err_p0"]) < abs(levels[0]["err_p0"])  # the centre node's: noisy, but smaller
 
 
 @pytest.mark.slow
