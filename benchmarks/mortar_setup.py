@@ -4,7 +4,7 @@
     python benchmarks/mortar_setup.py --n 40 --n1 39       # quick check
 
 Two thin elastoplastic plates pressed together (the loads and material of
-``dolfinx_nnqem.pressed_blocks``: clamped bottom, pressure on top, u_z = 0 on the z faces; the
+``dolfinx_nnqem.cases.pressed_blocks``: clamped bottom, pressure on top, u_z = 0 on the z faces; the
 pressure phase only by default): body 1 with n1 × 1 × n1 hexahedra, body 2 (the finer, the mortar
 slave) with n × 1 × n, so that no interface node but the corners coincides and every slave facet
 overlaps several master facets. The matching version of the same problem has n × 1 × n in both
@@ -37,13 +37,13 @@ from mpi4py import MPI
 from dolfinx_nnqem.contact import discretisation as discretisation_module
 from dolfinx_nnqem.contact import mortar_geometry
 from dolfinx_nnqem.contact.discretisation import discretise
-from dolfinx_nnqem.meshing import StackedBlocksTags as T
-from dolfinx_nnqem.meshing import build_stacked_blocks
-from dolfinx_nnqem.monolithic import MonolithicSolver
-from dolfinx_nnqem.pressed_blocks import DRAG, MATERIAL, PRESSURE, drag_amplitude, pressure_amplitude
+from dolfinx_nnqem.problem.meshing import StackedBlocksTags as T
+from dolfinx_nnqem.problem.meshing import build_stacked_blocks
+from dolfinx_nnqem.solvers.monolithic import MonolithicSolver
+from dolfinx_nnqem.cases.pressed_blocks import DRAG, MATERIAL, PRESSURE, drag_amplitude, pressure_amplitude
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Pressure
-from dolfinx_nnqem.solver import MonolithicOptions, SolverOptions
-from dolfinx_nnqem.stepping import solve_load_steps
+from dolfinx_nnqem.solvers import MonolithicOptions, SolverOptions
+from dolfinx_nnqem.solvers import solve_load_steps
 
 sys.path.insert(0, str(Path(__file__).parent))
 from scaling import one_newton_solve  # noqa: E402

@@ -31,9 +31,9 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 def _options(**kwargs):
     try:
-        from dolfinx_nnqem.solver import SolverOptions  # the new layout
+        from dolfinx_nnqem.solvers import SolverOptions  # the new layout
     except ImportError:
-        from dolfinx_nnqem.problem import SolverOptions
+        from dolfinx_nnqem.problem.contact_problem import SolverOptions
 
     return SolverOptions(**kwargs)
 
@@ -41,13 +41,13 @@ def _options(**kwargs):
 def _solver(method, problem, **options):
     """A solver; the monolithic linear-solver choice is a per-solver option after the redesign."""
     try:
-        from dolfinx_nnqem.solver import make_solver
+        from dolfinx_nnqem.solvers import make_solver
     except ImportError:
         from dolfinx_nnqem.solvers import make_solver
 
     linear_solver = options.pop("linear_solver", None)
     try:
-        from dolfinx_nnqem.solver import MonolithicOptions  # the new layout
+        from dolfinx_nnqem.solvers import MonolithicOptions  # the new layout
 
         extra = {} if linear_solver is None else {"monolithic": MonolithicOptions(linear_solver=linear_solver)}
         return make_solver(method, problem, _options(**options), **extra)
@@ -58,7 +58,7 @@ def _solver(method, problem, **options):
 
 
 def _state(problem, results) -> dict:
-    from dolfinx_nnqem.results import pair_table
+    from dolfinx_nnqem.io import pair_table
 
     out = {
         "u": problem.u.x.array.copy(),
@@ -73,8 +73,8 @@ def _state(problem, results) -> dict:
 
 
 def two_beams(method: str, law: str) -> dict:
-    from dolfinx_nnqem.stepping import solve_load_steps
-    from dolfinx_nnqem.two_beams import two_beams_problem
+    from dolfinx_nnqem.solvers import solve_load_steps
+    from dolfinx_nnqem.cases.two_beams import two_beams_problem
 
     problem = two_beams_problem(MPI.COMM_WORLD, law=law)
     solver = _solver(method, problem)
@@ -84,10 +84,10 @@ def two_beams(method: str, law: str) -> dict:
 
 def patch_test() -> dict:
     from dolfinx_nnqem.material import VonMises
-    from dolfinx_nnqem.meshing import StackedBlocksTags as T
-    from dolfinx_nnqem.meshing import build_stacked_blocks
+    from dolfinx_nnqem.problem.meshing import StackedBlocksTags as T
+    from dolfinx_nnqem.problem.meshing import build_stacked_blocks
     from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Pressure
-    from dolfinx_nnqem.stepping import solve_load_steps
+    from dolfinx_nnqem.solvers import solve_load_steps
 
     elastic = VonMises(E=1.0e9, nu=0.3)
     mesh, ct, ft = build_stacked_blocks(MPI.COMM_WORLD, 1.0, 0.5, 0.5, 1.0, 3, 2, 2, 3)
@@ -104,8 +104,8 @@ def patch_test() -> dict:
 
 
 def sliding_block(law: str) -> dict:
-    from dolfinx_nnqem.convergence import ConvergenceError
-    from dolfinx_nnqem.stepping import solve_load_steps
+    from dolfinx_nnqem.solvers import ConvergenceError
+    from dolfinx_nnqem.solvers import solve_load_steps
     from test_contact_verification import sliding_block as build
 
     problem, _ = build(law)
@@ -119,7 +119,7 @@ def sliding_block(law: str) -> dict:
 
 
 def hertz_v6() -> dict:
-    from dolfinx_nnqem.stepping import solve_load_steps
+    from dolfinx_nnqem.solvers import solve_load_steps
     from test_hertz import A_NOMINAL, hertz_problem
 
     problem = hertz_problem(A_NOMINAL / 3)
@@ -128,8 +128,8 @@ def hertz_v6() -> dict:
 
 
 def mindlin_v7(law: str = "alart-curnier") -> dict:
-    from dolfinx_nnqem.convergence import ConvergenceError
-    from dolfinx_nnqem.stepping import solve_load_steps
+    from dolfinx_nnqem.solvers import ConvergenceError
+    from dolfinx_nnqem.solvers import solve_load_steps
     from test_hertz import A_NOMINAL, hertz_problem
 
     n = 5
@@ -146,8 +146,8 @@ def mindlin_v7(law: str = "alart-curnier") -> dict:
 
 
 def pressed_blocks(linear_solver: str) -> dict:
-    from dolfinx_nnqem.pressed_blocks import pressed_blocks_problem
-    from dolfinx_nnqem.stepping import solve_load_steps
+    from dolfinx_nnqem.cases.pressed_blocks import pressed_blocks_problem
+    from dolfinx_nnqem.solvers import solve_load_steps
 
     problem = pressed_blocks_problem(2, MPI.COMM_SELF)
     results = solve_load_steps(problem, _solver("monolithic", problem, linear_solver=linear_solver), 6)
@@ -158,13 +158,13 @@ def tension_then_shear(method: str, update: bool = False) -> dict:
     from test_nneqm2 import _tension_then_shear
 
     try:
-        from dolfinx_nnqem.solver import make_solver
+        from dolfinx_nnqem.solvers import make_solver
     except ImportError:
         from dolfinx_nnqem.solvers import make_solver
 
     if method == "nneqm2":
         try:
-            from dolfinx_nnqem.solver import NNEQM2Options
+            from dolfinx_nnqem.solvers import NNEQM2Options
 
             factory = lambda p: make_solver("nneqm2", p, _options(), nneqm2=NNEQM2Options(  # noqa: E731
                 update_flow_directions=update))
@@ -178,7 +178,7 @@ def tension_then_shear(method: str, update: bool = False) -> dict:
 
 
 def thick_cylinder() -> dict:
-    from dolfinx_nnqem.stepping import solve_load_steps
+    from dolfinx_nnqem.solvers import solve_load_steps
     from test_thick_cylinder import cylinder_problem, limit_pressure
     from test_thick_cylinder import MATERIAL
 
@@ -257,7 +257,7 @@ def main() -> None:
     parser.add_argument("--cases", nargs="*", default=list(CASES), help="case names (default: all)")
     args = parser.parse_args()
     print(f"dolfinx_nnqem from {Path(dolfinx_nnqem.__file__).parent}")
-    importlib.import_module("dolfinx_nnqem.problem")
+    importlib.import_module("dolfinx_nnqem.problem.contact_problem")
     data = run(args.cases)
     if args.save:
         save(args.save, data)

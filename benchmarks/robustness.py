@@ -30,15 +30,15 @@ from pathlib import Path
 import dolfinx_nnqem  # noqa: F401  (first: the PyPI wheel)
 from mpi4py import MPI
 
-from dolfinx_nnqem.amplitude import PiecewiseLinearPath
-from dolfinx_nnqem.convergence import ConvergenceError
+from dolfinx_nnqem.problem import PiecewiseLinearPath
+from dolfinx_nnqem.solvers import ConvergenceError
 from dolfinx_nnqem.material import VonMises
-from dolfinx_nnqem.meshing import BlockStackTags as B
-from dolfinx_nnqem.meshing import StackedBlocksTags as T
-from dolfinx_nnqem.meshing import build_block_stack, build_stacked_blocks
+from dolfinx_nnqem.problem.meshing import BlockStackTags as B
+from dolfinx_nnqem.problem.meshing import StackedBlocksTags as T
+from dolfinx_nnqem.problem.meshing import build_block_stack, build_stacked_blocks
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Pressure, Traction
-from dolfinx_nnqem.solver import METHODS, SolverOptions, make_solver
-from dolfinx_nnqem.stepping import solve_load_steps
+from dolfinx_nnqem.solvers import METHODS, SolverOptions, make_solver
+from dolfinx_nnqem.solvers import solve_load_steps
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
@@ -95,7 +95,7 @@ def pressed_and_dragged(ratio: float, cell_type: str = "hexahedron") -> Callable
 
 
 def two_beams(law: str) -> ContactProblem:
-    from dolfinx_nnqem.two_beams import two_beams_problem
+    from dolfinx_nnqem.cases.two_beams import two_beams_problem
 
     return two_beams_problem(law=law)
 

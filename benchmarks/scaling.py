@@ -1,4 +1,4 @@
-"""Scaling of the monolithic solver on the pressed blocks (``dolfinx_nnqem.pressed_blocks``).
+"""Scaling of the monolithic solver on the pressed blocks (``dolfinx_nnqem.cases.pressed_blocks``).
 
     python benchmarks/scaling.py --levels 1 2 4 --linear-solver direct iterative
     python benchmarks/scaling.py --levels 10 --linear-solver iterative --save run1.npz
@@ -36,11 +36,11 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from dolfinx_nnqem.monolithic import MonolithicSolver
-from dolfinx_nnqem.pressed_blocks import pressed_blocks_problem
-from dolfinx_nnqem.solver import MonolithicOptions, SolverOptions
-from dolfinx_nnqem.results import pair_table
-from dolfinx_nnqem.stepping import solve_load_steps
+from dolfinx_nnqem.solvers.monolithic import MonolithicSolver
+from dolfinx_nnqem.cases.pressed_blocks import pressed_blocks_problem
+from dolfinx_nnqem.solvers import MonolithicOptions, SolverOptions
+from dolfinx_nnqem.io import pair_table
+from dolfinx_nnqem.solvers import solve_load_steps
 
 
 def peak_memory_mb(comm) -> tuple[float, float]:

@@ -21,10 +21,10 @@ import numba
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from dolfinx_nnqem.output import ResultsWriter
-from dolfinx_nnqem.solver import make_solver
-from dolfinx_nnqem.stepping import solve_load_steps
-from dolfinx_nnqem.two_beams import DEFAULT_LAW, FREE_END_CORNERS, two_beams_problem
+from dolfinx_nnqem.io import ResultsWriter
+from dolfinx_nnqem.solvers import make_solver
+from dolfinx_nnqem.solvers import solve_load_steps
+from dolfinx_nnqem.cases.two_beams import DEFAULT_LAW, FREE_END_CORNERS, two_beams_problem
 
 
 def one_tangent_solve(problem, solver) -> float:

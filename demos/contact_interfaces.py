@@ -28,14 +28,14 @@ import numpy as np
 from mpi4py import MPI
 
 from dolfinx_nnqem.material import VonMises
-from dolfinx_nnqem.meshing import BlockStackTags as T
-from dolfinx_nnqem.meshing import build_block_stack
-from dolfinx_nnqem.output import ResultsWriter
-from dolfinx_nnqem.plots import plot_deformed
+from dolfinx_nnqem.problem.meshing import BlockStackTags as T
+from dolfinx_nnqem.problem.meshing import build_block_stack
+from dolfinx_nnqem.io import ResultsWriter
+from dolfinx_nnqem.io.plots import plot_deformed
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Pressure
-from dolfinx_nnqem.results import pair_table
-from dolfinx_nnqem.solver import METHODS, SolverOptions, make_solver
-from dolfinx_nnqem.stepping import solve_load_steps
+from dolfinx_nnqem.io import pair_table
+from dolfinx_nnqem.solvers import METHODS, SolverOptions, make_solver
+from dolfinx_nnqem.solvers import solve_load_steps
 
 parser = argparse.ArgumentParser(description="Three stacked blocks: two interfaces, two friction coefficients")
 parser.add_argument("--out", default="results/contact_interfaces")

@@ -49,15 +49,15 @@ import dolfinx_nnqem  # noqa: F401  (before dolfinx: the PyPI wheel needs it)
 import numpy as np
 from mpi4py import MPI
 
-from dolfinx_nnqem.hertz import NodalLoads, hertz_contact, measure_hertz
+from dolfinx_nnqem.cases.hertz import NodalLoads, hertz_contact, measure_hertz
 from dolfinx_nnqem.material import VonMises
-from dolfinx_nnqem.meshing import StackedBlocksTags as T
-from dolfinx_nnqem.meshing import build_graded_contact_blocks
-from dolfinx_nnqem.monolithic import MonolithicSolver
+from dolfinx_nnqem.problem.meshing import StackedBlocksTags as T
+from dolfinx_nnqem.problem.meshing import build_graded_contact_blocks
+from dolfinx_nnqem.solvers.monolithic import MonolithicSolver
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet
-from dolfinx_nnqem.solver import SolverOptions
-from dolfinx_nnqem.results import pair_table, reactions
-from dolfinx_nnqem.stepping import solve_load_steps
+from dolfinx_nnqem.solvers import SolverOptions
+from dolfinx_nnqem.io import pair_table, reactions
+from dolfinx_nnqem.solvers import solve_load_steps
 
 parser = argparse.ArgumentParser(description="V6 Hertz contact and V7 Cattaneo–Mindlin partial slip")
 parser.add_argument("--out", default="results/hertz")

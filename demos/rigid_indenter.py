@@ -33,17 +33,17 @@ import dolfinx_nnqem  # noqa: F401  (before dolfinx: the PyPI wheel needs it)
 import numpy as np
 from mpi4py import MPI
 
-from dolfinx_nnqem.amplitude import PiecewiseLinearPath
+from dolfinx_nnqem.problem import PiecewiseLinearPath
 from dolfinx_nnqem.contact.obstacles import Sphere
-from dolfinx_nnqem.hertz import NodalLoads, effective_modulus, measure_hertz
+from dolfinx_nnqem.cases.hertz import NodalLoads, effective_modulus, measure_hertz
 from dolfinx_nnqem.material import VonMises
-from dolfinx_nnqem.meshing import BlockStackTags as T
-from dolfinx_nnqem.meshing import build_graded_block
-from dolfinx_nnqem.plots import plot_deformed
+from dolfinx_nnqem.problem.meshing import BlockStackTags as T
+from dolfinx_nnqem.problem.meshing import build_graded_block
+from dolfinx_nnqem.io.plots import plot_deformed
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet
-from dolfinx_nnqem.results import equilibrium_check, pair_table
-from dolfinx_nnqem.solver import SolverOptions, make_solver
-from dolfinx_nnqem.stepping import solve_load_steps
+from dolfinx_nnqem.io import equilibrium_check, pair_table
+from dolfinx_nnqem.solvers import SolverOptions, make_solver
+from dolfinx_nnqem.solvers import solve_load_steps
 
 parser = argparse.ArgumentParser(description="A rigid sphere on a block: Hertz, plastic indentation, sliding")
 parser.add_argument("--out", default="results/rigid_indenter")
@@ -75,7 +75,7 @@ def sphere_on_block(h, material, motion, half=False, mu_f=0.0):
 # %% [markdown]
 # ## 1. Hertz
 # One increment. The pair forces are tributary integrals of the pressure, so the contact radius
-# is measured with the whole distribution (`dolfinx_nnqem.hertz.measure_hertz`: the Hertz
+# is measured with the whole distribution (`dolfinx_nnqem.cases.hertz.measure_hertz`: the Hertz
 # pressure whose consistent nodal forces best fit the pair forces) and p0 at the centre pair.
 
 # %%

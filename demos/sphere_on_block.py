@@ -37,12 +37,12 @@ import dolfinx_nnqem  # noqa: F401  (before dolfinx: the PyPI wheel needs it)
 import numpy as np
 from mpi4py import MPI
 
-from dolfinx_nnqem.output import ResultsWriter
-from dolfinx_nnqem.plots import plot_contact_pressure, plot_deformed
-from dolfinx_nnqem.solver import SolverOptions, make_solver
-from dolfinx_nnqem.sphere_on_block import (A_NOMINAL, APPROACH, BLOCK, E_STAR, R_SPHERE, measure_sphere_on_block,
+from dolfinx_nnqem.io import ResultsWriter
+from dolfinx_nnqem.io.plots import plot_contact_pressure, plot_deformed
+from dolfinx_nnqem.solvers import SolverOptions, make_solver
+from dolfinx_nnqem.cases.sphere_on_block import (A_NOMINAL, APPROACH, BLOCK, E_STAR, R_SPHERE, measure_sphere_on_block,
                                            sphere_on_block_problem)
-from dolfinx_nnqem.stepping import solve_load_steps
+from dolfinx_nnqem.solvers import solve_load_steps
 
 parser = argparse.ArgumentParser(description="Hertz contact on independent meshes: a sphere on a block")
 parser.add_argument("--out", default="results/sphere_on_block")

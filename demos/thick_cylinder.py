@@ -39,17 +39,17 @@ import dolfinx_nnqem  # noqa: F401  (before dolfinx: the PyPI wheel needs it)
 import numpy as np
 from mpi4py import MPI
 
-from dolfinx_nnqem.convergence import ConvergenceError
+from dolfinx_nnqem.solvers import ConvergenceError
 from dolfinx_nnqem.material import VonMises
-from dolfinx_nnqem.meshing import ThickCylinderTags as T
-from dolfinx_nnqem.meshing import build_thick_cylinder
-from dolfinx_nnqem.monolithic import MonolithicSolver
-from dolfinx_nnqem.output import ResultsWriter
-from dolfinx_nnqem.plots import plot_convergence, plot_curve, plot_deformed
+from dolfinx_nnqem.problem.meshing import ThickCylinderTags as T
+from dolfinx_nnqem.problem.meshing import build_thick_cylinder
+from dolfinx_nnqem.solvers.monolithic import MonolithicSolver
+from dolfinx_nnqem.io import ResultsWriter
+from dolfinx_nnqem.io.plots import plot_convergence, plot_curve, plot_deformed
 from dolfinx_nnqem.problem import ContactProblem, Dirichlet, Pressure
-from dolfinx_nnqem.solver import SolverOptions
-from dolfinx_nnqem.results import node_blocks_at_points, values_at_blocks
-from dolfinx_nnqem.stepping import solve_load_steps
+from dolfinx_nnqem.solvers import SolverOptions
+from dolfinx_nnqem.io.results import node_blocks_at_points, values_at_blocks
+from dolfinx_nnqem.solvers import solve_load_steps
 
 parser = argparse.ArgumentParser(description=__doc__)
 parser.add_argument("--out", default="results/thick_cylinder")

@@ -25,9 +25,9 @@ from pathlib import Path
 import dolfinx_nnqem  # noqa: F401  (before dolfinx: the PyPI wheel needs it)
 from mpi4py import MPI
 
-from dolfinx_nnqem.plots import plot_convergence, plot_deformed
-from dolfinx_nnqem.solver import METHODS
-from dolfinx_nnqem.two_beams import format_differences, format_tables, run_two_beams, two_beams_problem
+from dolfinx_nnqem.io.plots import plot_convergence, plot_deformed
+from dolfinx_nnqem.solvers import METHODS
+from dolfinx_nnqem.cases.two_beams import format_differences, format_tables, run_two_beams, two_beams_problem
 
 parser = argparse.ArgumentParser(description="The seed's two-beam benchmark with every method")
 parser.add_argument("--out", default="results/two_beams_demo")
@@ -69,8 +69,8 @@ if rank0:
 
 # %%
 problem = two_beams_problem(law=summaries[0].get("law", "alart-curnier"))
-from dolfinx_nnqem.solver import make_solver  # noqa: E402
-from dolfinx_nnqem.stepping import solve_load_steps  # noqa: E402
+from dolfinx_nnqem.solvers import make_solver  # noqa: E402
+from dolfinx_nnqem.solvers import solve_load_steps  # noqa: E402
 
 solve_load_steps(problem, make_solver(args.methods[0], problem), args.increments)
 plot_deformed(problem, out / "deformed.png", field="von_mises", scale=50.0, camera="front",

@@ -5,7 +5,7 @@ own channels: gmsh prints ``Info : Reading ...`` lines on the C stdout (its ``Ge
 and ``General.Verbosity`` options), numba and other Python libraries emit Python warnings
 (``NumbaPerformanceWarning``, deprecations), VTK logs to stderr (``bad X server connection``
 when it renders off-screen without a display). :func:`show_third_party_output` decides once per
-process whether they are shown; the gmsh users of this package (:mod:`dolfinx_nnqem.meshing`,
+process whether they are shown; the gmsh users of this package (:mod:`dolfinx_nnqem.problem.meshing`,
 :mod:`dolfinx_nnqem.problem_file`) apply :func:`gmsh_options` to their session.
 
 Errors are not hidden: gmsh's API raises an exception for its errors whatever its terminal

@@ -17,7 +17,7 @@ import logging
 import sys
 from pathlib import Path
 
-from dolfinx_nnqem.solver import METHODS
+from dolfinx_nnqem.solvers.options import METHODS
 
 EXIT_OK, EXIT_DIVERGED, EXIT_USAGE, EXIT_BAD_INPUT = 0, 1, 2, 3
 EXIT_IO, EXIT_PETSC, EXIT_INTERNAL = 4, 5, 70
@@ -108,7 +108,7 @@ def _configure_logging(verbose: int, quiet: bool) -> None:
 def _two_beams(args) -> int:
     from mpi4py import MPI
 
-    from dolfinx_nnqem.two_beams import format_differences, format_tables, run_two_beams
+    from dolfinx_nnqem.cases.two_beams import format_differences, format_tables, run_two_beams
 
     rank0 = MPI.COMM_WORLD.rank == 0
     methods = [m for m in METHODS if _available(m)] if args.method == "all" else [args.method]
@@ -165,13 +165,13 @@ def _run(args) -> int:
 
     from mpi4py import MPI
 
-    from dolfinx_nnqem import checkpoint
+    from dolfinx_nnqem.io import checkpoint
     from dolfinx_nnqem.collective import agree
-    from dolfinx_nnqem.output import ResultsWriter
+    from dolfinx_nnqem.io.output import ResultsWriter
     from dolfinx_nnqem.problem_file import (build_problem, check_options, load_problem_file,
                                             solver_options)
-    from dolfinx_nnqem.solver import make_solver
-    from dolfinx_nnqem.stepping import solve_load_steps
+    from dolfinx_nnqem.solvers.registry import make_solver
+    from dolfinx_nnqem.solvers.stepping import solve_load_steps
 
     comm = MPI.COMM_WORLD
     spec = agree(comm, load_problem_file, args.problem)
@@ -191,7 +191,7 @@ def _run(args) -> int:
     options, method_options = solver_options(spec, method)
     checks = check_options(spec)
     if method != "monolithic" or solver_spec["linear_solver"] == "direct":
-        from dolfinx_nnqem.preflight import check_direct_solver
+        from dolfinx_nnqem.solvers.preflight import check_direct_solver
 
         check_direct_solver(comm, options.petsc_options)  # an unknown solver package is reported as such
     solver = make_solver(method, problem, options, **method_options)
@@ -226,7 +226,7 @@ def _run(args) -> int:
             writer.ended("interrupted")
         raise
     except Exception as error:
-        from dolfinx_nnqem.convergence import ConvergenceError
+        from dolfinx_nnqem.solvers.convergence import ConvergenceError
 
         interrupt = _interrupt_behind(error)
         if interrupt is not None:  # a signal that arrived inside compiled code (numba wraps it)
@@ -259,7 +259,7 @@ def _plot(args) -> int:
     """``dolfinx-nnqem plot RESULTS``: the run pictures from the folder, on rank 0."""
     from mpi4py import MPI
 
-    from dolfinx_nnqem.run_pictures import draw_run_pictures
+    from dolfinx_nnqem.io.run_pictures import draw_run_pictures
 
     if MPI.COMM_WORLD.rank != 0:
         return EXIT_OK
@@ -298,7 +298,7 @@ def _interrupt_behind(error: BaseException) -> KeyboardInterrupt | None:
 
 def _classify(error: BaseException, args) -> tuple[int, str]:
     """The exit code and the one-line message of an exception that ended the run."""
-    from dolfinx_nnqem.convergence import ConvergenceError
+    from dolfinx_nnqem.solvers.convergence import ConvergenceError
 
     if isinstance(error, Terminated):
         return EXIT_TERMINATED, "dolfinx-nnqem: terminated (SIGTERM)" + _restart_hint(args)

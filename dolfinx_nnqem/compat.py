@@ -20,7 +20,7 @@ import sys
 H5PY_BEFORE_DOLFINX: bool = "h5py" in sys.modules and "dolfinx" not in sys.modules
 """h5py was imported before DOLFINx: only then can it share the process with the PyPI wheel,
 whose DOLFINx loads its own HDF5 (h5py imported after it fails with "Not a datatype"). The
-package's reader (:mod:`dolfinx_nnqem.reader`) reads in a child process otherwise."""
+package's reader (:mod:`dolfinx_nnqem.io.reader`) reads in a child process otherwise."""
 
 try:  # the PyPI wheel: loads MPI and its PETSc before dolfinx/petsc4py
     import dolfinx_solver  # noqa: F401

@@ -256,7 +256,7 @@ def _mesh_section(mesh: dict, folder: Path, where: str) -> dict:
 
 
 def _materials_section(materials: dict, where: str) -> dict:
-    from dolfinx_nnqem.material import VonMises
+    from dolfinx_nnqem.material.von_mises import VonMises
 
     if not materials:
         raise ProblemFileError(f"{where}: [materials] is empty; give [materials.TAG] per cell tag")
@@ -357,7 +357,7 @@ def _amplitude_entry(entry: dict, where: str) -> None:
     """Check an optional ``amplitude`` table in place (rows [ℓ, a])."""
     if "amplitude" not in entry:
         return
-    from dolfinx_nnqem.amplitude import PiecewiseLinear
+    from dolfinx_nnqem.problem.amplitude import PiecewiseLinear
 
     try:
         entry["amplitude"] = PiecewiseLinear([[float(_number(v, f"{where}.amplitude[{i}]")) for v in row]
@@ -367,7 +367,7 @@ def _amplitude_entry(entry: dict, where: str) -> None:
 
 
 def _path(rows, where: str):
-    from dolfinx_nnqem.amplitude import PiecewiseLinearPath
+    from dolfinx_nnqem.problem.amplitude import PiecewiseLinearPath
 
     try:
         return PiecewiseLinearPath([[float(_number(v, f"{where}[{i}]")) for v in row]
@@ -431,7 +431,7 @@ def _solver_section(solver: dict, where: str) -> dict:
     solver.setdefault("method", "monolithic")
     if solver["method"] not in METHODS:
         raise ProblemFileError(f"{w}.method = {solver['method']!r}: expected one of {list(METHODS)}")
-    from dolfinx_nnqem.validation import MAX_CUTBACKS, MAX_INCREMENTS
+    from dolfinx_nnqem.problem.validation import MAX_CUTBACKS, MAX_INCREMENTS
 
     increments = solver.get("increments", 15)
     if isinstance(increments, str) and increments == "auto":
@@ -462,8 +462,8 @@ def _solver_section(solver: dict, where: str) -> dict:
 
 
 def _automatic_increments(table, where: str):
-    """[solver.auto]: the settings of :class:`~dolfinx_nnqem.step_control.AutomaticIncrements`."""
-    from dolfinx_nnqem.step_control import AutomaticIncrements
+    """[solver.auto]: the settings of :class:`~dolfinx_nnqem.solvers.step_control.AutomaticIncrements`."""
+    from dolfinx_nnqem.solvers.step_control import AutomaticIncrements
 
     if not isinstance(table, dict):
         raise ProblemFileError(f"{where} must be a table")
@@ -497,7 +497,7 @@ def _output_section(output: dict, where: str) -> dict:
 
 def _checks_section(checks: dict, where: str) -> dict:
     """[checks]: rtol, max_strain, max_rotation (false disables a small-strain limit)."""
-    from dolfinx_nnqem.checks import DEFAULT_MAX_ROTATION, DEFAULT_MAX_STRAIN
+    from dolfinx_nnqem.solvers.checks import DEFAULT_MAX_ROTATION, DEFAULT_MAX_STRAIN
 
     w = f"{where}: [checks]"
     checks = _checked_keys(checks, KEYS["checks"], set(), w)
@@ -515,8 +515,8 @@ def _checks_section(checks: dict, where: str) -> dict:
 
 
 def check_options(spec: ProblemSpec):
-    """The :class:`~dolfinx_nnqem.checks.CheckOptions` of the [checks] section."""
-    from dolfinx_nnqem.checks import CheckOptions
+    """The :class:`~dolfinx_nnqem.solvers.checks.CheckOptions` of the [checks] section."""
+    from dolfinx_nnqem.solvers.checks import CheckOptions
 
     return CheckOptions(**spec.checks)
 
@@ -614,7 +614,7 @@ def _check_xdmf(file: Path, names: dict) -> None:
 def build_problem(spec: ProblemSpec, comm):
     """The :class:`ContactProblem` of a checked problem file."""
     from dolfinx_nnqem.contact.obstacles import Cylinder, Plane, Sphere
-    from dolfinx_nnqem.problem import (BodyForce, Contact, ContactProblem, Dirichlet, Gravity, Pressure,
+    from dolfinx_nnqem.problem.contact_problem import (BodyForce, Contact, ContactProblem, Dirichlet, Gravity, Pressure,
                                        Traction)
 
     mesh, cell_tags, facet_tags = read_mesh(spec, comm)
@@ -642,7 +642,7 @@ def build_problem(spec: ProblemSpec, comm):
 
 def solver_options(spec: ProblemSpec, method: str | None = None):
     """(SolverOptions, {method: its own options}) from the [solver] section (``method`` overrides its method)."""
-    from dolfinx_nnqem.solver import MonolithicOptions, SolverOptions
+    from dolfinx_nnqem.solvers.options import MonolithicOptions, SolverOptions
 
     s = spec.solver
     method = method or s["method"]

@@ -1,4 +1,4 @@
-"""Write the project's gmsh meshes (``.msh``) with the builders of ``dolfinx_nnqem.meshing``.
+"""Write the project's gmsh meshes (``.msh``) with the builders of ``dolfinx_nnqem.problem.meshing``.
 
     python meshes/generate.py                 # all models, default parameters, into meshes/
     python meshes/generate.py two_beams --refine 2 --output-dir /tmp
@@ -18,7 +18,7 @@ import argparse
 import pathlib
 
 import dolfinx_nnqem  # noqa: F401  (first: the PyPI wheel loads MPI/PETSc before dolfinx)
-from dolfinx_nnqem import meshing
+from dolfinx_nnqem.problem import meshing
 from mpi4py import MPI
 
 MODELS = ("two_beams", "stacked_blocks", "thick_cylinder", "three_blocks", "indenter_block")

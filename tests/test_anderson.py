@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from dolfinx_nnqem.anderson import AndersonMixing
+from dolfinx_nnqem.numerics.anderson import AndersonMixing
 
 
 def _iterate(depth: int, G, x0: np.ndarray, tol: float = 1e-12, limit: int = 5000) -> tuple[np.ndarray, int]:

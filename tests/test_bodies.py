@@ -3,10 +3,10 @@
 import numpy as np
 from mpi4py import MPI
 
-from dolfinx_nnqem.condensation import Condensation
+from dolfinx_nnqem.solvers.condensation import Condensation
 from dolfinx_nnqem.material import VonMises
-from dolfinx_nnqem.meshing import BlockStackTags as T
-from dolfinx_nnqem.meshing import build_block_stack
+from dolfinx_nnqem.problem.meshing import BlockStackTags as T
+from dolfinx_nnqem.problem.meshing import build_block_stack
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Pressure
 
 

@@ -1,4 +1,4 @@
-"""FCLIB export of NNEQM1's condensed contact problem (``dolfinx_nnqem.fclib``).
+"""FCLIB export of NNEQM1's condensed contact problem (``dolfinx_nnqem.io.fclib``).
 
 Round trip (the file reads back to the same C, w_free and q), the HDF5 layout against the one
 of FrictionalContactLibrary/fclib ``src/fclib.h`` (b8845f7), the equivalence of FCLIB's
@@ -13,7 +13,8 @@ import textwrap
 import numpy as np
 import pytest
 
-from dolfinx_nnqem import compat, fclib
+from dolfinx_nnqem import compat
+from dolfinx_nnqem.io import fclib
 from dolfinx_nnqem.contact.laws import get_law
 
 h5py = fclib.h5py  # imported by fclib so that it survives DOLFINx's HDF5 (see fclib._import_h5py)
@@ -218,9 +219,9 @@ def test_fclib_solutions_are_pair_law_solutions(tmp_path):
 
 # -- a real NNEQM1 inner problem ------------------------------------------------------------------
 def _two_beams_nneqm1(law):
-    from dolfinx_nnqem.stepping import solve_load_steps
-    from dolfinx_nnqem.solver import make_solver
-    from dolfinx_nnqem.two_beams import two_beams_problem
+    from dolfinx_nnqem.solvers import solve_load_steps
+    from dolfinx_nnqem.solvers import make_solver
+    from dolfinx_nnqem.cases.two_beams import two_beams_problem
 
     p = two_beams_problem(law=law)
     s = make_solver("nneqm1", p)
@@ -282,7 +283,7 @@ MPI_SCRIPT = textwrap.dedent("""
     import dolfinx_nnqem
     import numpy as np
     from mpi4py import MPI
-    from dolfinx_nnqem import fclib
+    from dolfinx_nnqem.io import fclib
 
     comm = MPI.COMM_WORLD
     rng = np.random.default_rng(5)  # the same data on every rank, as NNEQM1's gathered data

@@ -16,13 +16,13 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from dolfinx_nnqem.meshing import StackedBlocksTags as T
-from dolfinx_nnqem.meshing import build_stacked_blocks
-from dolfinx_nnqem.pressed_blocks import MATERIAL, PRESSURE
+from dolfinx_nnqem.problem.meshing import StackedBlocksTags as T
+from dolfinx_nnqem.problem.meshing import build_stacked_blocks
+from dolfinx_nnqem.cases.pressed_blocks import MATERIAL, PRESSURE
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Pressure, Traction
-from dolfinx_nnqem.results import equilibrium_check, pair_table
-from dolfinx_nnqem.solver import METHODS, NNEQM2Options, SolverOptions, make_solver
-from dolfinx_nnqem.stepping import solve_load_path, solve_load_steps
+from dolfinx_nnqem.io import equilibrium_check, pair_table
+from dolfinx_nnqem.solvers import METHODS, NNEQM2Options, SolverOptions, make_solver
+from dolfinx_nnqem.solvers import solve_load_path, solve_load_steps
 
 
 def floating_blocks(mu_f=0.3, drag=0.2, pressure=PRESSURE, comm=MPI.COMM_WORLD):

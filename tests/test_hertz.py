@@ -33,16 +33,16 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from dolfinx_nnqem.hertz import NodalLoads, hertz_contact
-from dolfinx_nnqem.hertz import measure_hertz as _measure
+from dolfinx_nnqem.cases.hertz import NodalLoads, hertz_contact
+from dolfinx_nnqem.cases.hertz import measure_hertz as _measure
 from dolfinx_nnqem.material import VonMises
-from dolfinx_nnqem.meshing import StackedBlocksTags as T
-from dolfinx_nnqem.meshing import build_graded_contact_blocks
-from dolfinx_nnqem.monolithic import MonolithicSolver
+from dolfinx_nnqem.problem.meshing import StackedBlocksTags as T
+from dolfinx_nnqem.problem.meshing import build_graded_contact_blocks
+from dolfinx_nnqem.solvers.monolithic import MonolithicSolver
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet
-from dolfinx_nnqem.solver import SolverOptions
-from dolfinx_nnqem.results import pair_table, reactions
-from dolfinx_nnqem.stepping import solve_load_steps
+from dolfinx_nnqem.solvers import SolverOptions
+from dolfinx_nnqem.io import pair_table, reactions
+from dolfinx_nnqem.solvers import solve_load_steps
 
 E, NU = 210e3, 0.3  # MPa
 MATERIAL = VonMises(E=E, nu=NU)  # σ_y0 = inf: elastic
@@ -254,8 +254,8 @@ def test_v10_polar_law_on_v6_v7_where_it_converges():
     """V10 on V6/V7 (half model, h = a/3): the polar law along its own load path (with cutbacks)
     and the Cartesian law along the same path give the same pair forces where the polar law
     converges; the printout says where it needs Levenberg–Marquardt steps or stops."""
-    from dolfinx_nnqem.convergence import ConvergenceError
-    from dolfinx_nnqem.stepping import solve_load_path
+    from dolfinx_nnqem.solvers import ConvergenceError
+    from dolfinx_nnqem.solvers import solve_load_path
 
     h, increments = A_NOMINAL / 3, 3
     n = 1 + increments

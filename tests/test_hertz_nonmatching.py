@@ -28,13 +28,13 @@ import pytest
 from mpi4py import MPI
 
 from dolfinx_nnqem import compat
-from dolfinx_nnqem.hertz import NodalLoads
-from dolfinx_nnqem.meshing import SphereOnBlockTags as T
-from dolfinx_nnqem.meshing import build_sphere_on_block
-from dolfinx_nnqem.results import equilibrium_check, pair_table
-from dolfinx_nnqem.solver import SolverOptions, make_solver
-from dolfinx_nnqem.sphere_on_block import A_NOMINAL, measure_sphere_on_block, sphere_on_block_problem
-from dolfinx_nnqem.stepping import solve_load_path, solve_load_steps
+from dolfinx_nnqem.cases.hertz import NodalLoads
+from dolfinx_nnqem.problem.meshing import SphereOnBlockTags as T
+from dolfinx_nnqem.problem.meshing import build_sphere_on_block
+from dolfinx_nnqem.io import equilibrium_check, pair_table
+from dolfinx_nnqem.solvers import SolverOptions, make_solver
+from dolfinx_nnqem.cases.sphere_on_block import A_NOMINAL, measure_sphere_on_block, sphere_on_block_problem
+from dolfinx_nnqem.solvers import solve_load_path, solve_load_steps
 
 DEMO_H = A_NOMINAL / 7  # the demo's mesh
 SMALL = dict(R=5.0, block=3.0, approach=0.1, h_max=1.0, fine_radius=0.8, contact_radius=1.5)  # h = 0.5
@@ -278,7 +278,7 @@ def test_both_laws_agree_where_a_support_pins_a_friction_direction():
 
 # -- the picture --------------------------------------------------------------------------------------
 def test_plot_contact_pressure_writes_png(tmp_path):
-    from dolfinx_nnqem.plots import plot_contact_pressure
+    from dolfinx_nnqem.io.plots import plot_contact_pressure
 
     problem = sphere_on_block_problem(0.5, **SMALL)
     solve_load_steps(problem, make_solver("monolithic", problem, SolverOptions()), 1)
@@ -300,10 +300,10 @@ def test_measure_and_plot_on_two_ranks(tmp_path):
         "import sys, json\n"
         "import dolfinx_nnqem\n"
         "from mpi4py import MPI\n"
-        "from dolfinx_nnqem.plots import plot_contact_pressure\n"
-        "from dolfinx_nnqem.solver import SolverOptions, make_solver\n"
-        "from dolfinx_nnqem.sphere_on_block import measure_sphere_on_block, sphere_on_block_problem\n"
-        "from dolfinx_nnqem.stepping import solve_load_path, solve_load_steps\n"
+        "from dolfinx_nnqem.io.plots import plot_contact_pressure\n"
+        "from dolfinx_nnqem.solvers import SolverOptions, make_solver\n"
+        "from dolfinx_nnqem.cases.sphere_on_block import measure_sphere_on_block, sphere_on_block_problem\n"
+        "from dolfinx_nnqem.solvers import solve_load_path, solve_load_steps\n"
         f"p = sphere_on_block_problem(0.5, **{SMALL!r})\n"
         "solve_load_steps(p, make_solver('monolithic', p, SolverOptions()), 1)\n"
         f"m = measure_sphere_on_block(p, R={SMALL['R']!r})\n"

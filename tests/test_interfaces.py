@@ -18,12 +18,12 @@ import pytest
 from mpi4py import MPI
 
 from dolfinx_nnqem.material import VonMises
-from dolfinx_nnqem.meshing import BlockStackTags as T
-from dolfinx_nnqem.meshing import build_block_stack
+from dolfinx_nnqem.problem.meshing import BlockStackTags as T
+from dolfinx_nnqem.problem.meshing import build_block_stack
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Pressure
-from dolfinx_nnqem.results import equilibrium_check, pair_table
-from dolfinx_nnqem.solver import METHODS, SolverOptions, make_solver
-from dolfinx_nnqem.stepping import solve_load_steps
+from dolfinx_nnqem.io import equilibrium_check, pair_table
+from dolfinx_nnqem.solvers import METHODS, SolverOptions, make_solver
+from dolfinx_nnqem.solvers import solve_load_steps
 
 ELASTIC = VonMises(E=1.0e9, nu=0.3)
 P = 1.0e6

@@ -1,6 +1,6 @@
 """The iterative linear solver of the monolithic method (augmented u block, Schur fieldsplit, GAMG).
 
-The pressed blocks (``dolfinx_nnqem.pressed_blocks``): body 2 is held in y by contact alone, so
+The pressed blocks (``dolfinx_nnqem.cases.pressed_blocks``): body 2 is held in y by contact alone, so
 its stiffness is singular without the augmentation; plastic yielding, then slip. The iterative
 solver must give the direct solver's answer, keep the prescribed displacements exact, and give
 the same answer on 2 ranks.
@@ -16,11 +16,11 @@ import pytest
 from mpi4py import MPI
 
 from dolfinx_nnqem import compat
-from dolfinx_nnqem.monolithic import MonolithicSolver
-from dolfinx_nnqem.pressed_blocks import pressed_blocks_problem
-from dolfinx_nnqem.solver import MonolithicOptions
-from dolfinx_nnqem.results import pair_table
-from dolfinx_nnqem.stepping import solve_load_steps
+from dolfinx_nnqem.solvers.monolithic import MonolithicSolver
+from dolfinx_nnqem.cases.pressed_blocks import pressed_blocks_problem
+from dolfinx_nnqem.solvers import MonolithicOptions
+from dolfinx_nnqem.io import pair_table
+from dolfinx_nnqem.solvers import solve_load_steps
 
 SCRIPTS = Path(__file__).parent / "mpi_scripts"
 

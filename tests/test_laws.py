@@ -27,7 +27,7 @@ from dolfinx_nnqem.contact.laws import (
     get_law,
     unknowns_from_force,
 )
-from dolfinx_nnqem.nonsmooth import solve_nonsmooth
+from dolfinx_nnqem.numerics.nonsmooth import solve_nonsmooth
 
 LAW_NAMES = ("alart-curnier", "polar")
 FD_RTOL = 1e-6

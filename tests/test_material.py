@@ -7,9 +7,9 @@ import ufl
 from conftest import box_with_face_tags
 
 from dolfinx_nnqem.material import PlasticState, VonMises
-from dolfinx_nnqem.monolithic import MonolithicSolver
+from dolfinx_nnqem.solvers.monolithic import MonolithicSolver
 from dolfinx_nnqem.problem import ContactProblem, Dirichlet
-from dolfinx_nnqem.stepping import solve_load_steps
+from dolfinx_nnqem.solvers import solve_load_steps
 
 STEEL = VonMises(E=2.0e11, nu=0.3, sigma_y0=2.5e8, H=2.0e10)
 
@@ -160,7 +160,7 @@ def test_vectorised_kernels_agree_with_dolfinx_default_flags(monkeypatch):
     from mpi4py import MPI
 
     from dolfinx_nnqem import jit
-    from dolfinx_nnqem.pressed_blocks import pressed_blocks_problem
+    from dolfinx_nnqem.cases.pressed_blocks import pressed_blocks_problem
 
     def plastic_fields(compile_args):
         monkeypatch.setattr(jit, "KERNEL_COMPILE_ARGS", compile_args)
@@ -188,7 +188,7 @@ def test_numpy_return_map_agrees_with_ufl():
     from mpi4py import MPI
 
     from dolfinx_nnqem import compat, jit
-    from dolfinx_nnqem.material import (deviator_coordinates, deviator_tensors, equivalent_stress, flow_direction,
+    from dolfinx_nnqem.material.von_mises import (deviator_coordinates, deviator_tensors, equivalent_stress, flow_direction,
                                         radial_return, strain)
 
     material = VonMises(E=2.0e11, nu=0.3, sigma_y0=2.5e8, H=1.0e10)

@@ -1,4 +1,4 @@
-"""The gmsh model builders of dolfinx_nnqem.meshing: cell counts, tags, duplicated interfaces."""
+"""The gmsh model builders of dolfinx_nnqem.problem.meshing: cell counts, tags, duplicated interfaces."""
 
 import dolfinx_nnqem  # noqa: F401  (first: the PyPI wheel loads MPI/PETSc before dolfinx)
 import gmsh
@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from dolfinx_nnqem import compat, meshing
-from dolfinx_nnqem.meshing import StackedBlocksTags, ThickCylinderTags, TwoBeamsTags
+from dolfinx_nnqem import compat
+from dolfinx_nnqem.problem import meshing
+from dolfinx_nnqem.problem.meshing import StackedBlocksTags, ThickCylinderTags, TwoBeamsTags
 
 ROOT = __import__("pathlib").Path(__file__).resolve().parents[1]
 
@@ -141,7 +142,7 @@ def test_generate_script(tmp_path):
     assert all((tmp_path / n).stat().st_size > 0 for n in names)
     # the graded block is written with its graded nodes: it reads back as the builder's mesh
     from dolfinx_nnqem import compat
-    from dolfinx_nnqem.meshing import build_graded_block
+    from dolfinx_nnqem.problem.meshing import build_graded_block
 
     read = compat.read_from_msh(str(tmp_path / "indenter_block.msh"), MPI.COMM_SELF, 0, gdim=3)
     built = build_graded_block(MPI.COMM_SELF, 0.25, half=True)

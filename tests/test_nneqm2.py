@@ -18,13 +18,13 @@ import pytest
 from conftest import box_with_face_tags
 
 from dolfinx_nnqem import compat
-from dolfinx_nnqem import two_beams as tb
+from dolfinx_nnqem.cases import two_beams as tb
 from dolfinx_nnqem.material import VonMises
-from dolfinx_nnqem.monolithic import MonolithicSolver
-from dolfinx_nnqem.nneqm2 import NNEQM2Solver
-from dolfinx_nnqem.solver import NNEQM2Options
+from dolfinx_nnqem.solvers.monolithic import MonolithicSolver
+from dolfinx_nnqem.solvers.nneqm2 import NNEQM2Solver
+from dolfinx_nnqem.solvers import NNEQM2Options
 from dolfinx_nnqem.problem import ContactProblem, Dirichlet
-from dolfinx_nnqem.stepping import solve_load_steps
+from dolfinx_nnqem.solvers import solve_load_steps
 
 STEEL = VonMises(E=2.0e11, nu=0.3, sigma_y0=2.5e8, H=2.0e10)
 

@@ -17,13 +17,13 @@ import pytest
 from mpi4py import MPI
 
 from dolfinx_nnqem.material import VonMises
-from dolfinx_nnqem.meshing import BlockStackTags as T
-from dolfinx_nnqem.meshing import StackedBlocksTags as S
-from dolfinx_nnqem.meshing import build_block_stack, build_stacked_blocks
+from dolfinx_nnqem.problem.meshing import BlockStackTags as T
+from dolfinx_nnqem.problem.meshing import StackedBlocksTags as S
+from dolfinx_nnqem.problem.meshing import build_block_stack, build_stacked_blocks
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Pressure, Traction
-from dolfinx_nnqem.results import equilibrium_check, pair_table
-from dolfinx_nnqem.solver import METHODS, SolverOptions, make_solver
-from dolfinx_nnqem.stepping import solve_load_steps
+from dolfinx_nnqem.io import equilibrium_check, pair_table
+from dolfinx_nnqem.solvers import METHODS, SolverOptions, make_solver
+from dolfinx_nnqem.solvers import solve_load_steps
 
 P = 1.0e6
 TAU = 0.2 * P

@@ -21,11 +21,11 @@ is met (1.5 %).
 import numpy as np
 import pytest
 
-from dolfinx_nnqem.meshing import TwoBeamsTags as T
-from dolfinx_nnqem.results import equilibrium_check, node_blocks_at_points, pair_table, reactions, values_at_blocks
-from dolfinx_nnqem.solver import SolverOptions, make_solver
-from dolfinx_nnqem.stepping import solve_load_steps
-from dolfinx_nnqem.two_beams import FREE_END_CORNERS, two_beams_problem
+from dolfinx_nnqem.problem.meshing import TwoBeamsTags as T
+from dolfinx_nnqem.io.results import equilibrium_check, node_blocks_at_points, pair_table, reactions, values_at_blocks
+from dolfinx_nnqem.solvers import SolverOptions, make_solver
+from dolfinx_nnqem.solvers import solve_load_steps
+from dolfinx_nnqem.cases.two_beams import FREE_END_CORNERS, two_beams_problem
 
 INCREMENTS = 15
 TOLERANCE = 0.02

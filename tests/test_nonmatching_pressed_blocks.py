@@ -1,6 +1,6 @@
 """Plastic pressed blocks on non-matching meshes (issue "Non-matching meshes").
 
-The family of ``dolfinx_nnqem.pressed_blocks`` with body 2 meshed finer than body 1
+The family of ``dolfinx_nnqem.cases.pressed_blocks`` with body 2 meshed finer than body 1
 (``pressed_blocks_problem(level, n2=...)``): the interface is discretised by dual mortar, body 2's
 finer face the slave. The pressure yields both blocks, then the drag yields them again in shear and
 makes pairs slip; body 2 is held in y by contact alone. The monolithic solver with the direct and
@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from dolfinx_nnqem.monolithic import MonolithicSolver
-from dolfinx_nnqem.pressed_blocks import pressed_blocks_problem
-from dolfinx_nnqem.results import equilibrium_check, pair_table
-from dolfinx_nnqem.solver import MonolithicOptions, SolverOptions, make_solver
-from dolfinx_nnqem.stepping import solve_load_path, solve_load_steps
+from dolfinx_nnqem.solvers.monolithic import MonolithicSolver
+from dolfinx_nnqem.cases.pressed_blocks import pressed_blocks_problem
+from dolfinx_nnqem.io import equilibrium_check, pair_table
+from dolfinx_nnqem.solvers import MonolithicOptions, SolverOptions, make_solver
+from dolfinx_nnqem.solvers import solve_load_path, solve_load_steps
 
 LEVEL = 1
 N2 = 6  # body 2: 6 × 6 facets on the interface against body 1's 4 × 4 (only x, z ∈ {0, ½, 1} coincide)

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from dolfinx_nnqem.nonsmooth import NonsmoothResult, solve_nonsmooth
+from dolfinx_nnqem.numerics.nonsmooth import NonsmoothResult, solve_nonsmooth
 
 
 def _smooth_residual(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -197,8 +197,8 @@ def _arctan(x):
 
 
 def test_solve_dense_retries_from_the_start_with_the_next_globalisation():
-    from dolfinx_nnqem.newton import Globalisation
-    from dolfinx_nnqem.nonsmooth import solve_dense
+    from dolfinx_nnqem.numerics.newton import Globalisation
+    from dolfinx_nnqem.numerics.nonsmooth import solve_dense
 
     full, monotone = Globalisation(min_step=1e-10, watchdog=6), Globalisation(min_step=1e-10, watchdog=0)
     x0 = np.array([3.0])
@@ -224,8 +224,8 @@ def test_solve_dense_retries_from_the_start_with_the_next_globalisation():
 def test_solve_dense_falls_back_to_another_start_and_step_rule():
     """Every globalisation fails from x0; the fallback's start (inside the basin) and step rule
     are then tried with each in turn; a first attempt that converges leaves the fallback unused."""
-    from dolfinx_nnqem.newton import Globalisation
-    from dolfinx_nnqem.nonsmooth import Fallback, solve_dense
+    from dolfinx_nnqem.numerics.newton import Globalisation
+    from dolfinx_nnqem.numerics.nonsmooth import Fallback, solve_dense
 
     full, monotone = Globalisation(min_step=1e-10, watchdog=6), Globalisation(min_step=1e-10, watchdog=0)
     x0 = np.array([3.0])
@@ -261,7 +261,7 @@ class _CreepingCycle:
         self.x, self._x0 = ("A", 0), None
 
     def _merit(self, x=None):
-        from dolfinx_nnqem.newton import Merit
+        from dolfinx_nnqem.numerics.newton import Merit
 
         kind, k = x or self.x
         psi = {"A": 0.999 ** k, "B": 2.0, "solution": 0.0}[kind]
@@ -305,8 +305,8 @@ def test_watchdog_breaks_a_creeping_cycle_of_full_steps():
     """Chamberlain's rule counts every sufficient decrease as progress and follows the cycle to the
     iteration limit; with progress measured as halving Ψ the watchdog returns to the best iterate
     and its monotone step converges (the monolithic solver's default)."""
-    from dolfinx_nnqem.newton import Globalisation, solve
-    from dolfinx_nnqem.solver import MonolithicOptions
+    from dolfinx_nnqem.numerics.newton import Globalisation, solve
+    from dolfinx_nnqem.solvers import MonolithicOptions
 
     classic = solve(_CreepingCycle(), Globalisation(watchdog=6), 40)
     default = MonolithicOptions().globalisation
@@ -326,8 +326,8 @@ def test_stall_test_stops_an_attempt_that_cannot_converge():
     """Without a root the watchdog's full steps wander to the iteration limit; with the stall test
     the attempt stops once the lowest |H| has not fallen by a tenth in ``stall_window`` iterations
     and says so, so that the caller's next attempt starts early."""
-    from dolfinx_nnqem.newton import Globalisation
-    from dolfinx_nnqem.nonsmooth import solve_dense
+    from dolfinx_nnqem.numerics.newton import Globalisation
+    from dolfinx_nnqem.numerics.nonsmooth import solve_dense
 
     x0 = np.array([0.3])
     wander = solve_dense(_no_root, x0, tol=1e-10, max_iter=100, globalisations=(Globalisation(watchdog=6),))
@@ -345,8 +345,8 @@ def test_stall_test_stops_an_attempt_that_cannot_converge():
 def test_stall_test_leaves_converging_solves_alone(residual, x0):
     """A solve that converges, however slowly (H = x³: |H| falls by 8/27 a step), takes the
     same iterates with and without the stall test."""
-    from dolfinx_nnqem.newton import Globalisation
-    from dolfinx_nnqem.nonsmooth import solve_dense
+    from dolfinx_nnqem.numerics.newton import Globalisation
+    from dolfinx_nnqem.numerics.nonsmooth import solve_dense
 
     plain, tested = (solve_dense(residual, np.array(x0), tol=1e-12, max_iter=100,
                                  globalisations=(Globalisation(min_step=1e-10, watchdog=0, stall_window=w),))
@@ -363,7 +363,7 @@ def test_stall_test_leaves_converging_solves_alone(residual, x0):
                                            ({"stall_window": 0}, "stall_window"),
                                            ({"stall_progress": 1.0}, "stall_progress")])
 def test_invalid_watchdog_options_raise(options, name):
-    from dolfinx_nnqem.newton import Globalisation
+    from dolfinx_nnqem.numerics.newton import Globalisation
 
     with pytest.raises(ValueError, match=name):
         Globalisation(**options)

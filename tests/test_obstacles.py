@@ -19,16 +19,16 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from dolfinx_nnqem.amplitude import PiecewiseLinearPath
+from dolfinx_nnqem.problem import PiecewiseLinearPath
 from dolfinx_nnqem.contact.obstacles import Plane, Sphere
-from dolfinx_nnqem.hertz import NodalLoads, effective_modulus, measure_hertz
+from dolfinx_nnqem.cases.hertz import NodalLoads, effective_modulus, measure_hertz
 from dolfinx_nnqem.material import VonMises
-from dolfinx_nnqem.meshing import BlockStackTags as T
-from dolfinx_nnqem.meshing import build_block_stack, build_graded_block
+from dolfinx_nnqem.problem.meshing import BlockStackTags as T
+from dolfinx_nnqem.problem.meshing import build_block_stack, build_graded_block
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet
-from dolfinx_nnqem.results import equilibrium_check, pair_table
-from dolfinx_nnqem.solver import METHODS, NNEQM2Options, SolverOptions, make_solver
-from dolfinx_nnqem.stepping import solve_load_steps
+from dolfinx_nnqem.io import equilibrium_check, pair_table
+from dolfinx_nnqem.solvers import METHODS, NNEQM2Options, SolverOptions, make_solver
+from dolfinx_nnqem.solvers import solve_load_steps
 
 ELASTIC = VonMises(E=1.0e9, nu=0.3)
 H_BLOCK = 0.5

@@ -11,10 +11,11 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from dolfinx_nnqem import compat, meshing
+from dolfinx_nnqem import compat
+from dolfinx_nnqem.problem import meshing
 from dolfinx_nnqem.contact.pairs import ContactPairError, find_pairs, local_frames
-from dolfinx_nnqem.meshing import StackedBlocksTags as S
-from dolfinx_nnqem.meshing import TwoBeamsTags as T
+from dolfinx_nnqem.problem.meshing import StackedBlocksTags as S
+from dolfinx_nnqem.problem.meshing import TwoBeamsTags as T
 
 SCRIPTS = pathlib.Path(__file__).parent / "mpi_scripts"
 

@@ -11,13 +11,13 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from dolfinx_nnqem.checks import CheckOptions, check_state
-from dolfinx_nnqem.convergence import ConvergenceError, SolveReport
+from dolfinx_nnqem.solvers.checks import CheckOptions, check_state
+from dolfinx_nnqem.solvers import ConvergenceError, SolveReport
 from dolfinx_nnqem.material import VonMises
-from dolfinx_nnqem.output import ResultsWriter
+from dolfinx_nnqem.io import ResultsWriter
 from dolfinx_nnqem.problem import ContactProblem, Dirichlet, Traction
-from dolfinx_nnqem.solver import SolverOptions, make_solver
-from dolfinx_nnqem.stepping import solve_load_steps
+from dolfinx_nnqem.solvers import SolverOptions, make_solver
+from dolfinx_nnqem.solvers import solve_load_steps
 
 from conftest import box_with_face_tags
 
@@ -121,7 +121,7 @@ def test_nneqm2_stresses_outside_the_yield_surface_fail_the_check():
 
 
 def test_broken_pair_forces_fail_the_contact_check():
-    from dolfinx_nnqem.two_beams import two_beams_problem
+    from dolfinx_nnqem.cases.two_beams import two_beams_problem
 
     problem = two_beams_problem()
     solver = make_solver("monolithic", problem)

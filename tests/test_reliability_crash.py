@@ -12,7 +12,7 @@ import pytest
 
 from dolfinx_nnqem.cli import (EXIT_BAD_INPUT, EXIT_DIVERGED, EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_IO, EXIT_OK,
                                EXIT_PETSC, EXIT_TERMINATED, main)
-from dolfinx_nnqem.reader import read_fields, read_pairs, read_summary
+from dolfinx_nnqem.io import read_fields, read_pairs, read_summary
 
 from reliability_helpers import ROOT, env, kill_session, problem_file, start, wait_for_checkpoint
 
@@ -145,7 +145,7 @@ def test_petsc_errors_are_reported_as_themselves(tmp_path, capsys, options, meth
 
 
 def test_internal_errors_show_no_traceback_unless_asked(tmp_path, capsys, monkeypatch):
-    import dolfinx_nnqem.stepping as stepping
+    import dolfinx_nnqem.solvers.stepping as stepping
 
     def broken(*args, **kwargs):
         raise RuntimeError("boom")
@@ -194,7 +194,7 @@ def test_a_petsc_error_in_a_newton_solve_is_raised_not_taken_for_a_singular_matr
     from mpi4py import MPI
     from petsc4py import PETSc
 
-    from dolfinx_nnqem.linear_solver import DirectSolver
+    from dolfinx_nnqem.solvers.linear_solver import DirectSolver
 
     A = PETSc.Mat().createAIJ(size=(4, 4), nnz=1, comm=MPI.COMM_SELF)
     for i in range(4):

@@ -10,9 +10,9 @@ from mpi4py import MPI
 
 from dolfinx_nnqem.cli import EXIT_BAD_INPUT, EXIT_OK, main
 from dolfinx_nnqem.material import VonMises
-from dolfinx_nnqem.meshing import build_two_beams
+from dolfinx_nnqem.problem.meshing import build_two_beams
 from dolfinx_nnqem.problem import BodyForce, Contact, ContactProblem, Dirichlet, Pressure, Traction
-from dolfinx_nnqem.solver import SolverOptions
+from dolfinx_nnqem.solvers import SolverOptions
 
 ROOT = Path(__file__).resolve().parents[1]
 MESH = (ROOT / "meshes" / "two_beams.msh").as_posix()
@@ -125,9 +125,9 @@ def test_bad_input_through_the_api(tmp_path, beams, name):
 
 
 def _api_call(spec, beams, tmp_path):
-    from dolfinx_nnqem.output import ResultsWriter
-    from dolfinx_nnqem.solver import make_solver
-    from dolfinx_nnqem.stepping import solve_load_steps
+    from dolfinx_nnqem.io import ResultsWriter
+    from dolfinx_nnqem.solvers import make_solver
+    from dolfinx_nnqem.solvers import solve_load_steps
 
     kind, _, arg = spec.partition(":")
     problem = _api(beams)
@@ -158,8 +158,8 @@ def _square_msh(tmp_path) -> str:
 
 
 def test_numpy_scalars_are_accepted(tmp_path, beams):
-    from dolfinx_nnqem.solver import make_solver
-    from dolfinx_nnqem.stepping import solve_load_steps
+    from dolfinx_nnqem.solvers import make_solver
+    from dolfinx_nnqem.solvers import solve_load_steps
 
     m = VonMises(E=np.float64(1e9), nu=np.float32(0.3))
     problem = _api(beams, materials={np.int64(1): m, np.int32(2): m},

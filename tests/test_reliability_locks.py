@@ -7,7 +7,7 @@ import sys
 import time
 
 from dolfinx_nnqem.cli import EXIT_IO, EXIT_OK, main
-from dolfinx_nnqem.locking import LOCK_NAME, OutputLock
+from dolfinx_nnqem.io.locking import LOCK_NAME, OutputLock
 
 from reliability_helpers import env, kill_session, problem_file, start, wait_for_checkpoint
 

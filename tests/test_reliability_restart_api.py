@@ -4,11 +4,11 @@ after increment 3 and resumed in a fresh problem equals an uninterrupted run to 
 import numpy as np
 import pytest
 
-from dolfinx_nnqem import checkpoint
-from dolfinx_nnqem.output import ResultsWriter
-from dolfinx_nnqem.solver import make_solver
-from dolfinx_nnqem.stepping import solve_load_steps
-from dolfinx_nnqem.two_beams import two_beams_problem
+from dolfinx_nnqem.io import checkpoint
+from dolfinx_nnqem.io import ResultsWriter
+from dolfinx_nnqem.solvers import make_solver
+from dolfinx_nnqem.solvers import solve_load_steps
+from dolfinx_nnqem.cases.two_beams import two_beams_problem
 
 
 def _state(problem):

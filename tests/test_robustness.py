@@ -23,12 +23,12 @@ from mpi4py import MPI
 
 from dolfinx_nnqem.contact.laws import AlartCurnierLaw
 from dolfinx_nnqem.material import VonMises
-from dolfinx_nnqem.meshing import StackedBlocksTags as T
-from dolfinx_nnqem.meshing import build_stacked_blocks
+from dolfinx_nnqem.problem.meshing import StackedBlocksTags as T
+from dolfinx_nnqem.problem.meshing import build_stacked_blocks
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet
-from dolfinx_nnqem.results import pair_table
-from dolfinx_nnqem.solver import METHODS, NNEQM2Options, SolverOptions, make_solver
-from dolfinx_nnqem.stepping import solve_load_steps
+from dolfinx_nnqem.io import pair_table
+from dolfinx_nnqem.solvers import METHODS, NNEQM2Options, SolverOptions, make_solver
+from dolfinx_nnqem.solvers import solve_load_steps
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 import robustness  # noqa: E402
@@ -232,7 +232,7 @@ def test_force_free_states_converge(method, lift):
 
 
 def test_nneqm2_refuses_a_dense_system_too_large_before_solving():
-    from dolfinx_nnqem.solver import NNEQM2Options
+    from dolfinx_nnqem.solvers import NNEQM2Options
 
     problem = robustness.pressed_and_dragged(0.2)("alart-curnier")
     with pytest.raises(ValueError, match="dense system would have order") as error:

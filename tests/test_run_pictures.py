@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from dolfinx_nnqem.cli import EXIT_DIVERGED, EXIT_IO, EXIT_OK, main
-from dolfinx_nnqem.run_pictures import ENV_SWITCH, PICTURES
+from dolfinx_nnqem.io.run_pictures import ENV_SWITCH, PICTURES
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "demos" / "two_beams.toml"

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from dolfinx_nnqem import compat
-from dolfinx_nnqem.run_pictures import ENV_SWITCH, PICTURES
+from dolfinx_nnqem.io.run_pictures import ENV_SWITCH, PICTURES
 
 ROOT = Path(__file__).resolve().parents[1]
 

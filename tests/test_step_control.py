@@ -18,15 +18,15 @@ from mpi4py import MPI
 from test_contact_verification import ELASTIC, P, sliding_block
 
 from dolfinx_nnqem.cli import EXIT_OK, main
-from dolfinx_nnqem.convergence import ConvergenceError
-from dolfinx_nnqem.meshing import StackedBlocksTags as T
-from dolfinx_nnqem.meshing import build_stacked_blocks
+from dolfinx_nnqem.solvers import ConvergenceError
+from dolfinx_nnqem.problem.meshing import StackedBlocksTags as T
+from dolfinx_nnqem.problem.meshing import build_stacked_blocks
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Traction
 from dolfinx_nnqem.problem_file import ProblemFileError, load_problem_file
-from dolfinx_nnqem.results import pair_table
-from dolfinx_nnqem.solver import SolverOptions, make_solver
-from dolfinx_nnqem.step_control import AutomaticIncrements
-from dolfinx_nnqem.stepping import solve_load_steps
+from dolfinx_nnqem.io import pair_table
+from dolfinx_nnqem.solvers import SolverOptions, make_solver
+from dolfinx_nnqem.solvers import AutomaticIncrements
+from dolfinx_nnqem.solvers import solve_load_steps
 
 
 def test_the_rule_grows_shrinks_and_keeps_its_bounds():

@@ -9,15 +9,15 @@ import math
 import numpy as np
 from mpi4py import MPI
 
-from dolfinx_nnqem.convergence import ConvergenceError
+from dolfinx_nnqem.solvers import ConvergenceError
 from dolfinx_nnqem.material import VonMises
-from dolfinx_nnqem.meshing import ThickCylinderTags as T
-from dolfinx_nnqem.meshing import build_thick_cylinder
-from dolfinx_nnqem.monolithic import MonolithicSolver
+from dolfinx_nnqem.problem.meshing import ThickCylinderTags as T
+from dolfinx_nnqem.problem.meshing import build_thick_cylinder
+from dolfinx_nnqem.solvers.monolithic import MonolithicSolver
 from dolfinx_nnqem.problem import ContactProblem, Dirichlet, Pressure
-from dolfinx_nnqem.solver import SolverOptions
-from dolfinx_nnqem.results import node_blocks_at_points, values_at_blocks
-from dolfinx_nnqem.stepping import solve_load_steps
+from dolfinx_nnqem.solvers import SolverOptions
+from dolfinx_nnqem.io.results import node_blocks_at_points, values_at_blocks
+from dolfinx_nnqem.solvers import solve_load_steps
 
 A, B = 1.0, 2.0
 MATERIAL = VonMises(E=70e3, nu=0.3, sigma_y0=250.0, H=0.0)

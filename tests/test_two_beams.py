@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from dolfinx_nnqem import compat
-from dolfinx_nnqem.two_beams import run_two_beams
+from dolfinx_nnqem.cases.two_beams import run_two_beams
 
 
 def _pair_arrays(summary):
@@ -63,10 +63,10 @@ def test_v9_two_beams_mpi_matches_serial(ranks, serial_monolithic, tmp_path):
 
 def test_v10_polar_and_cartesian_laws_agree_on_two_beams():
     """The polar law (with the cutbacks it needs) and the Cartesian law on the SAME load path."""
-    from dolfinx_nnqem.monolithic import MonolithicSolver
-    from dolfinx_nnqem.results import pair_table
-    from dolfinx_nnqem.stepping import solve_load_path, solve_load_steps
-    from dolfinx_nnqem.two_beams import two_beams_problem
+    from dolfinx_nnqem.solvers.monolithic import MonolithicSolver
+    from dolfinx_nnqem.io import pair_table
+    from dolfinx_nnqem.solvers import solve_load_path, solve_load_steps
+    from dolfinx_nnqem.cases.two_beams import two_beams_problem
 
     polar_problem = two_beams_problem(law="polar")
     polar = solve_load_steps(polar_problem, MonolithicSolver(polar_problem), 15)
@@ -107,11 +107,11 @@ def test_v9_nneqm1_on_two_ranks_matches_serial(tmp_path):
 
 def test_iterative_linear_solver_gives_the_direct_answer(serial_monolithic):
     """linear_solver="iterative" (FGMRES, Schur fieldsplit, GAMG on K): the same Newton iterates."""
-    from dolfinx_nnqem.monolithic import MonolithicSolver
-    from dolfinx_nnqem.solver import MonolithicOptions
-    from dolfinx_nnqem.results import pair_table
-    from dolfinx_nnqem.stepping import solve_load_steps
-    from dolfinx_nnqem.two_beams import two_beams_problem
+    from dolfinx_nnqem.solvers.monolithic import MonolithicSolver
+    from dolfinx_nnqem.solvers import MonolithicOptions
+    from dolfinx_nnqem.io import pair_table
+    from dolfinx_nnqem.solvers import solve_load_steps
+    from dolfinx_nnqem.cases.two_beams import two_beams_problem
 
     problem = two_beams_problem()
     results = solve_load_steps(problem, MonolithicSolver(problem, monolithic=MonolithicOptions(linear_solver="iterative")), 15)

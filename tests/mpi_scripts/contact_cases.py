@@ -18,17 +18,17 @@ from mpi4py import MPI
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from dolfinx_nnqem.results import pair_table  # noqa: E402
-from dolfinx_nnqem.solver import SolverOptions, make_solver  # noqa: E402
-from dolfinx_nnqem.stepping import solve_load_steps  # noqa: E402
+from dolfinx_nnqem.io import pair_table  # noqa: E402
+from dolfinx_nnqem.solvers import SolverOptions, make_solver  # noqa: E402
+from dolfinx_nnqem.solvers import solve_load_steps  # noqa: E402
 
 
 def elastic_on_plastic_blocks(comm):
     """The pressed blocks of the robustness suite (drag 0.2 p), the lower block elastic: NNEQM2
     has Δγ unknowns in the upper block only, numbered across ranks."""
     from dolfinx_nnqem.material import VonMises
-    from dolfinx_nnqem.meshing import BlockStackTags as B
-    from dolfinx_nnqem.meshing import build_block_stack
+    from dolfinx_nnqem.problem.meshing import BlockStackTags as B
+    from dolfinx_nnqem.problem.meshing import build_block_stack
     from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Pressure, Traction
 
     mesh, ct, ft = build_block_stack(comm, 1.0, 1.0, (0.5, 0.5), ((4, 2, 4), (4, 2, 4)))

@@ -15,11 +15,11 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from dolfinx_nnqem.monolithic import MonolithicSolver
-from dolfinx_nnqem.pressed_blocks import pressed_blocks_problem
-from dolfinx_nnqem.solver import MonolithicOptions
-from dolfinx_nnqem.results import pair_table
-from dolfinx_nnqem.stepping import solve_load_steps
+from dolfinx_nnqem.solvers.monolithic import MonolithicSolver
+from dolfinx_nnqem.cases.pressed_blocks import pressed_blocks_problem
+from dolfinx_nnqem.solvers import MonolithicOptions
+from dolfinx_nnqem.io import pair_table
+from dolfinx_nnqem.solvers import solve_load_steps
 
 linear_solver, out = sys.argv[1], sys.argv[2]
 problem = pressed_blocks_problem(2, MPI.COMM_WORLD)

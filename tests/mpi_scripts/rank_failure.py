@@ -21,7 +21,7 @@ def main() -> int:
     argv = sys.argv[sys.argv.index("--") + 1:]
     if MPI.COMM_WORLD.rank == rank:
         if case == "solve":
-            from dolfinx_nnqem.monolithic import MonolithicSolver
+            from dolfinx_nnqem.solvers.monolithic import MonolithicSolver
 
             original = MonolithicSolver.solve_increment
             calls = [0]
@@ -36,7 +36,7 @@ def main() -> int:
         elif case == "writer":
             import errno
 
-            from dolfinx_nnqem import output
+            from dolfinx_nnqem.io import output
 
             def full(path, text, **kwargs):  # what safe_io raises when the disk is full
                 raise OSError(errno.ENOSPC, f"cannot write {path}: No space left on device", str(path))

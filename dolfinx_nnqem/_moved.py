@@ -1,0 +1,70 @@
+"""Deprecated module paths of release 0.1, kept importable until release 0.2.
+
+The package's modules moved into subpackages by layer (``docs/architecture.md``). An old path
+still imports, as the same module object under its old name, with a ``DeprecationWarning`` that
+names the new path: ``import dolfinx_nnqem.stepping`` gives ``dolfinx_nnqem.solvers.stepping``.
+The table below is the whole mechanism: a finder on ``sys.meta_path`` answers for these names only.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.abc
+import importlib.machinery
+import sys
+import warnings
+
+__all__ = ["MOVED", "REMOVED_IN"]
+
+REMOVED_IN = "0.2"
+"""The release in which the old paths stop importing."""
+
+MOVED: dict[str, str] = {
+    "amplitude": "problem.amplitude", "anderson": "numerics.anderson", "block_system": "solvers.block_system",
+    "bodies": "problem.bodies", "checkpoint": "io.checkpoint", "checks": "solvers.checks",
+    "condensation": "solvers.condensation", "convergence": "solvers.convergence", "fclib": "io.fclib",
+    "field_series": "io.field_series", "hertz": "cases.hertz", "linalg": "numerics.linalg",
+    "linear_solver": "solvers.linear_solver", "locking": "io.locking", "meshing": "problem.meshing",
+    "monolithic": "solvers.monolithic", "newton": "numerics.newton", "nneqm1": "solvers.nneqm1",
+    "nneqm2": "solvers.nneqm2", "nonsmooth": "numerics.nonsmooth", "output": "io.output", "plots": "io.plots",
+    "preflight": "solvers.preflight", "pressed_blocks": "cases.pressed_blocks", "reader": "io.reader",
+    "results": "io.results", "run_pictures": "io.run_pictures", "safe_io": "io.safe_io",
+    "sphere_on_block": "cases.sphere_on_block", "step_control": "solvers.step_control",
+    "stepping": "solvers.stepping", "two_beams": "cases.two_beams", "validation": "problem.validation",
+    "solver": "solvers",
+}
+"""Old module name (under ``dolfinx_nnqem.``) → its new path (under ``dolfinx_nnqem.``)."""
+
+
+class _Alias(importlib.abc.Loader):
+    """Loads an old path as the module at its new path."""
+
+    def __init__(self, new: str):
+        self.new = new
+        self._spec = None
+
+    def create_module(self, spec):
+        warnings.warn(f"{spec.name} is deprecated and will be removed in dolfinx_nnqem {REMOVED_IN}; "
+                      f"import {self.new} instead", DeprecationWarning, stacklevel=3)
+        module = importlib.import_module(self.new)
+        self._spec = module.__spec__
+        return module
+
+    def exec_module(self, module) -> None:
+        """Nothing to run (the new module is executed); the import system has just given the module
+        the old path's spec: give it back its own, so that it still knows where it lives."""
+        module.__spec__ = self._spec
+
+
+class _Finder(importlib.abc.MetaPathFinder):
+    def find_spec(self, fullname, path, target=None):
+        package, _, name = fullname.rpartition(".")
+        if package != "dolfinx_nnqem" or name not in MOVED:
+            return None
+        return importlib.machinery.ModuleSpec(fullname, _Alias(f"dolfinx_nnqem.{MOVED[name]}"))
+
+
+def install() -> None:
+    """Put the finder on ``sys.meta_path`` (once)."""
+    if not any(isinstance(finder, _Finder) for finder in sys.meta_path):
+        sys.meta_path.append(_Finder())

@@ -1,0 +1,205 @@
+"""Field output that survives a kill: one closed XDMF/HDF5 file per increment, an atomic index.
+
+Measured on this package's stacks (``docs/reliability.md``): a run SIGKILLed while it appends
+time steps to ONE ``XDMFFile`` leaves an HDF5 file that no reader opens ("bad object header
+version number": HDF5 keeps its metadata in memory until the file is closed), although the
+``.xdmf`` lists every step; VTX (ADIOS2 BP4) keeps every completed step readable. This writer
+keeps XDMF (ParaView and plain h5py read it; no ADIOS2 Python module is needed) and makes it
+crash-safe:
+
+* increment k is written, with the mesh, into ``fields/fields_k.xdmf`` + ``.h5`` by DOLFINx's
+  ``XDMFFile`` and the file is closed (HDF5 flushes everything) before anything refers to it;
+* then rank 0 replaces ``fields.xdmf`` atomically (temporary file + rename): a temporal
+  collection of every completed increment, each grid pointing into its own file.
+
+So ``fields.xdmf`` always lists complete, readable increments only; a step file of an increment
+the index does not list yet is ignored and overwritten by a later run or restart. Each step
+file holds the mesh again (its geometry and topology): the price of independent files.
+"""
+
+from __future__ import annotations
+
+import os
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import dolfinx.fem as fem
+import numpy as np
+from dolfinx.io import XDMFFile
+
+from dolfinx_nnqem.collective import on_rank0
+from dolfinx_nnqem.io.safe_io import OutputError, atomic_write_text
+from dolfinx_nnqem.material.von_mises import von_mises_stress
+
+__all__ = ["CellMeans", "FieldSeriesWriter", "read_field_index"]
+
+INDEX = "fields.xdmf"
+FOLDER = "fields"
+
+
+def _step_name(index: int) -> str:
+    return f"fields_{index:04d}"
+
+
+class CellMeans:
+    """Cell means of the Gauss-point state, as piecewise-constant fields for the output files:
+    the von Mises stress ``von_mises``, the equivalent plastic strain ``p`` and the fraction of
+    the cell's Gauss points that yielded in the last increment ``plastic``."""
+
+    def __init__(self, problem):
+        self.problem = problem
+        self.Q0 = fem.functionspace(problem.mesh, ("DG", 0))
+        self.q = fem.Function(self.Q0, name="von_mises")
+        self.p = fem.Function(self.Q0, name="p")
+        self.plastic = fem.Function(self.Q0, name="plastic")
+
+    @property
+    def fields(self) -> tuple[fem.Function, fem.Function, fem.Function]:
+        return self.q, self.p, self.plastic
+
+    def update(self) -> None:
+        """The means of the last converged state (owned and ghost cells)."""
+        state = self.problem.state
+        tdim = self.problem.mesh.topology.dim
+        imap = self.problem.mesh.topology.index_map(tdim)
+        cells = np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32)
+        qdofs = state.W_scalar.dofmap.list[cells]  # (ncells, points per cell)
+        dg = self.Q0.dofmap.list[cells, 0]
+        sigma = state.sigma_n.x.array.reshape(-1, 3, 3)
+        self.q.x.array[dg] = von_mises_stress(sigma[qdofs]).mean(axis=1)
+        self.p.x.array[dg] = state.p_n.x.array[qdofs].mean(axis=1)
+        self.plastic.x.array[dg] = (state.dp_n.x.array[qdofs] > 0).mean(axis=1)
+
+
+class FieldSeriesWriter:
+    """The displacement and cell means of the Gauss-point state, one file per increment.
+
+    Parameters
+    ----------
+    problem
+        The :class:`~dolfinx_nnqem.problem.contact_problem.ContactProblem`.
+    folder
+        The run's output folder: writes ``fields.xdmf`` and ``fields/``.
+    """
+
+    def __init__(self, problem, folder: str | os.PathLike):
+        self.problem = problem
+        self.folder = Path(folder)
+        self.comm = problem.mesh.comm
+        self.steps: list[tuple[int, float]] = []  # (increment, load factor) in the index
+        self._means = CellMeans(problem)
+        mesh = problem.mesh
+        # XDMF stores fields of the mesh's degree: a quadratic displacement is written at the
+        # vertices (interpolated to P1)
+        if problem.V.ufl_element().embedded_superdegree > 1:
+            self.u_out = fem.Function(fem.functionspace(mesh, ("Lagrange", 1, (3,))), name="u")
+        else:
+            self.u_out = None
+        on_rank0(self.comm, lambda: (self.folder / FOLDER).mkdir(parents=True, exist_ok=True))
+
+    def __call__(self, result) -> None:
+        self._means.update()
+        t = float(result.load_factor)
+        u = self.problem.u
+        if self.u_out is not None:
+            self.u_out.interpolate(u)
+            u = self.u_out
+        name = _step_name(result.index)
+        path = self.folder / FOLDER / f"{name}.xdmf"
+        try:
+            with XDMFFile(self.comm, str(path), "w") as xdmf:
+                xdmf.write_mesh(self.problem.mesh)
+                for f in (u, *self._means.fields):
+                    xdmf.write_function(f, t)
+        except RuntimeError as error:  # HDF5 reports a full disk as a RuntimeError
+            raise OutputError(28, f"cannot write {path.with_suffix('.h5')}: {error}", str(path)) from error
+        self.steps = [s for s in self.steps if s[0] < result.index] + [(result.index, t)]
+        on_rank0(self.comm, self._write_index)
+
+    def _write_index(self) -> None:
+        root = ET.Element("Xdmf", {"Version": "3.0", "xmlns:xi": "http://www.w3.org/2001/XInclude"})
+        domain = ET.SubElement(root, "Domain")
+        series = ET.SubElement(domain, "Grid", {"Name": "fields", "GridType": "Collection",
+                                                "CollectionType": "Temporal"})
+        for index, t in self.steps:
+            series.append(_step_grid(self.folder / FOLDER / f"{_step_name(index)}.xdmf", t))
+        ET.indent(root)
+        atomic_write_text(self.folder / INDEX, '<?xml version="1.0"?>\n' + ET.tostring(root, encoding="unicode") + "\n")
+
+    # -- restart -------------------------------------------------------------------------------------
+    def state(self) -> dict:
+        return {"steps": [list(s) for s in self.steps]}
+
+    def resume(self, state: dict) -> None:
+        """Continue a run from a checkpoint: keep the steps it had written, drop later ones."""
+        self.steps = [(int(i), float(t)) for i, t in state.get("steps", [])]
+        last = self.steps[-1][0] if self.steps else 0
+
+        def tidy():
+            for f in (self.folder / FOLDER).glob("fields_*.*"):
+                try:
+                    if int(f.stem.split("_")[1]) > last:
+                        f.unlink()
+                except (ValueError, IndexError):
+                    pass
+            self._write_index()
+
+        on_rank0(self.comm, tidy)
+
+    def close(self) -> None:
+        pass
+
+
+def _step_grid(step_file: Path, t: float) -> ET.Element:
+    """One Uniform grid at time ``t``: the mesh and every function of ``step_file``, with data
+    paths made relative to the index's folder."""
+    tree = ET.parse(step_file)
+    prefix = f"{FOLDER}/"
+    grid = ET.Element("Grid", {"Name": step_file.stem, "GridType": "Uniform"})
+    mesh_grid = next(g for g in tree.iter("Grid") if g.find("Topology") is not None and g.find("Geometry") is not None)
+    for tag in ("Topology", "Geometry"):
+        element = mesh_grid.find(tag)
+        for item in element.iter("DataItem"):
+            item.text = prefix + item.text.strip()
+        grid.append(element)
+    ET.SubElement(grid, "Time", {"Value": f"{t:.17g}"})
+    for attribute in tree.iter("Attribute"):
+        for item in attribute.iter("DataItem"):
+            item.text = prefix + item.text.strip()
+        grid.append(attribute)
+    return grid
+
+
+def read_field_index(folder: str | os.PathLike) -> list[dict]:
+    """The increments ``fields.xdmf`` lists, read with h5py (no DOLFINx, any number of ranks).
+
+    Returns one dict per increment: ``time`` (the load factor), ``geometry`` (nodes, 3),
+    ``topology`` (cells, nodes per cell) and every field by name (nodal or cell values).
+    Raises :class:`OSError` naming the file that cannot be read.
+    """
+    import h5py
+
+    folder = Path(folder)
+    index = folder / INDEX
+    tree = ET.parse(index)
+    steps = []
+    for grid in tree.iter("Grid"):
+        if grid.get("GridType") != "Uniform":
+            continue
+        step = {"time": float(grid.find("Time").get("Value"))}
+        for tag, key in (("Topology", "topology"), ("Geometry", "geometry")):
+            step[key] = _read_item(folder, grid.find(tag).find("DataItem"), h5py)
+        for attribute in grid.findall("Attribute"):
+            step[attribute.get("Name")] = _read_item(folder, attribute.find("DataItem"), h5py)
+        steps.append(step)
+    return steps
+
+
+def _read_item(folder: Path, item: ET.Element, h5py) -> np.ndarray:
+    file, dataset = item.text.strip().split(":", 1)
+    try:
+        with h5py.File(folder / file, "r") as h5:
+            return np.asarray(h5[dataset])
+    except (OSError, KeyError) as error:
+        raise OSError(f"cannot read {dataset} from {folder / file}: {error}") from error
+

@@ -1,0 +1,410 @@
+"""Writers: what a converged increment leaves on disk.
+
+Each writer is a callable taking an :class:`~dolfinx_nnqem.solvers.stepping.IncrementResult`; pass them
+as ``callbacks`` to :func:`~dolfinx_nnqem.solvers.stepping.solve_load_steps`. Files are (re)written
+after every increment, so a run that dies at increment k leaves increments 1..k readable.
+
+- ``fields.xdmf`` + ``fields/fields_XXXX.xdmf|h5``: one time series (time = load factor) with
+  the displacement ``u`` (P1), and per cell the von Mises stress ``von_mises``, the equivalent
+  plastic strain ``p`` and the fraction of Gauss points that yielded in the increment
+  ``plastic`` (cell means of the Gauss-point values); one closed file per increment and an
+  atomically replaced index (:mod:`dolfinx_nnqem.io.field_series`: survives a kill).
+- ``pairs.pvd`` + ``pairs/pairs_XXXX.vtp``: the contact pairs as a point cloud with p_n,
+  friction force, state, gap and slip (ParaView).
+- ``pairs/pairs_XXXX.csv``: the pair table of each increment (with its load factor).
+- ``summary.json``: the run summary (schema in ``docs/outputs.md``).
+
+Every file is written to a temporary name and renamed (:mod:`dolfinx_nnqem.io.safe_io`): a kill or
+a full disk never leaves a truncated file under a real name, and ``pairs.pvd`` only lists
+complete files. :class:`ResultsWriter` holds the folder's lock (:mod:`dolfinx_nnqem.io.locking`)
+for the run and starts by clearing an earlier run's outputs (unless it resumes from a
+checkpoint, or ``overwrite=False`` makes it refuse a used folder).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+import dolfinx_nnqem.io.results as res
+from dolfinx_nnqem.collective import on_rank0
+from dolfinx_nnqem.contact.laws import STATE_NAMES
+from dolfinx_nnqem.io.field_series import FieldSeriesWriter
+from dolfinx_nnqem.io.locking import OutputLock, clear_outputs, previous_outputs
+from dolfinx_nnqem.io.run_pictures import draw_live_pictures, pictures_enabled
+from dolfinx_nnqem.io.safe_io import atomic_write, atomic_write_text, remove_stale_temporaries
+from dolfinx_nnqem.material.von_mises import von_mises_stress
+from dolfinx_nnqem.problem.validation import check_output_folder
+
+
+def von_mises(sigma: np.ndarray) -> np.ndarray:
+    """Deprecated (removed in 0.2): :func:`dolfinx_nnqem.material.von_mises_stress`."""
+    warnings.warn("dolfinx_nnqem.io.output.von_mises is deprecated and will be removed in 0.2; use "
+                  "dolfinx_nnqem.material.von_mises_stress", DeprecationWarning, stacklevel=2)
+    return von_mises_stress(sigma)
+
+
+class PairWriter:
+    """Pair point cloud (VTK .vtp per increment + .pvd collection) and a CSV table per increment."""
+
+    def __init__(self, problem, folder: str | os.PathLike):
+        self.problem = problem
+        self.folder = Path(folder)
+        self.rank = problem.comm.rank
+        self.entries: list[tuple[float, str]] = []
+        if self.rank == 0:
+            (self.folder / "pairs").mkdir(parents=True, exist_ok=True)
+
+    def __call__(self, result) -> None:
+        table = res.pair_table(self.problem)  # collective
+        on_rank0(self.problem.comm, self._write, result, table)
+
+    def _write(self, result, table) -> None:
+        name = f"pairs_{result.index:04d}"
+        t = float(result.load_factor)
+        atomic_write(self.folder / "pairs" / f"{name}.csv", lambda tmp: self._write_csv(tmp, table, t))
+        atomic_write(self.folder / "pairs" / f"{name}.vtp", lambda tmp: self._write_vtp(tmp, table, t))
+        self.entries = [e for e in self.entries if e[1] != f"pairs/{name}.vtp"] + [(t, f"pairs/{name}.vtp")]
+        self._write_pvd(self.folder / "pairs.pvd")  # only after the .vtp is complete
+
+    def state(self) -> dict:
+        return {"entries": [list(e) for e in self.entries]}
+
+    def resume(self, state: dict) -> None:
+        """Continue from a checkpoint: its entries; later increments' files are removed."""
+        self.entries = [(float(t), str(f)) for t, f in state.get("entries", [])]
+        keep = {Path(f).stem for _, f in self.entries}
+
+        def tidy():
+            for f in (self.folder / "pairs").glob("pairs_*.*"):
+                if f.stem not in keep:
+                    f.unlink()
+            self._write_pvd(self.folder / "pairs.pvd")
+
+        on_rank0(self.problem.comm, tidy)
+
+    @staticmethod
+    def _write_csv(path: Path, t: dict, load_factor: float = float("nan")) -> None:
+        with open(path, "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(["pair", "interface", "x", "y", "z", "state", "p_n_on_body1", "t1_on_body1", "t2_on_body1",
+                        "Fx_on_body1", "Fy_on_body1", "Fz_on_body1", "gap", "slip1", "slip2",
+                        "u1x", "u1y", "u1z", "u2x", "u2y", "u2z", "area", "pressure", "weighted_gap",
+                        "slave_x", "slave_y", "slave_z", "load_factor"])
+            for i in range(len(t["state"])):
+                w.writerow([i, t["interface_name"][i], *t["position"][i], STATE_NAMES[t["state"][i]],
+                            *t["force_local_body1"][i], *t["force_on_body1"][i], t["gap"][i], *t["slip"][i],
+                            *t["u_body1"][i], *t["u_body2"][i], t["area"][i], t["pressure"][i],
+                            t["weighted_gap"][i], *t["position_b"][i], repr(load_factor)])
+
+    @staticmethod
+    def _write_vtp(path: Path, t: dict, load_factor: float = float("nan")) -> None:
+        import pyvista
+
+        cloud = pyvista.PolyData(np.asarray(t["position"], dtype=float))
+        local = t["force_local_body1"]
+        cloud["p_n"] = -local[:, 0]  # compression on body 2, N
+        cloud["friction_on_body2"] = -t["force_on_body1"] - (-local[:, 0])[:, None] * t["frame"][:, 0, :]
+        cloud["force_on_body1"] = t["force_on_body1"]
+        cloud["state"] = t["state"].astype(np.int32)
+        cloud["interface"] = t["interface"].astype(np.int32)
+        cloud["gap"] = t["gap"]
+        cloud["pressure"] = t["pressure"]  # p_n / tributary area, Pa
+        cloud["weighted_gap"] = t["weighted_gap"]
+        cloud["area"] = t["area"]
+        cloud["slip"] = np.linalg.norm(t["slip"], axis=1)
+        cloud["u_body1"] = t["u_body1"]
+        cloud["u_body2"] = t["u_body2"]
+        cloud.field_data["load_factor"] = np.array([load_factor])
+        _save_as_vtp(cloud, path)
+
+    def _write_pvd(self, path: Path) -> None:
+        lines = ['<?xml version="1.0"?>',
+                 '<VTKFile type="Collection" version="0.1">', "  <Collection>"]
+        lines += [f'    <DataSet timestep="{t:.12g}" file="{f}"/>' for t, f in self.entries]
+        lines += ["  </Collection>", "</VTKFile>"]
+        atomic_write_text(path, "\n".join(lines) + "\n")
+
+
+def _save_as_vtp(cloud, path: Path) -> None:
+    """VTK XML PolyData at ``path`` whatever its suffix (temporary names); a failed write raises."""
+    from vtkmodules.vtkIOXML import vtkXMLPolyDataWriter
+
+    writer = vtkXMLPolyDataWriter()
+    writer.SetFileName(str(path))
+    writer.SetInputData(cloud)
+    writer.SetDataModeToBinary()
+    if writer.Write() != 1 or writer.GetErrorCode() != 0:
+        import errno
+
+        code = writer.GetErrorCode() or errno.EIO
+        raise OSError(errno.ENOSPC if code == 20007 else errno.EIO,  # vtkErrorCode::OutOfDiskSpaceError
+                      f"VTK could not write {path} (error code {code})",
+                      str(path))
+
+
+class SummaryWriter:
+    """``summary.json``: run summary, rewritten after every increment.
+
+    Parameters
+    ----------
+    problem, method
+        The problem and the solver's name.
+    path
+        The JSON file.
+    increments
+        Number of increments asked for.
+    probes
+        Named mesh nodes whose displacement is reported, e.g. free-end corners:
+        ``{name: (x, y, z)}`` or ``{name: ((x, y, z), cell_tag)}`` to pick one body's node
+        where bodies have coincident nodes.
+    extra
+        Further JSON-serialisable data to include (e.g. the benchmark's parameters).
+    """
+
+    def __init__(self, problem, method: str, path: str | os.PathLike, increments: int,
+                 probes: dict[str, np.ndarray] | None = None, extra: dict | None = None):
+        self.problem = problem
+        self.path = Path(path)
+        self.t0 = time.perf_counter()
+        self.data = {
+            "method": method, "increments": int(increments) if isinstance(increments, int) else "auto", "converged": False, "status": "running",
+            "load_factors": [], "iterations": [], "residual_histories": [], "checks": [],
+            "plastic_gauss_points": [], "num_gauss_points": problem.state.num_gauss_points(),
+            "num_pairs": problem.num_pairs, "wall_time_s": 0.0, "mpi_ranks": problem.comm.size,
+        }
+        if extra:
+            self.data.update(extra)
+        self.probe_names = list(probes or {})
+        points, blocks = [], []
+        for name in self.probe_names:
+            spec = probes[name]
+            point, tag = (spec, None) if np.ndim(spec[0]) == 0 else spec
+            points.append(np.asarray(point, dtype=float))
+            blocks.append(res.node_blocks_at_points(problem, points[-1], cell_tag=tag)[0])
+        self.probe_points = np.array(points).reshape(-1, 3)
+        self.probe_blocks = np.array(blocks, dtype=np.int64)
+
+    def __call__(self, result) -> None:
+        p = self.problem
+        d = self.data
+        d["load_factors"].append(float(result.load_factor))
+        d["iterations"].append(int(result.iterations))
+        d["residual_histories"].append(
+            [[h.equilibrium, h.contact] for h in result.report.history])
+        d["plastic_gauss_points"].append(int(result.plastic_points))
+        d["system_order"] = int(result.report.system_order)
+        d["wall_time_s"] = time.perf_counter() - self.t0
+        d["converged"] = bool(math.isclose(result.load_factor, 1.0))
+        d["status"] = "completed" if d["converged"] else "running"
+        if result.check is not None:
+            c = result.check
+            d["checks"].append({"equilibrium": c.equilibrium, "contact": c.contact, "coulomb": c.coulomb,
+                                "max_strain": c.max_strain, "max_rotation": c.max_rotation,
+                                "force_scale": c.force_scale, "tolerance": c.tolerance,
+                                "own_stresses": c.own_stresses})
+        eq = res.equilibrium_check(p)
+        d["applied_load"] = eq["applied_load"].tolist()
+        d["reactions"] = {str(k): v.tolist() for k, v in eq["reactions"].items()}
+        # per increment, for the load curve (run_pictures): the reactions and the probes' displacements
+        d.setdefault("reaction_history", []).append(d["reactions"])
+        if eq["obstacle_forces"]:
+            d["obstacle_forces"] = {k: v.tolist() for k, v in eq["obstacle_forces"].items()}
+            d.setdefault("obstacle_force_history", []).append(d["obstacle_forces"])
+        d["reaction_sum"] = eq["reaction_sum"].tolist()
+        d["equilibrium_residual"] = eq["global_imbalance"]
+        d["free_dof_residual"] = eq["residual_norm"]
+        if len(self.probe_blocks):
+            u = res.values_at_blocks(p, self.probe_blocks)
+            d["probes"] = [{"name": n, "position": x.tolist(), "u": ui.tolist()}
+                           for n, x, ui in zip(self.probe_names, self.probe_points, u)]
+            d.setdefault("probe_history", []).append([ui.tolist() for ui in u])
+        if p.has_contact:
+            t = res.pair_table(p)
+            d["pairs"] = [
+                {"position": t["position"][i].tolist(), "state": str(t["state_name"][i]),
+                 "force_on_body1": t["force_on_body1"][i].tolist(),
+                 "force_local_body1": t["force_local_body1"][i].tolist(),
+                 "u_body1": t["u_body1"][i].tolist(), "u_body2": t["u_body2"][i].tolist(),
+                 "gap": float(t["gap"][i]), "pressure": float(t["pressure"][i]),
+                 "weighted_gap": float(t["weighted_gap"][i]), "area": float(t["area"][i]),
+                 "interface": str(t["interface_name"][i])}
+                for i in range(len(t["state"]))]
+        self.write()
+
+    def write(self) -> None:
+        """Write the summary (rank 0; atomic: a crash never leaves half a file; collective)."""
+        on_rank0(self.problem.comm, lambda: atomic_write_text(self.path, json.dumps(_jsonable(self.data), indent=1)))
+
+    def failed(self, failure: dict) -> None:
+        """Record the increment that did not converge (from :func:`solve_load_steps`)."""
+        self.data["converged"] = False
+        self.data["status"] = "not converged"
+        self.data["failure"] = failure
+        self.data["wall_time_s"] = time.perf_counter() - self.t0
+        self.write()
+
+    def ended(self, status: str, message: str = "") -> None:
+        """Record how the run ended when it did not complete ("interrupted", "error"), without
+        waiting for the other ranks."""
+        if self.data.get("status") in ("completed", "not converged"):
+            return
+        self.data["status"] = status
+        if message:
+            self.data["error"] = message
+        self.data["wall_time_s"] = time.perf_counter() - self.t0
+        # NOT collective: the other ranks may be stuck in a collective call (an error or a
+        # signal seen by some ranks only), so every rank that gets here writes the same data
+        # (each through its own temporary file and an atomic rename); a failure to write is
+        # ignored: the run is ending on an error already (e.g. a full disk), keep that one
+        try:
+            atomic_write_text(self.path, json.dumps(_jsonable(self.data), indent=1))
+        except OSError:
+            pass
+
+    def state(self) -> dict:
+        return {"data": _jsonable(self.data)}
+
+    def resume(self, state: dict) -> None:
+        data = dict(state.get("data", {}))
+        data.pop("failure", None)
+        data["status"] = "running"
+        self.data.update(data)
+        self.t0 -= float(data.get("wall_time_s", 0.0))
+
+
+def _jsonable(value):
+    """``value`` with numpy scalars and arrays turned into Python numbers and lists."""
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+class ResultsWriter:
+    """All writers of a run in one folder: fields.xdmf, pairs (when there is contact), summary.json.
+
+    Parameters
+    ----------
+    overwrite
+        What to do with a folder that holds an earlier run's outputs (:func:`locking.previous_outputs`):
+        True (default) removes them first, so nothing of the old run stays mixed in; False
+        refuses with :class:`FileExistsError`.
+    resume
+        Continue a checkpointed run in this folder: keep its files (call :meth:`resume` with the
+        checkpoint's writer state before the first increment).
+    lock
+        Hold the folder's lock (:class:`locking.OutputLock`) until :meth:`close`: a second run
+        into the same folder refuses to start.
+    pictures
+        Draw the run's pictures into ``folder/pictures`` at :meth:`close`
+        (:mod:`dolfinx_nnqem.io.run_pictures`): after a completed run, and after one that stopped
+        at an increment that did not converge (its converged increments). None (default): yes,
+        unless the environment sets ``DOLFINX_NNQEM_PICTURES=0``; False: never.
+    """
+
+    def __init__(self, problem, method: str, folder: str | os.PathLike, increments: int,
+                 probes: dict[str, np.ndarray] | None = None, extra: dict | None = None,
+                 fields: bool = True, *, overwrite: bool = True, resume: bool = False, lock: bool = True,
+                 pictures: bool | None = None):
+
+        check_output_folder(folder)
+        self.folder = Path(folder)
+        self.problem = problem
+        self.pictures = pictures
+        self.drawn: dict = {}  # what close() drew: picture name -> path, or why it was not drawn
+        self._lock = OutputLock(self.folder) if lock else None
+
+        def prepare():
+            self.folder.mkdir(parents=True, exist_ok=True)
+            if self._lock is not None:
+                self._lock.acquire()
+            try:
+                remove_stale_temporaries(self.folder)
+                if not resume:
+                    old = previous_outputs(self.folder)
+                    if old and not overwrite:
+                        raise FileExistsError(17, f"output folder {self.folder} holds an earlier run's results "
+                                                  f"({', '.join(p.name for p in old)}); use --overwrite to replace "
+                                                  "them, --restart to continue that run, or another folder",
+                                              str(self.folder))
+                    clear_outputs(self.folder)
+            except BaseException:
+                if self._lock is not None:
+                    self._lock.release()
+                raise
+
+        on_rank0(problem.comm, prepare)
+        self.writers = []
+        self.fields = FieldSeriesWriter(problem, self.folder) if fields else None
+        if self.fields is not None:
+            self.writers.append(self.fields)
+        self.pairs = PairWriter(problem, self.folder) if problem.has_contact else None
+        if self.pairs is not None:
+            on_rank0(problem.comm, lambda: (self.folder / "pairs").mkdir(parents=True, exist_ok=True))
+            self.writers.append(self.pairs)
+        self.summary = SummaryWriter(problem, method, self.folder / "summary.json", increments, probes, extra)
+        self.writers.append(self.summary)
+
+    def __call__(self, result) -> None:
+        for w in self.writers:
+            w(result)
+
+    def failed(self, failure: dict) -> None:
+        """The run gave up at an increment: ``summary.json`` says which, and why."""
+        self.summary.failed(failure)
+
+    def ended(self, status: str, message: str = "") -> None:
+        """The run stopped otherwise ("interrupted", "error"): ``summary.json`` says so."""
+        self.summary.ended(status, message)
+
+    def state(self) -> dict:
+        """The writers' state for a checkpoint (JSON)."""
+        return {"fields": self.fields.state() if self.fields else None,
+                "pairs": self.pairs.state() if self.pairs else None, "summary": self.summary.state()}
+
+    def resume(self, state: dict) -> None:
+        """Continue from a checkpoint's writer state (drops the files of later increments)."""
+        if self.fields is not None and state.get("fields"):
+            self.fields.resume(state["fields"])
+        if self.pairs is not None and state.get("pairs"):
+            self.pairs.resume(state["pairs"])
+        self.summary.resume(state["summary"])
+        self.summary.write()
+
+    def close(self) -> None:
+        """Close the files, draw the pictures (see ``pictures``), release the folder's lock."""
+        for w in self.writers:
+            if hasattr(w, "close"):
+                w.close()
+        try:
+            self._draw_pictures()
+        finally:
+            self._release()
+
+    def _draw_pictures(self) -> None:
+
+        status = self.summary.data.get("status")
+        # only where every rank agrees on how the run ended (drawing is collective): not after
+        # an error or an interrupt, which some ranks may not have seen
+        if (not pictures_enabled(self.pictures) or status not in ("completed", "not converged")
+                or not self.summary.data.get("load_factors")):
+            return
+        self.drawn = draw_live_pictures(self.problem, self.folder, completed=status == "completed")
+
+    def _release(self) -> None:
+        if self._lock is not None and self.problem.comm.rank == 0:
+            self._lock.release()
+

@@ -1,0 +1,257 @@
+"""Pictures: pyvista (off-screen PNG) for fields, matplotlib for curves.
+
+Collective functions gather what they draw on rank 0, which alone writes the file.
+Off-screen pyvista needs no X server with the PyPI VTK; with Debian's VTK run under
+``xvfb-run -a`` (see ``docs/install.md``).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+
+import numpy as np
+
+from dolfinx_nnqem import compat
+import dolfinx_nnqem.io.results as res
+from dolfinx_nnqem.material.von_mises import von_mises_stress
+
+STATE_COLOURS = {0: "white", 1: "royalblue", 2: "crimson"}  # open, stick, slip
+
+
+def _matplotlib():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def plot_curve(x, y, path: str | os.PathLike, *, xlabel: str, ylabel: str, label: str = "FE",
+               reference: dict[str, float] | None = None, title: str = "") -> None:
+    """A curve with optional horizontal reference lines (e.g. an analytical limit load)."""
+    plt = _matplotlib()
+    fig, ax = plt.subplots(figsize=(6, 4))
+    ax.plot(x, y, "o-", label=label)
+    for name, value in (reference or {}).items():
+        ax.axhline(value, color="k", ls="--", lw=1)
+        ax.text(ax.get_xlim()[0], value, f" {name}", va="bottom")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="lower right")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def plot_convergence(histories: Sequence[Sequence[float]], path: str | os.PathLike,
+                     labels: Sequence[str] | None = None, title: str = "") -> None:
+    """Relative residual per iteration, one line per increment (log scale)."""
+    plt = _matplotlib()
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for k, h in enumerate(histories):
+        h = np.maximum(np.asarray(h, dtype=float), 1e-17)
+        ax.semilogy(np.arange(len(h)), h, "o-", ms=3,
+                    label=None if labels is None else labels[k])
+    ax.set_xlabel("iteration")
+    ax.set_ylabel("relative residual")
+    ax.set_title(title)
+    ax.grid(True, which="both", alpha=0.3)
+    if labels is not None and len(labels) <= 12:
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def _gather_grid(problem, field: str):
+    """Rank 0: (topology, cell_types, points, u, cell values) of the whole mesh; None elsewhere."""
+    import dolfinx.plot
+
+    topology, cell_types, x = dolfinx.plot.vtk_mesh(problem.V)
+    u = problem.u.x.array.reshape(-1, 3)[: len(x)]
+    state = problem.state
+    ncells = len(cell_types)
+    qdofs = state.W_scalar.dofmap.list[:ncells]
+    if field == "von_mises":
+        values = von_mises_stress(state.sigma_n.x.array.reshape(-1, 3, 3)[qdofs]).mean(axis=1)
+    elif field == "p":
+        values = state.p_n.x.array[qdofs].mean(axis=1)
+    else:
+        raise ValueError(f"field {field!r}: expected 'von_mises' or 'p'")
+    comm = problem.comm
+    parts = comm.gather((np.asarray(topology), np.asarray(cell_types), np.asarray(x), u, values), root=0)
+    if comm.rank != 0:
+        return None
+    tops, types, xs, us, vals, offset = [], [], [], [], [], 0
+    for top, ct, xx, uu, vv in parts:
+        width = len(top) // max(len(ct), 1)  # one cell type per mesh: [n, i0..i(n-1)] rows
+        top = top.reshape(-1, width).copy()
+        top[:, 1:] += offset
+        tops.append(top.reshape(-1))
+        types.append(ct)
+        xs.append(xx)
+        us.append(uu)
+        vals.append(vv)
+        offset += len(xx)
+    return (np.concatenate(tops), np.concatenate(types), np.concatenate(xs),
+            np.concatenate(us), np.concatenate(vals))
+
+
+def plot_deformed(problem, path: str | os.PathLike, *, field: str = "von_mises", scale: float | None = None,
+                  show_pairs: bool = True, title: str = "", camera: str | Sequence[float] | None = "iso",
+                  focus: Sequence[float] | None = None, zoom: float = 1.0) -> None:
+    """Deformed shape (displacements × ``scale``) coloured by a Gauss-point field (cell means).
+
+    ``field``: ``"von_mises"`` (Pa) or ``"p"`` (equivalent plastic strain). Contact pairs are
+    drawn at their slave nodes as spheres coloured by state (white open, blue stick, red slip).
+    ``camera``: "iso", "xy", "xz", "yz", "front", a direction (x, y, z) from the focus to the
+    camera, or None (VTK's default); ``focus``: the point looked at (default the mesh centre);
+    ``zoom``: > 1 magnifies. Collective.
+    """
+    grid_data = _gather_grid(problem, field)
+    table = res.pair_table(problem) if (show_pairs and problem.has_contact) else None
+    if problem.comm.rank != 0:
+        return
+    import pyvista
+
+    pyvista.OFF_SCREEN = True
+    topology, cell_types, x, u, values = grid_data
+    grid = pyvista.UnstructuredGrid(topology, cell_types, x)
+    if scale is None:
+        size = np.ptp(x, axis=0).max()
+        umax = np.abs(u).max()
+        scale = 0.1 * size / umax if umax > 0 else 1.0
+    grid.points = x + scale * u
+    grid.cell_data[field] = values
+    plotter = pyvista.Plotter(off_screen=True, window_size=(1200, 700))
+    plotter.add_mesh(grid, scalars=field, show_edges=True, cmap="viridis",
+                     scalar_bar_args={"title": {"von_mises": "von Mises (Pa)", "p": "p"}[field]})
+    if table is not None:
+        centres = table["position_b"] + scale * table["u_body2"]  # the slave nodes: on the drawn mesh
+        for state, colour in STATE_COLOURS.items():
+            sel = table["state"] == state
+            if np.any(sel):
+                plotter.add_points(centres[sel], color=colour, point_size=14,
+                                   render_points_as_spheres=True)
+    plotter.add_text(f"{title}  (displacements x {scale:.3g})", font_size=10)
+    views = {"iso": plotter.view_isometric, "xy": plotter.view_xy, "xz": plotter.view_xz,
+             "yz": plotter.view_yz, "front": lambda: plotter.view_vector((0.4, 0.5, 1.0), viewup=(0, 1, 0))}
+    if isinstance(camera, str):
+        if camera not in views:
+            raise ValueError(f"camera {camera!r}: expected one of {sorted(views)}, a direction, or None")
+        views[camera]()
+    elif camera is not None:
+        plotter.view_vector(tuple(float(c) for c in camera), viewup=(0, 1, 0))
+    if focus is not None:
+        position = np.asarray(plotter.camera.position) - np.asarray(plotter.camera.focal_point)
+        plotter.camera.focal_point = tuple(focus)
+        plotter.camera.position = tuple(np.asarray(focus) + position)
+    if zoom != 1.0:
+        plotter.camera.zoom(zoom)
+    plotter.screenshot(str(path))
+    plotter.close()
+
+
+def _slave_triangles(problem, table: dict) -> np.ndarray | None:
+    """Rank 0: the slave surface's triangles as rows of the pair table (None elsewhere).
+
+    The facets' vertex coordinates are gathered and matched to the pairs' slave nodes
+    (``position_b``); facets with a vertex that carries no pair (beyond the master) are left
+    out. None as well for a surface of quadrilaterals or pairs without slave facets (node-to-node,
+    obstacles): then the points alone are drawn.
+    """
+    from scipy.spatial import cKDTree
+
+    slave = getattr(problem.contact.interfaces[0].pairs, "slave", None)
+    if slave is None:  # node-to-node pairs and obstacles name no slave facets: points are drawn
+        return None  # (the same answer on every rank: no collective call is skipped by one)
+    mesh = problem.mesh
+    fdim = mesh.topology.dim - 1
+    facets = problem.facet_tags.find(int(slave))
+    facets = facets[facets < mesh.topology.index_map(fdim).size_local]  # owned: each facet once
+    nodes = compat.entities_to_geometry(mesh, fdim, facets)
+    # (corners, vertices per facet): a rank without slave facets sends an empty block
+    parts = problem.comm.gather((mesh.geometry.x[nodes.reshape(-1)], nodes.shape[1]), root=0)
+    if problem.comm.rank != 0:
+        return None
+    widths = {width for corners, width in parts if len(corners)}
+    if widths != {3} or len(table["position_b"]) == 0:  # quadrilaterals, or nothing to draw
+        return None
+    corners = np.concatenate([corners for corners, _ in parts])
+    distance, row = cKDTree(table["position_b"]).query(corners)
+    size = max(np.ptp(table["position_b"], axis=0).max(), 1e-300)
+    row = np.where(distance <= 1e-9 * size, row, -1).reshape(-1, 3)
+    return row[np.all(row >= 0, axis=1)]
+
+
+def plot_contact_pressure(problem_or_table, path: str | os.PathLike, *, problem=None, title: str = "",
+                          unit: str = "MPa", camera: str | Sequence[float] = "bottom", point_size: float = 12.0,
+                          interface: int | None = None, circle: float | None = None) -> None:
+    """The contact pressure on the slave surface: its facets interpolated, with a scalar bar.
+
+    ``problem_or_table``: a problem (collective: call on every rank; its pair table is gathered
+    and its slave facets are drawn as triangles coloured by the nodal pressures interpolated),
+    or a pair table (:func:`dolfinx_nnqem.io.results.pair_table`; the slave nodes are drawn as
+    points coloured by pressure). ``interface`` restricts to one interface of the table.
+    ``camera``: "bottom" (looking up the y axis onto the contact face), "top", "iso", or a
+    direction from the centre to the camera. ``circle``: the radius of a reference contact
+    circle about the y axis (e.g. Hertz's a), drawn just below the surface. Rank 0 writes the PNG.
+    """
+    if isinstance(problem_or_table, dict):
+        table, problem = problem_or_table, problem
+        triangles = None
+    else:
+        problem = problem_or_table
+        table = res.pair_table(problem)
+        triangles = _slave_triangles(problem, table) if len(problem.contact.interfaces) == 1 else None
+    comm = None if problem is None else problem.comm
+    if comm is not None and comm.rank != 0:
+        return
+    select = np.ones(len(table["pressure"]), dtype=bool)
+    if interface is not None:
+        select = table["interface"] == interface
+    import pyvista
+
+    pyvista.OFF_SCREEN = True
+    points = table["position_b"]
+    pressure = np.where(select, table["pressure"], np.nan)
+    plotter = pyvista.Plotter(off_screen=True, window_size=(1000, 800))
+    bar = {"title": f"contact pressure ({unit})"}
+    finite = pressure[np.isfinite(pressure)]
+    clim = (0.0, float(finite.max()) if len(finite) and finite.max() > 0 else 1.0)
+    if triangles is not None and len(triangles):
+        faces = np.hstack([np.full((len(triangles), 1), 3), triangles]).reshape(-1)
+        surface = pyvista.PolyData(points, faces)
+        surface.point_data["pressure"] = pressure
+        plotter.add_mesh(surface, scalars="pressure", cmap="plasma", show_edges=True, edge_color="grey",
+                         scalar_bar_args=bar, nan_color="lightgrey", clim=clim)
+    else:
+        cloud = pyvista.PolyData(points[select])
+        cloud.point_data["pressure"] = pressure[select]
+        plotter.add_mesh(cloud, scalars="pressure", cmap="plasma", point_size=point_size,
+                         render_points_as_spheres=True, scalar_bar_args=bar, clim=clim)
+    if circle is not None:
+        # only the sector the surface covers (a quarter for a quarter model), so that the camera
+        # frames the surface
+        covered = np.arctan2(points[:, 2], points[:, 0])
+        angle = np.linspace(covered.min(), covered.max(), 91)
+        y = points[:, 1].min() - 1e-3 * max(np.ptp(points, axis=0).max(), 1e-300)
+        ring = np.column_stack([circle * np.cos(angle), np.full_like(angle, y), circle * np.sin(angle)])
+        plotter.add_mesh(pyvista.lines_from_points(ring), color="white", line_width=3)
+    plotter.add_text(title or "contact pressure on the slave surface", font_size=11)
+    plotter.show_axes()
+    if isinstance(camera, str):
+        views = {"bottom": lambda: plotter.view_vector((0.0, -1.0, 0.0), viewup=(0, 0, 1)),
+                 "top": lambda: plotter.view_vector((0.0, 1.0, 0.0), viewup=(0, 0, 1)),
+                 "iso": plotter.view_isometric}
+        if camera not in views:
+            raise ValueError(f"camera {camera!r}: expected one of {sorted(views)} or a direction")
+        views[camera]()
+    else:
+        plotter.view_vector(tuple(float(c) for c in camera), viewup=(0, 1, 0))
+    plotter.screenshot(str(path))
+    plotter.close()

@@ -1,0 +1,92 @@
+"""The package's own reader of a run's output folder (also of a run that was killed).
+
+:func:`read_results` returns what the folder holds for the increments a run completed:
+``summary.json``, the pair tables (``pairs.pvd`` → CSV files) and the fields (``fields.xdmf``
+→ HDF5 files, read with h5py). Nothing here needs MPI.
+
+h5py and the PyPI DOLFINx wheel bring two different HDF5 libraries; h5py works in a process
+only when it was imported before DOLFINx. :func:`read_fields` therefore reads in a child
+process when DOLFINx is already loaded here and h5py was not imported first.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["read_fields", "read_pairs", "read_results", "read_summary"]
+
+MPI_LAUNCHER_PREFIXES = ("PMI_", "PMIX_", "HYDRA_", "MPIR_", "MPI_LOCAL", "OMPI_", "PRTE_")
+
+
+def read_summary(folder: str | os.PathLike) -> dict:
+    """``summary.json`` (always complete: it is replaced atomically)."""
+    return json.loads((Path(folder) / "summary.json").read_text())
+
+
+def read_pairs(folder: str | os.PathLike) -> list[dict]:
+    """The pair tables ``pairs.pvd`` lists: ``[{"load_factor", "rows": [dict per pair]}]``."""
+    folder = Path(folder)
+    pvd = folder / "pairs.pvd"
+    if not pvd.exists():
+        return []
+    out = []
+    for dataset in ET.parse(pvd).iter("DataSet"):
+        csv_path = folder / Path(dataset.get("file")).with_suffix(".csv")
+        with open(csv_path, newline="") as fh:
+            rows = list(csv.DictReader(fh))
+        out.append({"load_factor": float(dataset.get("timestep")), "file": str(csv_path), "rows": rows})
+    return out
+
+
+def _h5py_usable_here() -> bool:
+    from dolfinx_nnqem import compat
+
+    return compat.H5PY_BEFORE_DOLFINX or "dolfinx" not in sys.modules
+
+
+def read_fields(folder: str | os.PathLike) -> list[dict]:
+    """The increments ``fields.xdmf`` lists (see :func:`dolfinx_nnqem.io.field_series.read_field_index`)."""
+    if _h5py_usable_here():
+        from dolfinx_nnqem.io.field_series import read_field_index
+
+        return read_field_index(folder)
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "fields.npz"
+        code = ("import h5py, sys, numpy as np, json\n"
+                "from dolfinx_nnqem.io.field_series import read_field_index\n"
+                "steps = read_field_index(sys.argv[1])\n"
+                "arrays = {f'{i}/{k}': np.asarray(v) for i, s in enumerate(steps) for k, v in s.items()}\n"
+                "np.savez(sys.argv[2], **arrays)\n")
+        # a child of an MPI rank (mpirun) must not take the launcher's variables: it would try to
+        # join the parallel job (MPICH: "PMI_Init returned -1") and fail to start
+        env = {k: v for k, v in os.environ.items() if not k.startswith(MPI_LAUNCHER_PREFIXES)}
+        root = str(Path(__file__).resolve().parents[1])
+        env["PYTHONPATH"] = root + os.pathsep + env.get("PYTHONPATH", "")
+        run = subprocess.run([sys.executable, "-c", code, str(folder), str(out)], capture_output=True, text=True,
+                             env=env, timeout=600)
+        if run.returncode != 0:
+            last = (run.stderr.strip().splitlines() or ["?"])[-1]
+            raise OSError(f"cannot read the fields of {folder}: {last}")
+        steps: dict[int, dict] = {}
+        with np.load(out) as data:
+            for key in data.files:
+                i, name = key.split("/", 1)
+                value = data[key]
+                steps.setdefault(int(i), {})[name] = float(value) if name == "time" else value
+        return [steps[i] for i in sorted(steps)]
+
+
+def read_results(folder: str | os.PathLike) -> dict:
+    """Everything a run left: ``summary``, ``pairs`` (tables), ``fields`` (steps)."""
+    folder = Path(folder)
+    return {"summary": read_summary(folder), "pairs": read_pairs(folder),
+            "fields": read_fields(folder) if (folder / "fields.xdmf").exists() else []}

@@ -1,0 +1,13 @@
+"""The problem: mesh, tags, materials per body, supports, loads on a load path and contact — the
+one object every solver takes (:class:`ContactProblem`), with what builds it: the bodies and
+their free rigid modes (:mod:`.bodies`), load amplitudes (:mod:`.amplitude`), input checks
+(:mod:`.validation`) and gmsh mesh generators (:mod:`.meshing`)."""
+
+from dolfinx_nnqem.contact.model import Contact
+from dolfinx_nnqem.contact.obstacles import Cylinder, Plane, Sphere
+from dolfinx_nnqem.problem.amplitude import PiecewiseLinear, PiecewiseLinearPath
+from dolfinx_nnqem.problem.contact_problem import (FORCE_FLOOR_STRAIN, BodyForce, ContactProblem, Dirichlet,
+                                                   Gravity, Pressure, Traction, assemble_vector)
+
+__all__ = ["FORCE_FLOOR_STRAIN", "BodyForce", "Contact", "ContactProblem", "Cylinder", "Dirichlet", "Gravity",
+           "PiecewiseLinear", "PiecewiseLinearPath", "Plane", "Pressure", "Sphere", "Traction", "assemble_vector"]

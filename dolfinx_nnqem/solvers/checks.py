@@ -1,0 +1,341 @@
+r"""The independent check of a converged state: nothing is called "converged" on a solver's word.
+
+After a solver reports that an increment converged, :func:`solve_load_steps
+<dolfinx_nnqem.solvers.stepping.solve_load_steps>` measures the state itself, with the problem's public
+API only, before committing it:
+
+* **equilibrium**: the full residual R = F_int(u) − F_ext(ℓ) − Bᵀλ(z) at the free dofs,
+  ‖R_free‖ ≤ tol · F (the solver's atol is not added: a loose absolute tolerance never excuses
+  a residual), F = max(‖F_ext(ℓ)‖, ‖F_int‖, ‖Bᵀλ‖) the problem's force scale
+  (the one the solvers use). F_int is the radial return at u from the converged state, except
+  for a solver that returns its own Gauss-point stresses (NNEQM2: ``report.gauss_point_values``,
+  which is what the commit stores): then F_int = ∫ σ_own : ε(v) dx;
+* **contact**: every pair's law H(w, z) (force units, the supports' pinned directions applied),
+  ‖H‖ ≤ tol · F, and, independently of how a law is written, the Coulomb conditions of
+  the forces λ(z): p_n ≥ −tol·F and |λ_t| ≤ μ_f max(p_n, 0) + tol·F at every pair;
+* **plastic admissibility** of a solver's own Gauss-point values (NNEQM2): the stress lies in the
+  yield surface, q(σ) − σ_y0 − H (p_n + Δp) ≤ tol · σ_u with σ_u = min(σ_y0, 10⁻² E) (the yield
+  rows' stress unit), and Δp ≥ 0 (the radial return's stresses are admissible by construction);
+* **finite values**: u and z hold no NaN or infinity;
+* **small strain**: the package solves small-strain problems, so a state with a strain (the
+  largest ‖sym ∇u‖ at a Gauss point, Frobenius norm) above ``max_strain`` or an infinitesimal
+  rotation (the axial vector of skew ∇u) above ``max_rotation`` is refused: past a limit load
+  (plastic collapse, friction exceeded) a small-strain model keeps finding "equilibria" with
+  ever larger displacements. Both limits can be relaxed (or set to None).
+
+The tolerance is ``CheckOptions.rtol`` or, by default, derived from the solver's own ``rtol``:
+``max(min(max(1e4 · rtol, 1e-7), 1e-3), 10 · rtol)`` (1e-6 for the default rtol = 1e-10; never
+below ten times the solver's own rtol): a state that meets the
+solver's criterion passes with room for round-off (and for solvers whose own measure differs:
+NNEQM1's nested solves, NNEQM2's scaled system) while anything that is not equilibrium fails.
+
+A failed check turns the increment into a non-converged one (cut back, or reported with the
+reason); the figures of a passed check are kept in ``IncrementResult.check`` and written to
+``summary.json``.
+"""
+
+from __future__ import annotations
+
+import math
+import weakref
+from dataclasses import asdict, dataclass, field
+
+import dolfinx.fem as fem
+import numpy as np
+import ufl
+from mpi4py import MPI
+
+from dolfinx_nnqem import compat, jit
+from dolfinx_nnqem.contact.laws import STATE_NAMES
+from dolfinx_nnqem.material.von_mises import (can_yield, deviator_coordinates, equivalent_stress, strain,
+                                              yield_function, yield_stress_unit)
+from dolfinx_nnqem.problem.contact_problem import assemble_vector
+from dolfinx_nnqem.problem.validation import check_real
+from dolfinx_nnqem.solvers.options import SolverOptions
+
+__all__ = ["CheckOptions", "StateCheck", "check_state", "failure_details"]
+
+DEFAULT_MAX_STRAIN = 0.1
+"""Largest strain (Frobenius norm of sym ∇u at a Gauss point) accepted by default."""
+DEFAULT_MAX_ROTATION = 0.1
+"""Largest infinitesimal rotation (rad, |axial vector of skew ∇u|) accepted by default."""
+
+
+@dataclass(frozen=True)
+class CheckOptions:
+    """How strictly a converged state is checked.
+
+    Attributes
+    ----------
+    rtol
+        Relative tolerance of the equilibrium and contact checks (against the force scale F);
+        None: ``max(min(max(1e4 · solver rtol, 1e-7), 1e-3), 10 · solver rtol)``. Must be in (0, 1e-2].
+    max_strain, max_rotation
+        Small-strain limits (see the module docstring); None disables a limit.
+    """
+
+    rtol: float | None = None
+    max_strain: float | None = DEFAULT_MAX_STRAIN
+    max_rotation: float | None = DEFAULT_MAX_ROTATION
+
+    def __post_init__(self):
+        if self.rtol is not None:
+            check_real("CheckOptions.rtol", self.rtol, low=0.0, high=1e-2)
+        for name in ("max_strain", "max_rotation"):
+            value = getattr(self, name)
+            if value is not None:
+                check_real(f"CheckOptions.{name}", value, low=0.0, high=math.inf)
+
+    def tolerance(self, solver_rtol: float) -> float:
+        if self.rtol is not None:
+            return float(self.rtol)
+        rtol = float(solver_rtol)
+        return max(min(max(1e4 * rtol, 1e-7), 1e-3), 10.0 * rtol)
+
+
+@dataclass
+class StateCheck:
+    """The figures of one check (every rank holds the same)."""
+
+    ok: bool
+    reason: str  #: "" when ok
+    equilibrium: float  #: ‖R_free‖ / F
+    contact: float  #: ‖H‖ / F (0 without contact)
+    coulomb: float  #: largest violation of p_n ≥ 0 and |λ_t| ≤ μ_f p_n, / F
+    max_strain: float
+    max_rotation: float
+    force_scale: float  #: F
+    tolerance: float  #: the relative tolerance used
+    own_stresses: bool  #: equilibrium measured with the solver's own Gauss-point stresses
+    yield_violation: float = 0.0  #: own stresses: largest f / σ_u outside the yield surface (0 inside; inf if Δp < 0)
+    worst_pairs: list = field(default_factory=list)  #: [{pair, position, state, H/F}] (failed checks)
+    worst_nodes: list = field(default_factory=list)  #: [{position, |R|/F}] (failed checks)
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+class _Forms:
+    """Compiled objects of one problem used by the check (built on first use)."""
+
+    def __init__(self, problem):
+        st = problem.state
+        self.grad = fem.Function(st.W_tensor)
+        self.grad_expr = jit.expression(ufl.grad(problem.u), compat.interpolation_points(st.W_tensor))
+        self.sigma = fem.Function(st.W_tensor)
+        self.own_force = jit.form(ufl.inner(self.sigma, strain(ufl.TestFunction(problem.V))) * st.dx)
+        self._material = None
+        self._state = st
+
+    def material_at_points(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """σ_y0, H and the stress unit σ_u at the owned Gauss points (computed once)."""
+        if self._material is None:
+            st = self._state
+            sy = st.values_at_points(st.sigma_y0)
+            self._material = (sy, st.values_at_points(st.H), yield_stress_unit(sy, st.values_at_points(st.E)))
+        return self._material
+
+
+_FORMS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _forms(problem) -> _Forms:
+    forms = _FORMS.get(problem)
+    if forms is None:
+        forms = _FORMS[problem] = _Forms(problem)
+    return forms
+
+
+def _allmax(comm, value: float) -> float:
+    return comm.allreduce(float(value), op=MPI.MAX)
+
+
+def check_state(problem, report=None, solver_options=None, options: CheckOptions | None = None) -> StateCheck:
+    """Check the problem's current iterate (collective; call before commit).
+
+    Parameters
+    ----------
+    problem
+        The :class:`~dolfinx_nnqem.problem.contact_problem.ContactProblem`, at the iterate the solver left.
+    report
+        The solver's :class:`~dolfinx_nnqem.solvers.convergence.SolveReport` (its
+        ``gauss_point_values``, when they belong to the current u, are what will be committed,
+        so equilibrium is measured with them).
+    solver_options
+        The solver's :class:`~dolfinx_nnqem.solvers.options.SolverOptions` (rtol, atol); default ones if None.
+    options
+        :class:`CheckOptions`.
+    """
+    options = options or CheckOptions()
+    solver_options = solver_options or SolverOptions()
+    tol = options.tolerance(solver_options.rtol)
+    atol = float(solver_options.atol)
+    comm = problem.comm
+    forms = _forms(problem)
+
+    # -- finite values
+    n_owned = problem.V.dofmap.index_map.size_local * 3
+    finite = bool(np.all(np.isfinite(problem.u.x.array[:n_owned])))
+    if problem.has_contact:
+        finite &= bool(np.all(np.isfinite(problem.contact.z)))
+    finite = bool(comm.allreduce(int(finite), op=MPI.MIN))
+    if not finite:
+        nan = float("nan")
+        return StateCheck(False, "the state holds NaN or infinite values", nan, nan, nan, nan, nan, nan, tol, False)
+
+    # -- equilibrium
+    gpv = getattr(report, "gauss_point_values", None)
+    own = gpv is not None and np.array_equal(gpv.u, problem.u.x.array)
+    own = bool(comm.allreduce(int(own), op=MPI.MIN))
+    if own:
+        n_gp = problem.state.W_scalar.dofmap.index_map.size_local
+        forms.sigma.x.array[:9 * n_gp] = np.asarray(gpv.sigma, dtype=float).reshape(-1)
+        forms.sigma.x.scatter_forward()
+        F_int = assemble_vector(forms.own_force, problem.V)
+    else:
+        F_int = problem.assemble_internal_force()
+    F_ext = problem.external_force()
+    scale = max(F_ext.norm(), F_int.norm(), problem.force_floor)
+    lam = Bl = None
+    if problem.has_contact:
+        lam = problem.contact.force()
+        Bl = problem.contact.global_force(lam)
+        scale = max(scale, Bl.norm(), problem.contact.motion_force_scale(problem.load_factor, problem.load_factor_n))
+    R = problem.residual(F_int=F_int)
+    Rf = problem.free_residual(R)
+    F = max(scale, 1e-300)
+    eq = Rf.norm() / F
+    limit = tol  # the solver's atol is not added: an absolute tolerance never excuses a residual
+    reasons = []
+    if not eq <= limit:
+        hint = (f" (the solver's atol = {atol:g} N is above {limit:.0e} F: it lets the solver stop early)"
+                if atol > limit * F else "")
+        reasons.append(f"equilibrium residual |R|/F = {eq:.3e} > {limit:.1e} (F = {F:.4g} N){hint}")
+
+    # -- plastic admissibility of the solver's own Gauss-point values
+    yield_violation = 0.0
+    if own:
+        yield_violation = _yield_violation(problem, forms, gpv)
+        if not yield_violation <= tol:
+            reasons.append("the solver's Gauss-point values have Δp < 0" if math.isinf(yield_violation) else
+                           f"the solver's Gauss-point stresses leave the yield surface: max (q − σ_y)/σ_u = "
+                           f"{yield_violation:.3e} > {tol:.1e}")
+
+    # -- contact
+    contact = coulomb = 0.0
+    pair_violation = None
+    if problem.has_contact:
+        model = problem.contact
+        w = problem.relative_displacement()
+        H = model.evaluate(w).H
+        norm_H = math.sqrt(comm.allreduce(float(np.sum(H * H)), op=MPI.SUM))
+        contact = norm_H / F
+        pinned = model.constrained
+        p_n = np.where(pinned[:, 0], 0.0, lam[:, 0])
+        lam_t = np.where(pinned[:, 1:], 0.0, lam[:, 1:])
+        cone = np.linalg.norm(lam_t, axis=1) - model.mu_f * np.maximum(p_n, 0.0)
+        violation = np.maximum(np.maximum(-p_n, cone), 0.0)
+        coulomb = _allmax(comm, np.max(violation, initial=0.0)) / F
+        pair_violation = np.maximum(np.linalg.norm(H, axis=1), violation) / F
+        if not contact <= limit:
+            reasons.append(f"contact complementarity |H|/F = {contact:.3e} > {limit:.1e}")
+        if not coulomb <= limit:
+            reasons.append(f"Coulomb conditions violated by {coulomb:.3e} F (p_n < 0 or |λ_t| > μ_f p_n)")
+        for obj in (Bl,):
+            obj.destroy()
+
+    # -- small strain
+    forms.grad.interpolate(forms.grad_expr)
+    n_gp = problem.state.W_scalar.dofmap.index_map.size_local
+    G = forms.grad.x.array[:9 * n_gp].reshape(-1, 3, 3)
+    sym = 0.5 * (G + G.transpose(0, 2, 1))
+    strain = _allmax(comm, np.max(np.sqrt(np.einsum("nij,nij->n", sym, sym)), initial=0.0))
+    rotation = _allmax(comm, np.max(0.5 * np.sqrt((G[:, 2, 1] - G[:, 1, 2]) ** 2 + (G[:, 0, 2] - G[:, 2, 0]) ** 2
+                                                  + (G[:, 1, 0] - G[:, 0, 1]) ** 2), initial=0.0))
+    if options.max_strain is not None and not strain <= options.max_strain:
+        reasons.append(f"largest strain {strain:.3g} exceeds max_strain = {options.max_strain:g}: far outside "
+                       "the small-strain setting (plastic collapse or friction exceeded?)")
+    if options.max_rotation is not None and not rotation <= options.max_rotation:
+        reasons.append(f"largest rotation {rotation:.3g} rad exceeds max_rotation = {options.max_rotation:g}: "
+                       "far outside the small-rotation setting (a mechanism or collapse?)")
+
+    result = StateCheck(not reasons, "; ".join(reasons), float(eq), float(contact), float(coulomb),
+                        float(strain), float(rotation), float(F), float(tol), own, float(yield_violation))
+    if reasons:
+        result.worst_nodes = _worst_nodes(problem, Rf, F)
+        if pair_violation is not None:
+            result.worst_pairs = _worst_pairs(problem, pair_violation)
+    for obj in (F_int, F_ext, R, Rf):
+        obj.destroy()
+    return result
+
+
+def _yield_violation(problem, forms: _Forms, gpv) -> float:
+    """Largest (q(σ) − σ_y0 − H (p_n + Δp)) / σ_u over the Gauss points of all ranks, or 0 when the
+    solver's values lie in the yield surface; +inf if some Δp < 0."""
+    sy, H, su = forms.material_at_points()
+    n_gp = sy.size
+    sigma = np.asarray(gpv.sigma, dtype=float).reshape(n_gp, 3, 3)
+    dp = np.asarray(gpv.dp, dtype=float).reshape(n_gp)
+    p_n = problem.state.p_n.x.array[:n_gp]
+    f = yield_function(equivalent_stress(deviator_coordinates(sigma)), sy, H, p_n + dp)
+    worst = np.max(np.where(can_yield(sy), f / su, -np.inf), initial=-np.inf)  # elastic materials: nothing to violate
+    if np.any(dp < 0.0):
+        worst = np.inf
+    return max(_allmax(problem.comm, float(worst)), 0.0)
+
+
+def _worst_nodes(problem, Rf, F: float, count: int = 5) -> list:
+    """The ``count`` nodes with the largest free residual, over all ranks."""
+    comm = problem.comm
+    n_owned = problem.V.dofmap.index_map.size_local
+    r = np.linalg.norm(Rf.getArray(readonly=True).reshape(-1, 3)[:n_owned], axis=1) / F
+    order = np.argsort(-r)[:count]
+    x = problem.V.tabulate_dof_coordinates()[:n_owned]
+    local = [(float(r[i]), x[i].tolist()) for i in order]
+    every = sorted((item for part in comm.allgather(local) for item in part), key=lambda t: -t[0])[:count]
+    return [{"position": pos, "residual": val} for val, pos in every]
+
+
+def _worst_pairs(problem, violation: np.ndarray, count: int = 5) -> list:
+    """The ``count`` pairs with the largest |H|/F or Coulomb violation (global pair order)."""
+    model = problem.contact
+    X = np.concatenate([i.pairs.X_slave for i in model.interfaces]).reshape(-1, 3)
+    state = model.evaluate(problem.relative_displacement()).state
+    local = np.column_stack([violation, X, state.astype(float)])
+    g = model.gather(local)
+    order = np.argsort(-g[:, 0])[:count]
+    return [{"pair": int(i), "position": g[i, 1:4].tolist(), "state": STATE_NAMES[int(g[i, 4])],
+             "violation": float(g[i, 0])} for i in order]
+
+
+def failure_details(problem) -> dict:
+    """What would not settle at the problem's current (failed) iterate: the worst nodes (free
+    equilibrium residual), the worst pairs (|H|) and the Gauss points on the plastic branch
+    (collective; call before ``problem.restore()``)."""
+    try:
+        F_int = problem.assemble_internal_force()
+        F_ext = problem.external_force()
+        scale = max(F_ext.norm(), F_int.norm(), problem.force_floor)
+        out = {}
+        if problem.has_contact:
+            model = problem.contact
+            lam = model.force()
+            if problem.comm.allreduce(int(np.all(np.isfinite(lam))), op=MPI.MIN):  # the same choice on every rank
+                Bl = model.global_force(lam)
+                scale = max(scale, Bl.norm(), problem.contact.motion_force_scale(problem.load_factor, problem.load_factor_n))
+                Bl.destroy()
+        F = max(scale, 1e-300)
+        R = problem.residual(F_int=F_int)
+        Rf = problem.free_residual(R)
+        out["equilibrium"] = float(Rf.norm() / F)
+        out["worst_nodes"] = _worst_nodes(problem, Rf, F)
+        if problem.has_contact:
+            H = problem.contact.evaluate(problem.relative_displacement()).H
+            out["worst_pairs"] = _worst_pairs(problem, np.linalg.norm(H, axis=1) / F)
+        out["trial_plastic_gauss_points"] = problem.state.count_trial_plastic_points(problem.u)
+        for obj in (F_int, F_ext, R, Rf):
+            obj.destroy()
+        return out
+    except Exception as error:  # a report must never hide the original failure
+        return {"error": f"{type(error).__name__}: {error}"}

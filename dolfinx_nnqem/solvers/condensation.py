@@ -1,0 +1,208 @@
+r"""The displacement solves of NNEQM1 and NNEQM2, condensed onto the contact pairs.
+
+Both methods factorise a stiffness K (NNEQM1 the consistent tangent K_t, NNEQM2 the elastic K_e,
+with identity rows and columns at constrained dofs) and express the displacement through the
+pair forces: du = K⁻¹ (f + Bᵀ Δλ), w = B du, C = B K⁻¹ Bᵀ (``formulation.md`` §5).
+
+Floating bodies. A body held only by contact (possibly with partial supports) has free rigid
+modes N (:mod:`dolfinx_nnqem.problem.bodies`): K is singular along them. As FETI does, K is made
+regular by fixing one well-chosen dof per mode (identity row and column: K̃), and
+
+    G = K̃⁻¹ P   (P zeroes the constrained and fixing rows of a right-hand side)
+
+is a generalised inverse of K on self-equilibrated loads: for f with Nᵀ f = 0, K (G f) = f at
+every free dof, the fixing dofs included (their "reactions" vanish because the fixing is
+statically determinate: N restricted to the fixing dofs is regular). The displacement is then
+
+    du = G (f + Bᵀ Δλ) + N α,   with   Nᵀ (f + Bᵀ Δλ) = 0,
+
+α the rigid-mode amplitudes: n_r more unknowns and n_r more (linear, self-equilibrium) equations
+in the dense nonsmooth system, and w = B du picks up B N α. The fixing dofs are chosen by a
+column-pivoted QR of Nᵀ (the best-conditioned rows of N: far apart nodes, the right components).
+With no free mode, nothing changes: G = K⁻¹.
+"""
+
+from __future__ import annotations
+
+import time
+
+import dolfinx.fem as fem
+import numpy as np
+import scipy.linalg
+from petsc4py import PETSc
+
+from dolfinx_nnqem.numerics.linalg import clear_options, create_ksp, direct_options, factorise
+
+__all__ = ["Condensation"]
+
+
+class Condensation:
+    """Factorised stiffness, its generalised inverse G, and what the dense methods need of it.
+
+    Parameters
+    ----------
+    problem
+        The problem (its contact model and free rigid modes).
+    solver
+        The solver's name (for PETSc prefixes and messages).
+    petsc_options
+        Merged over MUMPS LU.
+    """
+
+    def __init__(self, problem, solver: str, petsc_options: dict | None):
+        self.problem = problem
+        self.solver = solver
+        self.modes = problem.rigid_modes
+        self.fixing_dofs, self.fixing_bcs = self._fixing_dofs()
+        start = problem.V.dofmap.index_map.local_range[0] * 3
+        n_owned = problem.V.dofmap.index_map.size_local * 3
+        owned_fixing = self.fixing_dofs[(self.fixing_dofs >= start) & (self.fixing_dofs < start + n_owned)]
+        self._owned_fixing = (owned_fixing - start).astype(np.int32)
+        self.zero_rows = np.union1d(problem.constrained_rows(), owned_fixing).astype(PETSc.IntType)
+        self.prefix = f"nnqem_{solver}_{id(self)}_"
+        self._options = direct_options(petsc_options)
+        self.ksp = create_ksp(problem.comm, self.prefix, self._options)
+        self._options_cleared = False
+        self.K = None
+        self._Bt_dense = None
+        self._X = None
+        self._C_rows = None
+        self._BN = None
+        self.timings: dict[str, float] = {}
+
+    @property
+    def num_modes(self) -> int:
+        """Free rigid modes n_r (0 when every body is supported)."""
+        return self.modes.count
+
+    # -- the fixing dofs -------------------------------------------------------------------------
+    def _fixing_dofs(self) -> tuple[np.ndarray, list]:
+        """One dof per free rigid mode (global unrolled indices, the same on every rank) and the
+        DirichletBCs (value 0) that fix them in K̃."""
+        if self.modes.count == 0:
+            return np.zeros(0, dtype=np.int64), []
+        p = self.problem
+        comm, V = p.comm, p.V
+        imap = V.dofmap.index_map
+        start = 3 * imap.local_range[0]
+        N = self.modes.local_array()  # (owned dofs, n_r)
+        n_r = N.shape[1]
+        # each rank proposes its n_r best-conditioned rows, then the best n_r of all proposals
+        if N.shape[0]:
+            _, _, pivots = scipy.linalg.qr(N.T, mode="economic", pivoting=True)
+            local = pivots[:n_r]
+        else:
+            local = np.zeros(0, dtype=np.int64)
+        candidates = np.concatenate(comm.allgather(start + local.astype(np.int64)))
+        rows = np.concatenate(comm.allgather(N[local])).reshape(-1, n_r)
+        _, _, pivots = scipy.linalg.qr(rows.T, mode="economic", pivoting=True)
+        chosen = pivots[:n_r]
+        smallest = np.linalg.svd(rows[chosen], compute_uv=False).min()
+        if smallest < 1e-8:
+            raise ValueError(f"{self.solver}: no well-conditioned fixing dofs for the free rigid modes "
+                             f"({', '.join(self.modes.description)}); smallest singular value {smallest:.1e}")
+        fixing = np.sort(candidates[chosen])
+        # local indices (owned or ghost) of the fixing dofs on this rank
+        blocks = np.concatenate([np.arange(*imap.local_range), imap.ghosts]).astype(np.int64)
+        order = np.argsort(blocks)
+        bcs = []
+        for dof in fixing:
+            block, component = divmod(int(dof), 3)
+            k = np.searchsorted(blocks[order], block)
+            local_dofs = np.zeros(0, dtype=np.int32)
+            if k < len(blocks) and blocks[order][k] == block:
+                local_dofs = np.array([3 * order[k] + component], dtype=np.int32)
+            bcs.append(fem.dirichletbc(PETSc.ScalarType(0.0), local_dofs, V.sub(component)))
+        return fixing, bcs
+
+    # -- factorisation and solves ----------------------------------------------------------------
+    def factorise(self, assemble, what: str) -> None:
+        """Assemble K̃ with ``assemble(A, extra_bcs)`` (into the same matrix every time) and factorise it."""
+        t0 = time.perf_counter()
+        self.K = assemble(self.K, self.fixing_bcs)
+        self._tick("assembly", t0)
+        t0 = time.perf_counter()
+        try:
+            factorise(self.ksp, self.K, self.solver.upper(), what)
+        finally:
+            if not self._options_cleared:
+                clear_options(self.prefix, self._options)
+                self._options_cleared = True
+        self._tick("factorisation", t0)
+
+    def solve(self, rhs: PETSc.Vec) -> PETSc.Vec:
+        """K̃⁻¹ (rhs with the fixing rows zeroed); constrained rows of ``rhs`` are kept (lifting)."""
+        b = rhs
+        if self.num_modes:  # on every rank (a copy is collective), whichever owns the fixing dofs
+            b = rhs.copy()
+            b.getArray()[self._owned_fixing] = 0.0
+        x = rhs.duplicate()
+        t0 = time.perf_counter()
+        self.ksp.solve(b, x)
+        self._tick("solve", t0)
+        if b is not rhs:
+            b.destroy()
+        return x
+
+    def solve_columns(self, loads: PETSc.Mat) -> PETSc.Mat:
+        """G applied to every column of ``loads`` (AIJ, laid out like V by rows): a dense matrix.
+
+        ``loads`` is changed in place: its constrained and fixing rows are zeroed (they are
+        loads) and it is converted to a dense matrix.
+        """
+        loads.zeroRows(self.zero_rows, diag=0.0)
+        dense = loads.convert("dense")  # petsc4py converts in place: ``loads`` is now dense
+        Y = dense.duplicate()
+        self.ksp.matSolve(dense, Y)
+        return Y
+
+    def transposed_B(self) -> PETSc.Mat:
+        """Bᵀ (a new AIJ matrix) with the constrained and fixing rows zeroed."""
+        Bt = self.problem.contact.B.transpose(PETSc.Mat())  # without an output matrix petsc4py transposes in place
+        Bt.zeroRows(self.zero_rows, diag=0.0)
+        return Bt
+
+    def pair_flexibility(self) -> tuple[np.ndarray, np.ndarray]:
+        """X = G Bᵀ (owned rows, dense (n_u, 3NC)) and C = B X gathered on every rank (3NC, 3NC)."""
+        model = self.problem.contact
+        t0 = time.perf_counter()
+        if self._Bt_dense is None:
+            self._Bt_dense = self.transposed_B().convert("dense")  # petsc4py converts in place
+            self._X = self._Bt_dense.duplicate()
+        self.ksp.matSolve(self._Bt_dense, self._X)
+        if self._C_rows is None:
+            self._C_rows = model.B.matMult(self._X)
+        else:
+            model.B.matMult(self._X, self._C_rows)
+        nc = model.num_global
+        # (3 rows per owned pair) × 3NC, regrouped per pair for the gather (a rank may own none)
+        C = model.gather(self._C_rows.getDenseArray().reshape(model.num_local, 9 * nc)).reshape(3 * nc, 3 * nc)
+        self._tick("flexibility", t0)
+        return self._X.getDenseArray().copy(), C
+
+    def mode_coupling(self) -> np.ndarray:
+        """B N gathered on every rank, (3NC, n_r): how each free rigid mode moves the pairs."""
+        if self._BN is None:
+            model = self.problem.contact
+            columns = [model.B_times(v) for v in self.modes.vectors]
+            local = np.stack(columns, axis=-1) if columns else np.zeros((model.num_local, 3, 0))
+            self._BN = model.gather(local).reshape(3 * model.num_global, self.num_modes)
+        return self._BN
+
+    def mode_loads(self, f: PETSc.Vec) -> np.ndarray:
+        """Nᵀ f (n_r,): the load ``f`` against each free rigid mode (collective)."""
+        return np.array([v.dot(f) for v in self.modes.vectors])
+
+    def mode_array(self) -> np.ndarray:
+        """N's owned rows (n_u, n_r)."""
+        if self.num_modes == 0:
+            return np.zeros((3 * self.problem.V.dofmap.index_map.size_local, 0))
+        return self.modes.local_array()
+
+    def _tick(self, key: str, t0: float) -> None:
+        self.timings[key] = self.timings.get(key, 0.0) + time.perf_counter() - t0
+
+    def destroy(self) -> None:
+        for obj in (self.ksp, self.K, self._Bt_dense, self._X, self._C_rows):
+            if obj is not None:
+                obj.destroy()

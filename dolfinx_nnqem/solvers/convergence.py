@@ -1,0 +1,66 @@
+"""What every solver reports about one increment, and the error raised when it gives up."""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from dolfinx_nnqem.contact.laws import STATE_NAMES  # noqa: F401  (the pair states' names, kept here for old imports)
+from dolfinx_nnqem.material.von_mises import GaussPointValues
+
+logger = logging.getLogger("dolfinx_nnqem")
+
+
+@dataclass
+class IterationRecord:
+    """One nonlinear iteration: relative residuals and what the step did."""
+
+    iteration: int
+    equilibrium: float  #: ‖R‖ / load scale (constrained rows excluded)
+    contact: float  #: ‖H‖ / load scale (0 without contact)
+    step_length: float  #: line-search step α (1 = full Newton step); NaN before the first step
+    kind: str  #: "newton", "lm" (Levenberg–Marquardt) or "" for the last, converged record
+    states: tuple[int, int, int] = (0, 0, 0)  #: numbers of open, stick, slip pairs
+    plastic_points: int = 0  #: Gauss points on the plastic branch at this iterate
+    inner_iterations: int = 0  #: iterations of a nested nonsmooth solve (NNEQM1), else 0
+
+    def line(self, solver: str) -> str:
+        alpha = "   -  " if np.isnan(self.step_length) else f"{self.step_length:6.3f}"
+        inner = f" inner {self.inner_iterations:3d}" if self.inner_iterations else ""
+        return (
+            f"[{solver}] it {self.iteration:3d}  |R|/F {self.equilibrium:9.3e}  |H|/F {self.contact:9.3e}"
+            f"  step {alpha} {self.kind:6s} open/stick/slip {self.states[0]}/{self.states[1]}/{self.states[2]}"
+            f"  plastic GP {self.plastic_points}{inner}"
+        )
+
+
+@dataclass
+class SolveReport:
+    """Outcome of one increment solve (what :meth:`Solver.solve_increment` returns)."""
+
+    converged: bool
+    iterations: int
+    history: list[IterationRecord] = field(default_factory=list)
+    message: str = ""
+    system_order: int = 0  #: order of the (non)smooth system solved per iteration
+    gauss_point_values: GaussPointValues | None = None  #: the solver's own state update (NNEQM2), or None
+
+    @property
+    def final(self) -> IterationRecord | None:
+        return self.history[-1] if self.history else None
+
+
+class ConvergenceError(RuntimeError):
+    """An increment did not converge even after the allowed cutbacks."""
+
+
+def count_states(states_local: np.ndarray, comm) -> tuple[int, int, int]:
+    """Global numbers of open (0), stick (1) and slip (2) pairs."""
+    from mpi4py import MPI
+
+    local = np.bincount(np.asarray(states_local, dtype=np.int64), minlength=3)[:3]
+    total = np.zeros(3, dtype=np.int64)
+    comm.Allreduce(local, total, op=MPI.SUM)
+    return int(total[0]), int(total[1]), int(total[2])

@@ -1,0 +1,412 @@
+r"""Monolithic semismooth Newton on (u, z): the scalable solver (``formulation.md`` §5).
+
+Per iteration, with R = F_int(u) − F_ext(ℓ) − Bᵀλ(z) and H = H(Bu + m(ℓ), z):
+
+    [ K_t(u)     −Bᵀ Λ' ] [du]     [ R ]
+    [ ∂_wH · B   ∂_zH   ] [dz] = − [ H ]
+
+solved by the linear-solver strategy (:mod:`dolfinx_nnqem.solvers.linear_solver`: MUMPS LU by
+default, or FGMRES + fieldsplit + GAMG for large meshes) and globalised by the package's Newton
+driver (:func:`dolfinx_nnqem.numerics.newton.solve`) on Ψ = ½(‖R‖² + ‖H‖²) — both in force units, so no
+row scaling is needed. The Levenberg–Marquardt fallback solves (JᵀJ + ν I) d = −JᵀF with
+ν = lm_c · min(ε, 1)^lm_delta · mean diag(JᵀJ), ε the relative residual. Without contact this
+is Newton–Raphson with the consistent tangent.
+
+Each increment starts from a predictor: the secant extrapolation of the last two increments
+where the load path goes on in the same direction, else — where prescribed displacements jump —
+a Newton step from the converged state with the jump lifted into the right-hand side. With the
+polar law, an increment that fails is tried once more from the same prediction with the angle of
+sliding pairs put on their slip after every step (``docs/theory.md``, the polar law).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from dolfinx_nnqem.solvers.block_system import AugmentedSystem, MonolithicMatrix, free_mask
+from dolfinx_nnqem.solvers.convergence import IterationRecord, SolveReport, count_states, logger
+from dolfinx_nnqem.numerics.linalg import clear_options, create_ksp, direct_options, free_dropped_objects, global_norm
+from dolfinx_nnqem.solvers.linear_solver import DirectSolver, IterativeSolver
+from dolfinx_nnqem.numerics.newton import Globalisation, Merit, NewtonResult, solve
+from dolfinx_nnqem.problem.contact_problem import ContactProblem
+from dolfinx_nnqem.solvers.options import MonolithicOptions, SolverOptions
+
+__all__ = ["MonolithicSolver"]
+
+
+@dataclass
+class _Evaluation:
+    """The residuals at an iterate."""
+
+    R_free: PETSc.Vec  #: equilibrium residual, constrained rows zeroed
+    H: np.ndarray  #: (num_local_pairs, 3) pair laws
+    law: object  #: the LawEvaluation (Jacobian blocks, states), or None without contact
+    scale: float  #: the force scale F
+    norm_R: float
+    norm_H: float
+    lin: object = None  #: the laws' Linearisation (Newton step coordinates), or None without contact
+
+
+class MonolithicSolver:
+    """Semismooth Newton on the displacement and the pair unknowns together.
+
+    Parameters
+    ----------
+    problem
+        The problem to solve.
+    options
+        Tolerances, iteration limit and ``petsc_options`` (merged over MUMPS LU,
+        :data:`dolfinx_nnqem.numerics.linalg.DIRECT_SOLVER_OPTIONS`, or over the iterative defaults).
+    monolithic
+        This solver's own options (:class:`~dolfinx_nnqem.solvers.options.MonolithicOptions`).
+    """
+
+    name = "monolithic"
+
+    def __init__(self, problem: ContactProblem, options: SolverOptions | None = None,
+                 monolithic: MonolithicOptions | None = None):
+        self.problem = problem
+        self.options = options or SolverOptions()
+        self.settings = monolithic or MonolithicOptions()
+        self.prefix = f"nnqem_monolithic_{id(self)}_"
+        self.iterative = self._use_iterative()
+        if self.iterative:
+            self.linear = IterativeSolver(problem.V, self.prefix, self.options.petsc_options, self.options.rtol,
+                                          problem.num_pairs, self.settings.lag_preconditioner)
+        else:
+            self.linear = DirectSolver(problem.comm, self.prefix, self.options.petsc_options)
+        self._K = None
+        self._mask = free_mask(problem) if problem.has_contact else None
+        self._matrix = None  # the direct Newton matrix (also the LM fallback's)
+        self._augmented = None
+        if self.iterative and problem.has_contact:
+            r = max(i.r for i in problem.contact.interfaces)
+            self._augmented = AugmentedSystem(problem.contact, self._mask, r, self.settings.augmentation)
+        self._timings: dict[str, float] = {}
+
+    @property
+    def timings(self) -> dict[str, float]:
+        """Seconds per phase: assembly, contact, block_matrix, and the linear solver's setup and solve."""
+        return {**self._timings, **self.linear.timings}
+
+    @property
+    def linear_iterations(self) -> int:
+        """Krylov iterations over all Newton steps (iterative solver)."""
+        return self.linear.linear_iterations
+
+    @property
+    def amg_setups(self) -> int:
+        """AMG hierarchies built (iterative solver with contact)."""
+        return self.linear.amg_setups
+
+    def _use_iterative(self) -> bool:
+        choice = self.settings.linear_solver
+        if choice == "auto":
+            return self.problem.V.dofmap.index_map.size_global * 3 >= self.settings.auto_iterative_dofs
+        return choice == "iterative"
+
+    # -- one increment ------------------------------------------------------------------------------
+    def solve_increment(self, load_factor: float) -> SolveReport:
+        """Solve for the load factor ``load_factor`` from the last converged state."""
+        p = self.problem
+        report = SolveReport(converged=False, iterations=0,
+                             system_order=p.V.dofmap.index_map.size_global * 3 + 3 * p.num_pairs)
+        outcome = self._attempt(load_factor, report, align_sliding=False)
+        if not outcome.converged and p.has_contact and p.contact.slip_following and outcome.iterations > 0:
+            # The polar law's H3 = r |s| sin(θ − θ_s) is a sine that a Newton step can follow only
+            # within a quarter turn; where slips are small and turn between iterates, steps clipped
+            # to that turn can stall. Put θ of sliding pairs on the slip after every step instead
+            # (PolarLaw.follow_slip). Only as a second attempt: measured always on, it cost
+            # iterations on other cases of the robustness suite (docs/robustness.md).
+            logger.info(f"[{self.name}] increment to load factor {load_factor:.6g}: {outcome.message}; "
+                        "trying again with the angle of sliding pairs on their slip after every step")
+            tried = outcome.iterations
+            p.restore()
+            outcome = self._attempt(load_factor, report, align_sliding=True)
+            outcome.iterations += tried
+        report.iterations = outcome.iterations
+        report.converged = outcome.converged
+        final = report.final
+        if outcome.converged:
+            report.message = "converged"
+        elif final is not None:
+            report.message = f"{outcome.message} (|R|/F = {final.equilibrium:.3e}, |H|/F = {final.contact:.3e})"
+        else:
+            report.message = outcome.message
+        return report
+
+    def _attempt(self, load_factor: float, report: SolveReport, align_sliding: bool) -> NewtonResult:
+        """Newton from the increment's prediction; ``align_sliding``: see :meth:`set_iterate`."""
+        self.linear.begin_increment()
+        lifted = self._predict(load_factor)
+        system = _NewtonSystem(self, report, align_sliding)
+        return solve(system, self.settings.globalisation, self.options.max_iterations,
+                     first_iteration=1 if lifted else 0, first_kind="lifted" if lifted else "",
+                     first_step_length=1.0 if lifted else math.nan)
+
+    def _predict(self, load_factor: float) -> bool:
+        """The increment's starting point; True if it was reached by a lifted Newton step.
+
+        The secant predictor when the load path goes on in the same direction; otherwise, if
+        prescribed displacements move, a Newton step from the converged state with their jump
+        lifted (:meth:`_lifted_step`); otherwise the converged state.
+        """
+        p = self.problem
+        extrapolated = self.settings.extrapolate and p.extrapolate(load_factor)
+        u_bc = p.u.x.array[p.bc_dofs].copy()
+        p.apply_prescribed_displacements(load_factor)
+        p.predict_contact()
+        delta_bc = p.u.x.array[p.bc_dofs] - u_bc
+        if extrapolated or not p.comm.allreduce(bool(np.any(delta_bc != 0.0)), op=MPI.LOR):
+            return False
+        p.u.x.array[p.bc_dofs] = u_bc
+        if self._lifted_step(self.evaluate(), delta_bc):
+            return True
+        p.apply_prescribed_displacements(load_factor)  # the solve failed: plain Newton from here
+        return False
+
+    def _lifted_step(self, ev: _Evaluation, delta_bc: np.ndarray) -> bool:
+        """Newton step from the converged state that moves the constrained dofs by ``delta_bc``.
+
+        J du = −F − J_c Δu_D with du = Δu_D at the constrained dofs: the tangent (and the pair
+        laws) evaluated where the solution is, not at a state whose boundary layer alone has been
+        moved (which, in a plastic body, yields spuriously and misleads the first step). The
+        step is taken in full, without line search (its start is not an admissible state).
+        Returns False if the linear solve failed.
+        """
+        p = self.problem
+        delta = np.zeros_like(p.u.x.array)
+        delta[p.bc_dofs] = delta_bc
+        K_delta = p.tangent_action(delta)
+        R_lifted = p.free_residual(K_delta)
+        R_lifted.axpy(1.0, ev.R_free)
+        H_lifted = ev.H
+        if p.has_contact:
+            delta_vec = p.u.x.petsc_vec.duplicate()
+            with delta_vec.localForm() as local:
+                local.array[:] = delta
+            H_lifted = ev.H + np.einsum("nij,nj->ni", ev.law.dH_dw, p.contact.B_times(delta_vec))
+        self.linear.set_forcing(1.0, record=False)  # the lifted system's residual is not the iterate's
+        u0 = p.u.x.array[:ev.R_free.getLocalSize()].copy()
+        z0 = p.contact.z.copy() if p.has_contact else None
+        lifted = _Evaluation(R_lifted, H_lifted, ev.law, ev.scale, math.nan, math.nan, ev.lin)
+        direction = self.newton_direction(lifted)
+        if direction is None:
+            return False
+        self.set_iterate(u0, z0, direction, 1.0, ev.lin)
+        p.u.x.array[p.bc_dofs] += delta_bc
+        return True
+
+    # -- the pieces the Newton system uses ------------------------------------------------------
+    def evaluate(self) -> _Evaluation:
+        """R (free part), H, the law evaluation and the force scale at the current iterate."""
+        p = self.problem
+        t0 = time.perf_counter()
+        F_int = p.assemble_internal_force()
+        self._tick("assembly", t0)
+        R_free = p.free_residual(p.residual(F_int=F_int))
+        law, lin, H = None, None, np.zeros((0, 3))
+        if p.has_contact:
+            t0 = time.perf_counter()
+            law = p.contact.evaluate(p.relative_displacement())
+            lin = p.contact.linearise(law)
+            H = law.H
+            self._tick("contact", t0)
+        return _Evaluation(R_free, H, law, p.force_scale(F_int), R_free.norm(), global_norm(H, p.comm), lin)
+
+    def _newton_matrix(self, ev: _Evaluation) -> PETSc.Mat:
+        """J as one AIJ matrix (the direct system, and the LM fallback's)."""
+        p = self.problem
+        t0 = time.perf_counter()
+        self._K = p.assemble_tangent(self._K)
+        self._tick("assembly", t0)
+        if not p.has_contact:
+            return self._K
+        t0 = time.perf_counter()
+        if self._matrix is None:
+            self._matrix = MonolithicMatrix(p.contact, self._mask)
+        J = self._matrix.assemble(self._K, ev.law.dH_dw, ev.lin.dH_dy, ev.lin.dlam_dy)
+        self._tick("block_matrix", t0)
+        return J
+
+    def _augmented_system(self, ev: _Evaluation):
+        """The augmented Newton system (iterative solver with contact): (MatNest, rhs)."""
+        p = self.problem
+        t0 = time.perf_counter()
+        self._K = p.assemble_tangent(self._K)
+        self._tick("assembly", t0)
+        t0 = time.perf_counter()
+        J = self._augmented.matrix(self._K, ev.law.dH_dw, ev.lin.dH_dy, ev.lin.dlam_dy)
+        b = self._augmented.rhs(ev.R_free, ev.H, ev.law.dH_dw)
+        self._tick("block_matrix", t0)
+        return J, b
+
+    def _rhs(self, J: PETSc.Mat, ev: _Evaluation) -> PETSc.Vec:
+        """−(R_free, H) in J's layout."""
+        b = J.createVecRight()
+        n_u = ev.R_free.getLocalSize()
+        arr = b.getArray()
+        arr[:n_u] = -ev.R_free.getArray()
+        arr[n_u:] = -ev.H.reshape(-1)
+        return b
+
+    def _split(self, x: PETSc.Vec, n_u: int) -> tuple[np.ndarray, np.ndarray]:
+        """(du, dz) from the solution vector, du = 0 exactly at the constrained dofs.
+
+        The matrix has identity rows there and the right-hand side zeros, but a Krylov solve
+        (and an inexact one above all) returns them only to its tolerance; left alone, the
+        prescribed values would drift, unseen by the free residual.
+        """
+        arr = x.getArray(readonly=True)
+        du = arr[:n_u].copy()
+        du[self.problem.owned_bc_dofs()] = 0.0
+        return du, arr[n_u:].reshape(-1, 3).copy()
+
+    def newton_direction(self, ev: _Evaluation) -> tuple[np.ndarray, np.ndarray] | None:
+        """Solve J d = −F at the current iterate; (du, dz), or None if the solve failed."""
+        if self._augmented is not None:
+            J, b = self._augmented_system(ev)
+        else:
+            J = self._newton_matrix(ev)
+            b = self._rhs(J, ev)
+        x = b.duplicate()
+        why_not = self.linear.solve(J, b, x, None if ev.law is None else ev.law.state)
+        if why_not is not None:
+            logger.info(f"{self.name}: {why_not}")
+            return None
+        return self._split(x, ev.R_free.getLocalSize())
+
+    def lm_direction(self, ev: _Evaluation, g: Globalisation) -> tuple[np.ndarray, np.ndarray, float]:
+        """Levenberg–Marquardt: (JᵀJ + ν I) d = −JᵀF, ν = lm_c · min(ε, 1)^lm_delta · mean diag(JᵀJ).
+
+        Returns (du, dz, ∇Ψ·d). JᵀJ is factorised with MUMPS whatever the Newton solver: it is
+        the rare fallback.
+        """
+        J = self._newton_matrix(ev)
+        minus_F = self._rhs(J, ev)
+        JtJ = J.transposeMatMult(J)
+        diag = JtJ.getDiagonal()
+        mean_diag = diag.sum() / max(diag.getSize(), 1)
+        eps = math.sqrt(ev.norm_R ** 2 + ev.norm_H ** 2) / max(ev.scale, self.options.atol)
+        JtJ.shift(g.lm_c * min(eps, 1.0) ** g.lm_delta * mean_diag)
+        rhs = JtJ.createVecRight()
+        J.multTranspose(minus_F, rhs)
+        x = rhs.duplicate()
+        options = direct_options({})
+        ksp = create_ksp(self.problem.comm, self.prefix + "lm_", options)
+        ksp.setOperators(JtJ)
+        ksp.solve(rhs, x)
+        clear_options(self.prefix + "lm_", options)
+        ksp.destroy()
+        slope = -rhs.dot(x)  # ∇Ψ·d = (JᵀF)·d
+        du, dz = self._split(x, ev.R_free.getLocalSize())
+        return du, dz, slope
+
+    def set_iterate(self, u0: np.ndarray, z0: np.ndarray | None, direction, alpha: float, lin=None,
+                    align_sliding: bool = False) -> None:
+        """u = u0 + α du, z advanced by α dz in the step coordinates of ``lin`` (owned entries; ghosts
+        updated); then the unknowns no force depends on follow the slip, with ``align_sliding`` also
+        the direction of the friction force of sliding pairs (:meth:`ContactModel.follow_slip`)."""
+        p = self.problem
+        du, dz = direction[0], direction[1]
+        p.u.x.array[:du.shape[0]] = u0 + alpha * du
+        p.u.x.scatter_forward()
+        if p.has_contact:
+            p.contact.z = p.contact.advance(z0, dz, alpha, None if lin is None else lin.cartesian)
+            p.contact.follow_slip(p.relative_displacement(), sliding_too=align_sliding)
+
+    def _tick(self, key: str, t0: float) -> None:
+        self._timings[key] = self._timings.get(key, 0.0) + time.perf_counter() - t0
+
+    def destroy(self) -> None:
+        """Free the PETSc objects (linear solver, matrices)."""
+        self.linear.destroy()
+        for obj in (self._matrix, self._augmented):
+            if obj is not None:
+                obj.destroy()
+        for obj in (self._K, self._mask):
+            if obj is not None:
+                obj.destroy()
+
+
+class _NewtonSystem:
+    """The monolithic system as a backend of the Newton driver (one per increment)."""
+
+    def __init__(self, solver: MonolithicSolver, report: SolveReport, align_sliding: bool = False):
+        self.solver = solver
+        self.problem = solver.problem
+        self.report = report
+        self.align_sliding = align_sliding  #: see MonolithicSolver.set_iterate
+        self.current: _Evaluation | None = None
+        self._start = None  # (u0, z0, evaluation) of the step being taken
+        self._direction = None
+        self._slope = math.nan
+
+    def _merit(self, ev: _Evaluation) -> Merit:
+        opts = self.solver.options
+        tol = opts.rtol * ev.scale + opts.atol
+        converged = ev.norm_R <= tol and ev.norm_H <= tol
+        return Merit(0.5 * (ev.norm_R ** 2 + ev.norm_H ** 2), converged)
+
+    def evaluate(self) -> Merit:
+        self.current = self.solver.evaluate()
+        return self._merit(self.current)
+
+    def record(self, iteration: int, step_length: float, kind: str) -> None:
+        p, ev = self.problem, self.current
+        free_dropped_objects(p.petsc_comms)  # once per iteration, on every rank
+        ref = max(ev.scale, self.solver.options.atol)
+        states = count_states(ev.law.state, p.comm) if ev.law is not None else (0, 0, 0)
+        record = IterationRecord(iteration, ev.norm_R / ref, ev.norm_H / ref, step_length, kind, states,
+                                 p.state.count_trial_plastic_points(p.u))
+        self.report.history.append(record)
+        logger.info(record.line(self.solver.name))
+
+    def snapshot(self):
+        p = self.problem
+        return p.u.x.array.copy(), (p.contact.z.copy() if p.has_contact else None), self.current
+
+    def restore(self, snapshot) -> Merit:
+        p = self.problem
+        u, z, ev = snapshot
+        p.u.x.array[:] = u
+        if p.has_contact:
+            p.contact.z = z.copy()
+        self.current = ev
+        return self._merit(ev)
+
+    def start_step(self) -> None:
+        p = self.problem
+        u0 = p.u.x.array[:self.current.R_free.getLocalSize()].copy()
+        self._start = (u0, p.contact.z.copy() if p.has_contact else None, self.current)
+
+    def newton_direction(self, merit: Merit) -> str | None:
+        ev = self._start[2]
+        ref = max(ev.scale, self.solver.options.atol)
+        self.solver.linear.set_forcing(math.sqrt(ev.norm_R ** 2 + ev.norm_H ** 2) / ref)
+        self._direction = self.solver.newton_direction(ev)
+        if self._direction is None:
+            return "the linear solve of the Newton step failed"
+        self._slope = -2.0 * merit.psi  # J d = −F exactly: ∇Ψ·d = −|F|²
+        return None
+
+    def lm_direction(self, merit: Merit, globalisation: Globalisation) -> str | None:
+        u0, z0, ev = self._start
+        self.solver.set_iterate(u0, z0, (np.zeros_like(u0), None if z0 is None else np.zeros_like(z0)), 0.0)
+        du, dz, self._slope = self.solver.lm_direction(ev, globalisation)
+        self._direction = (du, dz)
+        return None
+
+    def slope(self) -> float:
+        return self._slope
+
+    def move(self, step_length: float) -> Merit:
+        u0, z0, ev = self._start
+        self.solver.set_iterate(u0, z0, self._direction, step_length, ev.lin, self.align_sliding)
+        return self.evaluate()

@@ -1,0 +1,235 @@
+"""The solvers' options: :class:`SolverOptions` (tolerances, iteration limit, PETSc options of the
+displacement solves) for every solver, and one dataclass per solver for what only it has.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+from dataclasses import dataclass, field
+
+from dolfinx_nnqem.numerics.newton import Globalisation
+
+__all__ = ["METHODS", "STALL_WINDOW", "MonolithicOptions", "NNEQM1Options", "NNEQM2Options", "SolverOptions"]
+
+METHODS = ("monolithic", "nneqm1", "nneqm2")
+"""The solvers by name (:func:`~dolfinx_nnqem.solvers.registry.make_solver`)."""
+
+
+def _check_integer(owner: str, name: str, value, lowest: int) -> None:
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < lowest:
+        raise ValueError(f"{owner}: {name} = {value!r}; expected an integer >= {lowest}")
+
+
+def _check_real(owner: str, name: str, value, low: float, high: float) -> None:
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(float(value)) \
+            or not low < float(value) <= high:
+        raise ValueError(f"{owner}: {name} = {value!r}; expected a finite number in ({low:g}, {high:g}]")
+
+
+@dataclass
+class SolverOptions:
+    """Options every solver shares.
+
+    Converged when ‖R‖ ≤ rtol · F + atol and ‖H‖ ≤ rtol · F + atol, R the equilibrium
+    residual at the free dofs, H the pair laws (force units), F = max(‖ℓ F_ext‖, ‖F_int‖, ‖Bᵀλ‖)
+    the problem's force scale; ``atol`` (force units) guards the unloaded start.
+
+    Attributes
+    ----------
+    rtol, atol
+        Tolerances (0 < rtol ≤ 1e-2; 0 ≤ atol).
+    max_iterations
+        Newton iterations per increment (NNEQM1: outer iterations). An attempt that stops making
+        progress ends earlier (the stall test, :data:`STALL_WINDOW`), so the limit only bounds
+        attempts that still converge, slowly (50: the monolithic polar law on the frictional
+        sphere-on-block demo mesh converges at 32).
+    petsc_options
+        PETSc options of the displacement solves (the monolithic Newton system, or NNEQM1's and
+        NNEQM2's stiffness), merged over the package's defaults (MUMPS LU).
+    """
+
+    rtol: float = 1e-10
+    atol: float = 1e-12
+    max_iterations: int = 50
+    petsc_options: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        _check_real("SolverOptions", "rtol", self.rtol, 0.0, 1e-2)
+        if isinstance(self.atol, bool) or not isinstance(self.atol, numbers.Real) \
+                or not (math.isfinite(float(self.atol)) and self.atol >= 0):
+            raise ValueError(f"SolverOptions: atol = {self.atol!r}; expected a finite number >= 0")
+        _check_integer("SolverOptions", "max_iterations", self.max_iterations, 1)
+        if not isinstance(self.petsc_options, dict):
+            raise ValueError(f"SolverOptions: petsc_options = {self.petsc_options!r}; expected a dict")
+
+
+STALL_WINDOW = 10
+"""Every solver's Newton solves (monolithic, NNEQM1's and NNEQM2's dense ones) stop an attempt
+whose lowest |H| has not fallen by a tenth in this many iterations
+(:class:`~dolfinx_nnqem.numerics.newton.Globalisation`), so that the next attempt (the other damping,
+sliding pairs aligned, NNEQM2's updated flow directions, a cutback) starts early instead of
+after a crawl to the iteration limit."""
+
+
+@dataclass
+class MonolithicOptions:
+    """Options of the monolithic semismooth Newton solver.
+
+    Attributes
+    ----------
+    linear_solver
+        "direct" (MUMPS LU), "iterative" (FGMRES + Schur fieldsplit + GAMG), or "auto"
+        (iterative from ``auto_iterative_dofs`` displacement dofs on).
+    extrapolate
+        Start each increment from the secant extrapolation of the last two.
+    augmentation
+        Iterative solver only: the penalty added to the u block on closed pair directions, in
+        units of r (:class:`dolfinx_nnqem.solvers.block_system.AugmentedSystem`). It changes the
+        preconditioner, not the Newton step.
+    lag_preconditioner
+        Iterative solver with contact: keep the u block's AMG hierarchy while it works.
+    globalisation
+        The Newton driver's damping (:class:`~dolfinx_nnqem.numerics.newton.Globalisation`); the LM
+        parameter is ν = lm_c · min(ε, 1)^lm_delta · mean diag(JᵀJ), ε the relative residual.
+    """
+
+    linear_solver: str = "direct"
+    auto_iterative_dofs: int = 300_000
+    extrapolate: bool = True
+    augmentation: float = 1.0
+    lag_preconditioner: bool = True
+    globalisation: Globalisation = field(default_factory=lambda: Globalisation(
+        min_step=1.0 / 64, watchdog=6, watchdog_progress=0.5, watchdog_restarts=2,
+        stall_window=STALL_WINDOW))
+
+    def __post_init__(self):
+        if self.linear_solver not in ("direct", "iterative", "auto"):
+            raise ValueError(f"MonolithicOptions: linear_solver = {self.linear_solver!r}; expected 'direct', "
+                             "'iterative' or 'auto'")
+        _check_integer("MonolithicOptions", "auto_iterative_dofs", self.auto_iterative_dofs, 0)
+        if isinstance(self.augmentation, bool) or not isinstance(self.augmentation, numbers.Real) \
+                or not (math.isfinite(float(self.augmentation)) and self.augmentation > 0):
+            raise ValueError(f"MonolithicSolver: augmentation = {self.augmentation!r}; expected a finite value > 0 "
+                             "(the u block's penalty on closed pair directions, in units of r)")
+
+
+def _in_turn(inner: Globalisation, retry: Globalisation | None) -> tuple[Globalisation, ...]:
+    """The damping rules a dense solve tries in turn: ``inner``, then ``retry`` if given."""
+    return (inner,) if retry is None else (inner, retry)
+
+
+@dataclass
+class NNEQM1Options:
+    """Options of NNEQM1 (nonsmooth Newton on the pair unknowns nested in Newton–Raphson).
+
+    Attributes
+    ----------
+    modified
+        Keep K, X and C from the first iteration of the increment (modified Newton).
+    extrapolate
+        Start each increment's outer iteration from the secant extrapolation of the last two
+        increments (u and the pair unknowns, :meth:`ContactProblem.extrapolate`), as the
+        monolithic solver does; where it does not apply (the first two increments, a turn of
+        the load path), from the converged state with the prescribed jump lifted.
+    inner_max_iterations
+        Iteration limit of the dense nonsmooth solve.
+    inner
+        Damping of the dense nonsmooth solve (ν = lm_c |H̃|^lm_delta on its scaled rows). The
+        default watchdog crosses the kinks and curved valleys of the merit function (the polar
+        law's angle) where monotone steps shrink to nothing.
+    inner_retry
+        Tried from the same start when ``inner`` stops without converging (None: no retry).
+        The default, monotone Armijo steps, breaks the stick ↔ slip cycles that full steps
+        can fall into (:func:`~dolfinx_nnqem.numerics.nonsmooth.solve_dense`).
+    """
+
+    modified: bool = False
+    extrapolate: bool = True
+    inner_max_iterations: int = 100
+    inner: Globalisation = field(default_factory=lambda: Globalisation(min_step=1e-10, watchdog=6,
+                                                                       stall_window=STALL_WINDOW))
+    inner_retry: Globalisation | None = field(default_factory=lambda: Globalisation(min_step=1e-10, watchdog=0,
+                                                                                    stall_window=STALL_WINDOW))
+
+    def __post_init__(self):
+        _check_integer("NNEQM1Options", "inner_max_iterations", self.inner_max_iterations, 1)
+
+    @property
+    def inner_globalisations(self) -> tuple[Globalisation, ...]:
+        """The dense solve's damping rules in the order they are tried."""
+        return _in_turn(self.inner, self.inner_retry)
+
+
+@dataclass
+class NNEQM2Options:
+    """Options of NNEQM2 (one nonsmooth system of the pairs and every Gauss point's Δγ).
+
+    Attributes
+    ----------
+    update_flow_directions
+        False (the seed's method): the flow directions N are frozen at their value from the
+        start of the increment. True: N recomputed from the current iterate after each solve
+        until it stops changing (the radial return's fixed point).
+    flow_update
+        How ``update_flow_directions`` recomputes N: from the trial stress σ_n + C ε(du)
+        ("trial", default) or from the stress σ_n + C (ε(du) − Δγ N) ("stress").
+    inner_max_iterations
+        Iteration limit of each dense nonsmooth solve.
+    max_flow_updates
+        Limit of the N fixed-point passes.
+    flow_rtol
+        Convergence of the N fixed point (stress over σ_y); default 100 · rtol.
+    flow_acceleration
+        Anderson depth of the N fixed point (:class:`~dolfinx_nnqem.numerics.anderson.AndersonMixing`;
+        0: the plain passes).
+    retry_updating_directions
+        With frozen directions: when the dense solve fails, solve the increment again with
+        updated directions (the fixed point of ``update_flow_directions``, from the elastic
+        predictor's trial directions) before the load stepping cuts back. Frozen directions may
+        admit no solution where the stress turns within a large plastic increment; the
+        increment then ends at the radial return (``increment_info[...]["directions"]``).
+    extrapolate
+        Start each increment's dense solve from the secant extrapolation of the last two
+        increments' pair forces (:meth:`ContactProblem.extrapolate`) instead of the last ones.
+    inner
+        Damping of the dense nonsmooth solves.
+    inner_retry
+        Tried from the same start when ``inner`` stops without converging (None: no retry):
+        by default a watchdog, which crosses kinks of the merit function where the monotone
+        steps of ``inner`` shrink to nothing (see :class:`NNEQM1Options`).
+    max_dense_order
+        Largest order 3 NC + NG of the dense system accepted (NG: the Gauss points of the
+        materials that can yield; an elastic body's carry no unknown). Its matrices grow as the
+        order squared (8 bytes each entry; 20 000 is 3.2 GB per matrix); a larger problem is
+        refused before anything is assembled.
+    """
+
+    update_flow_directions: bool = False
+    flow_update: str = "trial"
+    inner_max_iterations: int = 100
+    max_flow_updates: int = 50
+    flow_rtol: float | None = None
+    flow_acceleration: int = 5
+    retry_updating_directions: bool = True
+    extrapolate: bool = True
+    inner: Globalisation = field(default_factory=lambda: Globalisation(min_step=1e-10, watchdog=0,
+                                                                       stall_window=STALL_WINDOW))
+    inner_retry: Globalisation | None = field(default_factory=lambda: Globalisation(min_step=1e-10, watchdog=6,
+                                                                                    stall_window=STALL_WINDOW))
+    max_dense_order: int = 20_000
+
+    def __post_init__(self):
+        _check_integer("NNEQM2Options", "max_dense_order", self.max_dense_order, 1)
+        if self.flow_update not in ("trial", "stress"):
+            raise ValueError(f"NNEQM2Options: flow_update = {self.flow_update!r}; expected 'trial' or 'stress'")
+        _check_integer("NNEQM2Options", "inner_max_iterations", self.inner_max_iterations, 1)
+        _check_integer("NNEQM2Options", "max_flow_updates", self.max_flow_updates, 0)
+        _check_integer("NNEQM2Options", "flow_acceleration", self.flow_acceleration, 0)
+        if self.flow_rtol is not None:
+            _check_real("NNEQM2Options", "flow_rtol", self.flow_rtol, 0.0, 1.0)
+
+    @property
+    def inner_globalisations(self) -> tuple[Globalisation, ...]:
+        """The dense solves' damping rules in the order they are tried."""
+        return _in_turn(self.inner, self.inner_retry)

@@ -1,0 +1,71 @@
+"""The solvers by name: :func:`make_solver`."""
+
+from __future__ import annotations
+
+from dolfinx_nnqem.problem.contact_problem import ContactProblem
+from dolfinx_nnqem.solvers.contract import Solver
+from dolfinx_nnqem.solvers.monolithic import MonolithicSolver
+from dolfinx_nnqem.solvers.nneqm1 import NNEQM1Solver
+from dolfinx_nnqem.solvers.nneqm2 import NNEQM2Solver
+from dolfinx_nnqem.solvers.options import (METHODS, MonolithicOptions, NNEQM1Options, NNEQM2Options,
+                                           SolverOptions)
+
+__all__ = ["make_solver"]
+
+_SOLVERS = {"monolithic": (MonolithicSolver, MonolithicOptions),
+            "nneqm1": (NNEQM1Solver, NNEQM1Options),
+            "nneqm2": (NNEQM2Solver, NNEQM2Options)}
+
+
+def make_solver(method: str, problem: ContactProblem, options: SolverOptions | None = None,
+                **method_options) -> Solver:
+    """The solver called ``method`` ("monolithic", "nneqm1", "nneqm2") for ``problem``.
+
+    Parameters
+    ----------
+    method
+        The method's name (case does not matter).
+    problem
+        The :class:`~dolfinx_nnqem.problem.ContactProblem` to solve.
+    options
+        :class:`~dolfinx_nnqem.solvers.options.SolverOptions`, what every solver shares.
+    method_options
+        The chosen method's own options, by its name: ``monolithic=MonolithicOptions(...)``,
+        ``nneqm1=NNEQM1Options(...)`` or ``nneqm2=NNEQM2Options(...)``.
+
+    Raises
+    ------
+    TypeError
+        An argument of the wrong type, named (e.g. a ``MonolithicOptions`` given as ``options``).
+    ValueError
+        An unknown method, or options of another method.
+    """
+    if not isinstance(method, str):
+        raise TypeError(f"make_solver: method = {method!r} must be a str, one of {list(METHODS)}")
+    method = method.lower()
+    if method not in METHODS:
+        raise ValueError(f"unknown method {method!r}; expected one of {list(METHODS)}")
+    if not isinstance(problem, ContactProblem):
+        raise TypeError(f"make_solver: problem must be a ContactProblem, got {type(problem).__name__}")
+    if options is not None and not isinstance(options, SolverOptions):
+        raise TypeError(f"make_solver: options must be a SolverOptions, got {type(options).__name__}"
+                        + _where_it_goes(options))
+    unknown = sorted(set(method_options) - {method})
+    if unknown:
+        raise ValueError(f"make_solver({method!r}): options {unknown} belong to another method")
+    solver_class, options_class = _SOLVERS[method]
+    own = method_options.get(method)
+    if own is not None and not isinstance(own, options_class):
+        raise TypeError(f"make_solver: {method}= must be a {options_class.__name__}, got {type(own).__name__}"
+                        + _where_it_goes(own))
+    return solver_class(problem, options, own)
+
+
+def _where_it_goes(value: object) -> str:
+    """A hint naming the keyword that takes ``value``'s type, if it is some method's options."""
+    for name, (_, options_class) in _SOLVERS.items():
+        if isinstance(value, options_class):
+            return f" (a {options_class.__name__} goes in {name}={options_class.__name__}(...))"
+    if isinstance(value, SolverOptions):
+        return " (SolverOptions go in options=SolverOptions(...))"
+    return ""

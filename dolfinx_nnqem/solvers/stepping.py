@@ -1,0 +1,247 @@
+"""Load stepping with cutback (``formulation.md`` §6).
+
+The load factor ℓ rises from 0 to 1 in N equal increments. An increment that does not converge
+is halved and retried, at most ``max_cutbacks`` times in a row; then :class:`ConvergenceError`
+names the increment, the residuals and the pair states. Every converged increment is committed
+and handed to the callbacks (the writers) before the next one starts, so a run that dies later
+loses no converged increment.
+
+A solver's "converged" is not taken on trust: before the commit the state is checked
+independently (:func:`dolfinx_nnqem.solvers.checks.check_state`: equilibrium at the free dofs, every
+pair's complementarity, finite values, the small-strain setting); a failed check makes the
+increment a non-converged one with the check's reason. A ``checkpoint``
+(:class:`dolfinx_nnqem.io.checkpoint.Checkpointer`) saves what the next increment needs after the
+writers ran; ``resume`` (from :func:`dolfinx_nnqem.io.checkpoint.restore`) continues such a run.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+from dolfinx_nnqem.solvers.checks import CheckOptions, StateCheck, check_state, failure_details
+from dolfinx_nnqem.solvers.convergence import ConvergenceError, SolveReport, logger
+from dolfinx_nnqem.numerics.linalg import free_dropped_objects
+from dolfinx_nnqem.solvers.step_control import AutomaticIncrements, as_step_control
+from dolfinx_nnqem.problem.validation import check_stepping_arguments
+
+
+@dataclass
+class IncrementResult:
+    """A converged increment, as handed to the writers."""
+
+    index: int  #: 1-based count of converged increments
+    load_factor: float
+    report: SolveReport
+    plastic_points: int  #: Gauss points that yielded in this increment
+    wall_time_s: float
+    cutbacks: int  #: halvings needed before this increment converged
+    commit_time_s: float = 0.0  #: state update (Gauss-point stresses) after convergence
+    output_time_s: float = 0.0  #: time spent in the callbacks (writers)
+    check: StateCheck | None = None  #: the independent check of the converged state
+
+    @property
+    def iterations(self) -> int:
+        return self.report.iterations
+
+
+@dataclass
+class StepperState:
+    """Where load stepping stands after a converged increment (what a restart needs)."""
+
+    start: float  #: the load factor the run started from
+    step: float  #: the next increment's size (after a cutback: the reduced one)
+    cutbacks: int  #: halvings still in force
+    index: int  #: converged increments so far
+
+
+def solve_load_steps(
+    problem,
+    solver,
+    increments: int | str | AutomaticIncrements = 15,
+    *,
+    max_cutbacks: int = 5,
+    callbacks: Sequence[Callable[[IncrementResult], None]] = (),
+    final_load_factor: float = 1.0,
+    max_displacement: float | None = None,
+    check: CheckOptions | None = None,
+    checkpoint=None,
+    resume: StepperState | None = None,
+) -> list[IncrementResult]:
+    """Drive ``solver`` from the last converged load factor to ``final_load_factor``.
+
+    Parameters
+    ----------
+    problem
+        The :class:`~dolfinx_nnqem.problem.contact_problem.ContactProblem`.
+    solver
+        A :class:`~dolfinx_nnqem.solvers.contract.Solver`.
+    increments
+        Number of equal increments N (the seed: 15), or ``"auto"`` / an
+        :class:`~dolfinx_nnqem.solvers.step_control.AutomaticIncrements` for automatic incrementation
+        (the increment grows when Newton converges easily and shrinks when it struggles).
+    max_cutbacks
+        Halvings allowed in a row before giving up.
+    callbacks
+        Called with every converged :class:`IncrementResult`, in order.
+    max_displacement
+        Reject (and cut back) an increment whose largest displacement component exceeds this:
+        past a limit load a small-displacement model keeps finding equilibria with ever larger
+        displacements, so collapse is declared when the displacement leaves the small range.
+    check
+        :class:`~dolfinx_nnqem.solvers.checks.CheckOptions` of the independent check of every converged
+        state (default: tolerances derived from the solver's ``options``).
+    checkpoint
+        Called as ``checkpoint(problem, stepper_state, result)`` after the callbacks of every
+        converged increment (:class:`dolfinx_nnqem.io.checkpoint.Checkpointer`).
+    resume
+        The :class:`StepperState` of a restored checkpoint: continue that run (same
+        ``increments`` and ``final_load_factor``).
+
+    Raises
+    ------
+    ConvergenceError
+        An increment did not converge after ``max_cutbacks`` halvings. Its ``failure``
+        attribute (a dict: increment, load factor, reason, the worst nodes and pairs) is also
+        handed to every callback that has a ``failed`` method before it is raised.
+    """
+    increments, control = as_step_control(increments)
+    increments, max_cutbacks, final_load_factor, max_displacement = check_stepping_arguments(
+        increments or 1, max_cutbacks, final_load_factor, max_displacement)
+    check = check or CheckOptions()
+    solver_options = getattr(solver, "options", None)
+    if resume is None:
+        start = problem.load_factor_n
+        step = (final_load_factor - start) / increments
+        if control is not None:
+            step = control.first_step(final_load_factor - start)
+        cutbacks, index0 = 0, 0
+    else:
+        start, step, cutbacks, index0 = resume.start, resume.step, resume.cutbacks, resume.index
+    results: list[IncrementResult] = []
+    ell = problem.load_factor_n
+    direction = 1.0 if final_load_factor >= start else -1.0  # unloading paths run downwards
+    span = abs(final_load_factor - start)
+    while direction * (final_load_factor - ell) > 1e-12 * span:
+        if control is None:
+            target = ell + step
+            if direction * (target - final_load_factor) > 0:
+                target = final_load_factor
+        else:
+            target = control.target(ell, abs(step), final_load_factor, direction, span)
+        free_dropped_objects(problem.petsc_comms)
+        t0 = time.perf_counter()
+        report = solver.solve_increment(target)
+        verdict = None
+        if report.converged:
+            verdict = check_state(problem, report, solver_options, check)
+            if not verdict.ok:
+                report.converged = False
+                report.message = f"the solver reported convergence, but the independent check failed: {verdict.reason}"
+        if report.converged and max_displacement is not None:
+            u_max = _max_displacement(problem)
+            if u_max > max_displacement:
+                report.converged = False
+                report.message = (f"largest displacement {u_max:.4g} exceeds max_displacement = "
+                                  f"{max_displacement:.4g} (collapse)")
+        if not report.converged:
+            if cutbacks >= max_cutbacks or (control is not None and control.too_small(abs(step) / 2.0, span)):
+                failure = {"increment": index0 + len(results) + 1, "load_factor": float(target),
+                           "last_converged_load_factor": float(ell), "cutbacks": cutbacks,
+                           "reason": report.message, **failure_details(problem)}
+                problem.restore()
+                _give_up(_failure_message(solver, target, report, cutbacks), failure, callbacks)
+            problem.restore()
+            cutbacks += 1
+            step /= 2.0
+            logger.warning(f"[{solver.name}] increment to load factor {target:.6g} failed "
+                           f"({report.message}); cutback {cutbacks}, new step {step:.6g}")
+            continue
+        t_commit = time.perf_counter()
+        problem.commit(report.gauss_point_values)
+        ell = target
+        result = IncrementResult(
+            index=index0 + len(results) + 1, load_factor=target, report=report,
+            plastic_points=problem.state.count_plastic_points(),
+            wall_time_s=time.perf_counter() - t0, cutbacks=cutbacks,
+            commit_time_s=time.perf_counter() - t_commit, check=verdict,
+        )
+        results.append(result)
+        logger.info(f"[{solver.name}] increment {result.index}: load factor {target:.6g} converged in "
+                    f"{report.iterations} iterations, {result.plastic_points} plastic Gauss points")
+        t_out = time.perf_counter()
+        for callback in callbacks:
+            callback(result)
+        result.output_time_s = time.perf_counter() - t_out
+        if control is not None:  # automatic: the size follows the Newton iterations
+            step = direction * control.next_step(abs(step), report.iterations, span)
+            cutbacks = 0
+        elif cutbacks:  # after a successful cut step, try the original step size again
+            step = direction * min(abs(2.0 * step), span / increments)
+            cutbacks = max(cutbacks - 1, 0)
+        if checkpoint is not None:
+            checkpoint(problem, StepperState(start, step, cutbacks, result.index), result)
+    return results
+
+
+def _give_up(message: str, failure: dict, callbacks) -> None:
+    """Raise ConvergenceError with ``failure``, after handing it to the callbacks that take it."""
+    error = ConvergenceError(message)
+    error.failure = failure
+    for callback in callbacks:
+        if hasattr(callback, "failed"):
+            callback.failed(failure)
+    raise error
+
+
+def _max_displacement(problem) -> float:
+    n_owned = problem.V.dofmap.index_map.size_local * 3
+    local = float(abs(problem.u.x.array[:n_owned]).max(initial=0.0))
+    from mpi4py import MPI
+
+    return problem.comm.allreduce(local, op=MPI.MAX)
+
+
+def _failure_message(solver, target: float, report: SolveReport, cutbacks: int) -> str:
+    last = report.final
+    lines = [f"{solver.name}: the increment to load factor {target:.6g} did not converge after "
+             f"{cutbacks} cutbacks: {report.message}"]
+    if last is not None:
+        lines.append(f"  last iterate: |R|/F = {last.equilibrium:.3e}, |H|/F = {last.contact:.3e}, "
+                     f"open/stick/slip = {last.states}, plastic Gauss points = {last.plastic_points}")
+    return "\n".join(lines)
+
+
+def solve_load_path(problem, solver, load_factors: Sequence[float], *,
+                    callbacks: Sequence[Callable[[IncrementResult], None]] = (),
+                    check: CheckOptions | None = None) -> list[IncrementResult]:
+    """Solve the increments ending at the given load factors, in order, without cutback.
+
+    For an explicit load path (e.g. to repeat the path another run took after cutbacks, since
+    friction makes the solution path dependent). Raises :class:`ConvergenceError` at the first
+    increment that does not converge.
+    """
+    results: list[IncrementResult] = []
+    for target in load_factors:
+        t0 = time.perf_counter()
+        report = solver.solve_increment(float(target))
+        verdict = None
+        if report.converged:
+            verdict = check_state(problem, report, getattr(solver, "options", None), check)
+            if not verdict.ok:
+                report.converged = False
+                report.message = f"the solver reported convergence, but the independent check failed: {verdict.reason}"
+        if not report.converged:
+            failure = {"increment": len(results) + 1, "load_factor": float(target), "cutbacks": 0,
+                       "reason": report.message, **failure_details(problem)}
+            problem.restore()
+            _give_up(_failure_message(solver, float(target), report, 0), failure, callbacks)
+        problem.commit(report.gauss_point_values)
+        result = IncrementResult(index=len(results) + 1, load_factor=float(target), report=report,
+                                 plastic_points=problem.state.count_plastic_points(),
+                                 wall_time_s=time.perf_counter() - t0, cutbacks=0, check=verdict)
+        results.append(result)
+        for callback in callbacks:
+            callback(result)
+    return results
