@@ -30,6 +30,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from dolfinx_nnqem.solvers.block_system import AugmentedSystem, MonolithicMatrix, free_mask
+from dolfinx_nnqem.solvers.contract import ReleasesPETSc
 from dolfinx_nnqem.solvers.convergence import IterationRecord, SolveReport, count_states, logger
 from dolfinx_nnqem.numerics.linalg import clear_options, create_ksp, direct_options, free_dropped_objects, global_norm
 from dolfinx_nnqem.solvers.linear_solver import DirectSolver, IterativeSolver
@@ -53,7 +54,7 @@ class _Evaluation:
     lin: object = None  #: the laws' Linearisation (Newton step coordinates), or None without contact
 
 
-class MonolithicSolver:
+class MonolithicSolver(ReleasesPETSc):
     """Semismooth Newton on the displacement and the pair unknowns together.
 
     Parameters

@@ -38,13 +38,14 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import asdict, dataclass
 
 import numpy as np
 from mpi4py import MPI
 
 from dolfinx_nnqem.solvers.condensation import Condensation
+from dolfinx_nnqem.solvers.condensed import CondensedProblem, CondensedSystem, newton_step, rigid_start
 from dolfinx_nnqem.contact.model import PairLaws
+from dolfinx_nnqem.solvers.contract import ReleasesPETSc
 from dolfinx_nnqem.solvers.convergence import IterationRecord, SolveReport, count_states, logger
 from dolfinx_nnqem.numerics.linalg import free_dropped_objects, global_norm
 from dolfinx_nnqem.numerics.newton import Globalisation, Merit, solve
@@ -52,62 +53,13 @@ from dolfinx_nnqem.numerics.nonsmooth import Fallback, solve_dense
 from dolfinx_nnqem.problem.contact_problem import ContactProblem
 from dolfinx_nnqem.solvers.options import NNEQM1Options, SolverOptions
 
-__all__ = ["CondensedProblem", "NNEQM1Solver"]
+__all__ = ["CondensedProblem", "NNEQM1Solver", "rigid_start"]  # the first and last live in .condensed
 
 FULL_STEPS = Globalisation(line_search=False, levenberg_marquardt=False)
 """NNEQM1's outer Newton–Raphson: every step is a solved condensed problem, taken in full."""
 
 
-@dataclass
-class CondensedProblem:
-    """One outer iteration's dense contact problem (all pairs, global order).
-
-    Attributes
-    ----------
-    C
-        (3NC, 3NC) contact flexibility B G Bᵀ.
-    w_free, w_m, lam_m
-        (3NC,) relative displacement of the out-of-balance load, at the iterate, and its forces.
-    mu_f, g0
-        (NC,) friction coefficients and initial gaps.
-    w_prev
-        (NC, 3) w at the start of the increment.
-    r
-        The laws' scaling (the largest over the interfaces).
-    BN, e
-        (3NC, n_r) the free rigid modes seen by the pairs, (n_r,) Nᵀ r_m (empty without them).
-    """
-
-    C: np.ndarray
-    w_free: np.ndarray
-    w_m: np.ndarray
-    lam_m: np.ndarray
-    mu_f: np.ndarray
-    g0: np.ndarray
-    w_prev: np.ndarray
-    r: float
-    BN: np.ndarray
-    e: np.ndarray
-
-    def as_dict(self) -> dict:
-        return asdict(self)
-
-
-def rigid_start(BN: np.ndarray, w_change: np.ndarray) -> np.ndarray:
-    """Starting mode amplitudes α_0 = −(B N)⁺ Δw: the rigid motion that undoes the change ``w_change``
-    of the pairs' relative displacements, in the least-squares sense.
-
-    The generalised inverse fixes a floating body at its fixing dofs, so the elastic predictor
-    moves it rigidly by an arbitrary amount; started from α = 0, its pairs would open or
-    penetrate for no physical reason (and an interface whose pairs all open leaves the body's
-    modes without a Jacobian column). Started from α_0, the pairs keep their relative position.
-    """
-    if BN.shape[1] == 0:
-        return np.zeros(0)
-    return -np.linalg.lstsq(BN, w_change, rcond=None)[0]
-
-
-class NNEQM1Solver:
+class NNEQM1Solver(ReleasesPETSc):
     """Nested NNEQM: contact flexibility + dense nonsmooth Newton inside Newton–Raphson.
 
     Parameters
@@ -175,113 +127,34 @@ class NNEQM1Solver:
         return report
 
     def inner_solve(self, cond: CondensedProblem, laws: PairLaws, z_m: np.ndarray, tol: float, scale: float):
-        """Dense nonsmooth Newton/LM on x = (z, α) with w(z, α) = w_m + w_free + C (λ(z) − λ_m) + B N α.
+        """Dense nonsmooth Newton/LM on x = (z, α) of the condensed problem ``cond``
+        (:class:`~dolfinx_nnqem.solvers.condensed.CondensedSystem`: unknowns and rows scaled by
+        the load scale F, so that the LM parameter ν = c |H̃| sees a residual and a Jacobian of
+        order one). Returns the driver's result and the system (to read z and α off ``result.x``).
 
-        Unknowns and rows are scaled by the load scale F so that the LM parameter ν = c |H̃|
-        sees a residual and a Jacobian of order one (the polar angle is not scaled; the mode
-        amplitudes α scale as F / r).
+        The start is z_m with the free rigid modes' amplitudes that undo the predictor's rigid
+        motion (:func:`~dolfinx_nnqem.solvers.condensed.rigid_start`); with free modes, then one
+        Newton step with every pair's branch frozen at the outer iterate
+        (:meth:`~dolfinx_nnqem.solvers.condensed.CondensedSystem.pair_rows`): the elastic
+        predictor w_free is the response to the out-of-balance load before the pair forces
+        change, and where that load is not in balance (a body held only by contact, whose
+        generalised inverse fixes it at its fixing dofs) pairs evaluated there start on the wrong
+        branch. Where every body is supported the predictor is the physical response and the
+        seed's start from it is kept.
         """
-        C, n_r = cond.C, cond.BN.shape[1]
-        nc = z_m.shape[0]
-        n3 = 3 * nc
-        F = scale
-        z_scale = laws.unknown_scale(F).reshape(-1)
-        x_scale = np.concatenate([z_scale, np.full(n_r, F / cond.r)])
-
-        def w_of(xs, lam):
-            w = cond.w_m + cond.w_free + C @ (lam.reshape(-1) - cond.lam_m)
-            return w + cond.BN @ xs[n3:] if n_r else w
-
-        def step_scale(cartesian):
-            """x_scale of the step coordinates (friction forces of pairs in the Cartesian chart)."""
-            if cartesian is None:
-                return x_scale
-            return np.concatenate([laws.step_scale(F, cartesian).reshape(-1), x_scale[n3:]])
-
-        def system(xs, lam, lin, ev):
-            """The scaled rows and Jacobian for the law evaluation ``ev`` in the laws' step coordinates ``lin``."""
-            y_scale = step_scale(lin.cartesian)
-            # J = blockdiag(∂H/∂w) · C · blockdiag(∂λ/∂y) + blockdiag(∂H/∂y)
-            DwC = np.einsum("nij,njk->nik", ev.dH_dw, C.reshape(nc, 3, n3))
-            Jz = np.einsum("anj,njk->ank", DwC.reshape(n3, nc, 3), lin.dlam_dy)
-            idx = np.arange(nc)
-            Jb = Jz.reshape(nc, 3, nc, 3)
-            Jb[idx, :, idx, :] += lin.dH_dy
-            if not n_r:
-                return ev.H.reshape(-1) / F, Jz.reshape(n3, n3) * y_scale[None, :n3] / F, lin.cartesian
-            # the free rigid modes: w depends on α, and Nᵀ(r + Bᵀ(λ − λ_m)) = 0
-            H = np.concatenate([ev.H.reshape(-1), cond.e + cond.BN.T @ (lam.reshape(-1) - cond.lam_m)])
-            J = np.zeros((n3 + n_r, n3 + n_r))
-            J[:n3, :n3] = Jz.reshape(n3, n3)
-            J[:n3, n3:] = np.einsum("nij,njk->nik", ev.dH_dw, cond.BN.reshape(nc, 3, n_r)).reshape(n3, n_r)
-            J[n3:, :n3] = np.einsum("anj,njk->ank", cond.BN.T.reshape(n_r, nc, 3), lin.dlam_dy).reshape(n_r, n3)
-            return H / F, J * y_scale[None, :] / F, lin.cartesian
-
-        def residual(x):
-            xs = x * x_scale
-            z = xs[:n3].reshape(nc, 3)
-            lam, _ = laws.force(z)
-            ev = laws.evaluate(w_of(xs, lam).reshape(nc, 3), cond.w_prev, z)
-            return system(xs, lam, laws.linearise(z, ev), ev)
-
-        def advance(x, dx, alpha, cartesian):
-            """The pair unknowns step in the laws' coordinates; the mode amplitudes linearly."""
-            xs, dxs = x * x_scale, dx * step_scale(cartesian)
-            z = laws.advance(xs[:n3].reshape(nc, 3), dxs[:n3].reshape(nc, 3), alpha, cartesian)
-            return np.concatenate([z.reshape(-1), xs[n3:] + alpha * dxs[n3:]]) / x_scale
-
-        def on_the_slip(x):
-            """x with the unknowns no force depends on (the polar angle of pairs without friction
-            force) set on the slip there (:meth:`PairLaws.follow_slip`)."""
-            xs = x * x_scale
-            z = xs[:n3].reshape(nc, 3)
-            lam, _ = laws.force(z)
-            z = laws.follow_slip(z, w_of(xs, lam).reshape(nc, 3), cond.w_prev)
-            return np.concatenate([z.reshape(-1), xs[n3:]]) / x_scale
-
-        def advance_following(x, dx, alpha, cartesian):
-            return on_the_slip(advance(x, dx, alpha, cartesian))
-
-        x0 = np.concatenate([z_m.reshape(-1), rigid_start(cond.BN, cond.w_free)]) / x_scale
-        if n_r:  # only a floating body's predictor is out of balance (see _frozen_branch_start)
-            x0 = self._frozen_branch_start(x0, x_scale, laws, cond, z_m, w_of, system, advance)
+        system = CondensedSystem(laws, cond, scale)
+        x0 = system.scaled(z_m, alpha=rigid_start(cond.BN, cond.w_free))
+        if system.n_r:
+            x0 = newton_step(system.residual(x0, frozen=system.at(cond.w_m, z_m)), x0, system.advance)
         # The polar angles follow the slip only if the plain iteration fails: measured on the
         # robustness suite, following always costs cutbacks elsewhere (docs/robustness.md)
         fallback = None
         if laws.slip_following:
-            fallback = Fallback("with the polar angles on the slip", on_the_slip(x0), advance_following)
-        result = solve_dense(residual, x0, tol=tol / F, max_iter=self.settings.inner_max_iterations,
-                             globalisations=self.settings.inner_globalisations, advance=advance, fallback=fallback)
-        result.x = result.x * x_scale
-        return result
-
-    @staticmethod
-    def _frozen_branch_start(x0, x_scale, laws, cond, z_m, w_of, system, advance):
-        """The inner start: one Newton step with every pair's branch frozen at the outer iterate.
-
-        The elastic predictor w_free is the response to the out-of-balance load before the pair
-        forces change; where that load is not in balance (a body held only by contact, whose
-        generalised inverse fixes it at its fixing dofs) it deforms the contact surfaces
-        meaninglessly, and pairs evaluated there start on the wrong branch (opening although
-        they will be pressed). The monolithic solver linearises the laws where the iterate is;
-        this step does the same here: the laws' values and B-Jacobians at (w_m, z_m), their
-        linearisation at x0, one solve. The iteration then starts from its solution (or from x0
-        if that system is singular). Used when there are free rigid modes: where every body is
-        supported, the predictor is the physical response to the out-of-balance load and the
-        seed's start from it is kept.
-        """
-        nc = z_m.shape[0]
-        xs = x0 * x_scale
-        lam, _ = laws.force(z_m)
-        ev = laws.evaluate(cond.w_m.reshape(nc, 3), cond.w_prev, z_m)
-        w = w_of(xs, lam).reshape(nc, 3)
-        H_lin = ev.H + np.einsum("nij,nj->ni", ev.dH_dw, w - cond.w_m.reshape(nc, 3))
-        H, J, cartesian = system(xs, lam, laws.linearise(z_m, ev), ev._replace(H=H_lin))
-        try:
-            step = np.linalg.solve(J, -H)
-        except np.linalg.LinAlgError:
-            return x0
-        return advance(x0, step, 1.0, cartesian) if np.all(np.isfinite(step)) else x0
+            fallback = Fallback("with the polar angles on the slip", system.on_the_slip(x0), system.advance_on_the_slip)
+        result = solve_dense(system.residual, x0, tol=tol / scale, max_iter=self.settings.inner_max_iterations,
+                             globalisations=self.settings.inner_globalisations, advance=system.advance,
+                             fallback=fallback)
+        return result, system
 
     def destroy(self) -> None:
         self.condensation.destroy()
@@ -391,18 +264,17 @@ class _OuterSystem:
         opts = s.options
         tol = opts.rtol * scale + opts.atol
         t0 = time.perf_counter()
-        result = s.inner_solve(cond, self.laws, z_m, tol, max(tol / max(opts.rtol, 1e-300), 1e-300))
+        result, system = s.inner_solve(cond, self.laws, z_m, tol, max(tol / max(opts.rtol, 1e-300), 1e-300))
         s._timings["contact"] = s._timings.get("contact", 0.0) + time.perf_counter() - t0
         self.inner_iterations = result.iterations
         if not result.converged:
             self.inner_failure = f"inner nonsmooth solve failed at outer iteration {self.steps}: {result.message}"
             return self.inner_failure
-        nc = model.num_global
-        z_new = result.x[:3 * nc].reshape(nc, 3)
+        z_new = system.pair_unknowns(result.x)
         lam_new, _ = self.laws.force(z_new)
         du = x_r.getArray(readonly=True) + self._X @ (lam_new.reshape(-1) - cond.lam_m)
         if cond_solver.num_modes:
-            du += cond_solver.mode_array() @ result.x[3 * nc:]
+            du += cond_solver.mode_array() @ system.modes(result.x)
         self._step = (du, model.local_rows(z_new).copy())
         x_r.destroy()
         return None
