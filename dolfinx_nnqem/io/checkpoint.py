@@ -11,7 +11,7 @@ wheel, which loads its own HDF5 first (h5py then fails with "Not a datatype")::
     OUT/checkpoints/ckpt_K/meta.json         load stepping, writers' state, fingerprint
 
 Each rank's file holds its local arrays, ghosts included: the displacement u and u_n, the
-Gauss-point state σ_n, p_n, Δp_n, the contact model's z, z_n, w_n, state_n, slip_n, the load
+Gauss-point state σ_n, p_n, Δp_n, Δε_p,n, the contact model's z, z_n, w_n, state_n, slip_n, the load
 factors and the secant predictor's history (:attr:`ContactProblem.predictor_history`), plus a
 fingerprint of the rank's layout (owned dofs and their coordinates, Gauss points, pairs). A
 checkpoint is complete when every rank's file and ``meta.json`` are on disk; only then does
@@ -146,7 +146,7 @@ class Checkpointer:
 def _write_rank(tmp: Path, problem) -> None:
     st = problem.state
     arrays = {"u": problem.u.x.array, "u_n": st.u_n.x.array, "sigma_n": st.sigma_n.x.array,
-              "p_n": st.p_n.x.array, "dp_n": st.dp_n.x.array}
+              "p_n": st.p_n.x.array, "dp_n": st.dp_n.x.array, "deps_p_n": st.deps_p_n.x.array}
     info = {"format": FORMAT, "fingerprint": _fingerprint(problem), "load_factor_n": float(problem.load_factor_n),
             "load_factor": float(problem.load_factor)}
     if problem.has_contact:
@@ -230,6 +230,8 @@ def _read_rank(path: Path, problem) -> None:
         for name, f in (("u", problem.u), ("u_n", st.u_n), ("sigma_n", st.sigma_n), ("p_n", st.p_n),
                         ("dp_n", st.dp_n)):
             f.x.array[:] = data[name]
+        if "deps_p_n" in data:  # a checkpoint of release 0.1 has no Δε_p,n (only NNEQM2's predictor reads it)
+            st.deps_p_n.x.array[:] = data["deps_p_n"]
         problem.load_factor_n = float(info["load_factor_n"])
         problem.load_factor = float(info["load_factor"])
         if problem.has_contact:

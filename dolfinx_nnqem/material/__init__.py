@@ -5,9 +5,10 @@ in UFL with its state in quadrature spaces, behind the interface the solvers use
 from dolfinx_nnqem.material.von_mises import (DEVIATORIC_BASIS, ELASTIC_YIELD_STRESS, GaussPointValues,
                                               PlasticState, ReturnMap, VonMises, can_yield, deviator_coordinates,
                                               deviator_tensors, elastic_stress, equivalent_stress, flow_direction,
-                                              radial_return, strain, von_mises_stress, yield_function,
+                                              radial_return, return_map_plastic_strain,
+                                              return_map_tangent, strain, von_mises_stress, yield_function,
                                               yield_stress_unit)
 
 __all__ = ["DEVIATORIC_BASIS", "ELASTIC_YIELD_STRESS", "GaussPointValues", "PlasticState", "ReturnMap", "VonMises",
            "can_yield", "deviator_coordinates", "deviator_tensors", "elastic_stress", "equivalent_stress",
-           "flow_direction", "radial_return", "strain", "von_mises_stress", "yield_function", "yield_stress_unit"]
+           "flow_direction", "radial_return", "return_map_plastic_strain", "return_map_tangent", "strain", "von_mises_stress", "yield_function", "yield_stress_unit"]

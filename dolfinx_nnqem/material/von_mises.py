@@ -114,11 +114,19 @@ class GaussPointValues:
         (owned Gauss points, 3, 3) stresses.
     dp
         (owned Gauss points,) equivalent plastic strain increments.
+    deps_p
+        (owned Gauss points, 3, 3) plastic strain increments (None: not given).
+    flow_rule
+        How the flow was integrated: "backward-euler" (the radial return's normal at the end of the
+        increment) or "frozen-directions" (NNEQM2's seed variant: the directions at its start).
+        The independent check verifies the values against the rule they claim.
     """
 
     u: np.ndarray
     sigma: np.ndarray
     dp: np.ndarray
+    deps_p: np.ndarray | None = None
+    flow_rule: str = "backward-euler"
 
 
 class ReturnMap(NamedTuple):
@@ -126,6 +134,7 @@ class ReturnMap(NamedTuple):
 
     sigma: ufl.core.expr.Expr  #: updated stress σ
     dp: ufl.core.expr.Expr  #: equivalent plastic strain increment Δp ≥ 0
+    deps_p: ufl.core.expr.Expr  #: plastic strain increment Δε_p = Δp (3/2) s_tr / q_tr
     f_tr: ufl.core.expr.Expr  #: trial yield function
     q_tr: ufl.core.expr.Expr  #: trial von Mises stress
     s_tr: ufl.core.expr.Expr  #: trial deviatoric stress
@@ -183,6 +192,7 @@ class PlasticState:
         self.sigma_n = fem.Function(W_tensor, name="sigma")  # converged stress
         self.p_n = fem.Function(W_scalar, name="p")  # converged equivalent plastic strain
         self.dp_n = fem.Function(W_scalar, name="dp")  # Δp of the last converged increment
+        self.deps_p_n = fem.Function(W_tensor, name="deps_p")  # Δε_p of the last converged increment
         self.u_n = fem.Function(V, name="u_converged")  # converged displacement
         self._points = compat.interpolation_points(W_scalar)
         self._commit_expressions = None
@@ -203,7 +213,8 @@ class PlasticState:
         # q_tr > 0 whenever f_tr > 0; the guard only keeps the elastic branch free of 0/0.
         q_safe = ufl.conditional(ufl.gt(f_tr, 0), q_tr, 1.0)
         sigma = sigma_tr - 3 * self.mu * dp / q_safe * s_tr
-        return ReturnMap(sigma=sigma, dp=dp, f_tr=f_tr, q_tr=q_tr, s_tr=s_tr)
+        deps_p = 1.5 * dp / q_safe * s_tr  # so that σ = σ_tr − 2μ Δε_p
+        return ReturnMap(sigma=sigma, dp=dp, deps_p=deps_p, f_tr=f_tr, q_tr=q_tr, s_tr=s_tr)
 
     def tangent(self, u, eps_du) -> ufl.core.expr.Expr:
         """C_alg : ε(du), the consistent tangent at ``u`` applied to the strain ``eps_du``."""
@@ -236,7 +247,8 @@ class PlasticState:
 
     # -- state update -----------------------------------------------------------------------
     def commit(self, u: fem.Function) -> None:
-        """Accept ``u`` as converged: update σ_n, p_n, Δp_n and u_n at every Gauss point."""
+        """Accept ``u`` as converged: update σ_n, p_n, Δp_n, Δε_p,n and u_n at every Gauss point
+        by the radial return."""
         if self._commit_expressions is None:
             # Built once: the expressions refer to ``u`` (the problem's unknown) symbolically.
             rm = self.return_map(u)
@@ -244,25 +256,28 @@ class PlasticState:
             self._commit_expressions = (
                 jit.expression(rm.sigma, self._points),
                 jit.expression(rm.dp, self._points),
+                jit.expression(rm.deps_p, self._points),
             )
         elif u is not self._commit_u:
             raise ValueError("PlasticState.commit must always be given the same displacement Function")
-        e_sigma, e_dp = self._commit_expressions
+        e_sigma, e_dp, e_deps_p = self._commit_expressions
         sigma_new = fem.Function(self.W_tensor)
         sigma_new.interpolate(e_sigma)
         self.dp_n.interpolate(e_dp)
+        self.deps_p_n.interpolate(e_deps_p)
         self.sigma_n.x.array[:] = sigma_new.x.array
         self.p_n.x.array[:] += self.dp_n.x.array
         self.u_n.x.array[:] = u.x.array
-        for f in (self.sigma_n, self.p_n, self.dp_n, self.u_n):
+        for f in (self.sigma_n, self.p_n, self.dp_n, self.deps_p_n, self.u_n):
             f.x.scatter_forward()
 
-    def commit_values(self, u: fem.Function, sigma: np.ndarray, dp: np.ndarray) -> None:
+    def commit_values(self, u: fem.Function, sigma: np.ndarray, dp: np.ndarray,
+                      deps_p: np.ndarray | None = None) -> None:
         """Accept ``u`` as converged with Gauss-point values computed by the caller.
 
-        For solvers whose stress update is not this class's radial return (NNEQM2 integrates
-        the flow with directions frozen over the increment): σ_n ← ``sigma``,
-        Δp_n ← ``dp``, p_n ← p_n + ``dp``, u_n ← ``u``.
+        For solvers whose stress update is not this class's radial return (NNEQM2's own
+        integration): σ_n ← ``sigma``, Δp_n ← ``dp``, p_n ← p_n + ``dp``, Δε_p,n ← ``deps_p``,
+        u_n ← ``u``.
 
         Parameters
         ----------
@@ -271,6 +286,10 @@ class PlasticState:
             in the order of :attr:`W_tensor`'s owned dofs.
         dp
             Equivalent plastic strain increments at the owned Gauss points, shape ``(n_owned,)``.
+        deps_p
+            Plastic strain increments at the owned Gauss points, ``(n_owned, 3, 3)``; None: the
+            part of the strain increment the stress increment does not account for,
+            dev Δε − dev(σ − σ_n) / (2μ) (plastic strains are deviatoric).
         """
         n = self.W_scalar.dofmap.index_map.size_local
         sigma = np.asarray(sigma, dtype=float).reshape(-1)
@@ -278,12 +297,28 @@ class PlasticState:
         if sigma.size != 9 * n or dp.size != n:
             raise ValueError(f"commit_values: expected {n} owned Gauss points, got sigma of size "
                              f"{sigma.size} (9 per point) and dp of size {dp.size}")
+        if deps_p is None:
+            deps_p = self.plastic_strain_of(u, sigma.reshape(n, 3, 3))
+        deps_p = np.asarray(deps_p, dtype=float).reshape(-1)
+        if deps_p.size != 9 * n:
+            raise ValueError(f"commit_values: expected deps_p of size {9 * n}, got {deps_p.size}")
         self.sigma_n.x.array[:9 * n] = sigma
         self.dp_n.x.array[:n] = dp
         self.p_n.x.array[:n] += dp
+        self.deps_p_n.x.array[:9 * n] = deps_p
         self.u_n.x.array[:] = u.x.array
-        for f in (self.sigma_n, self.p_n, self.dp_n, self.u_n):
+        for f in (self.sigma_n, self.p_n, self.dp_n, self.deps_p_n, self.u_n):
             f.x.scatter_forward()
+
+    def plastic_strain_of(self, u: fem.Function, sigma: np.ndarray) -> np.ndarray:
+        """dev Δε − dev(σ − σ_n)/(2μ) at the owned Gauss points (n, 3, 3), Δε = ε(u) − ε(u_n)."""
+        n = sigma.shape[0]
+        strain_increment = fem.Function(self.W_tensor)
+        strain_increment.interpolate(jit.expression(ufl.dev(strain(u) - strain(self.u_n)), self._points))
+        mu = self.values_at_points(self.mu)
+        dsigma = sigma - self.sigma_n.x.array[:9 * n].reshape(n, 3, 3)
+        dev_dsigma = dsigma - np.trace(dsigma, axis1=1, axis2=2)[:, None, None] * np.eye(3) / 3.0
+        return strain_increment.x.array[:9 * n].reshape(n, 3, 3) - dev_dsigma / (2.0 * mu[:, None, None])
 
     def count_plastic_points(self) -> int:
         """Number of Gauss points (over all ranks) that yielded in the last converged increment."""
@@ -419,6 +454,41 @@ def flow_direction(s: np.ndarray, stress_unit: np.ndarray, fallback: np.ndarray 
     N = np.zeros_like(s) if fallback is None else fallback.copy()
     N[ok] = 1.5 * s[ok] / q[ok, None]
     return N
+
+
+def return_map_plastic_strain(t: np.ndarray, mu: np.ndarray, sigma_y0: np.ndarray, H: np.ndarray,
+                              p_n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The radial return of trial deviators t (coordinates, (n, 5)): the plastic strain increment
+    Δε_p (coordinates, (n, 5)) and Δp (n,).
+
+    Δp = max(q_tr − σ_y0 − H p_n, 0) / (3μ + H), Δε_p = Δp (3/2) t / q_tr (= Δp N at the returned
+    stress, which is parallel to t for von Mises).
+    """
+    q = equivalent_stress(t)
+    dp = np.maximum(yield_function(q, sigma_y0, H, p_n), 0.0) / (3.0 * mu + H)
+    q_safe = np.where(dp > 0.0, q, 1.0)
+    return (1.5 * dp / q_safe)[:, None] * t, dp
+
+
+def return_map_tangent(t: np.ndarray, mu: np.ndarray, sigma_y0: np.ndarray, H: np.ndarray,
+                       p_n: np.ndarray) -> np.ndarray:
+    """∂Δε_p/∂e (n, 5, 5) of :func:`return_map_plastic_strain` for t = s_n + 2μ e, e the deviatoric
+    strain increment (coordinates).
+
+    With n̂ = t/|t|: 2μ √(3/2) [√(3/2)/(3μ + H) n̂⊗n̂ + Δp/|t| (I − n̂⊗n̂)] where the return is
+    plastic, 0 elsewhere. C − 2μ·2μ of it on the deviators is the consistent tangent C_alg of
+    :meth:`PlasticState.tangent` (``formulation.md`` §1).
+    """
+    _, dp = return_map_plastic_strain(t, mu, sigma_y0, H, p_n)
+    plastic = dp > 0.0
+    size = np.linalg.norm(t, axis=1)
+    n_hat = t / np.where(plastic, size, 1.0)[:, None]
+    nn = np.einsum("ja,jb->jab", n_hat, n_hat)
+    radial = (_SQRT32 / (3.0 * mu + H))[:, None, None] * nn
+    turning = (dp / np.where(plastic, size, 1.0))[:, None, None] * (np.eye(5) - nn)
+    out = (2.0 * mu * _SQRT32)[:, None, None] * (radial + turning)
+    out[~plastic] = 0.0
+    return out
 
 
 def elastic_stress(eps: np.ndarray, lmbda: np.ndarray, mu: np.ndarray) -> np.ndarray:

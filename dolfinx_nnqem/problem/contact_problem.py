@@ -366,19 +366,29 @@ class ContactProblem:
             R.axpy(-1.0, self.contact.global_force(self.contact.force(z)))
         return R
 
-    def force_scale(self, F_int: PETSc.Vec) -> float:
-        """The problem's force scale F at the current iterate, for convergence tests.
+    def force_scale(self, F_int: PETSc.Vec, F_ext: PETSc.Vec | None = None) -> float:
+        """The problem's force scale F at the current iterate, for convergence tests: the one
+        recipe every solver and the independent check use.
 
         F = max(‖F_ext(ℓ)‖, ‖F_int‖, ‖Bᵀλ(z)‖, r ‖Δm‖, F_floor): the applied loads, the internal
         forces (which carry the prescribed displacements), the contact forces, the forces a moving
         rigid obstacle sets up over the increment (``ContactModel.motion_force_scale``), and
         ``force_floor``: a state without forces (a body moved rigidly before it touches, every
-        pair open) would otherwise be judged by its rounding errors against zero.
+        pair open) would otherwise be judged by its rounding errors against zero. ``F_ext``:
+        F_ext(ℓ) if the caller has it (assembled otherwise).
         """
-        scale = max(self.external_force().norm(), F_int.norm(), self.force_floor)
+        if F_ext is None:
+            F_ext = self.external_force()
+            F_ext_norm = F_ext.norm()
+            F_ext.destroy()
+        else:
+            F_ext_norm = F_ext.norm()
+        scale = max(F_ext_norm, F_int.norm(), self.force_floor)
         if self.has_contact:
-            scale = max(scale, self.contact.global_force(self.contact.force()).norm(),
+            contact_force = self.contact.global_force(self.contact.force())
+            scale = max(scale, contact_force.norm(),
                         self.contact.motion_force_scale(self.load_factor, self.load_factor_n))
+            contact_force.destroy()
         return scale
 
     def tangent_action(self, delta: np.ndarray) -> PETSc.Vec:
@@ -408,30 +418,39 @@ class ContactProblem:
         motion = self.contact.motion_amplitudes(load_factor) if self.has_contact else np.zeros(0)
         return np.concatenate([np.array(values), motion])
 
-    def extrapolate(self, load_factor: float) -> bool:
-        """Secant predictor: u ← u_n + β (u_n − u_{n−1}), the contact force likewise (see
-        :meth:`ContactModel.extrapolate`); True if it was applied.
-
-        Starts Newton from the linear extrapolation of the last two converged increments
-        instead of from the last one (constrained dofs are set afterwards by
-        :meth:`apply_prescribed_displacements`). β is the ratio of this increment's change of
-        the load amplitudes to the last one's (Δℓ / Δℓ_previous when every load follows ℓ).
-        Nothing happens before two increments exist, or where the load path turns (the
-        changes of the amplitudes are not parallel: e.g. a pressure stops rising and a drag
-        starts), since the last increment's response then says little about this one's.
-        """
+    def extrapolation_factor(self, load_factor: float) -> float | None:
+        """β of the secant predictor to ``load_factor``: the ratio of this increment's change of the
+        load amplitudes to the last one's (Δℓ / Δℓ_previous when every load follows ℓ); None before
+        two increments exist, or where the load path turns (the changes of the amplitudes are not
+        parallel: e.g. a pressure stops rising and a drag starts), since the last increment's
+        response then says little about this one's."""
         if self._previous is None:
-            return False
-        ell_prev, u_prev, z_prev = self._previous
+            return None
+        ell_prev = self._previous[0]
         a_n = self.amplitudes(self.load_factor_n)
         d_prev = a_n - self.amplitudes(ell_prev)
         d_new = self.amplitudes(load_factor) - a_n
         norm_prev = float(d_prev @ d_prev)
         if norm_prev == 0.0:
-            return False
+            return None
         beta = float(d_new @ d_prev) / norm_prev
         if np.linalg.norm(d_new - beta * d_prev) > 1e-3 * np.linalg.norm(d_new):
-            return False  # the load path turns here
+            return None  # the load path turns here
+        return beta
+
+    def extrapolate(self, load_factor: float) -> bool:
+        """Secant predictor: u ← u_n + β (u_n − u_{n−1}), the contact force likewise (see
+        :meth:`ContactModel.extrapolate`), β from :meth:`extrapolation_factor`; True if it was
+        applied.
+
+        Starts Newton from the linear extrapolation of the last two converged increments
+        instead of from the last one (constrained dofs are set afterwards by
+        :meth:`apply_prescribed_displacements`).
+        """
+        beta = self.extrapolation_factor(load_factor)
+        if beta is None:
+            return False
+        _, u_prev, z_prev = self._previous
         u_n = self.state.u_n.x.array
         self.u.x.array[:] = u_n + beta * (u_n - u_prev)
         if self.has_contact:
@@ -475,7 +494,8 @@ class ContactProblem:
         self._previous = (self.load_factor_n, self.state.u_n.x.array.copy(),
                           self.contact.z_n.copy() if self.has_contact else None)
         if gauss_point_values is not None and np.array_equal(gauss_point_values.u, self.u.x.array):
-            self.state.commit_values(self.u, gauss_point_values.sigma, gauss_point_values.dp)
+            self.state.commit_values(self.u, gauss_point_values.sigma, gauss_point_values.dp,
+                                     gauss_point_values.deps_p)
         else:
             self.state.commit(self.u)
         self.load_factor_n = self.load_factor

@@ -13,9 +13,12 @@ API only, before committing it:
 * **contact**: every pair's law H(w, z) (force units, the supports' pinned directions applied),
   ‖H‖ ≤ tol · F, and, independently of how a law is written, the Coulomb conditions of
   the forces λ(z): p_n ≥ −tol·F and |λ_t| ≤ μ_f max(p_n, 0) + tol·F at every pair;
-* **plastic admissibility** of a solver's own Gauss-point values (NNEQM2): the stress lies in the
-  yield surface, q(σ) − σ_y0 − H (p_n + Δp) ≤ tol · σ_u with σ_u = min(σ_y0, 10⁻² E) (the yield
-  rows' stress unit), and Δp ≥ 0 (the radial return's stresses are admissible by construction);
+* **the constitutive law** at every Gauss point (:mod:`~dolfinx_nnqem.solvers.constitutive`), of
+  the values the commit will store — a solver's own (NNEQM2) or the radial return's at u
+  (monolithic, NNEQM1): σ = σ_n + C (Δε − Δε_p) with Δε from u itself; Δε_p deviatoric with
+  |Δε_p| = √(3/2) Δp (ε_p,n+1 − ε_p,n = Δγ N, p_n+1 = p_n + Δγ); Δε_p along the end stress's normal
+  for the backward-Euler rule; Δp ≥ 0, f ≤ 0, and f = 0 where Δp > 0 (Δγ f = 0); each to
+  tol · σ_u with σ_u = min(σ_y0, 10⁻² E);
 * **finite values**: u and z hold no NaN or infinity;
 * **small strain**: the package solves small-strain problems, so a state with a strain (the
   largest ‖sym ∇u‖ at a Gauss point, Frobenius norm) above ``max_strain`` or an infinitesimal
@@ -47,10 +50,10 @@ from mpi4py import MPI
 
 from dolfinx_nnqem import compat, jit
 from dolfinx_nnqem.contact.laws import STATE_NAMES
-from dolfinx_nnqem.material.von_mises import (can_yield, deviator_coordinates, equivalent_stress, strain,
-                                              yield_function, yield_stress_unit)
+from dolfinx_nnqem.material.von_mises import GaussPointValues, can_yield, strain, yield_stress_unit
 from dolfinx_nnqem.problem.contact_problem import assemble_vector
 from dolfinx_nnqem.problem.validation import check_real
+from dolfinx_nnqem.solvers.constitutive import ConstitutiveCheck, check_constitutive_law
 from dolfinx_nnqem.solvers.options import SolverOptions
 
 __all__ = ["CheckOptions", "StateCheck", "check_state", "failure_details"]
@@ -107,7 +110,8 @@ class StateCheck:
     force_scale: float  #: F
     tolerance: float  #: the relative tolerance used
     own_stresses: bool  #: equilibrium measured with the solver's own Gauss-point stresses
-    yield_violation: float = 0.0  #: own stresses: largest f / σ_u outside the yield surface (0 inside; inf if Δp < 0)
+    yield_violation: float = 0.0  #: largest f / σ_u outside the yield surface (0 inside; inf if some Δp < 0)
+    constitutive: dict = field(default_factory=dict)  #: each relation's largest violation / σ_u (:class:`ConstitutiveCheck`)
     worst_pairs: list = field(default_factory=list)  #: [{pair, position, state, H/F}] (failed checks)
     worst_nodes: list = field(default_factory=list)  #: [{position, |R|/F}] (failed checks)
 
@@ -120,20 +124,46 @@ class _Forms:
 
     def __init__(self, problem):
         st = problem.state
+        points = compat.interpolation_points(st.W_tensor)
         self.grad = fem.Function(st.W_tensor)
-        self.grad_expr = jit.expression(ufl.grad(problem.u), compat.interpolation_points(st.W_tensor))
+        self.grad_expr = jit.expression(ufl.grad(problem.u), points)
+        self.strain_increment = fem.Function(st.W_tensor)
+        self.strain_increment_expr = jit.expression(strain(problem.u) - strain(st.u_n), points)
         self.sigma = fem.Function(st.W_tensor)
         self.own_force = jit.form(ufl.inner(self.sigma, strain(ufl.TestFunction(problem.V))) * st.dx)
+        self._return_map = None
         self._material = None
+        # the state, not the problem: this object is the value of a WeakKeyDictionary keyed by
+        # the problem, and a reference to its key would keep both alive for the whole process
         self._state = st
 
-    def material_at_points(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """σ_y0, H and the stress unit σ_u at the owned Gauss points (computed once)."""
+    def material_at_points(self) -> dict[str, np.ndarray]:
+        """λ, μ, σ_y0, H, the stress unit σ_u and the points that can yield, at the owned Gauss
+        points (computed once)."""
         if self._material is None:
             st = self._state
-            sy = st.values_at_points(st.sigma_y0)
-            self._material = (sy, st.values_at_points(st.H), yield_stress_unit(sy, st.values_at_points(st.E)))
+            at = st.values_at_points
+            sy = at(st.sigma_y0)
+            self._material = {"lmbda": at(st.lmbda), "mu": at(st.mu), "sigma_y0": sy, "H": at(st.H),
+                              "stress_unit": yield_stress_unit(sy, at(st.E)), "yields": can_yield(sy)}
         return self._material
+
+    def return_map_values(self, p) -> GaussPointValues:
+        """The values the radial return gives at the problem ``p``'s u: what a commit without a
+        solver's own values stores."""
+        st = self._state
+        if self._return_map is None:
+            rm = st.return_map(p.u)
+            points = compat.interpolation_points(st.W_tensor)
+            self._return_map = (jit.expression(rm.sigma, points), jit.expression(rm.dp, points),
+                                jit.expression(rm.deps_p, points), fem.Function(st.W_tensor),
+                                fem.Function(st.W_scalar), fem.Function(st.W_tensor))
+        e_sigma, e_dp, e_deps, sigma, dp, deps = self._return_map
+        for f, e in ((sigma, e_sigma), (dp, e_dp), (deps, e_deps)):
+            f.interpolate(e)
+        n = st.W_scalar.dofmap.index_map.size_local
+        return GaussPointValues(p.u.x.array, sigma.x.array[:9 * n].reshape(n, 3, 3).copy(), dp.x.array[:n].copy(),
+                                deps.x.array[:9 * n].reshape(n, 3, 3).copy(), "backward-euler")
 
 
 _FORMS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
@@ -212,14 +242,18 @@ def check_state(problem, report=None, solver_options=None, options: CheckOptions
                 if atol > limit * F else "")
         reasons.append(f"equilibrium residual |R|/F = {eq:.3e} > {limit:.1e} (F = {F:.4g} N){hint}")
 
-    # -- plastic admissibility of the solver's own Gauss-point values
-    yield_violation = 0.0
-    if own:
-        yield_violation = _yield_violation(problem, forms, gpv)
-        if not yield_violation <= tol:
-            reasons.append("the solver's Gauss-point values have Δp < 0" if math.isinf(yield_violation) else
-                           f"the solver's Gauss-point stresses leave the yield surface: max (q − σ_y)/σ_u = "
-                           f"{yield_violation:.3e} > {tol:.1e}")
+    # -- the constitutive law at every Gauss point, of the values the commit will store
+    values = gpv if own else forms.return_map_values(problem)
+    constitutive, yield_violation = _constitutive(problem, forms, values)
+    if comm.allreduce(int(np.any(np.asarray(values.dp) < 0.0)), op=MPI.MAX):
+        yield_violation = math.inf
+        reasons.append("the Gauss-point values have Δp < 0")
+    broken = [f"{_RELATIONS[name]} (by {value:.3e} σ_u)" for name, value in constitutive._asdict().items()
+              if not value <= tol]
+    if broken:
+        source = "the solver's" if own else "the radial return's"
+        reasons.append(f"{source} Gauss-point values break the constitutive law beyond {tol:.1e} σ_u: "
+                       + "; ".join(broken))
 
     # -- contact
     contact = coulomb = 0.0
@@ -260,7 +294,8 @@ def check_state(problem, report=None, solver_options=None, options: CheckOptions
                        "far outside the small-rotation setting (a mechanism or collapse?)")
 
     result = StateCheck(not reasons, "; ".join(reasons), float(eq), float(contact), float(coulomb),
-                        float(strain), float(rotation), float(F), float(tol), own, float(yield_violation))
+                        float(strain), float(rotation), float(F), float(tol), own, float(yield_violation),
+                        constitutive._asdict())
     if reasons:
         result.worst_nodes = _worst_nodes(problem, Rf, F)
         if pair_violation is not None:
@@ -270,19 +305,31 @@ def check_state(problem, report=None, solver_options=None, options: CheckOptions
     return result
 
 
-def _yield_violation(problem, forms: _Forms, gpv) -> float:
-    """Largest (q(σ) − σ_y0 − H (p_n + Δp)) / σ_u over the Gauss points of all ranks, or 0 when the
-    solver's values lie in the yield surface; +inf if some Δp < 0."""
-    sy, H, su = forms.material_at_points()
-    n_gp = sy.size
-    sigma = np.asarray(gpv.sigma, dtype=float).reshape(n_gp, 3, 3)
-    dp = np.asarray(gpv.dp, dtype=float).reshape(n_gp)
-    p_n = problem.state.p_n.x.array[:n_gp]
-    f = yield_function(equivalent_stress(deviator_coordinates(sigma)), sy, H, p_n + dp)
-    worst = np.max(np.where(can_yield(sy), f / su, -np.inf), initial=-np.inf)  # elastic materials: nothing to violate
-    if np.any(dp < 0.0):
-        worst = np.inf
-    return max(_allmax(problem.comm, float(worst)), 0.0)
+_RELATIONS = {
+    "elasticity": "σ = σ_n + C (Δε − Δε_p)",
+    "plastic_strain": "Δε_p deviatoric with √(2/3)|Δε_p| = Δp",
+    "flow_direction": "Δε_p = Δp (3/2) s/q (the flow along the normal at the end of the increment)",
+    "yield_surface": "the stress within the yield surface, f(σ, p_n + Δp) ≤ 0",
+    "complementarity": "Δp ≥ 0 and f = 0 where Δp > 0",
+}
+"""The relations of :mod:`~dolfinx_nnqem.solvers.constitutive`, as the check's reason names them."""
+
+
+def _constitutive(problem, forms: _Forms, values: GaussPointValues) -> tuple[ConstitutiveCheck, float]:
+    """The constitutive relations at the owned Gauss points for ``values`` (collective), and the
+    yield-surface figure alone."""
+    st = problem.state
+    n = st.W_scalar.dofmap.index_map.size_local
+    forms.strain_increment.interpolate(forms.strain_increment_expr)
+    deps_p = values.deps_p
+    if deps_p is None:  # values given without their plastic strains: what the stresses leave over
+        deps_p = st.plastic_strain_of(problem.u, np.asarray(values.sigma).reshape(n, 3, 3))
+    result = check_constitutive_law(
+        problem.comm, forms.strain_increment.x.array[:9 * n].reshape(n, 3, 3),
+        np.asarray(values.sigma, dtype=float).reshape(n, 3, 3), np.asarray(values.dp, dtype=float).reshape(n),
+        np.asarray(deps_p, dtype=float).reshape(n, 3, 3), values.flow_rule,
+        st.sigma_n.x.array[:9 * n].reshape(n, 3, 3), st.p_n.x.array[:n], forms.material_at_points())
+    return result, result.yield_surface
 
 
 def _worst_nodes(problem, Rf, F: float, count: int = 5) -> list:

@@ -193,6 +193,17 @@ class Condensation:
         """Nᵀ f (n_r,): the load ``f`` against each free rigid mode (collective)."""
         return np.array([v.dot(f) for v in self.modes.vectors])
 
+    def mode_amplitudes(self, displacement: np.ndarray) -> np.ndarray:
+        """α with N α = ``displacement`` at the fixing dofs (collective; ``displacement``: owned rows
+        of a vector laid out like V): the free rigid motion a displacement carries, since
+        everything G returns vanishes at the fixing dofs."""
+        if self.num_modes == 0:
+            return np.zeros(0)
+        comm = self.problem.comm
+        values = np.concatenate(comm.allgather(np.asarray(displacement)[self._owned_fixing]))
+        rows = np.concatenate(comm.allgather(self.mode_array()[self._owned_fixing])).reshape(-1, self.num_modes)
+        return np.linalg.solve(rows, values)
+
     def mode_array(self) -> np.ndarray:
         """N's owned rows (n_u, n_r)."""
         if self.num_modes == 0:

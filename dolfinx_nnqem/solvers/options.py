@@ -10,10 +10,13 @@ from dataclasses import dataclass, field
 
 from dolfinx_nnqem.numerics.newton import Globalisation
 
-__all__ = ["METHODS", "STALL_WINDOW", "MonolithicOptions", "NNEQM1Options", "NNEQM2Options", "SolverOptions"]
+__all__ = ["FLOW_DIRECTIONS", "METHODS", "STALL_WINDOW", "MonolithicOptions", "NNEQM1Options", "NNEQM2Options", "SolverOptions"]
 
 METHODS = ("monolithic", "nneqm1", "nneqm2")
 """The solvers by name (:func:`~dolfinx_nnqem.solvers.registry.make_solver`)."""
+
+FLOW_DIRECTIONS = ("return-map", "frozen")
+"""NNEQM2's two variants (:class:`NNEQM2Options`)."""
 
 
 def _check_integer(owner: str, name: str, value, lowest: int) -> None:
@@ -163,56 +166,38 @@ class NNEQM1Options:
 
 @dataclass
 class NNEQM2Options:
-    """Options of NNEQM2 (one nonsmooth system of the pairs and every Gauss point's Δγ).
+    """Options of NNEQM2 (one nonsmooth system of the pairs and every Gauss point's plastic flow).
 
     Attributes
     ----------
-    update_flow_directions
-        False (the seed's method): the flow directions N are frozen at their value from the
-        start of the increment. True: N recomputed from the current iterate after each solve
-        until it stops changing (the radial return's fixed point).
-    flow_update
-        How ``update_flow_directions`` recomputes N: from the trial stress σ_n + C ε(du)
-        ("trial", default) or from the stress σ_n + C (ε(du) − Δγ N) ("stress").
-    inner_max_iterations
-        Iteration limit of each dense nonsmooth solve.
-    max_flow_updates
-        Limit of the N fixed-point passes.
-    flow_rtol
-        Convergence of the N fixed point (stress over σ_y); default 100 · rtol.
-    flow_acceleration
-        Anderson depth of the N fixed point (:class:`~dolfinx_nnqem.numerics.anderson.AndersonMixing`;
-        0: the plain passes).
-    retry_updating_directions
-        With frozen directions: when the dense solve fails, solve the increment again with
-        updated directions (the fixed point of ``update_flow_directions``, from the elastic
-        predictor's trial directions) before the load stepping cuts back. Frozen directions may
-        admit no solution where the stress turns within a large plastic increment; the
-        increment then ends at the radial return (``increment_info[...]["directions"]``).
+    flow_directions
+        "return-map" (default): the flow directions are unknowns with the plastic strains, and the
+        answer is the backward-Euler (radial return) state, the other methods' answer
+        (:mod:`~dolfinx_nnqem.solvers.nneqm2_return_map`). "frozen": the seed's method, the
+        directions frozen at the start of the increment and a dense system in the plastic
+        multipliers (:mod:`~dolfinx_nnqem.solvers.nneqm2_frozen`): first-order accurate in the
+        increment where the stress turns (``docs/theory.md`` measures its error).
     extrapolate
-        Start each increment's dense solve from the secant extrapolation of the last two
-        increments' pair forces (:meth:`ContactProblem.extrapolate`) instead of the last ones.
-    inner
-        Damping of the dense nonsmooth solves.
-    inner_retry
-        Tried from the same start when ``inner`` stops without converging (None: no retry):
-        by default a watchdog, which crosses kinks of the merit function where the monotone
-        steps of ``inner`` shrink to nothing (see :class:`NNEQM1Options`).
+        Start each increment from the secant extrapolation of the last two increments (the pair
+        forces, :meth:`ContactProblem.extrapolate`; "return-map": the plastic strains too).
+    globalisation
+        "return-map": the damping of its Newton iteration (as the monolithic solver's).
+    inner_max_iterations, inner, inner_retry
+        "frozen": the iteration limit and the damping rules of the dense nonsmooth solves, tried in
+        turn (``inner_retry`` None: no retry).
     max_dense_order
-        Largest order 3 NC + NG of the dense system accepted (NG: the Gauss points of the
-        materials that can yield; an elastic body's carry no unknown). Its matrices grow as the
-        order squared (8 bytes each entry; 20 000 is 3.2 GB per matrix); a larger problem is
-        refused before anything is assembled.
+        "frozen": the largest order 3 NC + NG of the dense system accepted (NG: the Gauss points
+        of the materials that can yield). Its matrices grow as the order squared (8 bytes each
+        entry; 20 000 is 3.2 GB per matrix); a larger problem is refused before anything is
+        assembled. The default variant has no dense matrix over the Gauss points.
     """
 
-    update_flow_directions: bool = False
-    flow_update: str = "trial"
-    inner_max_iterations: int = 100
-    max_flow_updates: int = 50
-    flow_rtol: float | None = None
-    flow_acceleration: int = 5
-    retry_updating_directions: bool = True
+    flow_directions: str = "return-map"
     extrapolate: bool = True
+    globalisation: Globalisation = field(default_factory=lambda: Globalisation(
+        min_step=1.0 / 64, watchdog=6, watchdog_progress=0.5, watchdog_restarts=2,
+        stall_window=STALL_WINDOW))
+    inner_max_iterations: int = 100
     inner: Globalisation = field(default_factory=lambda: Globalisation(min_step=1e-10, watchdog=0,
                                                                        stall_window=STALL_WINDOW))
     inner_retry: Globalisation | None = field(default_factory=lambda: Globalisation(min_step=1e-10, watchdog=6,
@@ -220,14 +205,14 @@ class NNEQM2Options:
     max_dense_order: int = 20_000
 
     def __post_init__(self):
+        if self.flow_directions not in FLOW_DIRECTIONS:
+            raise ValueError(f"NNEQM2Options: flow_directions = {self.flow_directions!r}; expected one of "
+                             f"{list(FLOW_DIRECTIONS)}")
         _check_integer("NNEQM2Options", "max_dense_order", self.max_dense_order, 1)
-        if self.flow_update not in ("trial", "stress"):
-            raise ValueError(f"NNEQM2Options: flow_update = {self.flow_update!r}; expected 'trial' or 'stress'")
         _check_integer("NNEQM2Options", "inner_max_iterations", self.inner_max_iterations, 1)
-        _check_integer("NNEQM2Options", "max_flow_updates", self.max_flow_updates, 0)
-        _check_integer("NNEQM2Options", "flow_acceleration", self.flow_acceleration, 0)
-        if self.flow_rtol is not None:
-            _check_real("NNEQM2Options", "flow_rtol", self.flow_rtol, 0.0, 1.0)
+        for name in ("globalisation", "inner"):
+            if not isinstance(getattr(self, name), Globalisation):
+                raise TypeError(f"NNEQM2Options: {name} must be a Globalisation")
 
     @property
     def inner_globalisations(self) -> tuple[Globalisation, ...]:

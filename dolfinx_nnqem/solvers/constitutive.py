@@ -1,0 +1,97 @@
+r"""The constitutive law checked at every Gauss point: part of the independent check of a converged state.
+
+The Gauss-point values an increment will commit — the stress σ, the equivalent plastic strain
+increment Δp and the plastic strain increment Δε_p, whether a solver computed them itself
+(NNEQM2, :class:`~dolfinx_nnqem.material.von_mises.GaussPointValues`) or the radial return at u
+gives them (the monolithic solver, NNEQM1) — must satisfy, with Δε = ε(u) − ε(u_n) from the
+displacement itself:
+
+* elasticity: σ = σ_n + C (Δε − Δε_p), i.e. σ = C (ε − ε_p);
+* the plastic strain: deviatoric, and of the size Δp says, |Δε_p| = √(3/2) Δp, i.e.
+  ε_p,n+1 − ε_p,n = Δγ N with |N| = √(3/2) and p_n+1 = p_n + Δγ;
+* the flow direction of the rule the values claim: for "backward-euler" Δε_p = Δp (3/2) s / q
+  with s, q of σ (the normal at the end of the increment); for "frozen-directions" (NNEQM2's seed
+  variant, the directions of the increment's start) the size relation above only;
+* admissibility and complementarity: Δp ≥ 0, f(σ, p_n + Δp) ≤ 0, and f = 0 where Δp > 0
+  (Δγ f = 0).
+
+Each relation is measured in stress units over σ_u = min(σ_y0, 10⁻² E) (plastic strains times
+2μ or 3μ + H) and must hold to the check's tolerance at every Gauss point; the points of an elastic
+material must have no plastic strain at all.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from mpi4py import MPI
+
+from dolfinx_nnqem.material.von_mises import (deviator_coordinates, elastic_stress, equivalent_stress,
+                                              yield_function)
+
+__all__ = ["ConstitutiveCheck", "check_constitutive_law"]
+
+_SQRT32 = math.sqrt(1.5)
+_SQRT23 = math.sqrt(2.0 / 3.0)
+
+
+class ConstitutiveCheck(NamedTuple):
+    """The largest violation of each relation over all Gauss points (over σ_u), every rank the same."""
+
+    elasticity: float
+    plastic_strain: float  #: deviatoric, and √(2/3)|Δε_p| = Δp
+    flow_direction: float  #: backward Euler: Δε_p along the end stress's normal (0 for frozen directions)
+    yield_surface: float  #: max(f, 0)
+    complementarity: float  #: |f| where Δp > 0, and −Δp where Δp < 0
+
+
+def check_constitutive_law(comm, strain_increment: np.ndarray, sigma: np.ndarray, dp: np.ndarray,
+                           deps_p: np.ndarray, flow_rule: str, sigma_n: np.ndarray, p_n: np.ndarray,
+                           material: dict[str, np.ndarray]) -> ConstitutiveCheck:
+    """The relations of the module docstring at this rank's owned Gauss points (collective).
+
+    Parameters
+    ----------
+    strain_increment, sigma, deps_p, sigma_n
+        (n, 3, 3) Δε, σ, Δε_p and σ_n.
+    dp, p_n
+        (n,) Δp and p_n.
+    flow_rule
+        "backward-euler" or "frozen-directions".
+    material
+        (n,) arrays ``lmbda``, ``mu``, ``sigma_y0``, ``H``, ``stress_unit`` and the bool mask
+        ``yields`` (the points of a material that can yield).
+    """
+    lmbda, mu, H = material["lmbda"], material["mu"], material["H"]
+    su, yields = material["stress_unit"], material["yields"]
+    sigma_expected = sigma_n + elastic_stress(strain_increment - deps_p, lmbda, mu)
+    elasticity = np.linalg.norm((sigma - sigma_expected).reshape(-1, 9), axis=1) / su
+    trace = np.abs(np.trace(deps_p, axis1=1, axis2=2))
+    size = np.linalg.norm(deps_p.reshape(-1, 9), axis=1)  # |Δε_p| (Frobenius)
+    plastic_strain = (2.0 * mu * trace + (3.0 * mu + H) * np.abs(_SQRT23 * size - dp)) / su
+    s = deviator_coordinates(sigma)
+    q = equivalent_stress(s)
+    f = yield_function(q, material["sigma_y0"], H, p_n + dp)
+    if flow_rule == "backward-euler":
+        normal = deviator_coordinates(deps_p) - (1.5 * dp / np.where(q > 0.0, q, 1.0))[:, None] * s
+        flow = 2.0 * mu * np.linalg.norm(normal, axis=1) / su
+    elif flow_rule == "frozen-directions":
+        flow = np.zeros_like(dp)
+    else:
+        raise ValueError(f"unknown flow rule {flow_rule!r}: expected 'backward-euler' or 'frozen-directions'")
+    yield_surface = np.where(yields, np.maximum(f, 0.0) / su, 0.0)
+    complementarity = np.where(dp > 0.0, np.abs(f) / su, np.maximum(-dp, 0.0) * (3.0 * mu + H) / su)
+    # an elastic material has no plastic strain whatever its stress
+    elastic = ~yields
+    plastic_strain[elastic] = (2.0 * mu[elastic] * size[elastic] + (3.0 * mu[elastic] + H[elastic])
+                               * np.abs(dp[elastic])) / su[elastic]
+    complementarity[elastic] = 0.0
+    flow[elastic] = 0.0
+
+    def worst(values: np.ndarray) -> float:
+        return comm.allreduce(float(np.max(values, initial=0.0)), op=MPI.MAX)
+
+    return ConstitutiveCheck(worst(elasticity), worst(plastic_strain), worst(flow), worst(yield_surface),
+                             worst(complementarity))
