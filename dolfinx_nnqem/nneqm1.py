@@ -247,11 +247,19 @@ class NNEQM1Solver:
             x0 = self._frozen_branch_start(x0, x_scale, laws, cond, z_m, w_of, system, advance)
         # The polar angles follow the slip only if the plain iteration fails: measured on the
         # robustness suite, following always costs cutbacks elsewhere (docs/robustness.md)
-        fallback = None
+        fallbacks = []
         if laws.slip_following:
-            fallback = Fallback("with the polar angles on the slip", on_the_slip(x0), advance_following)
+            fallbacks.append(Fallback("with the polar angles on the slip", on_the_slip(x0), advance_following))
+        # Last, where every body is supported: from the laws linearised at the outer iterate (a
+        # floating body's x0 is that already). The predictor can open pairs the increment keeps
+        # pressed; a full step then takes all their force away, every pair penetrates, and from
+        # there the polar law's iteration can fail with every attempt (docs/theory.md, NNEQM1)
+        if not n_r:
+            fallbacks.append(Fallback(
+                "from the outer iterate's pair states",
+                lambda: self._frozen_branch_start(x0, x_scale, laws, cond, z_m, w_of, system, advance), advance))
         result = solve_dense(residual, x0, tol=tol / F, max_iter=self.settings.inner_max_iterations,
-                             globalisations=self.settings.inner_globalisations, advance=advance, fallback=fallback)
+                             globalisations=self.settings.inner_globalisations, advance=advance, fallback=fallbacks)
         result.x = result.x * x_scale
         return result
 
@@ -268,7 +276,8 @@ class NNEQM1Solver:
         linearisation at x0, one solve. The iteration then starts from its solution (or from x0
         if that system is singular). Used when there are free rigid modes: where every body is
         supported, the predictor is the physical response to the out-of-balance load and the
-        seed's start from it is kept.
+        seed's start from it is kept; this start is then the dense solve's last fallback, tried
+        only when every attempt from the predictor failed.
         """
         nc = z_m.shape[0]
         xs = x0 * x_scale
