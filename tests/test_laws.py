@@ -780,3 +780,35 @@ def test_polar_follow_slip_with_sliding_pairs_puts_their_friction_force_on_the_s
     assert aligned[0, 2] == pytest.approx(theta_s + np.pi)
     np.testing.assert_array_equal(aligned[1:], z[1:])  # sticking, pinned, at rest, rounding-size slip
     np.testing.assert_array_equal(laws.follow_slip(z, w, w_prev), z)
+
+
+def test_polar_advance_keeps_the_angle_of_a_rounding_size_friction_force():
+    """PolarLaw.advance on pairs stepping in the force: a new friction force of rounding size
+    (|q| ≤ NO_FORCE · force unit, here 1e-20 N against 1e5 N) keeps θ, with p_r its component on
+    −d(θ); a real force turns θ onto its direction (the representation nearest the old θ) and
+    is reproduced exactly. The Cartesian law steps z + α dy whatever the force unit."""
+    from dolfinx_nnqem.contact.laws import NO_FORCE
+
+    law, force_unit = PolarLaw(), 1.0e5
+    theta = np.array([0.7, 0.7, 0.7, -2.0])
+    z = np.column_stack((np.full(4, 1e3), np.zeros(4), theta))  # no friction force before
+    dy = np.array([[0.0, 1e-20, -3e-20],  # rounding (an open pair's leftover)
+                   [0.0, 30.0, -40.0],  # a real force
+                   [0.0, 0.0, 0.0],  # none at all
+                   [0.0, -0.5 * NO_FORCE * force_unit, 0.0]])  # below the threshold, any direction
+    out = law.advance(z, dy, 1.0, np.ones(4, dtype=bool), force_unit)
+    np.testing.assert_array_equal(out[[0, 2, 3], 2], theta[[0, 2, 3]])  # θ kept
+    d = np.column_stack((np.cos(theta), np.sin(theta)))
+    np.testing.assert_allclose(out[[0, 3], 1], -np.sum(dy[[0, 3], 1:] * d[[0, 3]], axis=1), rtol=1e-15)
+    assert out[2, 1] == 0.0
+    assert np.all(np.abs(law.force(out)[0][[0, 3], 1:] - dy[[0, 3], 1:]) <= 1e-20 + 0.5 * NO_FORCE * force_unit)
+    # the real force turns θ: d(θ) = ±q/|q|, the sign (of p_r) that keeps θ nearest 0.7
+    q = dy[1, 1:]
+    assert abs(out[1, 1]) == pytest.approx(50.0, rel=1e-15)
+    assert abs(out[1, 2] - 0.7) <= 0.5 * np.pi and out[1, 2] != 0.7
+    np.testing.assert_allclose(law.force(out)[0][1], [1e3, *q], rtol=1e-14)
+    # the same rounding-size step taken with a tiny force unit is a real force: θ turns
+    turned = law.advance(z[:1], dy[:1], 1.0, np.ones(1, dtype=bool), 1e-12)
+    assert turned[0, 2] != 0.7
+    np.testing.assert_allclose(law.force(turned)[0][0, 1:], dy[0, 1:], rtol=1e-12)
+    np.testing.assert_array_equal(AlartCurnierLaw().advance(z, dy, 1.0, None, force_unit), z + dy)

@@ -252,6 +252,35 @@ def test_solve_dense_falls_back_to_another_start_and_step_rule():
     assert "; then watchdog 6 near: " in failed.message and "; then monotone near: " in failed.message
 
 
+
+def test_solve_dense_tries_fallbacks_in_order_and_computes_a_lazy_start_only_when_needed():
+    """A sequence of fallbacks: each is tried (with every globalisation) only after all the
+    attempts before it failed; a start given as a function is computed once, when its attempt
+    comes, and never if an earlier attempt converged."""
+    from dolfinx_nnqem.numerics.newton import Globalisation
+    from dolfinx_nnqem.numerics.nonsmooth import Fallback, solve_dense
+
+    full, monotone = Globalisation(min_step=1e-10, watchdog=6), Globalisation(min_step=1e-10, watchdog=0)
+    x0 = np.array([3.0])
+    computed = []
+
+    def lazy_start():
+        computed.append(True)
+        return np.array([0.5])
+
+    ways = [Fallback("far", np.array([5.0]), None), Fallback("near", lazy_start, None)]
+    out = solve_dense(_arctan, x0, tol=1e-10, max_iter=6, globalisations=(full,), fallback=ways)
+    print(f"\n  {out.message}")
+    assert out.converged and abs(out.x[0]) < 1e-10 and computed == [True]
+    assert out.message.startswith("watchdog 6 near after watchdog 6: ") and "; watchdog 6 far: " in out.message
+    computed.clear()
+    early = solve_dense(_arctan, np.array([0.5]), tol=1e-10, max_iter=6, globalisations=(full,), fallback=ways)
+    assert early.converged and not computed
+    failed = solve_dense(_arctan, x0, tol=1e-10, max_iter=2, globalisations=(full, monotone),
+                         fallback=[Fallback("far", np.array([5.0]), None), Fallback("farther", lambda: np.array([9.0]),
+                                                                                     None)])
+    assert not failed.converged and failed.message.count("; then ") == 5
+
 class _CreepingCycle:
     """A Newton backend whose full steps cycle A → B → A' → ... with Ψ(A) creeping down by 0.1 %
     a cycle (Ψ(B) = 2); a damped step from A lands on the solution. The pattern of the monolithic

@@ -109,7 +109,7 @@ class LawEvaluation(NamedTuple):
 class Linearisation(NamedTuple):
     """The law's part of a Newton step, in the coordinates y the law steps in.
 
-    A Newton step solves for dy; the new unknowns are ``law.advance(z, dy, α, cartesian)``. For
+    A Newton step solves for dy; the new unknowns are ``law.advance(z, dy, α, cartesian, force_unit)``. For
     the Cartesian law y = z. For the polar law y = z except on the pairs flagged ``cartesian``,
     whose tangential step is taken in the friction force itself (see
     :meth:`PolarLaw.linearise`).
@@ -419,8 +419,9 @@ class ContactLaw(Protocol):
         ...
 
     def advance(self, z: npt.ArrayLike, dy: npt.ArrayLike, alpha: float,
-                cartesian: np.ndarray | None) -> np.ndarray:
-        """The unknowns after the step α dy from z (``cartesian`` from :meth:`linearise`)."""
+                cartesian: np.ndarray | None, force_unit: float) -> np.ndarray:
+        """The unknowns after the step α dy from z (``cartesian`` from :meth:`linearise`;
+        ``force_unit``: forces below :data:`NO_FORCE` times it are rounding)."""
         ...
 
     slip_following: bool
@@ -506,7 +507,7 @@ class AlartCurnierLaw:
         return Linearisation(evaluation.dH_dz, self.force(z)[1], None)
 
     def advance(self, z: npt.ArrayLike, dy: npt.ArrayLike, alpha: float,
-                cartesian: np.ndarray | None) -> np.ndarray:
+                cartesian: np.ndarray | None, force_unit: float) -> np.ndarray:
         """z + α dy."""
         return np.asarray(z, dtype=np.float64) + alpha * np.asarray(dy, dtype=np.float64)
 
@@ -705,13 +706,17 @@ class PolarLaw:
         return Linearisation(dH_dy, dlam_dy, cartesian)
 
     def advance(self, z: npt.ArrayLike, dy: npt.ArrayLike, alpha: float,
-                cartesian: np.ndarray | None) -> np.ndarray:
+                cartesian: np.ndarray | None, force_unit: float) -> np.ndarray:
         """z + α dy, θ turned by at most :data:`MAX_TURN`; on ``cartesian`` pairs the new friction
         force λ_t + α dy_t in polar form.
 
         Of the two representations (|q|, θ) and (−|q|, θ + π) the one whose angle is nearer the
         old θ is taken, so that a small change of force is a small change of (p_r, θ) (θ is not
-        wrapped: it moves continuously). A zero force keeps θ.
+        wrapped: it moves continuously). A force of rounding size (|q| ≤ :data:`NO_FORCE` ·
+        ``force_unit``, e.g. an open pair's p_r of 1e-20 N) keeps θ: its direction is the
+        direction of rounding errors, which differ between machines and libraries (measured: the
+        secant predictor of the polar law's pairs turned open pairs by up to 0.27 rad differently
+        on the PyPI and the Debian stacks, and the contact solve that followed failed on one).
         """
         z = np.asarray(z, dtype=np.float64)
         dy = np.asarray(dy, dtype=np.float64)
@@ -730,8 +735,10 @@ class PolarLaw:
         turn = np.mod(direction - theta + np.pi, 2.0 * np.pi) - np.pi  # in [−π, π)
         flip = np.abs(turn) > 0.5 * np.pi  # nearer the other representation (p_r = −|q|, θ + π)
         turn = np.where(flip, turn - np.copysign(np.pi, turn), turn)
-        out[c, 1] = np.where(flip, -size, size)
-        out[c, 2] = np.where(size > 0.0, theta + turn, theta)
+        rounding = size <= NO_FORCE * float(force_unit)  # keeps θ; p_r the force's component on −d(θ)
+        along = -(q[:, 0] * np.cos(theta) + q[:, 1] * np.sin(theta))
+        out[c, 1] = np.where(rounding, along, np.where(flip, -size, size))
+        out[c, 2] = np.where(rounding, theta, theta + turn)
         return out
 
     def follow_slip(self, z: npt.ArrayLike, w: npt.ArrayLike, w_prev: npt.ArrayLike, constrained: npt.ArrayLike,

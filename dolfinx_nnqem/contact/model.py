@@ -259,11 +259,13 @@ class PairLaws:
     def advance(self, z: np.ndarray, dy: np.ndarray, alpha: float, cartesian: np.ndarray | None) -> np.ndarray:
         """The unknowns after the step α dy from z in the step coordinates of :meth:`linearise`."""
         if len(self.groups) == 1:
-            return self.groups[0].law.advance(z, dy, alpha, cartesian)
+            group = self.groups[0]
+            return group.law.advance(z, dy, alpha, cartesian, group.force_unit)
         out = np.empty((self.size, 3))
         for group in self.groups:
             i = group.index
-            out[i] = group.law.advance(z[i], dy[i], alpha, None if cartesian is None else cartesian[i])
+            out[i] = group.law.advance(z[i], dy[i], alpha, None if cartesian is None else cartesian[i],
+                                       group.force_unit)
         return out
 
     def extrapolate(self, z_n: np.ndarray, z_prev: np.ndarray, beta: float) -> np.ndarray:

@@ -338,17 +338,19 @@ def _describe(globalisation: Globalisation) -> str:
 
 
 class Fallback(NamedTuple):
-    """A second way through a dense system, tried with every globalisation when the first fails:
-    a start and a step rule (``label`` names it in messages)."""
+    """Another way through a dense system, tried with every globalisation when the ways before it
+    failed: a start and a step rule (``label`` names it in messages). ``x0`` may be a function
+    of no argument returning the start: it is then computed only if the attempt is made."""
 
     label: str
-    x0: np.ndarray
-    advance: AdvanceFunction
+    x0: np.ndarray | Callable[[], np.ndarray]
+    advance: AdvanceFunction | None
 
 
 def solve_dense(residual: ResidualFunction, x0: npt.ArrayLike, *, tol: float, max_iter: int,
                 globalisations: Sequence[Globalisation], advance: AdvanceFunction | None = None,
-                log: LogFunction | None = None, fallback: Fallback | None = None) -> NonsmoothResult:
+                log: LogFunction | None = None, fallback: Fallback | Sequence[Fallback] | None = None
+                ) -> NonsmoothResult:
     """:func:`solve_nonsmooth` from ``x0`` with each globalisation in turn, until one converges.
 
     The contact systems of NNEQM1 and NNEQM2 meet two kinds of trouble that no single damping
@@ -368,7 +370,8 @@ def solve_dense(residual: ResidualFunction, x0: npt.ArrayLike, *, tol: float, ma
         As for :func:`solve_nonsmooth`; later attempts continue the iteration numbers.
     fallback
         If no globalisation converges from ``x0`` with ``advance``, each is tried again from
-        ``fallback.x0`` with ``fallback.advance``.
+        ``fallback.x0`` with ``fallback.advance``; a sequence of fallbacks is tried in its order,
+        each one only if every attempt before it failed.
 
     Returns
     -------
@@ -379,11 +382,17 @@ def solve_dense(residual: ResidualFunction, x0: npt.ArrayLike, *, tol: float, ma
     """
     if not globalisations:
         raise ValueError("solve_dense needs at least one globalisation")
+    fallbacks = () if fallback is None else (fallback,) if isinstance(fallback, Fallback) else tuple(fallback)
     attempts = [(g, x0, advance, _describe(g)) for g in globalisations]
-    if fallback is not None:
-        attempts += [(g, fallback.x0, fallback.advance, f"{_describe(g)} {fallback.label}") for g in globalisations]
+    for way in fallbacks:
+        attempts += [(g, way, way.advance, f"{_describe(g)} {way.label}") for g in globalisations]
+    starts: dict[int, np.ndarray] = {}  # each fallback's start, computed once, when first needed
     iterations, norms, counts, failures = 0, [], [0, 0, 0], []
     for g, start, step_rule, label in attempts:
+        if isinstance(start, Fallback):
+            if id(start) not in starts:
+                starts[id(start)] = start.x0() if callable(start.x0) else start.x0
+            start = starts[id(start)]
         offset = iterations
         attempt_log = None if log is None else (lambda k, norm, step, kind, o=offset: log(o + k, norm, step, kind))
         result = _solve_with(residual, start, tol, max_iter, g, log=attempt_log, advance=step_rule)

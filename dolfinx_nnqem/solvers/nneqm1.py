@@ -140,7 +140,8 @@ class NNEQM1Solver(ReleasesPETSc):
         change, and where that load is not in balance (a body held only by contact, whose
         generalised inverse fixes it at its fixing dofs) pairs evaluated there start on the wrong
         branch. Where every body is supported the predictor is the physical response and the
-        seed's start from it is kept.
+        seed's start from it is kept; the frozen-branch start is then the last fallback, tried only
+        when every attempt from the predictor failed.
         """
         system = CondensedSystem(laws, cond, scale)
         x0 = system.scaled(z_m, alpha=rigid_start(cond.BN, cond.w_free))
@@ -148,12 +149,22 @@ class NNEQM1Solver(ReleasesPETSc):
             x0 = newton_step(system.residual(x0, frozen=system.at(cond.w_m, z_m)), x0, system.advance)
         # The polar angles follow the slip only if the plain iteration fails: measured on the
         # robustness suite, following always costs cutbacks elsewhere (docs/robustness.md)
-        fallback = None
+        fallbacks = []
         if laws.slip_following:
-            fallback = Fallback("with the polar angles on the slip", system.on_the_slip(x0), system.advance_on_the_slip)
+            fallbacks.append(Fallback("with the polar angles on the slip", system.on_the_slip(x0),
+                                      system.advance_on_the_slip))
+        # Last, where every body is supported: from the laws linearised at the outer iterate (a
+        # floating body's x0 is that already). The predictor can open pairs the increment keeps
+        # pressed; a full step then takes all their force away, every pair penetrates, and from
+        # there the polar law's iteration can fail with every attempt (docs/theory.md, NNEQM1)
+        if not system.n_r:
+            fallbacks.append(Fallback(
+                "from the outer iterate's pair states",
+                lambda: newton_step(system.residual(x0, frozen=system.at(cond.w_m, z_m)), x0, system.advance),
+                system.advance))
         result = solve_dense(system.residual, x0, tol=tol / scale, max_iter=self.settings.inner_max_iterations,
                              globalisations=self.settings.inner_globalisations, advance=system.advance,
-                             fallback=fallback)
+                             fallback=fallbacks)
         return result, system
 
     def destroy(self) -> None:
