@@ -30,14 +30,14 @@ from dolfinx_nnqem.solvers import ConvergenceError, NNEQM2Options, SolverOptions
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import robustness as rb  # noqa: E402  (the cases)
 
-STEEL = VonMises(E=200_000.0, nu=0.3, sigma_y0=400.0, H=2_000.0)
+STEEL = VonMises(E=200_000.0, nu=0.3, sigma_y0=400.0, H=20_000.0)
 
 
 def indentation(law: str, n: int = 8) -> ContactProblem:
-    """A rigid sphere (R = 2) pressed 0.04 into a von Mises cube of n × n × n hexahedra (a quarter:
+    """A rigid sphere (R = 2) pressed 0.02 into a von Mises cube of n × n × n hexahedra (a quarter:
     symmetry planes x = 0 and z = 0, rollers below), frictionless."""
     mesh, ct, ft = build_block_stack(MPI.COMM_WORLD, 1.0, 1.0, [1.0], [(n, n, n)])
-    sphere = Sphere(centre=(0.0, 3.0, 0.0), radius=2.0, motion=(0.0, -0.04, 0.0))
+    sphere = Sphere(centre=(0.0, 3.0, 0.0), radius=2.0, motion=(0.0, -0.02, 0.0))
     return ContactProblem(mesh, ct, ft, materials=STEEL,
                           dirichlet=[Dirichlet(T.bottom(1), 0.0, [1]), Dirichlet(T.xmin(1), 0.0, [0]),
                                      Dirichlet(T.zmin(1), 0.0, [2])],

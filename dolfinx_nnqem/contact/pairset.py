@@ -198,21 +198,71 @@ class PairSet(Protocol):
     up to that ownership. Per-pair arrays hold the LOCAL pairs.
     """
 
-    comm: MPI.Comm
-    num_local: int
-    num_global: int
-    offset: int
-    R: np.ndarray  #: (num_local, 3, 3) frames, rows (n, t1, t2); n points from the master to the slave side
-    g0: np.ndarray  #: (num_local,) initial gaps
-    rows: PairRows  #: the local rows of B
-    X_slave: np.ndarray  #: (num_local, 3) slave node positions
-    X_master: np.ndarray  #: (num_local, 3) the facing point of the master side
-    slave_blocks: np.ndarray  #: (num_local,) global dof-block indices of the slave nodes
-    area: np.ndarray  #: (num_local,) the slave node's tributary area (pressure = p_n / area)
-    kind: str  #: "node-to-node", "rigid obstacle", ...
-    #: pin the tangential force of slave nodes whose tangential motion a support prescribes
-    #: (rows coupling one slave node to several master nodes; ``ContactModel``)
-    pins_supported_slave_tangents: bool
+    @property
+    def comm(self) -> MPI.Comm:
+        """The communicator of the mesh."""
+        ...
+
+    @property
+    def num_local(self) -> int:
+        """Pairs this rank owns."""
+        ...
+
+    @property
+    def num_global(self) -> int:
+        """Pairs of the set over all ranks."""
+        ...
+
+    @property
+    def offset(self) -> int:
+        """The global index of this rank's first pair."""
+        ...
+
+    @property
+    def R(self) -> np.ndarray:
+        """(num_local, 3, 3) frames, rows (n, t1, t2); n points from the master to the slave side."""
+        ...
+
+    @property
+    def g0(self) -> np.ndarray:
+        """(num_local,) initial gaps."""
+        ...
+
+    @property
+    def rows(self) -> PairRows:
+        """The local rows of B."""
+        ...
+
+    @property
+    def X_slave(self) -> np.ndarray:
+        """(num_local, 3) slave node positions."""
+        ...
+
+    @property
+    def X_master(self) -> np.ndarray:
+        """(num_local, 3) the facing point of the master side."""
+        ...
+
+    @property
+    def slave_blocks(self) -> np.ndarray:
+        """(num_local,) global dof-block indices of the slave nodes."""
+        ...
+
+    @property
+    def area(self) -> np.ndarray:
+        """(num_local,) the slave nodes' tributary areas (pressure = p_n / area)."""
+        ...
+
+    @property
+    def kind(self) -> str:
+        """What discretises the interface: "node-to-node", "rigid obstacle", ..."""
+        ...
+
+    @property
+    def pins_supported_slave_tangents(self) -> bool:
+        """Pin the tangential force of slave nodes whose tangential motion a support prescribes
+        (rows coupling one slave node to several master nodes; ``ContactModel``)."""
+        ...
 
     def motion(self, load_factor: float) -> np.ndarray:
         """(num_local, 3): m(ℓ), the known part of w (the master side's prescribed motion)."""

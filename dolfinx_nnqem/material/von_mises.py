@@ -342,6 +342,11 @@ class PlasticState:
         imap = self.W_scalar.dofmap.index_map
         return imap.size_global * self.W_scalar.dofmap.index_map_bs
 
+    def at_points(self) -> VonMisesAtPoints:
+        """The material at this rank's owned Gauss points (interpolated once per call)."""
+        at = self.values_at_points
+        return VonMisesAtPoints(at(self.mu), at(self.lmbda), at(self.sigma_y0), at(self.H), at(self.E))
+
     def values_at_points(self, expr) -> np.ndarray:
         """A scalar UFL expression (e.g. a material field) at this rank's owned Gauss points."""
         f = fem.Function(self.W_scalar)
@@ -489,6 +494,50 @@ def return_map_tangent(t: np.ndarray, mu: np.ndarray, sigma_y0: np.ndarray, H: n
     out = (2.0 * mu * _SQRT32)[:, None, None] * (radial + turning)
     out[~plastic] = 0.0
     return out
+
+
+@dataclass(frozen=True)
+class VonMisesAtPoints:
+    """Von Mises plasticity at a set of Gauss points, on numpy arrays: the material's
+    :class:`~dolfinx_nnqem.material.interface.PointwisePlasticity` (what NNEQM2 needs).
+
+    Attributes
+    ----------
+    mu, lmbda, sigma_y0, H, E
+        (n,) material values (σ_y0 = :data:`ELASTIC_YIELD_STRESS` for an elastic material).
+    """
+
+    mu: np.ndarray
+    lmbda: np.ndarray
+    sigma_y0: np.ndarray
+    H: np.ndarray
+    E: np.ndarray
+
+    @property
+    def stress_unit(self) -> np.ndarray:
+        """σ_u = min(σ_y0, 10⁻² E) (:func:`yield_stress_unit`)."""
+        return yield_stress_unit(self.sigma_y0, self.E)
+
+    @property
+    def yields(self) -> np.ndarray:
+        return can_yield(self.sigma_y0)
+
+    def plastic_strain(self, t: np.ndarray, p_n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return return_map_plastic_strain(t, self.mu, self.sigma_y0, self.H, p_n)
+
+    def plastic_strain_tangent(self, t: np.ndarray, p_n: np.ndarray) -> np.ndarray:
+        return return_map_tangent(t, self.mu, self.sigma_y0, self.H, p_n)
+
+    def yield_value(self, s: np.ndarray, p: np.ndarray) -> np.ndarray:
+        return yield_function(equivalent_stress(s), self.sigma_y0, self.H, p)
+
+    def flow_direction(self, s: np.ndarray) -> np.ndarray:
+        """N = (3/2) s / q (|N| = √(3/2)), 0 where q = 0."""
+        q = equivalent_stress(s)
+        return (1.5 / np.where(q > 0.0, q, 1.0))[:, None] * s * (q > 0.0)[:, None]
+
+    def hardening(self) -> np.ndarray:
+        return self.H
 
 
 def elastic_stress(eps: np.ndarray, lmbda: np.ndarray, mu: np.ndarray) -> np.ndarray:

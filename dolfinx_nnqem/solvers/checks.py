@@ -50,7 +50,8 @@ from mpi4py import MPI
 
 from dolfinx_nnqem import compat, jit
 from dolfinx_nnqem.contact.laws import STATE_NAMES
-from dolfinx_nnqem.material.von_mises import GaussPointValues, can_yield, strain, yield_stress_unit
+from dolfinx_nnqem.material.interface import PointwisePlasticity
+from dolfinx_nnqem.material.von_mises import GaussPointValues, strain
 from dolfinx_nnqem.problem.contact_problem import assemble_vector
 from dolfinx_nnqem.problem.validation import check_real
 from dolfinx_nnqem.solvers.constitutive import ConstitutiveCheck, check_constitutive_law
@@ -137,15 +138,10 @@ class _Forms:
         # the problem, and a reference to its key would keep both alive for the whole process
         self._state = st
 
-    def material_at_points(self) -> dict[str, np.ndarray]:
-        """λ, μ, σ_y0, H, the stress unit σ_u and the points that can yield, at the owned Gauss
-        points (computed once)."""
+    def material_at_points(self) -> PointwisePlasticity:
+        """The material at the owned Gauss points (computed once)."""
         if self._material is None:
-            st = self._state
-            at = st.values_at_points
-            sy = at(st.sigma_y0)
-            self._material = {"lmbda": at(st.lmbda), "mu": at(st.mu), "sigma_y0": sy, "H": at(st.H),
-                              "stress_unit": yield_stress_unit(sy, at(st.E)), "yields": can_yield(sy)}
+            self._material = self._state.at_points()
         return self._material
 
     def return_map_values(self, p) -> GaussPointValues:

@@ -7,17 +7,18 @@ gives them (the monolithic solver, NNEQM1) — must satisfy, with Δε = ε(u) �
 displacement itself:
 
 * elasticity: σ = σ_n + C (Δε − Δε_p), i.e. σ = C (ε − ε_p);
-* the plastic strain: deviatoric, and of the size Δp says, |Δε_p| = √(3/2) Δp, i.e.
-  ε_p,n+1 − ε_p,n = Δγ N with |N| = √(3/2) and p_n+1 = p_n + Δγ;
-* the flow direction of the rule the values claim: for "backward-euler" Δε_p = Δp (3/2) s / q
-  with s, q of σ (the normal at the end of the increment); for "frozen-directions" (NNEQM2's seed
+* the plastic strain: deviatoric, and of the size Δp says, |Δε_p| = Δp |N| (√(3/2) Δp for von
+  Mises), i.e. ε_p,n+1 − ε_p,n = Δγ N and p_n+1 = p_n + Δγ;
+* the flow direction of the rule the values claim: for "backward-euler" Δε_p = Δp N(σ), N = ∂f/∂σ
+  at the end of the increment ((3/2) s / q for von Mises); for "frozen-directions" (NNEQM2's seed
   variant, the directions of the increment's start) the size relation above only;
 * admissibility and complementarity: Δp ≥ 0, f(σ, p_n + Δp) ≤ 0, and f = 0 where Δp > 0
   (Δγ f = 0).
 
-Each relation is measured in stress units over σ_u = min(σ_y0, 10⁻² E) (plastic strains times
-2μ or 3μ + H) and must hold to the check's tolerance at every Gauss point; the points of an elastic
-material must have no plastic strain at all.
+Each relation is measured in stress units over σ_u (the material's stress unit, min(σ_y0, 10⁻² E)
+for von Mises; plastic strains times 2μ or 3μ + H) and must hold to the check's tolerance at every
+Gauss point; the points of an elastic material must have no plastic strain at all. The material
+enters only through its :class:`~dolfinx_nnqem.material.interface.PointwisePlasticity`.
 """
 
 from __future__ import annotations
@@ -28,13 +29,12 @@ from typing import NamedTuple
 import numpy as np
 from mpi4py import MPI
 
-from dolfinx_nnqem.material.von_mises import (deviator_coordinates, elastic_stress, equivalent_stress,
-                                              yield_function)
+from dolfinx_nnqem.material.interface import PointwisePlasticity
+from dolfinx_nnqem.material.von_mises import deviator_coordinates, elastic_stress
 
 __all__ = ["ConstitutiveCheck", "check_constitutive_law"]
 
 _SQRT32 = math.sqrt(1.5)
-_SQRT23 = math.sqrt(2.0 / 3.0)
 
 
 class ConstitutiveCheck(NamedTuple):
@@ -49,7 +49,7 @@ class ConstitutiveCheck(NamedTuple):
 
 def check_constitutive_law(comm, strain_increment: np.ndarray, sigma: np.ndarray, dp: np.ndarray,
                            deps_p: np.ndarray, flow_rule: str, sigma_n: np.ndarray, p_n: np.ndarray,
-                           material: dict[str, np.ndarray]) -> ConstitutiveCheck:
+                           material: PointwisePlasticity) -> ConstitutiveCheck:
     """The relations of the module docstring at this rank's owned Gauss points (collective).
 
     Parameters
@@ -61,22 +61,21 @@ def check_constitutive_law(comm, strain_increment: np.ndarray, sigma: np.ndarray
     flow_rule
         "backward-euler" or "frozen-directions".
     material
-        (n,) arrays ``lmbda``, ``mu``, ``sigma_y0``, ``H``, ``stress_unit`` and the bool mask
-        ``yields`` (the points of a material that can yield).
+        The material at the same Gauss points.
     """
-    lmbda, mu, H = material["lmbda"], material["mu"], material["H"]
-    su, yields = material["stress_unit"], material["yields"]
-    sigma_expected = sigma_n + elastic_stress(strain_increment - deps_p, lmbda, mu)
+    mu, H, su, yields = material.mu, material.hardening(), material.stress_unit, material.yields
+    sigma_expected = sigma_n + elastic_stress(strain_increment - deps_p, material.lmbda, mu)
     elasticity = np.linalg.norm((sigma - sigma_expected).reshape(-1, 9), axis=1) / su
+    s = deviator_coordinates(sigma)
+    N = material.flow_direction(s)
+    f = material.yield_value(s, p_n + dp)
     trace = np.abs(np.trace(deps_p, axis1=1, axis2=2))
     size = np.linalg.norm(deps_p.reshape(-1, 9), axis=1)  # |Δε_p| (Frobenius)
-    plastic_strain = (2.0 * mu * trace + (3.0 * mu + H) * np.abs(_SQRT23 * size - dp)) / su
-    s = deviator_coordinates(sigma)
-    q = equivalent_stress(s)
-    f = yield_function(q, material["sigma_y0"], H, p_n + dp)
+    # |N| where the end stress has one; where it has none no point may flow (Δp must be 0)
+    N_size = np.where(np.linalg.norm(s, axis=1) > 0.0, np.linalg.norm(N, axis=1), _SQRT32)
+    plastic_strain = (2.0 * mu * trace + (3.0 * mu + H) * np.abs(size / N_size - dp)) / su
     if flow_rule == "backward-euler":
-        normal = deviator_coordinates(deps_p) - (1.5 * dp / np.where(q > 0.0, q, 1.0))[:, None] * s
-        flow = 2.0 * mu * np.linalg.norm(normal, axis=1) / su
+        flow = 2.0 * mu * np.linalg.norm(deviator_coordinates(deps_p) - dp[:, None] * N, axis=1) / su
     elif flow_rule == "frozen-directions":
         flow = np.zeros_like(dp)
     else:

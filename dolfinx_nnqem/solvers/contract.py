@@ -1,9 +1,11 @@
-"""The solver contract: what load stepping, writers and users may use of a solver.
+"""The solver contracts: what a solver may read of a problem, and what load stepping, writers and
+users may use of a solver.
 
-A solver takes a :class:`~dolfinx_nnqem.problem.ContactProblem` and solves one load increment
-at a time; :func:`~dolfinx_nnqem.solvers.stepping.solve_load_steps` drives it. Every solver of
-the package satisfies :class:`Solver` (checked by the type checker and by
-``tests/test_contracts.py``), and frees its PETSc objects when used as a context manager::
+A solver takes a problem — :class:`SolvableProblem`, which :class:`~dolfinx_nnqem.problem.ContactProblem`
+implements — and solves one load increment at a time; :func:`~dolfinx_nnqem.solvers.stepping.solve_load_steps`
+drives it. Every solver of the package satisfies :class:`Solver` (the type checker holds them to
+both in :mod:`~dolfinx_nnqem.solvers.conformance`; ``tests/test_contracts.py`` checks them at run
+time), and frees its PETSc objects when used as a context manager::
 
     with make_solver("monolithic", problem) as solver:
         solve_load_steps(problem, solver, 15)
@@ -12,13 +14,115 @@ the package satisfies :class:`Solver` (checked by the type checker and by
 from __future__ import annotations
 
 from types import TracebackType
-from typing import TYPE_CHECKING, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
+
+import numpy as np
 
 if TYPE_CHECKING:
+    from petsc4py import PETSc
+
+    from dolfinx_nnqem.contact.model import ContactModel
+    from dolfinx_nnqem.material.interface import MaterialState
+    from dolfinx_nnqem.material.von_mises import GaussPointValues
+    from dolfinx_nnqem.problem.bodies import RigidModes
     from dolfinx_nnqem.solvers.convergence import SolveReport
     from dolfinx_nnqem.solvers.options import SolverOptions
 
-__all__ = ["ReleasesPETSc", "Solver"]
+__all__ = ["ReleasesPETSc", "SolvableProblem", "Solver"]
+
+
+@runtime_checkable
+class SolvableProblem(Protocol):
+    """What a solver may read of a problem, and do to it.
+
+    The problem owns the displacement u and the pair unknowns z (its contact model's), the
+    Gauss-point state, the loads on the load path and the assembly of the pieces solvers combine;
+    a solver moves (u, z) to the end of an increment and leaves the commit to load stepping.
+    """
+
+    u: Any  #: the displacement (a dolfinx Function); the solvers' iterate
+    load_factor: float  #: ℓ of the iterate (:meth:`apply_prescribed_displacements` sets it)
+    load_factor_n: float  #: ℓ of the last converged increment
+
+    @property
+    def comm(self) -> Any:
+        """The MPI communicator."""
+        ...
+
+    @property
+    def V(self) -> Any:
+        """The displacement's function space."""
+        ...
+
+    @property
+    def state(self) -> MaterialState:
+        """The Gauss-point state (:mod:`dolfinx_nnqem.material.interface`)."""
+        ...
+
+    @property
+    def contact(self) -> ContactModel | None:
+        """Every interface's pairs and the pair unknowns z (None without contact)."""
+        ...
+
+    @property
+    def rigid_modes(self) -> RigidModes:
+        """The bodies' free rigid modes (a body held only by contact)."""
+        ...
+
+    @property
+    def bc_dofs(self) -> np.ndarray:
+        """The constrained dofs (local indices, ghosts included)."""
+        ...
+
+    @property
+    def force_floor(self) -> float:
+        """The smallest force scale (:meth:`force_scale`)."""
+        ...
+
+    @property
+    def petsc_comms(self) -> list:
+        """Communicators whose dropped PETSc objects a solver frees."""
+        ...
+
+    @property
+    def has_contact(self) -> bool: ...
+
+    @property
+    def num_pairs(self) -> int: ...
+
+    def apply_prescribed_displacements(self, load_factor: float) -> None: ...
+
+    def extrapolation_factor(self, load_factor: float) -> float | None: ...
+
+    def extrapolate(self, load_factor: float) -> bool: ...
+
+    def predict_contact(self) -> None: ...
+
+    def external_force(self, load_factor: float | None = None) -> PETSc.Vec: ...
+
+    def assemble_internal_force(self, F: PETSc.Vec | None = None) -> PETSc.Vec: ...
+
+    def assemble_tangent(self, A: PETSc.Mat | None = None, extra_bcs: Any = ()) -> PETSc.Mat: ...
+
+    def assemble_elastic_stiffness(self, A: PETSc.Mat | None = None, extra_bcs: Any = ()) -> PETSc.Mat: ...
+
+    def tangent_action(self, delta: np.ndarray) -> PETSc.Vec: ...
+
+    def residual(self, z: np.ndarray | None = None, F_int: PETSc.Vec | None = None) -> PETSc.Vec: ...
+
+    def free_residual(self, R: PETSc.Vec) -> PETSc.Vec: ...
+
+    def force_scale(self, F_int: PETSc.Vec, F_ext: PETSc.Vec | None = None) -> float: ...
+
+    def relative_displacement(self, u: PETSc.Vec | None = None) -> np.ndarray: ...
+
+    def constrained_rows(self) -> np.ndarray: ...
+
+    def owned_bc_dofs(self) -> np.ndarray: ...
+
+    def commit(self, gauss_point_values: GaussPointValues | None = None) -> None: ...
+
+    def restore(self) -> None: ...
 
 
 @runtime_checkable

@@ -18,8 +18,7 @@ import ufl
 from petsc4py import PETSc
 
 from dolfinx_nnqem import jit
-from dolfinx_nnqem.material.von_mises import (DEVIATORIC_BASIS, can_yield, deviator_coordinates, strain,
-                                              yield_stress_unit)
+from dolfinx_nnqem.material.von_mises import DEVIATORIC_BASIS, deviator_coordinates, strain
 from dolfinx_nnqem.problem.contact_problem import ContactProblem, assemble_vector
 
 __all__ = ["GaussPointOperators"]
@@ -32,10 +31,10 @@ class GaussPointOperators:
     ----------
     n_gp
         Owned Gauss points.
-    mu, lmbda, sigma_y0, H, E, stress_unit
-        (n_gp,) material values; σ_u = min(σ_y0, 10⁻² E) (the yield rows' stress unit).
-    yields
-        (n_gp,) bool: the points of a material that can yield.
+    material
+        The material at the owned Gauss points (:class:`~dolfinx_nnqem.material.interface.PointwisePlasticity`).
+    mu, lmbda, stress_unit, yields
+        (n_gp,) its elastic moduli, the yield rows' stress unit σ_u and the points that can yield.
     n_yield, offset, num_yield_points
         The owned yielding points, their offset in the global numbering over the ranks, and
         their number over all ranks.
@@ -54,11 +53,9 @@ class GaussPointOperators:
         weights.destroy()
         if self.A.getLocalSize()[0] != 9 * self.n_gp:
             raise RuntimeError("NNEQM2: the strain operator's rows do not match the Gauss points")
-        at_points = st.values_at_points
-        self.mu, self.lmbda = at_points(st.mu), at_points(st.lmbda)
-        self.sigma_y0, self.H, self.E = at_points(st.sigma_y0), at_points(st.H), at_points(st.E)
-        self.stress_unit = yield_stress_unit(self.sigma_y0, self.E)
-        self.yields = can_yield(self.sigma_y0)
+        self.material = st.at_points()
+        self.mu, self.lmbda = self.material.mu, self.material.lmbda
+        self.stress_unit, self.yields = self.material.stress_unit, self.material.yields
         self.n_yield = int(np.count_nonzero(self.yields))
         counts = problem.comm.allgather(self.n_yield)
         self.offset = int(sum(counts[:problem.comm.rank]))

@@ -39,8 +39,7 @@ import numpy as np
 from mpi4py import MPI
 
 from dolfinx_nnqem import compat, jit
-from dolfinx_nnqem.material.von_mises import (GaussPointValues, deviator_coordinates, deviator_tensors,
-                                              elastic_stress, equivalent_stress, yield_function)
+from dolfinx_nnqem.material.von_mises import GaussPointValues, deviator_coordinates, deviator_tensors, elastic_stress
 from dolfinx_nnqem.numerics.newton import solve
 from dolfinx_nnqem.problem.contact_problem import ContactProblem
 from dolfinx_nnqem.solvers.condensation import Condensation
@@ -250,8 +249,8 @@ class NNEQM2Solver(ReleasesPETSc):
         self._sigma_rm.interpolate(self._return_map)
         diff = np.linalg.norm((values.sigma - self._sigma_rm.x.array[:9 * gp.n_gp].reshape(gp.n_gp, 3, 3))
                               .reshape(gp.n_gp, 9), axis=1) / gp.stress_unit
-        f = (yield_function(equivalent_stress(deviator_coordinates(values.sigma)), gp.sigma_y0, gp.H,
-                            st.p_n.x.array[:gp.n_gp] + values.dp) / gp.stress_unit)[gp.yields]
+        f = (gp.material.yield_value(deviator_coordinates(values.sigma), st.p_n.x.array[:gp.n_gp] + values.dp)
+             / gp.stress_unit)[gp.yields]
         for vec in (F_int, F_ext, R, R_free):
             vec.destroy()
         return {

@@ -37,8 +37,8 @@ import numpy as np
 from petsc4py import PETSc
 
 from dolfinx_nnqem.contact.model import PairLaws
-from dolfinx_nnqem.material.von_mises import (DEVIATORIC_BASIS, equivalent_stress, flow_direction,
-                                              yield_function)
+from dolfinx_nnqem.material.von_mises import (DEVIATORIC_BASIS, VonMisesAtPoints, equivalent_stress,
+                                              flow_direction, yield_function)
 from dolfinx_nnqem.numerics.nonsmooth import NonsmoothResult, solve_dense
 from dolfinx_nnqem.numerics.newton import Globalisation
 from dolfinx_nnqem.problem.contact_problem import ContactProblem
@@ -74,10 +74,14 @@ class FrozenDirections:
 
     def __init__(self, problem: ContactProblem, gp: GaussPointOperators, elastic: Condensation,
                  globalisations: tuple[Globalisation, ...], max_iterations: int):
+        if not isinstance(gp.material, VonMisesAtPoints):
+            raise ValueError("NNEQM2's frozen flow directions are the seed's method for von Mises (N = (3/2) s/q); "
+                             f"the material is {type(gp.material).__name__}: use flow_directions='return-map'")
         self.p, self.gp, self.elastic = problem, gp, elastic
+        self.material: VonMisesAtPoints = gp.material
         self.globalisations, self.max_iterations = globalisations, max_iterations
         self.timings: dict[str, float] = {}
-        self.gscale = gp.gather_yielding(gp.stress_unit / (3.0 * gp.mu + gp.H))  # Δγ = Δγ̃ · gscale
+        self.gscale = gp.gather_yielding(gp.stress_unit / (3.0 * gp.mu + self.material.H))  # Δγ = Δγ̃ · gscale
         self._pairs = None  # G Bᵀ (owned rows), its strains (NG, 5, 3NC) and B G Bᵀ: built once
 
     # -- influence of loads -----------------------------------------------------------------------------
@@ -168,7 +172,7 @@ class FrozenDirections:
         Q.destroy()
         self._tick("plastic_matrix", t0)
         system = self._system(start, du0, WBB, WBQ, NtQ, F, nc)
-        rows = _YieldRows(system, gp, start, e0, SB, SQ, N, self.gscale)
+        rows = _YieldRows(system, gp, self.material, start, e0, SB, SQ, N, self.gscale)
         x0 = system.scaled(z, np.zeros(gp.num_yield_points), alpha)
         result, records = self._dense_solve(system, rows, x0, tol, start)
         du0.destroy()
@@ -282,15 +286,15 @@ class FrozenDirections:
 class _YieldRows:
     """The Gauss points' yield complementarity rows H4 and their Jacobian (module docstring)."""
 
-    def __init__(self, system: CondensedSystem, gp: GaussPointOperators, start: IncrementStart, e0, SB, SQ, N,
-                 gscale):
+    def __init__(self, system: CondensedSystem, gp: GaussPointOperators, material: VonMisesAtPoints,
+                 start: IncrementStart, e0, SB, SQ, N, gscale):
         self.system = system
         self.e0, self.SB, self.SQ, self.N, self.gscale = e0, SB, SQ, N, gscale
         self.s_n = gp.gather_yielding(start.s_n)
         self.p_n = gp.gather_yielding(start.p_n)
         self.mu = gp.gather_yielding(gp.mu)
-        self.sy = gp.gather_yielding(gp.sigma_y0)
-        self.Hh = gp.gather_yielding(gp.H)
+        self.sy = gp.gather_yielding(material.sigma_y0)
+        self.Hh = gp.gather_yielding(material.H)
         self.su = gp.gather_yielding(gp.stress_unit)
         self.can_flow = np.linalg.norm(N, axis=1) > 0.0  # a point with no direction cannot flow
         dp_n = gp.gather_yielding(gp.problem.state.dp_n.x.array[:gp.n_gp])

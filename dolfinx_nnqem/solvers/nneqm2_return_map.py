@@ -50,7 +50,7 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from dolfinx_nnqem.material.von_mises import deviator_tensors, return_map_plastic_strain, return_map_tangent
+from dolfinx_nnqem.material.von_mises import deviator_tensors
 from dolfinx_nnqem.numerics.linalg import free_dropped_objects, global_norm
 from dolfinx_nnqem.numerics.newton import Globalisation, Merit
 from dolfinx_nnqem.problem.contact_problem import ContactProblem
@@ -111,7 +111,7 @@ class ReturnMapIncrement:
         self.start, self.tol, self.report = start, tol, report
         self.align_sliding = align_sliding
         self.F = start.force_scale
-        self.row_scale = np.where(gp.yields, _SQRT23 * (3.0 * gp.mu + gp.H) / gp.stress_unit, 0.0)
+        self.row_scale = np.where(gp.yields, _SQRT23 * (3.0 * gp.mu + gp.material.hardening()) / gp.stress_unit, 0.0)
         self.timings: dict[str, float] = {}
         z = problem.contact.z.copy() if problem.has_contact else np.zeros((0, 3))
         self.x = _Iterate(z, np.zeros((gp.n_gp, 5)), np.zeros(elastic.num_modes))
@@ -145,14 +145,12 @@ class ReturnMapIncrement:
         return self.start.s_n + 2.0 * self.gp.mu[:, None] * self.gp.deviatoric_strains(du)
 
     def _return_map(self, t: np.ndarray) -> np.ndarray:
-        """The radial return's plastic strains for trial deviators t, 0 where nothing yields."""
-        gp = self.gp
-        plastic_strain, _ = return_map_plastic_strain(t, gp.mu, gp.sigma_y0, gp.H, self.start.p_n)
-        return np.where(gp.yields[:, None], plastic_strain, 0.0)
+        """The return map's plastic strains for trial deviators t, 0 where nothing yields."""
+        plastic_strain, _ = self.gp.material.plastic_strain(t, self.start.p_n)
+        return np.where(self.gp.yields[:, None], plastic_strain, 0.0)
 
     def _return_map_tangent(self, t: np.ndarray) -> np.ndarray:
-        gp = self.gp
-        return return_map_tangent(t, gp.mu, gp.sigma_y0, gp.H, self.start.p_n)
+        return self.gp.material.plastic_strain_tangent(t, self.start.p_n)
 
     def _displace(self, x: _Iterate) -> None:
         """du = G (b + Bᵀλ + q) + N α, the problem's u = u_n + du, and the rows that follow."""
