@@ -20,7 +20,7 @@ REMOVED_IN = "0.2"
 """The release in which the old paths stop importing."""
 
 MOVED: dict[str, str] = {
-    "amplitude": "problem.amplitude", "anderson": "numerics.anderson", "block_system": "solvers.block_system",
+    "amplitude": "problem.amplitude", "block_system": "solvers.block_system",
     "bodies": "problem.bodies", "checkpoint": "io.checkpoint", "checks": "solvers.checks",
     "condensation": "solvers.condensation", "convergence": "solvers.convergence", "fclib": "io.fclib",
     "field_series": "io.field_series", "hertz": "cases.hertz", "linalg": "numerics.linalg",

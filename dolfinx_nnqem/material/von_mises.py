@@ -499,12 +499,9 @@ def return_map_tangent(t: np.ndarray, mu: np.ndarray, sigma_y0: np.ndarray, H: n
 @dataclass(frozen=True)
 class VonMisesAtPoints:
     """Von Mises plasticity at a set of Gauss points, on numpy arrays: the material's
-    :class:`~dolfinx_nnqem.material.interface.PointwisePlasticity` (what NNEQM2 needs).
-
-    Attributes
-    ----------
-    mu, lmbda, sigma_y0, H, E
-        (n,) material values (σ_y0 = :data:`ELASTIC_YIELD_STRESS` for an elastic material).
+    :class:`~dolfinx_nnqem.material.interface.PointwisePlasticity` (what NNEQM2 needs). Its fields
+    are the (n,) material values μ, λ, σ_y0, H and E at the points (σ_y0 =
+    :data:`ELASTIC_YIELD_STRESS` for an elastic material).
     """
 
     mu: np.ndarray

@@ -1,3 +1,2 @@
-"""Numerics below the physics: the globalised semismooth Newton driver (:mod:`.newton`) and its
-dense backend (:mod:`.nonsmooth`), Anderson mixing (:mod:`.anderson`) and PETSc helpers
-(:mod:`.linalg`)."""
+"""Numerics below the physics: the globalised semismooth Newton driver (:mod:`.newton`), its dense
+backend (:mod:`.nonsmooth`) and PETSc helpers (:mod:`.linalg`)."""

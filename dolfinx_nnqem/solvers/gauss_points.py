@@ -27,17 +27,11 @@ __all__ = ["GaussPointOperators"]
 class GaussPointOperators:
     """Strain operator, quadrature force and material values at this rank's owned Gauss points.
 
-    Attributes
-    ----------
-    n_gp
-        Owned Gauss points.
-    material
-        The material at the owned Gauss points (:class:`~dolfinx_nnqem.material.interface.PointwisePlasticity`).
-    mu, lmbda, stress_unit, yields
-        (n_gp,) its elastic moduli, the yield rows' stress unit σ_u and the points that can yield.
-    n_yield, offset, num_yield_points
-        The owned yielding points, their offset in the global numbering over the ranks, and
-        their number over all ranks.
+    ``n_gp`` counts the owned Gauss points; ``material`` is the material there
+    (:class:`~dolfinx_nnqem.material.interface.PointwisePlasticity`), with its elastic moduli
+    ``mu``, ``lmbda``, the yield rows' stress unit ``stress_unit`` and the points that can yield
+    ``yields`` at hand; ``n_yield``, ``offset`` and ``num_yield_points`` count the owned yielding
+    points, give their offset in the numbering over the ranks, and count them over all ranks.
     """
 
     def __init__(self, problem: ContactProblem):
