@@ -1,5 +1,5 @@
-"""Several interfaces, a rigid obstacle and NNEQM2 with an elastic body on 2 ranks: the same answer
-as serially, to 1e-8.
+"""Several interfaces, a rigid obstacle and NNEQM2 (plastic bodies, an elastic one, yield in the first
+increment, both variants) on 2 ranks: the same answer as serially, to 1e-8.
 
 Pairs are owned by the rank of their slave node, so their global order depends on the number of
 ranks: results are compared pair by pair after sorting by (interface, slave position).
@@ -29,6 +29,8 @@ def _order(data):
 @pytest.mark.mpi
 @pytest.mark.parametrize("case, method", [("three_blocks", "monolithic"), ("three_blocks", "nneqm1"),
                                           ("three_blocks", "nneqm2"), ("elastic_on_plastic", "nneqm2"),
+                                          ("plastic_drag", "nneqm2"), ("plane_press", "nneqm2"),
+                                          ("plane_press", "nneqm2-frozen"),
                                           ("sphere", "monolithic"),
                                           ("sphere", "nneqm1")])
 def test_two_ranks_match_serial(case, method, tmp_path):
