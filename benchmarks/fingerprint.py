@@ -1,8 +1,8 @@
 """Fingerprint of solver results, to show that a change that must not move any number moves none.
 
 Runs a set of the robustness cases (``benchmarks/robustness.py``) with every method and law and
-saves, per cell, the final displacement, the pair unknowns, the load factors and the iterations
-of every increment (``--save A.npz``); ``--compare A.npz B.npz`` prints each cell's largest
+saves, per cell, the final displacement, the pair forces (not the unknowns: the polar angle of a
+pair without force means nothing), the load factors and the iterations of every increment (``--save A.npz``); ``--compare A.npz B.npz`` prints each cell's largest
 relative difference. Prints figures; asserts nothing::
 
     python benchmarks/fingerprint.py --save before.npz
@@ -49,7 +49,7 @@ def run(cases, methods, laws) -> dict[str, np.ndarray]:
                     continue
                 n = problem.V.dofmap.index_map.size_local * 3
                 out[key + "/u"] = problem.u.x.array[:n].copy()
-                out[key + "/z"] = problem.contact.z.copy() if problem.has_contact else np.zeros((0, 3))
+                out[key + "/z"] = problem.contact.force() if problem.has_contact else np.zeros((0, 3))
                 out[key + "/path"] = np.array([[r.load_factor, r.iterations] for r in results], dtype=float)
                 print(f"{key:45s} {len(results)} increments, {sum(r.iterations for r in results)} iterations",
                       flush=True)

@@ -351,19 +351,10 @@ def _polygon_area(P, n):
 
 
 @numba.njit(cache=True)
-def _couple(xs, A, xm, qb, qw, relative_tolerance, min_cos, M, g, cov):
-    """Add one couple's integrals to M (ks, km), g (ks,), cov (ks,) (see the module doc).
-
-    Returns the overlap area on the slave facet (0 if the couple does not count) and the number
-    of Gauss points whose inverse map failed (skipped).
-    """
-    ks = xs.shape[0]
-    km = xm.shape[0]
-    x0, n0, js = _centre_frame(xs, ks)
-    _, nm, jm = _centre_frame(xm, km)
-    if js == 0.0 or jm == 0.0 or _dot(nm, n0) > -min_cos:
-        return 0.0, 0
-    # in-plane axes: t1 along the first slave edge, t2 = n0 × t1 (right-handed with n0)
+def _in_plane(xs, ks, xm, km, x0, n0):
+    """Both facets' nodes in the plane through x0 normal to n0: the in-plane coordinates S (ks, 2)
+    and Pm (km, 2), the heights hs (ks,) and hm (km,) above the plane, and the slave facet's
+    diameter. In-plane axes: t1 along the first slave edge, t2 = n0 × t1 (right-handed with n0)."""
     t1 = np.empty(3)
     t2 = np.empty(3)
     d = np.empty(3)
@@ -394,6 +385,23 @@ def _couple(xs, A, xm, qb, qw, relative_tolerance, min_cos, M, g, cov):
         Pm[a, 0] = _dot(d, t1)
         Pm[a, 1] = _dot(d, t2)
         hm[a] = _dot(d, n0)
+    return S, hs, Pm, hm, diameter
+
+
+@numba.njit(cache=True)
+def _couple(xs, A, xm, qb, qw, relative_tolerance, min_cos, M, g, cov):
+    """Add one couple's integrals to M (ks, km), g (ks,), cov (ks,) (see the module doc).
+
+    Returns the overlap area on the slave facet (0 if the couple does not count) and the number
+    of Gauss points whose inverse map failed (skipped).
+    """
+    ks = xs.shape[0]
+    km = xm.shape[0]
+    x0, n0, js = _centre_frame(xs, ks)
+    _, nm, jm = _centre_frame(xm, km)
+    if js == 0.0 or jm == 0.0 or _dot(nm, n0) > -min_cos:
+        return 0.0, 0
+    S, hs, Pm, hm, diameter = _in_plane(xs, ks, xm, km, x0, n0)
     slave_area = _polygon_area(S, ks)
     if slave_area <= 0.0:
         return 0.0, 0
@@ -411,7 +419,16 @@ def _couple(xs, A, xm, qb, qw, relative_tolerance, min_cos, M, g, cov):
         return 0.0, 0
     if _polygon_area(poly, n) <= relative_tolerance * slave_area:
         return 0.0, 0
+    return _integrate_overlap(poly, n, xs, S, hs, Pm, hm, A, qb, qw, M, g, cov)
 
+
+@numba.njit(cache=True)
+def _integrate_overlap(poly, n, xs, S, hs, Pm, hm, A, qb, qw, M, g, cov):
+    """Integrate Φ_j N_k, Φ_j g and N_j over the overlap polygon poly[:n], triangulated from its
+    centroid, with the Gauss points mapped back to both facets; add them to M, g, cov. Returns
+    the area integrated and the number of Gauss points whose inverse map failed (skipped)."""
+    ks = S.shape[0]
+    km = Pm.shape[0]
     c0 = 0.0
     c1 = 0.0
     for i in range(n):

@@ -333,6 +333,38 @@ def node_to_node_rows(dofs_a: np.ndarray, dofs_b: np.ndarray, R: np.ndarray) -> 
     return PairRows.from_blocks(columns, np.concatenate([R, -R], axis=2))
 
 
+def _check_search(V, tags: tuple[int, int], tolerance: float | None, search_distance: float | None) -> float:
+    """Refuse equal tags and non-positive distances; the tolerance (default: the mesh's)."""
+    if tags[0] == tags[1]:
+        raise ContactPairError(
+            f"surface1 and surface2 are the same tag {tags[0]}; the two bodies need their own tags"
+        )
+    tolerance = float(mesh_tolerance(V.mesh) if tolerance is None else tolerance)
+    if not tolerance > 0:
+        raise ContactPairError(f"tolerance must be positive, got {tolerance}")
+    if search_distance is not None and not search_distance > 0:
+        raise ContactPairError(f"search_distance must be positive or None, got {search_distance}")
+    return tolerance
+
+
+def _initial_gaps(R: np.ndarray, X_a: np.ndarray, X_b: np.ndarray, tolerance: float,
+                  initial_gap: Callable[[np.ndarray], np.ndarray] | None) -> np.ndarray:
+    """g0 = n · (X_b − X_a), 0 for coincident nodes, or the user's ``initial_gap`` at the midpoints."""
+    if initial_gap is None:
+        g0 = np.einsum("ij,ij->i", R[:, 0], X_b - X_a)
+        # coincident nodes (within the tolerance) have no gap: drop the mesh generator's
+        # round-off, which would otherwise enter the Signorini condition
+        g0[np.linalg.norm(X_b - X_a, axis=1) <= tolerance] = 0.0
+        return g0
+    g0 = np.asarray(initial_gap((0.5 * (X_a + X_b)).T.copy()), dtype=np.float64)
+    if g0.shape != (len(X_b),) or not np.all(np.isfinite(g0)):
+        raise ContactPairError(
+            f"initial_gap must return {len(X_b)} finite values for x of shape (3, {len(X_b)}), "
+            f"got an array of shape {g0.shape}"
+        )
+    return g0
+
+
 def find_pairs(
     V: dolfinx.fem.FunctionSpace,
     facet_tags: dolfinx.mesh.MeshTags,
@@ -387,18 +419,7 @@ def find_pairs(
     """
     comm = V.mesh.comm
     tags = (int(surface1), int(surface2))
-    if tags[0] == tags[1]:
-        raise ContactPairError(
-            f"surface1 and surface2 are the same tag {tags[0]}; the two bodies need their own tags"
-        )
-    if tolerance is None:
-        tolerance = mesh_tolerance(V.mesh)
-    tolerance = float(tolerance)
-    if not tolerance > 0:
-        raise ContactPairError(f"tolerance must be positive, got {tolerance}")
-    if search_distance is not None and not search_distance > 0:
-        raise ContactPairError(f"search_distance must be positive or None, got {search_distance}")
-
+    tolerance = _check_search(V, tags, tolerance, search_distance)
     surfaces = gather_surfaces(V, facet_tags, tags)
     body1, body2 = surfaces.nodes
     shared = np.intersect1d(body1.index, body2.index)
@@ -417,18 +438,7 @@ def find_pairs(
     index_a, index_b = body1.index[partner], body2.index[order2]
     X_a, X_b = body1.x[partner], body2.x[order2]
     R = local_frames(body1.normal[partner])
-    if initial_gap is None:
-        g0 = np.einsum("ij,ij->i", R[:, 0], X_b - X_a)
-        # coincident nodes (within the tolerance) have no gap: drop the mesh generator's
-        # round-off, which would otherwise enter the Signorini condition
-        g0[np.linalg.norm(X_b - X_a, axis=1) <= tolerance] = 0.0
-    else:
-        g0 = np.asarray(initial_gap((0.5 * (X_a + X_b)).T.copy()), dtype=np.float64)
-        if g0.shape != (len(index_b),) or not np.all(np.isfinite(g0)):
-            raise ContactPairError(
-                f"initial_gap must return {len(index_b)} finite values for x of shape (3, {len(index_b)}), "
-                f"got an array of shape {g0.shape}"
-            )
+    g0 = _initial_gaps(R, X_a, X_b, tolerance, initial_gap)
 
     # --- ownership: the rank owning b_i's dof block; global order by owner, then coordinates
     mine, offset, num_global = owned_by_slave(comm, V.dofmap.index_map, index_b)

@@ -452,6 +452,16 @@ def build_two_beams(
 # --------------------------------------------------------------------------------------------
 
 
+def _check_blocks(counts: dict[str, int], lengths: dict[str, float]) -> None:
+    """Element counts must be positive integers and lengths positive; the message names the argument."""
+    for label, n in counts.items():
+        if int(n) != n or n < 1:
+            raise ValueError(f"{label} must be a positive integer, got {n!r}")
+    for label, length in lengths.items():
+        if not length > 0:
+            raise ValueError(f"{label} must be positive, got {length!r}")
+
+
 def build_stacked_blocks(
     comm: MPI.Comm = MPI.COMM_WORLD,
     Lx: float = 1.0,
@@ -506,12 +516,8 @@ def build_stacked_blocks(
     """
     nx2 = nx if nx2 is None else nx2
     nz2 = nz if nz2 is None else nz2
-    for label, n in (("nx", nx), ("ny1", ny1), ("ny2", ny2), ("nz", nz), ("nx2", nx2), ("nz2", nz2)):
-        if int(n) != n or n < 1:
-            raise ValueError(f"{label} must be a positive integer, got {n!r}")
-    for label, length in (("Lx", Lx), ("Ly1", Ly1), ("Ly2", Ly2), ("Lz", Lz)):
-        if not length > 0:
-            raise ValueError(f"{label} must be positive, got {length!r}")
+    _check_blocks({"nx": nx, "ny1": ny1, "ny2": ny2, "nz": nz, "nx2": nx2, "nz2": nz2},
+                  {"Lx": Lx, "Ly1": Ly1, "Ly2": Ly2, "Lz": Lz})
     y_i = Ly1 if y_interface is None else float(y_interface)
     x0 = -Lx / 2 if centred else 0.0
     z0 = -Lz / 2 if centred else 0.0

@@ -195,48 +195,23 @@ def check_state(problem, report=None, solver_options=None, options: CheckOptions
     options = options or CheckOptions()
     solver_options = solver_options or SolverOptions()
     tol = options.tolerance(solver_options.rtol)
-    atol = float(solver_options.atol)
     comm = problem.comm
     forms = _forms(problem)
-
-    # -- finite values
-    n_owned = problem.V.dofmap.index_map.size_local * 3
-    finite = bool(np.all(np.isfinite(problem.u.x.array[:n_owned])))
-    if problem.has_contact:
-        finite &= bool(np.all(np.isfinite(problem.contact.z)))
-    finite = bool(comm.allreduce(int(finite), op=MPI.MIN))
-    if not finite:
+    if not _finite(problem):
         nan = float("nan")
         return StateCheck(False, "the state holds NaN or infinite values", nan, nan, nan, nan, nan, nan, tol, False)
-
-    # -- equilibrium
     gpv = getattr(report, "gauss_point_values", None)
     own = gpv is not None and np.array_equal(gpv.u, problem.u.x.array)
     own = bool(comm.allreduce(int(own), op=MPI.MIN))
-    if own:
-        n_gp = problem.state.W_scalar.dofmap.index_map.size_local
-        forms.sigma.x.array[:9 * n_gp] = np.asarray(gpv.sigma, dtype=float).reshape(-1)
-        forms.sigma.x.scatter_forward()
-        F_int = assemble_vector(forms.own_force, problem.V)
-    else:
-        F_int = problem.assemble_internal_force()
-    F_ext = problem.external_force()
-    scale = max(F_ext.norm(), F_int.norm(), problem.force_floor)
-    lam = Bl = None
-    if problem.has_contact:
-        lam = problem.contact.force()
-        Bl = problem.contact.global_force(lam)
-        scale = max(scale, Bl.norm(), problem.contact.motion_force_scale(problem.load_factor, problem.load_factor_n))
-    R = problem.residual(F_int=F_int)
-    Rf = problem.free_residual(R)
-    F = max(scale, 1e-300)
-    eq = Rf.norm() / F
-    limit = tol  # the solver's atol is not added: an absolute tolerance never excuses a residual
-    reasons = []
-    if not eq <= limit:
-        hint = (f" (the solver's atol = {atol:g} N is above {limit:.0e} F: it lets the solver stop early)"
-                if atol > limit * F else "")
-        reasons.append(f"equilibrium residual |R|/F = {eq:.3e} > {limit:.1e} (F = {F:.4g} N){hint}")
+    reasons: list[str] = []
+
+    # -- equilibrium (with the stresses the commit will store)
+    Rf, F, eq = _equilibrium(problem, forms, gpv if own else None)
+    if not eq <= tol:  # the solver's atol is not added: an absolute tolerance never excuses a residual
+        atol = float(solver_options.atol)
+        hint = (f" (the solver's atol = {atol:g} N is above {tol:.0e} F: it lets the solver stop early)"
+                if atol > tol * F else "")
+        reasons.append(f"equilibrium residual |R|/F = {eq:.3e} > {tol:.1e} (F = {F:.4g} N){hint}")
 
     # -- the constitutive law at every Gauss point, of the values the commit will store
     values = gpv if own else forms.return_map_values(problem)
@@ -251,37 +226,18 @@ def check_state(problem, report=None, solver_options=None, options: CheckOptions
         reasons.append(f"{source} Gauss-point values break the constitutive law beyond {tol:.1e} σ_u: "
                        + "; ".join(broken))
 
-    # -- contact
+    # -- the contact law at every pair
     contact = coulomb = 0.0
     pair_violation = None
     if problem.has_contact:
-        model = problem.contact
-        w = problem.relative_displacement()
-        H = model.evaluate(w).H
-        norm_H = math.sqrt(comm.allreduce(float(np.sum(H * H)), op=MPI.SUM))
-        contact = norm_H / F
-        pinned = model.constrained
-        p_n = np.where(pinned[:, 0], 0.0, lam[:, 0])
-        lam_t = np.where(pinned[:, 1:], 0.0, lam[:, 1:])
-        cone = np.linalg.norm(lam_t, axis=1) - model.mu_f * np.maximum(p_n, 0.0)
-        violation = np.maximum(np.maximum(-p_n, cone), 0.0)
-        coulomb = _allmax(comm, np.max(violation, initial=0.0)) / F
-        pair_violation = np.maximum(np.linalg.norm(H, axis=1), violation) / F
-        if not contact <= limit:
-            reasons.append(f"contact complementarity |H|/F = {contact:.3e} > {limit:.1e}")
-        if not coulomb <= limit:
+        contact, coulomb, pair_violation = _contact_law(problem, F)
+        if not contact <= tol:
+            reasons.append(f"contact complementarity |H|/F = {contact:.3e} > {tol:.1e}")
+        if not coulomb <= tol:
             reasons.append(f"Coulomb conditions violated by {coulomb:.3e} F (p_n < 0 or |λ_t| > μ_f p_n)")
-        for obj in (Bl,):
-            obj.destroy()
 
     # -- small strain
-    forms.grad.interpolate(forms.grad_expr)
-    n_gp = problem.state.W_scalar.dofmap.index_map.size_local
-    G = forms.grad.x.array[:9 * n_gp].reshape(-1, 3, 3)
-    sym = 0.5 * (G + G.transpose(0, 2, 1))
-    strain = _allmax(comm, np.max(np.sqrt(np.einsum("nij,nij->n", sym, sym)), initial=0.0))
-    rotation = _allmax(comm, np.max(0.5 * np.sqrt((G[:, 2, 1] - G[:, 1, 2]) ** 2 + (G[:, 0, 2] - G[:, 2, 0]) ** 2
-                                                  + (G[:, 1, 0] - G[:, 0, 1]) ** 2), initial=0.0))
+    strain, rotation = _largest_strain_and_rotation(problem, forms)
     if options.max_strain is not None and not strain <= options.max_strain:
         reasons.append(f"largest strain {strain:.3g} exceeds max_strain = {options.max_strain:g}: far outside "
                        "the small-strain setting (plastic collapse or friction exceeded?)")
@@ -296,9 +252,64 @@ def check_state(problem, report=None, solver_options=None, options: CheckOptions
         result.worst_nodes = _worst_nodes(problem, Rf, F)
         if pair_violation is not None:
             result.worst_pairs = _worst_pairs(problem, pair_violation)
-    for obj in (F_int, F_ext, R, Rf):
-        obj.destroy()
+    Rf.destroy()
     return result
+
+
+def _finite(problem) -> bool:
+    """u and z hold no NaN or infinity, on every rank."""
+    n_owned = problem.V.dofmap.index_map.size_local * 3
+    finite = bool(np.all(np.isfinite(problem.u.x.array[:n_owned])))
+    if problem.has_contact:
+        finite &= bool(np.all(np.isfinite(problem.contact.z)))
+    return bool(problem.comm.allreduce(int(finite), op=MPI.MIN))
+
+
+def _equilibrium(problem, forms: _Forms, gpv: GaussPointValues | None):
+    """(R at the free dofs, the force scale F, |R_free|/F) with the solver's own Gauss-point stresses
+    ``gpv``, or the radial return's when None."""
+    if gpv is not None:
+        n_gp = problem.state.W_scalar.dofmap.index_map.size_local
+        forms.sigma.x.array[:9 * n_gp] = np.asarray(gpv.sigma, dtype=float).reshape(-1)
+        forms.sigma.x.scatter_forward()
+        F_int = assemble_vector(forms.own_force, problem.V)
+    else:
+        F_int = problem.assemble_internal_force()
+    F_ext = problem.external_force()
+    F = max(problem.force_scale(F_int, F_ext), 1e-300)
+    R = problem.residual(F_int=F_int)
+    Rf = problem.free_residual(R)
+    for vec in (F_int, F_ext, R):
+        vec.destroy()
+    return Rf, F, Rf.norm() / F
+
+
+def _contact_law(problem, F: float) -> tuple[float, float, np.ndarray]:
+    """(|H|/F, the largest violation of the Coulomb conditions / F, each pair's violation / F)."""
+    comm, model = problem.comm, problem.contact
+    lam = model.force()
+    H = model.evaluate(problem.relative_displacement()).H
+    contact = math.sqrt(comm.allreduce(float(np.sum(H * H)), op=MPI.SUM)) / F
+    pinned = model.constrained
+    p_n = np.where(pinned[:, 0], 0.0, lam[:, 0])
+    lam_t = np.where(pinned[:, 1:], 0.0, lam[:, 1:])
+    cone = np.linalg.norm(lam_t, axis=1) - model.mu_f * np.maximum(p_n, 0.0)
+    violation = np.maximum(np.maximum(-p_n, cone), 0.0)
+    coulomb = _allmax(comm, np.max(violation, initial=0.0)) / F
+    return contact, coulomb, np.maximum(np.linalg.norm(H, axis=1), violation) / F
+
+
+def _largest_strain_and_rotation(problem, forms: _Forms) -> tuple[float, float]:
+    """The largest |sym ∇u| and infinitesimal rotation |axial(skew ∇u)| over the Gauss points."""
+    comm = problem.comm
+    forms.grad.interpolate(forms.grad_expr)
+    n_gp = problem.state.W_scalar.dofmap.index_map.size_local
+    G = forms.grad.x.array[:9 * n_gp].reshape(-1, 3, 3)
+    sym = 0.5 * (G + G.transpose(0, 2, 1))
+    strain = _allmax(comm, np.max(np.sqrt(np.einsum("nij,nij->n", sym, sym)), initial=0.0))
+    rotation = _allmax(comm, np.max(0.5 * np.sqrt((G[:, 2, 1] - G[:, 1, 2]) ** 2 + (G[:, 0, 2] - G[:, 2, 0]) ** 2
+                                                  + (G[:, 1, 0] - G[:, 0, 1]) ** 2), initial=0.0))
+    return strain, rotation
 
 
 _RELATIONS = {
@@ -359,15 +370,13 @@ def failure_details(problem) -> dict:
     try:
         F_int = problem.assemble_internal_force()
         F_ext = problem.external_force()
-        scale = max(F_ext.norm(), F_int.norm(), problem.force_floor)
         out = {}
-        if problem.has_contact:
-            model = problem.contact
-            lam = model.force()
-            if problem.comm.allreduce(int(np.all(np.isfinite(lam))), op=MPI.MIN):  # the same choice on every rank
-                Bl = model.global_force(lam)
-                scale = max(scale, Bl.norm(), problem.contact.motion_force_scale(problem.load_factor, problem.load_factor_n))
-                Bl.destroy()
+        finite_forces = not problem.has_contact or problem.comm.allreduce(
+            int(np.all(np.isfinite(problem.contact.force()))), op=MPI.MIN)  # the same choice on every rank
+        if finite_forces:
+            scale = problem.force_scale(F_int, F_ext)
+        else:  # the failed iterate's pair forces are not finite: the scale of the loads alone
+            scale = max(F_ext.norm(), F_int.norm(), problem.force_floor)
         F = max(scale, 1e-300)
         R = problem.residual(F_int=F_int)
         Rf = problem.free_residual(R)
