@@ -38,14 +38,13 @@ def run(cases, methods, laws) -> dict[str, np.ndarray]:
                 if not case.contact and (method != "monolithic" or law != rb.LAWS[0]):
                     continue
                 problem = case.build(law)
-                solver = rb.make_solver(method, problem, rb.SolverOptions())
                 key = f"{case.name}/{method}/{law}"
                 try:
-                    results = rb.solve_load_steps(problem, solver, case.increments,
-                                                  max_displacement=case.max_displacement)
+                    with rb.make_solver(method, problem, rb.SolverOptions()) as solver:
+                        results = rb.solve_load_steps(problem, solver, case.increments,
+                                                      max_displacement=case.max_displacement)
                 except rb.ConvergenceError as error:
                     print(f"{key:45s} failed: {str(error).splitlines()[0][:100]}", flush=True)
-                    solver.destroy()
                     continue
                 n = problem.V.dofmap.index_map.size_local * 3
                 out[key + "/u"] = problem.u.x.array[:n].copy()
@@ -53,7 +52,6 @@ def run(cases, methods, laws) -> dict[str, np.ndarray]:
                 out[key + "/path"] = np.array([[r.load_factor, r.iterations] for r in results], dtype=float)
                 print(f"{key:45s} {len(results)} increments, {sum(r.iterations for r in results)} iterations",
                       flush=True)
-                solver.destroy()
     return out
 
 

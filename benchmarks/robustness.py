@@ -201,13 +201,13 @@ def run_cell(case: Case, method: str, law: str, increments) -> Cell:
     except ValueError as error:  # a method refusing the problem before solving, with its reason
         return Cell(converged=False, message=f"refused before solving: {error}", green=True)
     t0 = time.perf_counter()
-    try:
-        results = solve_load_steps(problem, solver, increments, max_displacement=case.max_displacement)
-        converged, message = True, "converged"
-    except ConvergenceError as error:
-        results, converged, message = [], False, str(error).splitlines()[0]
+    with solver:  # frees its PETSc objects
+        try:
+            results = solve_load_steps(problem, solver, increments, max_displacement=case.max_displacement)
+            converged, message = True, "converged"
+        except ConvergenceError as error:
+            results, converged, message = [], False, str(error).splitlines()[0]
     wall = time.perf_counter() - t0
-    solver.destroy() if hasattr(solver, "destroy") else None
     its = [r.iterations for r in results]
     cell = Cell(converged=converged, iterations=sum(its), max_per_increment=max(its, default=0),
                 median_per_increment=float(statistics.median(its)) if its else 0.0, increments=len(its),

@@ -63,7 +63,8 @@ def main():
     warm = two_beams_problem(comm, law=law, refine=args.refine)
     t_build_cold = time.perf_counter() - t0
     t0 = time.perf_counter()
-    solve_load_steps(warm, make_solver(args.method, warm), 1, final_load_factor=1.0 / args.increments)
+    with make_solver(args.method, warm) as solver:
+        solve_load_steps(warm, solver, 1, final_load_factor=1.0 / args.increments)
     t_first_increment = time.perf_counter() - t0
 
     # 2. the measured run

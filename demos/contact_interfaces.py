@@ -74,7 +74,6 @@ if comm.rank == 0:
 # Ten equal increments; after each, the friction force carried by each interface.
 
 # %%
-solver = make_solver(args.method, problem, SolverOptions(rtol=1e-12, max_iterations=40))
 writer = ResultsWriter(problem, args.method, out, 10)
 history = []
 
@@ -85,7 +84,9 @@ def record(result):
                     [t["state_name"][t["interface"] == k] for k in (0, 1)]))
 
 
-solve_load_steps(problem, solver, 10, callbacks=[writer, record])
+# a solver frees its PETSc objects at the end of a with block
+with make_solver(args.method, problem, SolverOptions(rtol=1e-12, max_iterations=40)) as solver:
+    solve_load_steps(problem, solver, 10, callbacks=[writer, record])
 writer.close()
 if comm.rank == 0:
     for ell, friction, states in history:

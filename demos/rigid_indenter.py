@@ -81,7 +81,8 @@ def sphere_on_block(h, material, motion, half=False, mu_f=0.0):
 # %%
 h = A / args.elements_per_a
 problem = sphere_on_block(h, VonMises(E=E, nu=NU), (0.0, -DELTA, 0.0))
-solve_load_steps(problem, make_solver("monolithic", problem, SolverOptions(rtol=1e-12)), 1)
+with make_solver("monolithic", problem, SolverOptions(rtol=1e-12)) as solver:
+    solve_load_steps(problem, solver, 1)
 table = pair_table(problem)
 loads = NodalLoads(problem, T.top(1), table["slave_block"])
 p_n = -table["force_local_body1"][:, 0]
@@ -124,7 +125,8 @@ if rank0:
 # %%
 steel = VonMises(E=E, nu=NU, sigma_y0=300.0, H=2.0e3)
 problem = sphere_on_block(A / 2, steel, (0.0, -3 * DELTA, 0.0))
-results = solve_load_steps(problem, make_solver("monolithic", problem, SolverOptions(rtol=1e-11)), 8)
+with make_solver("monolithic", problem, SolverOptions(rtol=1e-11)) as solver:
+    results = solve_load_steps(problem, solver, 8)
 table = pair_table(problem)
 force = 4 * float(-table["force_local_body1"][:, 0].sum())
 plastic = int(comm.allreduce(np.count_nonzero(problem.state.p_n.x.array > 0), op=MPI.SUM))
@@ -155,7 +157,8 @@ def record(result):
     forces.append((result.load_factor, 2 * f, int(np.sum(states == "stick")), int(np.sum(states == "slip"))))
 
 
-solve_load_steps(problem, make_solver("monolithic", problem, SolverOptions(rtol=1e-12)), 8, callbacks=[record])
+with make_solver("monolithic", problem, SolverOptions(rtol=1e-12)) as solver:
+    solve_load_steps(problem, solver, 8, callbacks=[record])
 summary["slide"] = [{"load_factor": ell, "force_N": f.tolist(), "stick": st, "slip": sl} for ell, f, st, sl in forces]
 if rank0:
     for ell, f, st, sl in forces:

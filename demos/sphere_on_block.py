@@ -88,9 +88,9 @@ if comm.rank == 0:
 # frictionless; the active set is found by the Newton iteration itself).
 
 # %%
-solver = make_solver("monolithic", problem, SolverOptions(rtol=1e-10))
 writer = ResultsWriter(problem, "monolithic", out, 1)
-results = solve_load_steps(problem, solver, 1, callbacks=[writer])
+with make_solver("monolithic", problem, SolverOptions(rtol=1e-10)) as solver:
+    results = solve_load_steps(problem, solver, 1, callbacks=[writer])
 writer.close()
 wall = time.perf_counter() - t0
 

@@ -72,7 +72,8 @@ problem = two_beams_problem(law=summaries[0].get("law", "alart-curnier"))
 from dolfinx_nnqem.solvers import make_solver  # noqa: E402
 from dolfinx_nnqem.solvers import solve_load_steps  # noqa: E402
 
-solve_load_steps(problem, make_solver(args.methods[0], problem), args.increments)
+with make_solver(args.methods[0], problem) as solver:
+    solve_load_steps(problem, solver, args.increments)
 plot_deformed(problem, out / "deformed.png", field="von_mises", scale=50.0, camera="front",
               title=f"two beams, {args.methods[0]}, load factor 1")
 if rank0:

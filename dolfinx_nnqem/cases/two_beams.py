@@ -80,19 +80,20 @@ def run_two_beams(method: str = "monolithic", increments: int = 15, out: str | P
     law = law or DEFAULT_LAW.get(method, "alart-curnier")
     t0 = time.perf_counter()
     problem = two_beams_problem(comm, law=law, refine=refine)
-    solver = make_solver(method, problem, options, **(method_options or {}))
     extra = {"law": law, "refine": refine, "r": problem.contact.interfaces[0].r,
              "model": "two overlapping cantilevers (benchmark-two-beams.md)"}
     writer = ResultsWriter(problem, method, out, increments, probes=FREE_END_CORNERS, extra=extra,
                            fields=fields)
     callbacks = [writer] + ([progress] if progress is not None else [])
     try:
-        solve_load_steps(problem, solver, increments, callbacks=callbacks)
+        with make_solver(method, problem, options, **(method_options or {})) as solver:
+            solve_load_steps(problem, solver, increments, callbacks=callbacks)
+            timings = dict(solver.timings)
     finally:
         writer.close()
     summary = writer.summary.data
     summary["wall_time_s"] = time.perf_counter() - t0
-    summary["timings_s"] = dict(getattr(solver, "timings", {}))
+    summary["timings_s"] = timings
     summary["free_end_corners"] = summary.pop("probes", [])
     writer.summary.data = summary
     writer.summary.write()  # atomic, rank 0, errors raised on every rank
