@@ -404,6 +404,10 @@ def main(argv: list[str] | None = None) -> int:
     code, message = collective.finish_collectively(code, message)
     if message and MPI.COMM_WORLD.rank == 0:
         print(message, file=sys.stderr, flush=True)
+    from dolfinx_nnqem.field_series import hdf5_left_open
+
+    if hdf5_left_open():  # HDF5's clean-up at exit would hang or abort on a file it cannot close
+        collective.end_job(code)
     return code
 
 

@@ -174,20 +174,27 @@ class PairWriter:
 
 
 def _save_as_vtp(cloud, path: Path) -> None:
-    """VTK XML PolyData at ``path`` whatever its suffix (temporary names); a failed write raises."""
+    """VTK XML PolyData at ``path`` whatever its suffix (temporary names); a failed write raises.
+
+    VTK builds the file in memory and Python writes it: VTK's own file output crashes the
+    process (SIGSEGV, or "free(): invalid pointer" and SIGABRT, VTK 9.7) when the disk fills up
+    during the write, which killed rank 0 of an MPI run with no message (issue 31). Python's
+    write raises OSError (ENOSPC) instead, which :func:`~dolfinx_nnqem.safe_io.atomic_write`
+    reports with the file's name. The binary data mode is base64 text, so the bytes are those
+    VTK would have written itself.
+    """
     from vtkmodules.vtkIOXML import vtkXMLPolyDataWriter
 
     writer = vtkXMLPolyDataWriter()
-    writer.SetFileName(str(path))
+    writer.WriteToOutputStringOn()
     writer.SetInputData(cloud)
     writer.SetDataModeToBinary()
     if writer.Write() != 1 or writer.GetErrorCode() != 0:
         import errno
 
-        code = writer.GetErrorCode() or errno.EIO
-        raise OSError(errno.ENOSPC if code == 20007 else errno.EIO,  # vtkErrorCode::OutOfDiskSpaceError
-                      f"VTK could not write {path} (error code {code})",
-                      str(path))
+        raise OSError(errno.EIO, f"VTK could not write {path} (error code {writer.GetErrorCode()})", str(path))
+    with open(path, "w", encoding="ascii") as fh:
+        fh.write(writer.GetOutputString())
 
 
 class SummaryWriter:
@@ -405,13 +412,29 @@ class ResultsWriter:
     def __call__(self, result) -> None:
         for w in self.writers:
             w(result)
+        self._reserve()
+
+    def _reserve(self) -> None:
+        """Keep room on disk for the summary's last rewrite (rank 0, which holds the lock): its
+        size now plus 64 kB for the failure or error it may add; twice that under MPI, where
+        :meth:`SummaryWriter.ended` may write from two ranks at once."""
+        if self._lock is not None and self.problem.comm.rank == 0 and self.summary.path.is_file():
+            copies = 2 if self.problem.comm.size > 1 else 1
+            self._lock.reserve(copies * self.summary.path.stat().st_size + 65536)
+
+    def _free_reserve(self) -> None:
+        if self._lock is not None and self.problem.comm.rank == 0:
+            self._lock.free_reserve()
 
     def failed(self, failure: dict) -> None:
         """The run gave up at an increment: ``summary.json`` says which, and why."""
+        self._free_reserve()
         self.summary.failed(failure)
 
     def ended(self, status: str, message: str = "") -> None:
-        """The run stopped otherwise ("interrupted", "error"): ``summary.json`` says so."""
+        """The run stopped otherwise ("interrupted", "error"): ``summary.json`` says so (on a
+        full disk too: the space reserved after every increment is given back first)."""
+        self._free_reserve()
         self.summary.ended(status, message)
 
     def state(self) -> dict:
