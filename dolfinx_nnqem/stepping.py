@@ -106,15 +106,16 @@ def solve_load_steps(
         attribute (a dict: increment, load factor, reason, the worst nodes and pairs) is also
         handed to every callback that has a ``failed`` method before it is raised.
     """
-    increments, control = as_step_control(increments)
+    increments, control = as_step_control(increments)  # increments None: automatic
     increments, max_cutbacks, final_load_factor, max_displacement = check_stepping_arguments(
-        increments or 1, max_cutbacks, final_load_factor, max_displacement)
+        increments, max_cutbacks, final_load_factor, max_displacement)
     check = check or CheckOptions()
     solver_options = getattr(solver, "options", None)
     if resume is None:
         start = problem.load_factor_n
-        step = (final_load_factor - start) / increments
-        if control is not None:
+        if control is None:
+            step = (final_load_factor - start) / increments
+        else:
             step = control.first_step(final_load_factor - start)
         cutbacks, index0 = 0, 0
     else:

@@ -47,8 +47,10 @@ def check_integer(name: str, value, *, low: int, high: int) -> int:
 
 
 def check_stepping_arguments(increments, max_cutbacks, final_load_factor, max_displacement) -> tuple:
-    """The arguments of :func:`~dolfinx_nnqem.stepping.solve_load_steps`, checked."""
-    increments = check_integer("increments", increments, low=1, high=MAX_INCREMENTS)
+    """The arguments of :func:`~dolfinx_nnqem.stepping.solve_load_steps`, checked
+    (``increments`` None: automatic incrementation, nothing to check)."""
+    if increments is not None:
+        increments = check_integer("increments", increments, low=1, high=MAX_INCREMENTS)
     max_cutbacks = check_integer("max_cutbacks", max_cutbacks, low=0, high=MAX_CUTBACKS)
     final_load_factor = check_real("final_load_factor", final_load_factor)
     if max_displacement is not None:

@@ -86,6 +86,7 @@ CASES = {
     "rtol not a number": (("increments = 2", "increments = 2\nrtol = nan"),
                           lambda b: SolverOptions(rtol=float("nan")), "rtol"),
     "atol negative": (("increments = 2", "increments = 2\natol = -1.0"), lambda b: SolverOptions(atol=-1.0), "atol"),
+    "increments zero": (("increments = 2", "increments = 0"), "steps:increments=0", "increments"),  # issue 31, 2
     "increments too many": (("increments = 2", "increments = 1000000"), "steps:increments=1000000", "increments"),
     "increments not an integer": (("increments = 2", "increments = 2.5"), "steps:increments=2.5", "increments"),
     "cutbacks too many": (("increments = 2", "increments = 2\nmax_cutbacks = 99"), "steps:max_cutbacks=99",
