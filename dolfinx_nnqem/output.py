@@ -288,7 +288,7 @@ class SummaryWriter:
 
     def write(self) -> None:
         """Write the summary (rank 0; atomic: a crash never leaves half a file; collective)."""
-        on_rank0(self.problem.comm, lambda: atomic_write_text(self.path, json.dumps(_jsonable(self.data), indent=1)))
+        on_rank0(self.problem.comm, lambda: atomic_write_text(self.path, summary_json(self.data)))
 
     def failed(self, failure: dict) -> None:
         """Record the increment that did not converge (from :func:`solve_load_steps`)."""
@@ -312,7 +312,7 @@ class SummaryWriter:
         # (each through its own temporary file and an atomic rename); a failure to write is
         # ignored: the run is ending on an error already (e.g. a full disk), keep that one
         try:
-            atomic_write_text(self.path, json.dumps(_jsonable(self.data), indent=1))
+            atomic_write_text(self.path, summary_json(self.data))
         except OSError:
             pass
 
@@ -327,16 +327,31 @@ class SummaryWriter:
         self.t0 -= float(data.get("wall_time_s", 0.0))
 
 
-def _jsonable(value):
-    """``value`` with numpy scalars and arrays turned into Python numbers and lists."""
+def summary_json(data: dict) -> str:
+    """``data`` as strict JSON text: a value that is not a finite number (NaN, ±inf: e.g. a
+    residual of a diverged iterate) is written as ``null``, and ``non_finite`` lists each such
+    key with the value it had (JSON has no NaN: ``json.dumps`` would write a bare ``NaN``,
+    which strict readers refuse)."""
+    non_finite: dict[str, str] = {}
+    clean = _jsonable({k: v for k, v in data.items() if k != "non_finite"}, "", non_finite)
+    if non_finite:
+        clean["non_finite"] = non_finite
+    return json.dumps(clean, indent=1, allow_nan=False)
+
+
+def _jsonable(value, path: str = "", non_finite: dict | None = None):
+    """``value`` with numpy scalars and arrays turned into Python numbers and lists; a float
+    that is not finite becomes None (recorded in ``non_finite`` under its path)."""
     if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return value.tolist()
+        return {str(k): _jsonable(v, f"{path}.{k}" if path else str(k), non_finite) for k, v in value.items()}
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return [_jsonable(v, f"{path}[{i}]", non_finite) for i, v in enumerate(value)]
     if isinstance(value, np.generic):
-        return value.item()
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        if non_finite is not None:
+            non_finite[path] = repr(value)
+        return None
     return value
 
 

@@ -219,9 +219,8 @@ class ContactProblem:
             components = (0, 1, 2) if d.components is None else tuple(d.components)
             if any(c not in (0, 1, 2) for c in components):
                 raise ValueError(f"Dirichlet(tag={d.tag}): components {components} must be among 0, 1, 2")
+            _check_finite(f"Dirichlet(tag={d.tag}).value", d.value)
             value = np.broadcast_to(np.asarray(d.value, dtype=float), (len(components),))
-            if not np.all(np.isfinite(value)):
-                raise ValueError(f"Dirichlet(tag={d.tag}): value {d.value} is not finite")
             for c, val in zip(components, value):
                 Vc = self.V.sub(c)
                 dofs = fem.locate_dofs_topological(Vc, fdim, facets)
@@ -516,8 +515,18 @@ def _amplitude(amplitude: Callable[[float], float] | None, load_factor: float) -
 
 
 def _check_finite(name: str, values, length: int | None = None) -> None:
-    values = np.atleast_1d(np.asarray(values, dtype=float))
-    if length is not None and values.shape != (length,):
-        raise ValueError(f"{name} = {values.tolist()}: expected {length} components")
-    if not np.all(np.isfinite(values)):
-        raise ValueError(f"{name} = {values.tolist()} is not finite")
+    """``values`` are ``length`` finite numbers within the supported magnitude (else an error
+    naming ``name``: not numpy's "could not convert string to float")."""
+    from dolfinx_nnqem.validation import check_magnitude
+
+    expected = f"{length} numbers" if length is not None else "numbers"
+    try:
+        array = np.atleast_1d(np.asarray(values, dtype=float))
+    except (TypeError, ValueError):
+        raise TypeError(f"{name} = {values!r}: expected {expected}"
+                        + (", e.g. (0.0, -9.81, 0.0)" if length == 3 else "")) from None
+    if length is not None and array.shape != (length,):
+        raise ValueError(f"{name} = {array.tolist()}: expected {length} components")
+    if not np.all(np.isfinite(array)):
+        raise ValueError(f"{name} = {array.tolist()} is not finite")
+    check_magnitude(name, array)

@@ -13,13 +13,35 @@ import numbers
 import numpy as np
 from mpi4py import MPI
 
-__all__ = ["MAX_CUTBACKS", "MAX_INCREMENTS", "check_cell_tag", "check_integer", "check_mesh",
-           "check_output_folder", "check_real", "check_stepping_arguments"]
+__all__ = ["MAX_CUTBACKS", "MAX_INCREMENTS", "MAX_MAGNITUDE", "MIN_MODULUS", "check_cell_tag", "check_integer",
+           "check_magnitude", "check_mesh", "check_output_folder", "check_real", "check_stepping_arguments"]
 
 MAX_INCREMENTS = 100_000
 """Largest number of load increments accepted (a larger number is a typo, not a plan)."""
 MAX_CUTBACKS = 50
 """Largest number of halvings in a row (2⁻⁵⁰ of an increment is below any meaning)."""
+
+
+MAX_MAGNITUDE = 1e20
+"""Largest magnitude of a dimensional input: moduli, yield stress, density, loads, prescribed
+displacements and motions, obstacle geometry, r, μ_f. Within it (and with the moduli not below
+:data:`MIN_MODULUS`) the products and squares the solvers form (stiffness × displacement,
+r × gap, the sums of squares of norms) stay far inside double precision (±1.8e308); E, a
+traction, a density, r or a prescribed value of 1e300 overflowed to NaN in the first iteration
+(issue 31). Any consistent unit system fits: Pa and m, MPa and mm, GPa."""
+MIN_MODULUS = 1e-20
+"""Smallest Young's modulus and yield stress: E = 1e-300 made the displacements overflow."""
+
+
+def check_magnitude(name: str, values, limit: float = MAX_MAGNITUDE) -> None:
+    """Raise ValueError naming ``name`` when a component of ``values`` exceeds ``limit`` in
+    magnitude (the values are finite numbers already)."""
+    array = np.abs(np.atleast_1d(np.asarray(values, dtype=float)))
+    if array.size and float(array.max()) > limit:
+        shown = values.tolist() if isinstance(values, np.ndarray) else values
+        raise ValueError(f"{name} = {shown!r}: beyond the supported magnitude {limit:g} (a value this large "
+                         "overflows double precision in the solvers' products; docs/reliability.md, "
+                         "'Supported ranges')")
 
 
 def check_real(name: str, value, *, low: float = -math.inf, high: float = math.inf,

@@ -184,3 +184,36 @@ def test_check_tolerance_follows_the_solver_rtol():
     problem = _box()
     results = solve_load_steps(problem, make_solver("monolithic", problem, SolverOptions(rtol=1e-2)), 2)
     assert all(r.check.ok for r in results)
+
+
+class DivergingSolver(LyingSolver):
+    """An iterate that overflowed: u and the residual history hold NaN and infinity."""
+
+    name = "diverging"
+
+    def solve_increment(self, load_factor):
+        from dolfinx_nnqem.convergence import IterationRecord
+
+        self.problem.u.x.array[:] = np.nan
+        history = [IterationRecord(0, float("nan"), float("inf"), float("nan"), "newton")]
+        return SolveReport(converged=False, iterations=1, message="the residual is not finite", history=history)
+
+
+def test_summary_json_is_valid_json_when_values_are_not_finite(tmp_path):
+    """Issue 31, item 3: a diverged iterate's NaN reached summary.json as a bare NaN (not JSON).
+    Now such a value is null and ``non_finite`` names the key and the value it had."""
+    problem = _box()
+    writer = ResultsWriter(problem, "diverging", tmp_path / "out", 2)
+    with pytest.raises(ConvergenceError):
+        solve_load_steps(problem, DivergingSolver(problem), 2, max_cutbacks=0, callbacks=[writer])
+    writer.close()
+    text = (tmp_path / "out" / "summary.json").read_text()
+
+    def refuse(constant):
+        raise ValueError(f"not JSON: {constant}")
+
+    summary = json.loads(text, parse_constant=refuse)  # strict: NaN, Infinity are refused
+    print(f"\n  status {summary['status']}; failure.equilibrium = {summary['failure']['equilibrium']}; "
+          f"non_finite: {dict(list(summary['non_finite'].items())[:3])} ({len(summary['non_finite'])} keys)")
+    assert summary["status"] == "not converged" and summary["failure"]["equilibrium"] is None
+    assert summary["non_finite"]["failure.equilibrium"] == "nan"

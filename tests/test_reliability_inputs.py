@@ -11,7 +11,7 @@ from mpi4py import MPI
 from dolfinx_nnqem.cli import EXIT_BAD_INPUT, EXIT_OK, main
 from dolfinx_nnqem.material import VonMises
 from dolfinx_nnqem.meshing import build_two_beams
-from dolfinx_nnqem.problem import BodyForce, Contact, ContactProblem, Dirichlet, Pressure, Traction
+from dolfinx_nnqem.problem import BodyForce, Contact, ContactProblem, Dirichlet, Gravity, Pressure, Traction
 from dolfinx_nnqem.solver import SolverOptions
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -95,6 +95,23 @@ CASES = {
     "traction not finite": (("[solver]", "[[traction]]\ntag = 13\nvalue = [nan, 0.0, 0.0]\n[solver]"),
                             lambda b: _api(b, tractions=[Traction(13, (math.nan, 0.0, 0.0))]), "finite"),
     "2D mesh": (None, lambda b: ContactProblem(_square(), None, None, materials=M), "2D"),
+    # issue 31, item 3: values that overflowed in the solvers are refused, with the limit
+    "E huge": (("E = 1.0e9", "E = 1e300"), lambda b: VonMises(E=1e300, nu=0.3), "[1e-20, 1e+20]"),
+    "E tiny": (("E = 1.0e9", "E = 1e-300"), lambda b: VonMises(E=1e-300, nu=0.3), "[1e-20, 1e+20]"),
+    "nu nearly 0.5": (("nu = 0.3", "nu = 0.4999999"), lambda b: VonMises(E=1e9, nu=0.4999999), "0.4999]"),
+    "density huge": (("nu = 0.3", "nu = 0.3\ndensity = 1e300"), lambda b: VonMises(E=1e9, nu=0.3, density=1e300),
+                     "density = 1e+300"),
+    "traction huge": (("[solver]", "[[traction]]\ntag = 13\nvalue = [1e300, 0.0, 0.0]\n[solver]"),
+                      lambda b: _api(b, tractions=[Traction(13, (1e300, 0.0, 0.0))]), "magnitude 1e+20"),
+    "prescribed value huge": (("tag = 12", "tag = 12\nvalue = 1e300"),
+                              lambda b: _api(b, dirichlet=[Dirichlet(11), Dirichlet(12, 1e300)]), "magnitude 1e+20"),
+    "r huge": (("mu_f = 0.3", "mu_f = 0.3\nr = 1e300"), lambda b: Contact(21, 22, mu_f=0.3, r=1e300), "1e+20"),
+    # issue 31, item 4: r far from E h stalls the Newton iterations: refused with the range
+    "r tiny": (("mu_f = 0.3", "mu_f = 0.3\nr = 1e-300"),
+               lambda b: _api(b, contact=Contact(21, 22, mu_f=0.3, r=1e-300)), "supported range is [1e-06, 1000] × E h"),
+    # issue 31, item 8: a load vector that is not numbers names the parameter, not numpy's words
+    "gravity not a vector": (("[solver]", '[gravity]\ng = "down"\n[solver]'),
+                             lambda b: _api(b, body_forces=[Gravity("down")]), ".g = 'down'"),
 }
 
 
