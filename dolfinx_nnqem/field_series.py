@@ -27,6 +27,7 @@ import dolfinx.fem as fem
 import numpy as np
 from dolfinx.io import XDMFFile
 
+from dolfinx_nnqem import compat
 from dolfinx_nnqem.collective import on_rank0
 from dolfinx_nnqem.safe_io import OutputError, atomic_write_text
 
@@ -100,7 +101,7 @@ class FieldSeriesWriter:
             nodes = mesh.geometry.index_map().size_global
             cells = mesh.topology.index_map(mesh.topology.dim).size_global
             # geometry and u (nodes × 3 doubles), topology (int64 per cell node), three cell fields
-            size = 8 * (6 * nodes + cells * (mesh.geometry.dofmap.shape[1] + 3))
+            size = 8 * (6 * nodes + cells * (compat.geometry_dofmap(mesh).shape[1] + 3))
         return int(1.25 * size) + 65536
 
     def _write_step(self, path: Path, functions: list, t: float) -> None:
