@@ -186,6 +186,8 @@ def _run(args) -> int:
               f"method {method}, {_increments_text(increments)}", flush=True)
         for line in problem.contact.describe() if problem.has_contact else []:
             print(f"  {line}", flush=True)
+        for motion in problem.friction_held.motions:  # fine while friction holds; named again if the run fails
+            print(f"  held by friction only: {motion}", flush=True)
     if args.check:
         return EXIT_OK
     options, method_options = solver_options(spec, method)

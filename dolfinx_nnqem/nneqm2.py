@@ -110,9 +110,21 @@ from dolfinx_nnqem.material import (DEVIATORIC_BASIS, GaussPointValues, can_yiel
                                     deviator_tensors, elastic_stress, equivalent_stress, flow_direction, strain,
                                     yield_function, yield_stress_unit)
 from dolfinx_nnqem.nneqm1 import rigid_start
-from dolfinx_nnqem.nonsmooth import solve_dense
+from dolfinx_nnqem.nonsmooth import NonsmoothResult, solve_dense
 from dolfinx_nnqem.problem import ContactProblem, assemble_vector
 from dolfinx_nnqem.solver import NNEQM2Options, SolverOptions
+
+SLIDING_WINDOW = 10
+"""Iterates in a row at which no pair holding a motion that only friction holds sticks (the body
+slides along it: past the friction limit no equilibrium exists) after which a dense solve stops
+instead of creeping: the Levenberg–Marquardt steps still lower |H| by a tenth per ten iterations
+(the stall test's measure) towards a least-squares point, up to 100 iterations of the
+order-924 system per attempt on the sliding three-block case (issue 31: 87 s to fail, 23 s
+with this stop; a window of 5 gained only 3 s more)."""
+
+
+class _Sliding(Exception):
+    """Raised inside a dense solve when a body only friction holds slides (see SLIDING_WINDOW)."""
 
 __all__ = ["NNEQM2Solver"]
 
@@ -200,6 +212,8 @@ class NNEQM2Solver:
         self.flow_rtol = 100.0 * self.options.rtol if self.settings.flow_rtol is None else self.settings.flow_rtol
         self._timings: dict[str, float] = {}
         self.increment_info: list[dict] = []  #: per converged solve: checks and counts
+        self._last_pair_states = None  #: pair states of the last dense solve's best iterate (gathered order)
+        self._sliding = False  #: the last dense solve stopped because a body only friction holds slides
         self._factorised = False
         self._YB = None
         self._setup_gauss_point_operators()
@@ -486,6 +500,13 @@ class NNEQM2Solver:
             report.history.extend(records)
             total_its += result.iterations
             report.iterations = total_its
+            if not result.converged and (self._sliding or p.friction_held.saturated(self._last_pair_states)):
+                # a body only friction holds slides (no pair holding it sticks): no flow
+                # direction can hold it, so no retry (it cost minutes per cutback, issue 31)
+                report.message = (f"dense nonsmooth solve failed (flow-direction pass {flow_updates}): "
+                                  f"{result.message}; no pair holding a motion that only friction holds "
+                                  "sticks")
+                return report
             if not result.converged and not updating and self.settings.retry_updating_directions:
                 # With N frozen at σ_n the yield rows may have no solution: where the stress turns
                 # within a large plastic increment, q(σ_tr − 2μ Δγ N) stays above the yield stress
@@ -682,10 +703,18 @@ class NNEQM2Solver:
             if nc:
                 counts = np.bincount(np.asarray(last["states"], dtype=np.int64), minlength=3)[:3]
                 states = tuple(int(c) for c in counts)
+                if norm < last.get("best", np.inf):  # the pair states of the best iterate, for a failure
+                    last["best"], last["best_states"] = norm, np.array(last["states"])
+                sliding = norm > tol and self.problem.friction_held.saturated(last["states"])
+                last["sliding"] = last.get("sliding", 0) + 1 if sliding else 0
             records.append(IterationRecord(it_offset + k, 0.0, norm, t if k else float("nan"),
                                            kind if k else "", states, last["plastic"]))
             logger.debug(f"[{self.name}] it {it_offset + k}: |H̃| = {norm:.3e} (pairs {last['Hc']:.3e}, "
                          f"yield {last['H4']:.3e}) {kind} t={t:.2e}")
+            if last.get("sliding", 0) >= SLIDING_WINDOW:
+                raise _Sliding(f"stopped at iteration {it_offset + k}: for {SLIDING_WINDOW} iterations no pair "
+                               "holding a motion that only friction holds has stuck: the body slides, past the "
+                               "friction limit no equilibrium exists")
 
         def on_the_slip(x):
             """x with the unknowns no force depends on (the polar angle of pairs without friction
@@ -703,6 +732,7 @@ class NNEQM2Solver:
             return on_the_slip(advance(x, dx, alpha, cartesian))
 
         t0 = time.perf_counter()
+        self._sliding = False
         if n_r and d.w_start is not None:
             x0 = self._frozen_branch_start(x0, d, laws, z_scale, residual, advance)
         step_rule = advance
@@ -711,14 +741,22 @@ class NNEQM2Solver:
             # in the monolithic solver: its H3 row then holds no meaningless residual and its H2
             # branch is the Cartesian law's (theory page, "The polar law's Newton step")
             x0, step_rule = on_the_slip(x0), advance_following
-        result = solve_dense(residual, x0, tol=tol, max_iter=self.settings.inner_max_iterations, log=log,
-                             globalisations=self.settings.inner_globalisations, advance=step_rule)
+        try:
+            result = solve_dense(residual, x0, tol=tol, max_iter=self.settings.inner_max_iterations, log=log,
+                                 globalisations=self.settings.inner_globalisations, advance=step_rule)
+        except _Sliding as sliding:  # no other globalisation can hold a sliding body either
+            result = NonsmoothResult(x=x0, converged=False, iterations=len(records), residual_norms=[],
+                                     message=str(sliding))
+            self._sliding = True
         self._tick("dense_solve", t0)
         # every rank takes rank 0's decision and solution
         comm = self.problem.comm
+        self._last_pair_states = last.get("best_states")  # of the best iterate (gathered order)
         if comm.size > 1:
-            converged, message, xs = comm.bcast((result.converged, result.message, result.x), root=0)
+            converged, message, xs, states, sliding = comm.bcast((result.converged, result.message, result.x,
+                                                                  self._last_pair_states, self._sliding), root=0)
             result.converged, result.message, result.x = converged, message, xs
+            self._last_pair_states, self._sliding = states, sliding
         return result, records
 
     @staticmethod

@@ -36,7 +36,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from dolfinx_nnqem import compat, jit
-from dolfinx_nnqem.bodies import check_rigid_modes, find_bodies, free_rigid_modes
+from dolfinx_nnqem.bodies import check_rigid_modes, find_bodies, free_rigid_modes, friction_held_motions
 from dolfinx_nnqem.contact.model import Contact, ContactModel
 from dolfinx_nnqem.contact.obstacles import Cylinder, Plane, Sphere  # noqa: F401  (the user's imports)
 from dolfinx_nnqem.material import GaussPointValues, PlasticState
@@ -181,6 +181,9 @@ class ContactProblem:
         self.bodies = find_bodies(self.V, cell_tags)
         self.rigid_modes = free_rigid_modes(self.V, self.bodies, self.bc_dofs)
         check_rigid_modes(self.rigid_modes, self.contact)
+        self.friction_held = friction_held_motions(self.rigid_modes, self.contact)
+        """Rigid motions that only friction holds (:class:`~dolfinx_nnqem.bodies.FrictionHeld`:
+        named before solving and when a run fails)."""
 
     @property
     def petsc_comms(self) -> list:
