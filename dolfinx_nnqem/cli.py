@@ -220,7 +220,7 @@ def _run(args) -> int:
         bar = None if args.quiet else _progress_bar(increments, method)
         if bar is not None:
             callbacks.append(bar)
-        solving = True
+        solving = args.solving = True
         solve_load_steps(problem, solver, increments, max_cutbacks=solver_spec["max_cutbacks"],
                          callbacks=callbacks, check=checks, checkpoint=ckpt, resume=resume)
     except KeyboardInterrupt:
@@ -295,6 +295,13 @@ def _interrupt_behind(error: BaseException) -> KeyboardInterrupt | None:
             return error
         seen.add(id(error))
         error = error.__cause__ or error.__context__
+    import signal
+
+    import dolfinx_nnqem
+
+    received = dolfinx_nnqem.received_signals  # an error raised while handling an interrupt (a lazy
+    if received:  # import that turned it into ImportError) is that interrupt
+        return Terminated() if received[-1] == signal.SIGTERM else KeyboardInterrupt()
     return None
 
 
@@ -349,6 +356,8 @@ def _os_text(error: OSError) -> str:
 def _restart_hint(args) -> str:
     if getattr(args, "command", None) != "run":
         return ""
+    if not getattr(args, "solving", False):  # interrupted while starting: nothing to continue
+        return "; before solving started (nothing written)"
     return (f"; the converged increments are written; continue with: dolfinx-nnqem run {args.problem} --restart"
             + (f" --out {args.out}" if args.out else ""))
 
@@ -356,18 +365,36 @@ def _restart_hint(args) -> str:
 def _install_sigterm() -> None:
     import signal
 
-    def handler(signum, frame):
+    import dolfinx_nnqem
+
+    def on_term(signum, frame):
+        dolfinx_nnqem.received_signals.append(signum)
         raise Terminated()
 
+    def on_int(signum, frame):
+        dolfinx_nnqem.received_signals.append(signum)
+        raise KeyboardInterrupt()
+
     try:
-        signal.signal(signal.SIGTERM, handler)
+        signal.signal(signal.SIGTERM, on_term)
         # MPI's start-up may leave SIGINT at its default (kill): make Ctrl-C a KeyboardInterrupt again
-        signal.signal(signal.SIGINT, signal.default_int_handler)
+        signal.signal(signal.SIGINT, on_int)
     except ValueError:  # not the main thread (e.g. called from a test runner's worker)
         pass
 
 
 def main(argv: list[str] | None = None) -> int:
+    import dolfinx_nnqem
+
+    dolfinx_nnqem.received_signals.clear()
+    _hold_signals()  # start-up: an interrupt is recorded, and acted on once the run can end cleanly
+    try:
+        return _main(argv)
+    finally:
+        _install_sigterm()  # never leave the start-up handlers behind (in-process callers)
+
+
+def _main(argv: list[str] | None) -> int:
     args = _parser().parse_args(argv)
     args.verbose = getattr(args, "verbose", 0)
     args.quiet = getattr(args, "quiet", False)
@@ -383,10 +410,11 @@ def main(argv: list[str] | None = None) -> int:
 
     from dolfinx_nnqem import collective
 
-    collective.init()
-    _install_sigterm()
+    collective.init()  # on every rank before any rank acts on an interrupt (it is collective)
     code, message = EXIT_OK, ""
     try:
+        _install_sigterm()
+        _raise_held_signal()
         if args.command == "two-beams":
             code = _two_beams(args)
         elif args.command == "run":
@@ -398,6 +426,7 @@ def main(argv: list[str] | None = None) -> int:
     except BaseException as error:  # noqa: BLE001  (every failure becomes a message and an exit code)
         if isinstance(error, SystemExit):
             raise
+        error = _interrupt_behind(error) or error
         code, message = _classify(error, args)
         if args.verbose >= 2:
             import traceback
@@ -411,6 +440,34 @@ def main(argv: list[str] | None = None) -> int:
     if hdf5_left_open():  # HDF5's clean-up at exit would hang or abort on a file it cannot close
         collective.end_job(code)
     return code
+
+
+def _hold_signals() -> None:
+    """Record Ctrl-C and SIGTERM (in ``dolfinx_nnqem.deferred_signals``) instead of acting on
+    them: during the imports and the MPI/PETSc set-up an exception would show a traceback, or
+    PETSc's own SIGTERM handler its error dump (exit 15). ``dolfinx_nnqem/__init__.py`` holds them
+    from the first import on in the command line."""
+    import signal
+
+    import dolfinx_nnqem
+
+    try:
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(signum, dolfinx_nnqem._defer_signal)
+    except ValueError:  # not the main thread (a test runner's worker): nothing to hold
+        pass
+
+
+def _raise_held_signal() -> None:
+    """Act on an interrupt that arrived during the start-up: the contract's exception."""
+    import signal
+
+    import dolfinx_nnqem
+
+    if dolfinx_nnqem.deferred_signals:
+        first = dolfinx_nnqem.deferred_signals[0]
+        dolfinx_nnqem.deferred_signals.clear()
+        raise Terminated() if first == signal.SIGTERM else KeyboardInterrupt()
 
 
 if __name__ == "__main__":

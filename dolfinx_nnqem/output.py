@@ -452,6 +452,27 @@ class ResultsWriter:
         self._free_reserve()
         self.summary.ended(status, message)
 
+    def record_end(self, error: BaseException) -> None:
+        """Record in ``summary.json`` how a run ended on ``error`` (call it from the run's
+        ``except``): "interrupted" for Ctrl-C or SIGTERM (also when numba wrapped the interrupt
+        in a SystemError), nothing for a :class:`ConvergenceError` (:meth:`failed` recorded it),
+        "error" with the message otherwise."""
+        from dolfinx_nnqem.convergence import ConvergenceError
+
+        seen, cause = set(), error
+        while cause is not None and id(cause) not in seen:
+            if isinstance(cause, KeyboardInterrupt):
+                self.ended("interrupted")
+                return
+            seen.add(id(cause))
+            cause = cause.__cause__ or cause.__context__
+        import dolfinx_nnqem
+
+        if dolfinx_nnqem.received_signals:  # an error raised while the command line handled an interrupt
+            self.ended("interrupted")
+        elif not isinstance(error, ConvergenceError):
+            self.ended("error", f"{type(error).__name__}: {error}")
+
     def state(self) -> dict:
         """The writers' state for a checkpoint (JSON)."""
         return {"fields": self.fields.state() if self.fields else None,

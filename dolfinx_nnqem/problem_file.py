@@ -558,6 +558,7 @@ def _read_msh(file: Path, comm):
 
     from dolfinx_nnqem import chatter, compat
     from dolfinx_nnqem.collective import on_rank0
+    from dolfinx_nnqem.meshing import restore_signal_handlers
 
     started = [False]
     previous_options: dict = {}
@@ -565,6 +566,7 @@ def _read_msh(file: Path, comm):
     def open_model():
         if not gmsh.isInitialized():
             gmsh.initialize(interruptible=False)  # leave Ctrl-C to the command line
+            restore_signal_handlers()  # and SIGTERM (gmsh takes it at the C level)
             started[0] = True
         previous_options.update(chatter.apply_gmsh_options())  # gmsh's "Info : Reading ..." lines only with -v
         gmsh.model.add("dolfinx_nnqem problem file")

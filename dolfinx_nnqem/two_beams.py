@@ -88,6 +88,9 @@ def run_two_beams(method: str = "monolithic", increments: int = 15, out: str | P
     callbacks = [writer] + ([progress] if progress is not None else [])
     try:
         solve_load_steps(problem, solver, increments, callbacks=callbacks)
+    except BaseException as error:  # noqa: BLE001  (an interrupt too: the summary says how the run ended)
+        writer.record_end(error)
+        raise
     finally:
         writer.close()
     summary = writer.summary.data
