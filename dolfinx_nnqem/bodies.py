@@ -372,3 +372,45 @@ def _raise_drifting(modes: RigidModes, combinations: np.ndarray, why: str) -> No
     lines = ["  - " + _describe_combination(modes, c) for c in _row_echelon(np.atleast_2d(combinations))]
     raise ValueError("a body can move rigidly without resistance (" + why + "):\n" + "\n".join(lines)
                      + "\nAdd a support (Dirichlet condition) against that motion, or contact that holds it.")
+
+
+def tags_sharing_nodes(V: dolfinx.fem.FunctionSpace, cell_tags, facet_tags, surfaces) -> list[tuple[int, int, int]]:
+    """The cell tags on either side of the facets tagged ``surfaces`` that share nodes, as
+    (tag a, tag b, number of common nodes) (collective).
+
+    Contact surfaces must be boundaries of bodies meshed apart. A facet tagged as a contact
+    surface that lies between cells of two different tags which share nodes means those "bodies"
+    were meshed as one (e.g. gmsh volumes fragmented together): the facet is inside the mesh, and
+    a surface tag on it may even be lost (two physical surfaces on the same facets keep one tag).
+    """
+    comm = V.mesh.comm
+    if cell_tags is None or facet_tags is None:
+        return []
+    mesh = V.mesh
+    tdim = mesh.topology.dim
+    mesh.topology.create_connectivity(tdim - 1, tdim)
+    f2c = mesh.topology.connectivity(tdim - 1, tdim)
+    imap = mesh.topology.index_map(tdim)
+    tag_of = np.full(imap.size_local + imap.num_ghosts, -1, dtype=np.int64)
+    tag_of[cell_tags.indices] = cell_tags.values
+    sides = set()
+    for surface in surfaces:
+        for facet in facet_tags.find(int(surface)):
+            cells = f2c.links(facet)
+            if len(cells) == 2:
+                a, b = sorted(int(t) for t in tag_of[cells])
+                if a >= 0 and a != b:
+                    sides.add((a, b))
+    sides = sorted(set().union(*comm.allgather(sides)))
+    blocks = V.dofmap.index_map
+
+    def nodes_of(tag: int) -> np.ndarray:
+        local = np.unique(V.dofmap.list[cell_tags.find(tag)].reshape(-1))
+        return np.unique(np.concatenate(comm.allgather(blocks.local_to_global(local.astype(np.int32)))))
+
+    shared = []
+    for a, b in sides:
+        n = len(np.intersect1d(nodes_of(a), nodes_of(b)))
+        if n:
+            shared.append((a, b, n))
+    return shared

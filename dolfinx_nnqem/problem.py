@@ -38,6 +38,7 @@ from petsc4py import PETSc
 from dolfinx_nnqem import compat, jit
 from dolfinx_nnqem.bodies import check_rigid_modes, find_bodies, free_rigid_modes, friction_held_motions
 from dolfinx_nnqem.contact.model import Contact, ContactModel
+from dolfinx_nnqem.contact.surfaces import ContactPairError
 from dolfinx_nnqem.contact.obstacles import Cylinder, Plane, Sphere  # noqa: F401  (the user's imports)
 from dolfinx_nnqem.material import GaussPointValues, PlasticState
 from dolfinx_nnqem.validation import check_cell_tag, check_mesh
@@ -176,8 +177,12 @@ class ContactProblem:
         self.force_floor = FORCE_FLOOR_STRAIN * E_max * self.characteristic_length() ** 2
         """The smallest force scale F (N): what a strain of 1e-6 sets up over one cell face."""
         if contacts:
-            self.contact = ContactModel(self.V, facet_tags, contacts, E=E_max, h=self.characteristic_length(),
-                                        constrained_dofs=self.constrained_flags())
+            try:
+                self.contact = ContactModel(self.V, facet_tags, contacts, E=E_max, h=self.characteristic_length(),
+                                            constrained_dofs=self.constrained_flags())
+            except ContactPairError as error:  # the cause may be bodies meshed as one: say so
+                raise self._bodies_meshed_together(contacts) or error
+
         self.bodies = find_bodies(self.V, cell_tags)
         self.rigid_modes = free_rigid_modes(self.V, self.bodies, self.bc_dofs)
         check_rigid_modes(self.rigid_modes, self.contact)
@@ -200,6 +205,25 @@ class ContactProblem:
         return self._petsc_comms
 
     # -- set-up helpers ---------------------------------------------------------------------
+    def _bodies_meshed_together(self, contacts) -> ValueError | None:
+        """The error naming cell tags that share nodes across a contact surface, or None.
+
+        A contact between volumes meshed together (common nodes) used to end with a symptom
+        ("no facet is tagged 22": both surface tags sat on the same interior facets and one was
+        lost) instead of the cause (issue 31)."""
+        from dolfinx_nnqem.bodies import tags_sharing_nodes
+
+        surfaces = [c.surface2 for c in contacts] + [c.surface1 for c in contacts if c.obstacle is None]
+        shared = tags_sharing_nodes(self.V, self.cell_tags, self.facet_tags, surfaces)
+        if not shared:
+            return None
+        pairs = "; ".join(f"the cells tagged {a} and {b} share {n} nodes" for a, b, n in shared)
+        return ContactPairError(
+            f"{pairs}: those bodies are meshed as one, so the contact surfaces between them (facet tags "
+            f"{sorted(set(int(t) for t in surfaces))}) lie inside the mesh, not on a boundary. Bodies in contact "
+            "must be meshed without common nodes (in gmsh: do not fragment or glue their volumes)")
+
+
     def _check_facet_tags(self, tags: Sequence[int]) -> None:
         if not tags:
             return

@@ -250,3 +250,15 @@ def test_an_interrupt_during_start_up(tmp_path, sig, code, words, delay):
     print(f"\n  {sig.name} {delay} s after the start: exit {job.returncode}: {err.strip()}")
     assert job.returncode == code and err.strip().startswith(f"dolfinx-nnqem: {words}")
     assert "Traceback" not in err and "PETSC ERROR" not in err and len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("method", ["monolithic", "nneqm2"])
+def test_a_linear_solver_that_does_not_solve_is_named(tmp_path, capsys, method):
+    """Issue 31, item 8: ``pc_type = "none"`` (with the default ksp_type "preonly") returns the
+    right-hand side instead of a solution; the run used to stall at increment 1 without naming
+    the cause. The start-up check solves a small system with the run's options and refuses them."""
+    p = problem_file(tmp_path, increments=2, solver='[solver.petsc_options]\npc_type = "none"')
+    code = main(["-q", "run", str(p), "--out", str(tmp_path / "out"), "--method", method])
+    err = capsys.readouterr().err.strip()
+    print(f"\n  {method}: exit {code}: {err}")
+    assert code == EXIT_BAD_INPUT and "pc_type = 'none'" in err and "does not solve" in err

@@ -195,3 +195,57 @@ def test_the_good_file_passes(tmp_path, capsys):
     path = tmp_path / "p.toml"
     path.write_text(GOOD)
     assert main(["-q", "run", str(path), "--check"]) == EXIT_OK
+
+
+def _fused_blocks_msh(tmp_path) -> str:
+    """Two boxes fragmented together (common nodes on y = 0.5), tagged as two bodies, the
+    interface tagged 21 and 22 as if the bodies were apart."""
+    import gmsh
+
+    started = not gmsh.isInitialized()
+    if started:
+        gmsh.initialize()
+    gmsh.option.setNumber("General.Terminal", 0)
+    gmsh.model.add("fused")
+    a = gmsh.model.occ.addBox(0, 0, 0, 1, 0.5, 1)
+    b = gmsh.model.occ.addBox(0, 0.5, 0, 1, 0.5, 1)
+    gmsh.model.occ.fragment([(3, a)], [(3, b)])
+    gmsh.model.occ.synchronize()
+
+    def at(dim, y):
+        return [t for _, t in gmsh.model.getEntities(dim) if abs(gmsh.model.occ.getCenterOfMass(dim, t)[1] - y) < 1e-6]
+
+    gmsh.model.addPhysicalGroup(3, at(3, 0.25), 1)
+    gmsh.model.addPhysicalGroup(3, at(3, 0.75), 2)
+    gmsh.model.addPhysicalGroup(2, at(2, 0.0), 11)
+    gmsh.model.addPhysicalGroup(2, at(2, 1.0), 12)
+    gmsh.model.addPhysicalGroup(2, at(2, 0.5), 21)
+    gmsh.model.addPhysicalGroup(2, at(2, 0.5), 22)
+    gmsh.option.setNumber("Mesh.MeshSizeMax", 0.5)
+    gmsh.model.mesh.generate(3)
+    path = tmp_path / "fused.msh"
+    gmsh.write(str(path))
+    gmsh.model.remove()
+    if started:
+        gmsh.finalize()
+    return path.as_posix()
+
+
+def test_bodies_meshed_together_are_named(tmp_path, capsys):
+    """Issue 31, item 8: a contact between volumes that share nodes used to fail with the symptom
+    ("no facet is tagged 22": both surface tags sat on the same interior facets, one was lost);
+    now the cells' tags and the number of common nodes are named."""
+    from dolfinx_nnqem import compat
+
+    msh = _fused_blocks_msh(tmp_path)
+    path = tmp_path / "p.toml"
+    path.write_text(GOOD.replace(MESH, msh))
+    code = main(["-q", "run", str(path), "--check"])
+    err = capsys.readouterr().err.strip()
+    mesh, cell_tags, facet_tags = compat.read_from_msh(msh, MPI.COMM_WORLD, 0, gdim=3)
+    with pytest.raises(ValueError) as error:
+        ContactProblem(mesh, cell_tags, facet_tags, materials={1: M, 2: M}, dirichlet=[Dirichlet(11), Dirichlet(12)],
+                       contact=Contact(21, 22, mu_f=0.3))
+    print(f"\n  exit {code}: {err}\n  API: {error.value}")
+    assert code == EXIT_BAD_INPUT and "the cells tagged 1 and 2 share" in err and "no facet is tagged" not in err
+    assert "the cells tagged 1 and 2 share" in str(error.value)
