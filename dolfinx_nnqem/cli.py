@@ -160,6 +160,17 @@ def _progress_bar(total: int, method: str):
     return show
 
 
+def _increment_line(method: str):
+    """``-v``: one line per converged increment, as ``--help`` promises (the stepping's own line
+    is logged at the level of ``-vv`` with the iterations)."""
+    def line(result):
+        print(f"[{method}] increment {result.index}: load factor {result.load_factor:.6g} converged in "
+              f"{result.iterations} iterations, {result.cutbacks} cutbacks, {result.plastic_points} plastic "
+              "Gauss points", flush=True)
+
+    return line
+
+
 def _run(args) -> int:
     import hashlib
 
@@ -220,6 +231,8 @@ def _run(args) -> int:
         bar = None if args.quiet else _progress_bar(increments, method)
         if bar is not None:
             callbacks.append(bar)
+        if args.verbose == 1 and not args.quiet and rank0:  # -v: a line per increment (-vv: the log has it)
+            callbacks.append(_increment_line(method))
         solving = args.solving = True
         solve_load_steps(problem, solver, increments, max_cutbacks=solver_spec["max_cutbacks"],
                          callbacks=callbacks, check=checks, checkpoint=ckpt, resume=resume)

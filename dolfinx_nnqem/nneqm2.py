@@ -451,7 +451,7 @@ class NNEQM2Solver:
             lam_start, _ = laws.force(z_start)
             scale = max(scale, model.global_force(model.force()).norm(),
                         model.motion_force_scale(p.load_factor, p.load_factor_n))
-        F = max(scale, opts.atol, p.force_floor)
+        F = max(scale, p.force_floor)  # not atol: |R|/F must be the check's (issue 31)
         tol = opts.rtol + opts.atol / F
 
         # -- Gauss-point data (global order)
@@ -830,7 +830,7 @@ class NNEQM2Solver:
             scale = max(scale, Bl.norm())
             R.axpy(-1.0, Bl)
         R_free = p.free_residual(R)
-        eq = R_free.norm() / max(scale, self.options.atol)
+        eq = R_free.norm() / max(scale, self.problem.force_floor)
         # the radial-return stress of the same displacement, from the same converged state
         rm = fem.Function(st.W_tensor)
         rm.interpolate(self._rm_expr)

@@ -217,3 +217,19 @@ def test_summary_json_is_valid_json_when_values_are_not_finite(tmp_path):
           f"non_finite: {dict(list(summary['non_finite'].items())[:3])} ({len(summary['non_finite'])} keys)")
     assert summary["status"] == "not converged" and summary["failure"]["equilibrium"] is None
     assert summary["non_finite"]["failure.equilibrium"] == "nan"
+
+
+@pytest.mark.parametrize("method", ["monolithic", "nneqm1"])
+def test_a_huge_atol_reports_one_residual(method):
+    """Issue 31, item 9: with atol = 1e30 the failure said "|R|/F = 4.4e-01" (the check) and
+    "last iterate: |R|/F = 3.5e-28" (the solver divided by max(F, atol)): both now use F."""
+    from dolfinx_nnqem.two_beams import two_beams_problem
+
+    problem = two_beams_problem()
+    with pytest.raises(ConvergenceError) as error:
+        solve_load_steps(problem, make_solver(method, problem, SolverOptions(atol=1e30)), 2, max_cutbacks=0)
+    text = str(error.value)
+    check = float(text.split("|R|/F = ")[1].split()[0])
+    last = float(text.split("last iterate: |R|/F = ")[1].split(",")[0])
+    print(f"\n  {method}: check |R|/F = {check:.3e}, last iterate |R|/F = {last:.3e}")
+    assert "atol = 1e+30" in text and check == pytest.approx(last, rel=1e-6) and check > 1e-3

@@ -262,3 +262,25 @@ def test_a_linear_solver_that_does_not_solve_is_named(tmp_path, capsys, method):
     err = capsys.readouterr().err.strip()
     print(f"\n  {method}: exit {code}: {err}")
     assert code == EXIT_BAD_INPUT and "pc_type = 'none'" in err and "does not solve" in err
+
+
+@pytest.mark.parametrize("again", [["--restart"], [], ["--overwrite"]])
+def test_a_later_run_removes_what_a_killed_run_left(tmp_path, again):
+    """Issue 31, item 9: a SIGKILL in the middle of a write leaves its temporary
+    (``.NAME.tmp-PID``; 2 of 25 kills measured, both in a checkpoint folder); the next run into
+    the folder removes every one, whether it restarts, is refused (an earlier run's results,
+    exit 4) or overwrites."""
+    from dolfinx_nnqem.cli import EXIT_IO
+
+    p = problem_file(tmp_path, increments=2)
+    out = tmp_path / "out"
+    assert main(["-q", "run", str(p), "--out", str(out)]) == EXIT_OK
+    left = [out / ".summary.json.tmp-999999", out / "pairs" / ".pairs_0002.vtp.tmp-999999",
+            out / "checkpoints" / "ckpt_00002" / ".rank_0000.npz.tmp-999999",
+            out / "checkpoints" / ".latest.json.tmp-999999", out / "fields" / ".fields_0002.h5.tmp-999999"]
+    for f in left:
+        f.write_text("half a file")
+    code = main(["-q", "run", str(p), "--out", str(out), *again])
+    remaining = [str(f.relative_to(out)) for f in out.rglob(".*.tmp-*")]
+    print(f"\n  next run {again or ['(no flag)']}: exit {code}, temporaries left {remaining}")
+    assert code == (EXIT_IO if not again else EXIT_OK) and not remaining
