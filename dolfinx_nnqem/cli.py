@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import sys
 from pathlib import Path
 
@@ -416,6 +417,10 @@ def _main(argv: list[str] | None) -> int:
         return EXIT_USAGE
     if getattr(args, "out", None) is not None and args.out.strip() in ("", "."):
         print("dolfinx-nnqem: error: --out needs a folder name (not empty, not '.')", file=sys.stderr)
+        return EXIT_USAGE
+    scale = getattr(args, "scale", None)
+    if scale is not None and not (math.isfinite(scale) and 0 < scale <= 1e20):  # nan drew a blank picture
+        print(f"dolfinx-nnqem: error: --scale must be a number in (0, 1e20], got {scale}", file=sys.stderr)
         return EXIT_USAGE
     _configure_logging(args.verbose, args.quiet)
     import dolfinx_nnqem  # noqa: F401  (loads the PyPI wheel's MPI/PETSc first)

@@ -84,6 +84,7 @@ def test_inconsistent_tags_are_reported_with_exit_code_3(tmp_path, capsys):
 
 def test_usage_errors_exit_with_code_2(capsys):
     assert main(["run", str(EXAMPLE), "--increments", "0"]) == EXIT_USAGE
+    assert main(["plot", str(ROOT), "--scale", "nan"]) == EXIT_USAGE
     with pytest.raises(SystemExit) as error:
         main(["two-beams", "--method", "fastest"])
     assert error.value.code == EXIT_USAGE
