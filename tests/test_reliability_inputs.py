@@ -108,7 +108,8 @@ CASES = {
     "r huge": (("mu_f = 0.3", "mu_f = 0.3\nr = 1e300"), lambda b: Contact(21, 22, mu_f=0.3, r=1e300), "1e+20"),
     # issue 31, item 4: r far from E h stalls the Newton iterations: refused with the range
     "r tiny": (("mu_f = 0.3", "mu_f = 0.3\nr = 1e-300"),
-               lambda b: _api(b, contact=Contact(21, 22, mu_f=0.3, r=1e-300)), "supported range is [1e-06, 1000] × E h"),
+               lambda b: _api(b, contact=Contact(21, 22, mu_f=0.3, r=1e-300)),
+               "supported range is [1e-06, 1000] × E h"),
     # issue 31, item 8: a load vector that is not numbers names the parameter, not numpy's words
     "gravity not a vector": (("[solver]", '[gravity]\ng = "down"\n[solver]'),
                              lambda b: _api(b, body_forces=[Gravity("down")]), ".g = 'down'"),

@@ -145,7 +145,8 @@ def test_a_nearly_full_file_system(tmp_path, ranks):
             fill(disk, free_kb * 1024)
             run, wall = _mpirun(_cli(["-q", "run", str(p), "--out", str(out)]), ranks=ranks)
             lines = [line for line in run.stderr.splitlines() if line.startswith("dolfinx-nnqem")]
-            status = json.loads((out / "summary.json").read_text())["status"] if (out / "summary.json").exists() else None
+            summary = out / "summary.json"
+            status = json.loads(summary.read_text())["status"] if summary.exists() else None
             left = [f.name for f in out.rglob(".*") if ".tmp-" in f.name or f.name == ".nnqem.lock"]
             outcomes.append((free_kb, run.returncode, lines, status, left, wall))
     for free_kb, code, lines, status, left, wall in outcomes:

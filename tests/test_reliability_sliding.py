@@ -28,7 +28,8 @@ def _pushed_blocks(tmp_path, plastic: bool = False):
     """demos/three_blocks.toml with block 3 pushed by a traction instead of dragged: blocks 2 and
     3 are held along x by friction only (μ_f 0.2 below block 2, p = 1 MPa, τ up to 0.5 MPa)."""
     text = (ROOT / "demos" / "three_blocks.toml").read_text()
-    text = text.replace('file = "../meshes/three_blocks.msh"', f'file = "{(ROOT / "meshes" / "three_blocks.msh").as_posix()}"')
+    mesh = (ROOT / "meshes" / "three_blocks.msh").as_posix()
+    text = text.replace('file = "../meshes/three_blocks.msh"', f'file = "{mesh}"')
     assert DRAG in text
     text = text.replace(DRAG, "").replace("[solver]", PUSH + "\n[solver]")
     if plastic:
