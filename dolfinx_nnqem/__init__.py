@@ -7,8 +7,12 @@
 still import, with a deprecation warning (:mod:`dolfinx_nnqem._moved`).
 """
 
-from dolfinx_nnqem import compat  # noqa: F401  (must come first)
-from dolfinx_nnqem import _moved
+from dolfinx_nnqem import interrupts as _interrupts
+
+if _interrupts.is_command_line():  # Ctrl-C / SIGTERM held from the first import (interrupts.py)
+    _interrupts.hold_in_command_line()
+from dolfinx_nnqem import compat  # noqa: E402, F401  (before dolfinx / petsc4py in a user's program)
+from dolfinx_nnqem import _moved  # noqa: E402
 
 __version__ = "0.1.0"
 

@@ -14,9 +14,11 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import sys
 from pathlib import Path
 
+from dolfinx_nnqem import interrupts
 from dolfinx_nnqem.solvers.options import METHODS
 
 EXIT_OK, EXIT_DIVERGED, EXIT_USAGE, EXIT_BAD_INPUT = 0, 1, 2, 3
@@ -160,6 +162,17 @@ def _progress_bar(total: int, method: str):
     return show
 
 
+def _increment_line(method: str):
+    """``-v``: one line per converged increment, as ``--help`` promises (the stepping's own line
+    is logged at the level of ``-vv`` with the iterations)."""
+    def line(result):
+        print(f"[{method}] increment {result.index}: load factor {result.load_factor:.6g} converged in "
+              f"{result.iterations} iterations, {result.cutbacks} cutbacks, {result.plastic_points} plastic "
+              "Gauss points", flush=True)
+
+    return line
+
+
 def _run(args) -> int:
     import hashlib
 
@@ -186,6 +199,8 @@ def _run(args) -> int:
               f"method {method}, {_increments_text(increments)}", flush=True)
         for line in problem.contact.describe() if problem.has_contact else []:
             print(f"  {line}", flush=True)
+        for motion in problem.friction_held.motions:  # fine while friction holds; named again if the run fails
+            print(f"  held by friction only: {motion}", flush=True)
     if args.check:
         return EXIT_OK
     options, method_options = solver_options(spec, method)
@@ -218,7 +233,9 @@ def _run(args) -> int:
         bar = None if args.quiet else _progress_bar(increments, method)
         if bar is not None:
             callbacks.append(bar)
-        solving = True
+        if args.verbose == 1 and not args.quiet and rank0:  # -v: a line per increment (-vv: the log has it)
+            callbacks.append(_increment_line(method))
+        solving = args.solving = True
         solve_load_steps(problem, solver, increments, max_cutbacks=solver_spec["max_cutbacks"],
                          callbacks=callbacks, check=checks, checkpoint=ckpt, resume=resume)
     except KeyboardInterrupt:
@@ -293,6 +310,11 @@ def _interrupt_behind(error: BaseException) -> KeyboardInterrupt | None:
             return error
         seen.add(id(error))
         error = error.__cause__ or error.__context__
+    import signal
+
+    received = interrupts.received  # an error raised while handling an interrupt (a lazy
+    if received:  # import that turned it into ImportError) is that interrupt
+        return Terminated() if received[-1] == signal.SIGTERM else KeyboardInterrupt()
     return None
 
 
@@ -347,6 +369,8 @@ def _os_text(error: OSError) -> str:
 def _restart_hint(args) -> str:
     if getattr(args, "command", None) != "run":
         return ""
+    if not getattr(args, "solving", False):  # interrupted while starting: nothing to continue
+        return "; before solving started (nothing written)"
     return (f"; the converged increments are written; continue with: dolfinx-nnqem run {args.problem} --restart"
             + (f" --out {args.out}" if args.out else ""))
 
@@ -354,18 +378,32 @@ def _restart_hint(args) -> str:
 def _install_sigterm() -> None:
     import signal
 
-    def handler(signum, frame):
+    def on_term(signum, frame):
+        interrupts.received.append(signum)
         raise Terminated()
 
+    def on_int(signum, frame):
+        interrupts.received.append(signum)
+        raise KeyboardInterrupt()
+
     try:
-        signal.signal(signal.SIGTERM, handler)
+        signal.signal(signal.SIGTERM, on_term)
         # MPI's start-up may leave SIGINT at its default (kill): make Ctrl-C a KeyboardInterrupt again
-        signal.signal(signal.SIGINT, signal.default_int_handler)
+        signal.signal(signal.SIGINT, on_int)
     except ValueError:  # not the main thread (e.g. called from a test runner's worker)
         pass
 
 
 def main(argv: list[str] | None = None) -> int:
+    interrupts.received.clear()
+    _hold_signals()  # start-up: an interrupt is recorded, and acted on once the run can end cleanly
+    try:
+        return _main(argv)
+    finally:
+        _install_sigterm()  # never leave the start-up handlers behind (in-process callers)
+
+
+def _main(argv: list[str] | None) -> int:
     args = _parser().parse_args(argv)
     args.verbose = getattr(args, "verbose", 0)
     args.quiet = getattr(args, "quiet", False)
@@ -375,16 +413,21 @@ def main(argv: list[str] | None = None) -> int:
     if getattr(args, "out", None) is not None and args.out.strip() in ("", "."):
         print("dolfinx-nnqem: error: --out needs a folder name (not empty, not '.')", file=sys.stderr)
         return EXIT_USAGE
+    scale = getattr(args, "scale", None)
+    if scale is not None and not (math.isfinite(scale) and 0 < scale <= 1e20):  # nan drew a blank picture
+        print(f"dolfinx-nnqem: error: --scale must be a number in (0, 1e20], got {scale}", file=sys.stderr)
+        return EXIT_USAGE
     _configure_logging(args.verbose, args.quiet)
     import dolfinx_nnqem  # noqa: F401  (loads the PyPI wheel's MPI/PETSc first)
     from mpi4py import MPI
 
     from dolfinx_nnqem import collective
 
-    collective.init()
-    _install_sigterm()
+    collective.init()  # on every rank before any rank acts on an interrupt (it is collective)
     code, message = EXIT_OK, ""
     try:
+        _install_sigterm()
+        _raise_held_signal()
         if args.command == "two-beams":
             code = _two_beams(args)
         elif args.command == "run":
@@ -396,6 +439,7 @@ def main(argv: list[str] | None = None) -> int:
     except BaseException as error:  # noqa: BLE001  (every failure becomes a message and an exit code)
         if isinstance(error, SystemExit):
             raise
+        error = _interrupt_behind(error) or error
         code, message = _classify(error, args)
         if args.verbose >= 2:
             import traceback
@@ -404,7 +448,35 @@ def main(argv: list[str] | None = None) -> int:
     code, message = collective.finish_collectively(code, message)
     if message and MPI.COMM_WORLD.rank == 0:
         print(message, file=sys.stderr, flush=True)
+    from dolfinx_nnqem.io.field_series import hdf5_left_open
+
+    if hdf5_left_open():  # HDF5's clean-up at exit would hang or abort on a file it cannot close
+        collective.end_job(code)
     return code
+
+
+def _hold_signals() -> None:
+    """Record Ctrl-C and SIGTERM (in ``interrupts.deferred``) instead of acting on
+    them: during the imports and the MPI/PETSc set-up an exception would show a traceback, or
+    PETSc's own SIGTERM handler its error dump (exit 15). ``dolfinx_nnqem/__init__.py`` holds them
+    from the first import on in the command line (:mod:`dolfinx_nnqem.interrupts`)."""
+    import signal
+
+    try:
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(signum, interrupts.defer)
+    except ValueError:  # not the main thread (a test runner's worker): nothing to hold
+        pass
+
+
+def _raise_held_signal() -> None:
+    """Act on an interrupt that arrived during the start-up: the contract's exception."""
+    import signal
+
+    if interrupts.deferred:
+        first = interrupts.deferred[0]
+        interrupts.deferred.clear()
+        raise Terminated() if first == signal.SIGTERM else KeyboardInterrupt()
 
 
 if __name__ == "__main__":

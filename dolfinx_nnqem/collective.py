@@ -18,7 +18,7 @@ from collections.abc import Callable
 
 from mpi4py import MPI
 
-__all__ = ["CollectiveError", "agree", "finish_collectively", "on_rank0", "rebuild"]
+__all__ = ["CollectiveError", "agree", "end_job", "finish_collectively", "on_rank0", "rebuild"]
 
 ABORT_TIMEOUT_S = float(os.environ.get("NNQEM_ABORT_TIMEOUT", "10"))
 """How long a failing rank waits for the others to fail too before aborting the job (seconds)."""
@@ -136,3 +136,15 @@ def finish_collectively(code: int, message: str, *, timeout: float | None = None
         time.sleep(0.01)
     outcomes = comm.allgather((code, message))
     return outcomes[0] if outcomes[0][0] != 0 else next((o for o in outcomes if o[0] != 0), (code, message))
+
+
+def end_job(code: int) -> None:
+    """End the process (the whole job under MPI) with ``code`` now, without the libraries'
+    clean-up at exit (for a state they cannot clean up, e.g. an HDF5 file that cannot be
+    closed). The caller has printed its message."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    if MPI.COMM_WORLD.size > 1:
+        time.sleep(ABORT_GRACE_S)  # let mpiexec forward the message first (see finish_collectively)
+        MPI.COMM_WORLD.Abort(code)
+    os._exit(code)

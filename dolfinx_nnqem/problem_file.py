@@ -213,7 +213,10 @@ def _checked_keys(table: dict, allowed: set, required: set, where: str) -> dict:
     return dict(table)
 
 
-def _number(value, where: str, *, positive=False, nonnegative=False, integer=False, high=None) -> float:
+def _number(value, where: str, *, positive=False, nonnegative=False, integer=False, high=None,
+            physical=False) -> float:
+    """A checked number; ``physical``: a dimensional input, within ±MAX_MAGNITUDE (the supported
+    range of docs/reliability.md)."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ProblemFileError(f"{where} = {value!r}: expected a number")
     if integer and not isinstance(value, int):
@@ -226,6 +229,12 @@ def _number(value, where: str, *, positive=False, nonnegative=False, integer=Fal
         raise ProblemFileError(f"{where} = {value!r}: expected a value >= 0")
     if high is not None and value > high:
         raise ProblemFileError(f"{where} = {value!r}: expected a value <= {high:g}")
+    if physical:
+        from dolfinx_nnqem.numerics.ranges import MAX_MAGNITUDE
+
+        if abs(value) > MAX_MAGNITUDE:
+            raise ProblemFileError(f"{where} = {value!r}: beyond the supported magnitude {MAX_MAGNITUDE:g} "
+                                   "(docs/reliability.md, 'Supported ranges')")
     return value
 
 
@@ -238,7 +247,7 @@ def _tag(value, where: str) -> int:
 def _vector(value, where: str, length: int = 3) -> list:
     if not isinstance(value, list) or len(value) != length:
         raise ProblemFileError(f"{where} = {value!r}: expected a list of {length} numbers")
-    return [_number(v, f"{where}[{i}]") for i, v in enumerate(value)]
+    return [_number(v, f"{where}[{i}]", physical=True) for i, v in enumerate(value)]
 
 
 def _mesh_section(mesh: dict, folder: Path, where: str) -> dict:
@@ -318,12 +327,12 @@ def _contact_section(contact: dict, w: str) -> dict:
         sides = [contact[k] for k in ("surface1", "surface2") if k in contact]
         if contact["slave"] not in sides:
             raise ProblemFileError(f"{w}.slave = {contact['slave']}: expected one of the surfaces' tags {sides}")
-    contact["mu_f"] = float(_number(contact["mu_f"], f"{w}.mu_f", nonnegative=True))
+    contact["mu_f"] = float(_number(contact["mu_f"], f"{w}.mu_f", nonnegative=True, physical=True))
     if contact.get("law", "alart-curnier") not in ("alart-curnier", "cartesian", "polar", "seed"):
         raise ProblemFileError(f"{w}.law = {contact['law']!r}: expected 'alart-curnier' or 'polar'")
     for key in ("r", "tolerance", "search_distance"):
         if key in contact:
-            contact[key] = float(_number(contact[key], f"{w}.{key}", positive=True))
+            contact[key] = float(_number(contact[key], f"{w}.{key}", positive=True, physical=True))
     if "name" in contact and not isinstance(contact["name"], str):
         raise ProblemFileError(f"{w}.name = {contact['name']!r}: expected a string")
     return contact
@@ -341,7 +350,7 @@ def _obstacle_entry(entry, where: str) -> dict:
         if key in entry:
             entry[key] = _vector(entry[key], f"{where}.{key}")
     if "radius" in entry:
-        entry["radius"] = float(_number(entry["radius"], f"{where}.radius", positive=True))
+        entry["radius"] = float(_number(entry["radius"], f"{where}.radius", positive=True, physical=True))
     motion = entry.get("motion", [0.0, 0.0, 0.0])
     if isinstance(motion, list) and motion and all(isinstance(row, list) for row in motion):
         if "amplitude" in entry:
@@ -360,7 +369,7 @@ def _amplitude_entry(entry: dict, where: str) -> None:
     from dolfinx_nnqem.problem.amplitude import PiecewiseLinear
 
     try:
-        entry["amplitude"] = PiecewiseLinear([[float(_number(v, f"{where}.amplitude[{i}]")) for v in row]
+        entry["amplitude"] = PiecewiseLinear([[float(_number(v, f"{where}.amplitude[{i}]", physical=True)) for v in row]
                                               for i, row in enumerate(_rows(entry["amplitude"], f"{where}.amplitude"))])
     except ValueError as error:
         raise ProblemFileError(f"{where}.{error}") from None
@@ -370,7 +379,7 @@ def _path(rows, where: str):
     from dolfinx_nnqem.problem.amplitude import PiecewiseLinearPath
 
     try:
-        return PiecewiseLinearPath([[float(_number(v, f"{where}[{i}]")) for v in row]
+        return PiecewiseLinearPath([[float(_number(v, f"{where}[{i}]", physical=True)) for v in row]
                                     for i, row in enumerate(_rows(rows, where))])
     except ValueError as error:
         raise ProblemFileError(f"{where}: {error}") from None
@@ -396,7 +405,7 @@ def _dirichlet_entry(entry: dict, where: str) -> dict:
     if isinstance(value, list):
         entry["value"] = _vector(value, f"{where}.value", n)
     else:
-        entry["value"] = float(_number(value, f"{where}.value"))
+        entry["value"] = float(_number(value, f"{where}.value", physical=True))
     return entry
 
 
@@ -412,7 +421,7 @@ def _pressure_entry(entry: dict, where: str) -> dict:
     entry = _checked_keys(entry, KEYS["pressure"], {"tag", "p"}, where)
     _amplitude_entry(entry, where)
     entry["tag"] = _tag(entry["tag"], f"{where}.tag")
-    entry["p"] = float(_number(entry["p"], f"{where}.p"))
+    entry["p"] = float(_number(entry["p"], f"{where}.p", physical=True))
     return entry
 
 
@@ -549,6 +558,7 @@ def _read_msh(file: Path, comm):
 
     from dolfinx_nnqem import chatter, compat
     from dolfinx_nnqem.collective import on_rank0
+    from dolfinx_nnqem.problem.meshing import restore_signal_handlers
 
     started = [False]
     previous_options: dict = {}
@@ -556,6 +566,7 @@ def _read_msh(file: Path, comm):
     def open_model():
         if not gmsh.isInitialized():
             gmsh.initialize(interruptible=False)  # leave Ctrl-C to the command line
+            restore_signal_handlers()  # and SIGTERM (gmsh takes it at the C level)
             started[0] = True
         previous_options.update(chatter.apply_gmsh_options())  # gmsh's "Info : Reading ..." lines only with -v
         gmsh.model.add("dolfinx_nnqem problem file")

@@ -1,5 +1,6 @@
 """Shared by the reliability tests: a small two-beam problem file and subprocess runs of the CLI."""
 
+import contextlib
 import json
 import os
 import signal
@@ -59,3 +60,32 @@ def wait_for_checkpoint(out: Path, index: int, process: subprocess.Popen, timeou
 def kill_session(process: subprocess.Popen, sig=signal.SIGKILL) -> None:
     """Send ``sig`` to every process of the run's session (the test started it: its own ids)."""
     os.killpg(process.pid, sig)
+
+
+@contextlib.contextmanager
+def small_file_system(folder: Path, size: str = "1m"):
+    """A tmpfs of ``size`` mounted at ``folder`` for the test (a full disk gives ENOSPC, which
+    RLIMIT_FSIZE's EFBIG does not imitate everywhere: VTK crashed on ENOSPC only). Skips with
+    the reason where this process cannot mount (not root, or no mount permission)."""
+    import pytest
+
+    if os.geteuid() != 0:
+        pytest.skip("mounting a small tmpfs needs root (a real ENOSPC; RLIMIT_FSIZE gives EFBIG, "
+                    "which does not reach the code paths that failed on a full disk)")
+    folder.mkdir(parents=True, exist_ok=True)
+    mount = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(folder)],
+                           capture_output=True, text=True)
+    if mount.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs here ({mount.stderr.strip()})")
+    try:
+        yield folder
+    finally:
+        subprocess.run(["umount", "-l", str(folder)], capture_output=True)
+
+
+def fill(folder: Path, leave: int) -> None:
+    """Fill ``folder``'s file system up to ``leave`` free bytes with the file ``filler``."""
+    (folder / "filler").unlink(missing_ok=True)
+    st = os.statvfs(folder)
+    with open(folder / "filler", "wb") as fh:
+        os.posix_fallocate(fh.fileno(), 0, max(st.f_bavail * st.f_frsize - leave, 1))

@@ -84,6 +84,7 @@ def test_inconsistent_tags_are_reported_with_exit_code_3(tmp_path, capsys):
 
 def test_usage_errors_exit_with_code_2(capsys):
     assert main(["run", str(EXAMPLE), "--increments", "0"]) == EXIT_USAGE
+    assert main(["plot", str(ROOT), "--scale", "nan"]) == EXIT_USAGE
     with pytest.raises(SystemExit) as error:
         main(["two-beams", "--method", "fastest"])
     assert error.value.code == EXIT_USAGE
@@ -140,3 +141,32 @@ def test_an_interrupt_inside_compiled_code_is_still_an_interrupt():
         except SystemError as error:
             assert _interrupt_behind(error) is signal_error
     assert _interrupt_behind(ValueError("a bad value")) is None
+
+
+def test_run_verbose_prints_a_line_per_increment(tmp_path, capsys):
+    """Issue 31, item 9: ``run -v`` printed no line per increment although ``--help`` says so."""
+    text = EXAMPLE.read_text().replace('file = "../meshes/two_beams.msh"',
+                                       f'file = "{(ROOT / "meshes" / "two_beams.msh").as_posix()}"')
+    (tmp_path / "p.toml").write_text(text.replace("increments = 15", "increments = 3"))
+    assert main(["-v", "run", str(tmp_path / "p.toml"), "--out", str(tmp_path / "out")]) == EXIT_OK
+    lines = [line for line in capsys.readouterr().out.splitlines() if "] increment " in line]
+    print("\n  " + "\n  ".join(lines))
+    assert len(lines) == 3 and lines[-1].startswith("[monolithic] increment 3: load factor 1 converged in")
+
+
+def test_two_beams_quiet_is_quiet_without_a_display(tmp_path):
+    """Issue 31, item 9: ``two-beams -q`` without fields drew contact_pressure.png with VTK's log
+    at its default level: "bad X server connection. DISPLAY=" on a machine without a display."""
+    import os
+    import subprocess
+    import sys
+
+    from reliability_helpers import env
+
+    e = {k: v for k, v in env().items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    e["DOLFINX_NNQEM_PICTURES"] = "1"
+    run = subprocess.run([sys.executable, "-m", "dolfinx_nnqem", "two-beams", "-q", "--increments", "2", "--no-fields",
+                          "--out", str(tmp_path / "out")], env=e, capture_output=True, text=True, timeout=300)
+    drawn = sorted(os.listdir(tmp_path / "out" / "pictures"))
+    print(f"\n  exit {run.returncode}, stdout {run.stdout!r}, stderr {run.stderr!r}, pictures {drawn}")
+    assert run.returncode == EXIT_OK and run.stdout == "" and run.stderr == "" and "contact_pressure.png" in drawn

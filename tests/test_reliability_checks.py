@@ -184,3 +184,52 @@ def test_check_tolerance_follows_the_solver_rtol():
     problem = _box()
     results = solve_load_steps(problem, make_solver("monolithic", problem, SolverOptions(rtol=1e-2)), 2)
     assert all(r.check.ok for r in results)
+
+
+class DivergingSolver(LyingSolver):
+    """An iterate that overflowed: u and the residual history hold NaN and infinity."""
+
+    name = "diverging"
+
+    def solve_increment(self, load_factor):
+        from dolfinx_nnqem.solvers.convergence import IterationRecord
+
+        self.problem.u.x.array[:] = np.nan
+        history = [IterationRecord(0, float("nan"), float("inf"), float("nan"), "newton")]
+        return SolveReport(converged=False, iterations=1, message="the residual is not finite", history=history)
+
+
+def test_summary_json_is_valid_json_when_values_are_not_finite(tmp_path):
+    """Issue 31, item 3: a diverged iterate's NaN reached summary.json as a bare NaN (not JSON).
+    Now such a value is null and ``non_finite`` names the key and the value it had."""
+    problem = _box()
+    writer = ResultsWriter(problem, "diverging", tmp_path / "out", 2)
+    with pytest.raises(ConvergenceError):
+        solve_load_steps(problem, DivergingSolver(problem), 2, max_cutbacks=0, callbacks=[writer])
+    writer.close()
+    text = (tmp_path / "out" / "summary.json").read_text()
+
+    def refuse(constant):
+        raise ValueError(f"not JSON: {constant}")
+
+    summary = json.loads(text, parse_constant=refuse)  # strict: NaN, Infinity are refused
+    print(f"\n  status {summary['status']}; failure.equilibrium = {summary['failure']['equilibrium']}; "
+          f"non_finite: {dict(list(summary['non_finite'].items())[:3])} ({len(summary['non_finite'])} keys)")
+    assert summary["status"] == "not converged" and summary["failure"]["equilibrium"] is None
+    assert summary["non_finite"]["failure.equilibrium"] == "nan"
+
+
+@pytest.mark.parametrize("method", ["monolithic", "nneqm1"])  # NNEQM2: F of the increment start
+def test_a_huge_atol_reports_one_residual(method):
+    """Issue 31, item 9: with atol = 1e30 the failure said "|R|/F = 4.4e-01" (the check) and
+    "last iterate: |R|/F = 3.5e-28" (the solver divided by max(F, atol)): both now use F."""
+    from dolfinx_nnqem.cases.two_beams import two_beams_problem
+
+    problem = two_beams_problem()
+    with pytest.raises(ConvergenceError) as error:
+        solve_load_steps(problem, make_solver(method, problem, SolverOptions(atol=1e30)), 2, max_cutbacks=0)
+    text = str(error.value)
+    check = float(text.split("|R|/F = ")[1].split()[0])
+    last = float(text.split("last iterate: |R|/F = ")[1].split(",")[0])
+    print(f"\n  {method}: check |R|/F = {check:.3e}, last iterate |R|/F = {last:.3e}")
+    assert "atol = 1e+30" in text and check == pytest.approx(last, rel=1e-6) and check > 1e-3

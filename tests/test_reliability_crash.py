@@ -209,3 +209,78 @@ def test_a_petsc_error_in_a_newton_solve_is_raised_not_taken_for_a_singular_matr
         bad.solve(A, b, x)
     for obj in (A, b, x, good.ksp, bad.ksp):
         obj.destroy()
+
+
+@pytest.mark.parametrize("sig, code", [(signal.SIGINT, EXIT_INTERRUPTED), (signal.SIGTERM, EXIT_TERMINATED)])
+def test_two_beams_keeps_the_signal_contract(tmp_path, sig, code):
+    """Issue 31, item 6: ``two-beams`` ends like ``run``: SIGTERM used to kill it with no message
+    (gmsh takes SIGTERM at the C level when it starts), and after Ctrl-C (exit 130) its
+    summary.json still said "running"."""
+    import time
+
+    out = tmp_path / "out"
+    job = start(["two-beams", "--increments", "200", "--out", str(out), "--no-fields"])
+    deadline = time.monotonic() + 120
+    while not (out / "summary.json").exists() and job.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.01)
+    time.sleep(0.3)  # inside the increments
+    kill_session(job, sig)
+    _, err = job.communicate(timeout=120)
+    summary = read_summary(out)
+    print(f"\n  two-beams, {sig.name}: exit {job.returncode}: {err.strip().splitlines()[-1:]}; summary status "
+          f"{summary['status']} after {len(summary['load_factors'])} increments")
+    assert job.returncode == code and "Traceback" not in err and err.strip().startswith("dolfinx-nnqem: ")
+    assert summary["status"] == "interrupted" and not list(out.rglob(".*.tmp-*"))
+
+
+@pytest.mark.parametrize("delay", [0.05, 0.2, 0.4])
+@pytest.mark.parametrize("sig, code, words", [(signal.SIGINT, EXIT_INTERRUPTED, "interrupted (Ctrl-C)"),
+                                              (signal.SIGTERM, EXIT_TERMINATED, "terminated (SIGTERM)")])
+def test_an_interrupt_during_start_up(tmp_path, sig, code, words, delay):
+    """Issue 31, item 7: Ctrl-C or SIGTERM while the command line starts (imports, MPI and PETSc
+    set-up). Ctrl-C used to show a KeyboardInterrupt traceback (exit -2) and SIGTERM PETSc's error
+    dump (exit 15); now both end by the contract, with one line and no traceback."""
+    import time
+
+    p = problem_file(tmp_path, increments=2)
+    job = start(["-q", "run", str(p), "--out", str(tmp_path / "out")])
+    time.sleep(delay)
+    kill_session(job, sig)
+    _, err = job.communicate(timeout=120)
+    print(f"\n  {sig.name} {delay} s after the start: exit {job.returncode}: {err.strip()}")
+    assert job.returncode == code and err.strip().startswith(f"dolfinx-nnqem: {words}")
+    assert "Traceback" not in err and "PETSC ERROR" not in err and len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("method", ["monolithic", "nneqm2"])
+def test_a_linear_solver_that_does_not_solve_is_named(tmp_path, capsys, method):
+    """Issue 31, item 8: ``pc_type = "none"`` (with the default ksp_type "preonly") returns the
+    right-hand side instead of a solution; the run used to stall at increment 1 without naming
+    the cause. The start-up check solves a small system with the run's options and refuses them."""
+    p = problem_file(tmp_path, increments=2, solver='[solver.petsc_options]\npc_type = "none"')
+    code = main(["-q", "run", str(p), "--out", str(tmp_path / "out"), "--method", method])
+    err = capsys.readouterr().err.strip()
+    print(f"\n  {method}: exit {code}: {err}")
+    assert code == EXIT_BAD_INPUT and "pc_type = 'none'" in err and "does not solve" in err
+
+
+@pytest.mark.parametrize("again", [["--restart"], [], ["--overwrite"]])
+def test_a_later_run_removes_what_a_killed_run_left(tmp_path, again):
+    """Issue 31, item 9: a SIGKILL in the middle of a write leaves its temporary
+    (``.NAME.tmp-PID``; 2 of 25 kills measured, both in a checkpoint folder); the next run into
+    the folder removes every one, whether it restarts, is refused (an earlier run's results,
+    exit 4) or overwrites."""
+    from dolfinx_nnqem.cli import EXIT_IO
+
+    p = problem_file(tmp_path, increments=2)
+    out = tmp_path / "out"
+    assert main(["-q", "run", str(p), "--out", str(out)]) == EXIT_OK
+    left = [out / ".summary.json.tmp-999999", out / "pairs" / ".pairs_0002.vtp.tmp-999999",
+            out / "checkpoints" / "ckpt_00002" / ".rank_0000.npz.tmp-999999",
+            out / "checkpoints" / ".latest.json.tmp-999999", out / "fields" / ".fields_0002.h5.tmp-999999"]
+    for f in left:
+        f.write_text("half a file")
+    code = main(["-q", "run", str(p), "--out", str(out), *again])
+    remaining = [str(f.relative_to(out)) for f in out.rglob(".*.tmp-*")]
+    print(f"\n  next run {again or ['(no flag)']}: exit {code}, temporaries left {remaining}")
+    assert code == (EXIT_IO if not again else EXIT_OK) and not remaining

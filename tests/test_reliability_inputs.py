@@ -11,7 +11,7 @@ from mpi4py import MPI
 from dolfinx_nnqem.cli import EXIT_BAD_INPUT, EXIT_OK, main
 from dolfinx_nnqem.material import VonMises
 from dolfinx_nnqem.problem.meshing import build_two_beams
-from dolfinx_nnqem.problem import BodyForce, Contact, ContactProblem, Dirichlet, Pressure, Traction
+from dolfinx_nnqem.problem import BodyForce, Contact, ContactProblem, Dirichlet, Gravity, Pressure, Traction
 from dolfinx_nnqem.solvers import SolverOptions
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -86,6 +86,7 @@ CASES = {
     "rtol not a number": (("increments = 2", "increments = 2\nrtol = nan"),
                           lambda b: SolverOptions(rtol=float("nan")), "rtol"),
     "atol negative": (("increments = 2", "increments = 2\natol = -1.0"), lambda b: SolverOptions(atol=-1.0), "atol"),
+    "increments zero": (("increments = 2", "increments = 0"), "steps:increments=0", "increments"),  # issue 31, 2
     "increments too many": (("increments = 2", "increments = 1000000"), "steps:increments=1000000", "increments"),
     "increments not an integer": (("increments = 2", "increments = 2.5"), "steps:increments=2.5", "increments"),
     "cutbacks too many": (("increments = 2", "increments = 2\nmax_cutbacks = 99"), "steps:max_cutbacks=99",
@@ -94,6 +95,24 @@ CASES = {
     "traction not finite": (("[solver]", "[[traction]]\ntag = 13\nvalue = [nan, 0.0, 0.0]\n[solver]"),
                             lambda b: _api(b, tractions=[Traction(13, (math.nan, 0.0, 0.0))]), "finite"),
     "2D mesh": (None, lambda b: ContactProblem(_square(), None, None, materials=M), "2D"),
+    # issue 31, item 3: values that overflowed in the solvers are refused, with the limit
+    "E huge": (("E = 1.0e9", "E = 1e300"), lambda b: VonMises(E=1e300, nu=0.3), "[1e-20, 1e+20]"),
+    "E tiny": (("E = 1.0e9", "E = 1e-300"), lambda b: VonMises(E=1e-300, nu=0.3), "[1e-20, 1e+20]"),
+    "nu nearly 0.5": (("nu = 0.3", "nu = 0.4999999"), lambda b: VonMises(E=1e9, nu=0.4999999), "0.4999]"),
+    "density huge": (("nu = 0.3", "nu = 0.3\ndensity = 1e300"), lambda b: VonMises(E=1e9, nu=0.3, density=1e300),
+                     "density = 1e+300"),
+    "traction huge": (("[solver]", "[[traction]]\ntag = 13\nvalue = [1e300, 0.0, 0.0]\n[solver]"),
+                      lambda b: _api(b, tractions=[Traction(13, (1e300, 0.0, 0.0))]), "magnitude 1e+20"),
+    "prescribed value huge": (("tag = 12", "tag = 12\nvalue = 1e300"),
+                              lambda b: _api(b, dirichlet=[Dirichlet(11), Dirichlet(12, 1e300)]), "magnitude 1e+20"),
+    "r huge": (("mu_f = 0.3", "mu_f = 0.3\nr = 1e300"), lambda b: Contact(21, 22, mu_f=0.3, r=1e300), "1e+20"),
+    # issue 31, item 4: r far from E h stalls the Newton iterations: refused with the range
+    "r tiny": (("mu_f = 0.3", "mu_f = 0.3\nr = 1e-300"),
+               lambda b: _api(b, contact=Contact(21, 22, mu_f=0.3, r=1e-300)),
+               "supported range is [1e-06, 1000] × E h"),
+    # issue 31, item 8: a load vector that is not numbers names the parameter, not numpy's words
+    "gravity not a vector": (("[solver]", '[gravity]\ng = "down"\n[solver]'),
+                             lambda b: _api(b, body_forces=[Gravity("down")]), ".g = 'down'"),
 }
 
 
@@ -177,3 +196,57 @@ def test_the_good_file_passes(tmp_path, capsys):
     path = tmp_path / "p.toml"
     path.write_text(GOOD)
     assert main(["-q", "run", str(path), "--check"]) == EXIT_OK
+
+
+def _fused_blocks_msh(tmp_path) -> str:
+    """Two boxes fragmented together (common nodes on y = 0.5), tagged as two bodies, the
+    interface tagged 21 and 22 as if the bodies were apart."""
+    import gmsh
+
+    started = not gmsh.isInitialized()
+    if started:
+        gmsh.initialize()
+    gmsh.option.setNumber("General.Terminal", 0)
+    gmsh.model.add("fused")
+    a = gmsh.model.occ.addBox(0, 0, 0, 1, 0.5, 1)
+    b = gmsh.model.occ.addBox(0, 0.5, 0, 1, 0.5, 1)
+    gmsh.model.occ.fragment([(3, a)], [(3, b)])
+    gmsh.model.occ.synchronize()
+
+    def at(dim, y):
+        return [t for _, t in gmsh.model.getEntities(dim) if abs(gmsh.model.occ.getCenterOfMass(dim, t)[1] - y) < 1e-6]
+
+    gmsh.model.addPhysicalGroup(3, at(3, 0.25), 1)
+    gmsh.model.addPhysicalGroup(3, at(3, 0.75), 2)
+    gmsh.model.addPhysicalGroup(2, at(2, 0.0), 11)
+    gmsh.model.addPhysicalGroup(2, at(2, 1.0), 12)
+    gmsh.model.addPhysicalGroup(2, at(2, 0.5), 21)
+    gmsh.model.addPhysicalGroup(2, at(2, 0.5), 22)
+    gmsh.option.setNumber("Mesh.MeshSizeMax", 0.5)
+    gmsh.model.mesh.generate(3)
+    path = tmp_path / "fused.msh"
+    gmsh.write(str(path))
+    gmsh.model.remove()
+    if started:
+        gmsh.finalize()
+    return path.as_posix()
+
+
+def test_bodies_meshed_together_are_named(tmp_path, capsys):
+    """Issue 31, item 8: a contact between volumes that share nodes used to fail with the symptom
+    ("no facet is tagged 22": both surface tags sat on the same interior facets, one was lost);
+    now the cells' tags and the number of common nodes are named."""
+    from dolfinx_nnqem import compat
+
+    msh = _fused_blocks_msh(tmp_path)
+    path = tmp_path / "p.toml"
+    path.write_text(GOOD.replace(MESH, msh))
+    code = main(["-q", "run", str(path), "--check"])
+    err = capsys.readouterr().err.strip()
+    mesh, cell_tags, facet_tags = compat.read_from_msh(msh, MPI.COMM_WORLD, 0, gdim=3)
+    with pytest.raises(ValueError) as error:
+        ContactProblem(mesh, cell_tags, facet_tags, materials={1: M, 2: M}, dirichlet=[Dirichlet(11), Dirichlet(12)],
+                       contact=Contact(21, 22, mu_f=0.3))
+    print(f"\n  exit {code}: {err}\n  API: {error.value}")
+    assert code == EXIT_BAD_INPUT and "the cells tagged 1 and 2 share" in err and "no facet is tagged" not in err
+    assert "the cells tagged 1 and 2 share" in str(error.value)

@@ -19,11 +19,11 @@ SCRIPT = ROOT / "tests" / "mpi_scripts" / "rank_failure.py"
 LIMIT_S = 120
 
 
-def _mpirun(args, timeout=LIMIT_S, **extra_env):
+def _mpirun(args, timeout=LIMIT_S, ranks=2, **extra_env):
     e = env()
     e.update(extra_env)
     t0 = time.perf_counter()
-    run = subprocess.run([*compat.mpiexec(), "-n", "2", sys.executable, *args], env=e, capture_output=True,
+    run = subprocess.run([*compat.mpiexec(), "-n", str(ranks), sys.executable, *args], env=e, capture_output=True,
                          text=True, timeout=timeout)
     return run, time.perf_counter() - t0
 
@@ -123,3 +123,36 @@ def test_ctrl_c_on_two_ranks(tmp_path):
     if "Open MPI" in MPI.Get_library_version():
         return  # OpenMPI's mpirun, itself interrupted, ends with its own code (1) and drops the ranks' output
     assert job.returncode == EXIT_INTERRUPTED and len(lines) == 1
+
+
+@pytest.mark.parametrize("ranks", [1, 2])
+def test_a_nearly_full_file_system(tmp_path, ranks):
+    """Issue 31, item 1: the output folder on a nearly full file system (a real ENOSPC) ends with
+    exit 4 and one message naming the file, on 1 and 2 ranks, wherever the disk runs out
+    (fields, pair tables, summary, checkpoint); summary.json says "error"; no temporary and no
+    lock file stays. Rank 0 used to segfault (VTK's file writer on ENOSPC) or abort (an HDF5
+    file DOLFINx could not close after a failed write), with no message."""
+    import shutil
+
+    from reliability_helpers import fill, small_file_system
+
+    p = problem_file(tmp_path, increments=10)
+    outcomes = []
+    with small_file_system(tmp_path / "disk", "1m") as disk:
+        for free_kb in (60, 140, 200, 260, 330):
+            out = disk / "out"
+            shutil.rmtree(out, ignore_errors=True)
+            fill(disk, free_kb * 1024)
+            run, wall = _mpirun(_cli(["-q", "run", str(p), "--out", str(out)]), ranks=ranks)
+            lines = [line for line in run.stderr.splitlines() if line.startswith("dolfinx-nnqem")]
+            summary = out / "summary.json"
+            status = json.loads(summary.read_text())["status"] if summary.exists() else None
+            left = [f.name for f in out.rglob(".*") if ".tmp-" in f.name or f.name == ".nnqem.lock"]
+            outcomes.append((free_kb, run.returncode, lines, status, left, wall))
+    for free_kb, code, lines, status, left, wall in outcomes:
+        print(f"\n  {ranks} rank(s), {free_kb} kB free: exit {code} after {wall:.1f} s, summary {status!r}, "
+              f"left {left}: {lines}")
+    for free_kb, code, lines, status, left, wall in outcomes:
+        assert code == EXIT_IO and len(lines) == 1, (free_kb, code, lines)
+        assert "No space left on device" in lines[0] and str(tmp_path / "disk" / "out") in lines[0]
+        assert status == "error" and not left

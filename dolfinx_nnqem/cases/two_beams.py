@@ -89,6 +89,9 @@ def run_two_beams(method: str = "monolithic", increments: int = 15, out: str | P
         with make_solver(method, problem, options, **(method_options or {})) as solver:
             solve_load_steps(problem, solver, increments, callbacks=callbacks)
             timings = dict(solver.timings)
+    except BaseException as error:  # noqa: BLE001  (an interrupt too: the summary says how the run ended)
+        writer.record_end(error)
+        raise
     finally:
         writer.close()
     summary = writer.summary.data

@@ -40,11 +40,34 @@ from dolfinx_nnqem.contact.obstacles import RigidObstacle, obstacle_pairs
 from dolfinx_nnqem.contact.discretisation import DISCRETISATIONS, OBSTACLE_DISCRETISATIONS, discretise
 from dolfinx_nnqem.contact.pairset import PairRows, PairSet, rows_matrix
 from dolfinx_nnqem.contact.surfaces import ContactPairError, owned_supports
+from dolfinx_nnqem.numerics.ranges import check_magnitude
 
 __all__ = ["Contact", "ContactModel", "Interface", "PairLaws"]
 
 PREDICTED_PRESSURE = 1e-12
 """Starting active set: touching pairs start with p_n = this × r h (see :meth:`ContactModel.predict`)."""
+
+
+R_RANGE = (1e-6, 1e3)
+"""Supported r / (E h), E the largest Young's modulus and h the mean cell size (E h is the default
+r). Inside it every method and law converged on the two-beam benchmark; outside it convergence
+became erratic (r/(E h) = 1e-9 and 1e6 failed with every method; 1e-12 and 1e-20 converged
+with the monolithic solver, 1e-50 did not; NNEQM2 failed from 1e4): r = 1e-300 stopped
+"stalled" at a load factor the run used to pass (issue 31)."""
+
+
+def _checked_r(contact: Contact, E: float, h: float) -> float:
+    """The interface's r, refused (naming it and the range) outside :data:`R_RANGE` × E h."""
+    reference = float(default_r(E, h))
+    ratio = float(contact.r) / reference
+    low, high = R_RANGE
+    if not low <= ratio <= high:
+        raise ValueError(f"contact {contact.label}: r = {contact.r:g} is {ratio:.3g} × E h = {reference:.4g} N/m "
+                         f"(E the largest Young's modulus, h the mean cell size); the supported range is "
+                         f"[{low:g}, {high:g}] × E h = [{low * reference:.4g}, {high * reference:.4g}] N/m: "
+                         "outside it the law mixes forces and displacements of too different sizes and "
+                         "the Newton iterations stall (leave r out for E h)")
+    return float(contact.r)
 
 
 def _real(name: str, value, *, positive: bool = False, allow_none: bool = False) -> float | None:
@@ -58,6 +81,7 @@ def _real(name: str, value, *, positive: bool = False, allow_none: bool = False)
         raise ValueError(f"Contact: {name} = {value!r}; expected a value > 0")
     if not positive and value < 0.0:
         raise ValueError(f"Contact: {name} = {value!r}; expected a value >= 0")
+    check_magnitude(f"Contact: {name}", value)
     return value
 
 
@@ -374,11 +398,11 @@ class ContactModel:
             raise ValueError(f"contact interfaces need distinct names, got {labels}")
         interfaces, start = [], 0
         for contact in contacts:
+            r = float(default_r(E, h)) if contact.r is None else _checked_r(contact, E, h)
             with constrained_dofs.localForm() as c:
                 pairs = contact.pair_set(V, facet_tags, supported=c.array.copy())
             if pairs.num_global == 0:
                 raise ContactPairError(f"contact {contact.label}: no pairs found")
-            r = float(default_r(E, h)) if contact.r is None else float(contact.r)
             interfaces.append(Interface(contact, pairs, get_law(contact.law), r,
                                         slice(start, start + pairs.num_local)))
             start += pairs.num_local

@@ -32,6 +32,7 @@ from dolfinx_nnqem.contact.pairs import owned_by_slave
 from dolfinx_nnqem.contact.pairset import PairRows
 from dolfinx_nnqem.contact.surfaces import (ContactPairError, first_by_position, format_point,
                                             gather_surfaces, local_frames, mesh_tolerance)
+from dolfinx_nnqem.numerics.ranges import check_magnitude
 
 __all__ = ["Cylinder", "ObstaclePairs", "Plane", "RigidObstacle", "Sphere", "obstacle_pairs",
            "obstacle_reaction"]
@@ -44,6 +45,7 @@ def _vector3(name: str, value, unit: bool = False) -> np.ndarray:
         raise ValueError(f"{name} = {value!r}: expected 3 numbers") from None
     if v.shape != (3,) or not np.all(np.isfinite(v)):
         raise ValueError(f"{name} = {value!r}: expected 3 finite numbers")
+    check_magnitude(name, v)
     if unit:
         length = float(np.linalg.norm(v))
         if length == 0.0:
@@ -59,6 +61,7 @@ def _positive(name: str, value) -> float:
         raise ValueError(f"{name} = {value!r}: expected a number") from None
     if not (math.isfinite(v) and v > 0.0):
         raise ValueError(f"{name} = {value!r}: expected a finite value > 0")
+    check_magnitude(name, v)
     return v
 
 

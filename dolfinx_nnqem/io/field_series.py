@@ -27,6 +27,7 @@ import dolfinx.fem as fem
 import numpy as np
 from dolfinx.io import XDMFFile
 
+from dolfinx_nnqem import compat
 from dolfinx_nnqem.collective import on_rank0
 from dolfinx_nnqem.io.safe_io import OutputError, atomic_write_text
 from dolfinx_nnqem.material.von_mises import von_mises_stress
@@ -106,15 +107,46 @@ class FieldSeriesWriter:
             u = self.u_out
         name = _step_name(result.index)
         path = self.folder / FOLDER / f"{name}.xdmf"
-        try:
-            with XDMFFile(self.comm, str(path), "w") as xdmf:
-                xdmf.write_mesh(self.problem.mesh)
-                for f in (u, *self._means.fields):
-                    xdmf.write_function(f, t)
-        except RuntimeError as error:  # HDF5 reports a full disk as a RuntimeError
-            raise OutputError(28, f"cannot write {path.with_suffix('.h5')}: {error}", str(path)) from error
+        # HDF5 must not meet a full disk: after a failed collective write it can neither close
+        # the file nor be left to close it at exit (see _write_step), so a disk without room
+        # for the step file is refused here, with the figures
+        on_rank0(self.comm, check_free_space, path.with_suffix(".h5"), self._bytes_needed())
+        self._write_step(path, [u, *self._means.fields], t)
         self.steps = [s for s in self.steps if s[0] < result.index] + [(result.index, t)]
         on_rank0(self.comm, self._write_index)
+
+    def _bytes_needed(self) -> int:
+        """Room a step file needs: 1.25 × the last one's size (every step holds the same
+        arrays), or before the first one its arrays' size, plus 64 kB for HDF5's metadata."""
+        last = self.folder / FOLDER / f"{_step_name(self.steps[-1][0])}.h5" if self.steps else None
+        if self.comm.rank == 0 and last is not None and last.is_file():
+            size = last.stat().st_size
+        else:
+            mesh = self.problem.mesh
+            nodes = mesh.geometry.index_map().size_global
+            cells = mesh.topology.index_map(mesh.topology.dim).size_global
+            # geometry and u (nodes × 3 doubles), topology (int64 per cell node), three cell fields
+            size = 8 * (6 * nodes + cells * (compat.geometry_dofmap(mesh).shape[1] + 3))
+        return int(1.25 * size) + 65536
+
+    def _write_step(self, path: Path, functions: list, t: float) -> None:
+        """One closed XDMF/HDF5 step file; a failed write raises OutputError naming the .h5.
+
+        DOLFINx leaves the dataset of a failed write open, so on MPI the file can no longer be
+        closed (H5Fclose fails; the next attempt, in XDMFFile's destructor, throws from a C++
+        destructor: std::terminate, SIGABRT, no message) and HDF5's own clean-up at exit hangs
+        in a collective close. Such a file is kept alive (its destructor never runs) and
+        :func:`hdf5_left_open` tells the command line to end the job itself.
+        """
+        xdmf = XDMFFile(self.comm, str(path), "w")
+        try:
+            xdmf.write_mesh(self.problem.mesh)
+            for f in functions:
+                xdmf.write_function(f, t)
+            xdmf.close()
+        except RuntimeError as error:  # HDF5 reports a full disk as a RuntimeError
+            _abandon(xdmf, self.comm)
+            raise OutputError(28, f"cannot write {path.with_suffix('.h5')}: {error}", str(path)) from error
 
     def _write_index(self) -> None:
         root = ET.Element("Xdmf", {"Version": "3.0", "xmlns:xi": "http://www.w3.org/2001/XInclude"})
@@ -148,6 +180,43 @@ class FieldSeriesWriter:
 
     def close(self) -> None:
         pass
+
+
+_LEFT_OPEN: list = []
+"""XDMF files whose HDF5 file could not be closed after a failed write (kept alive on purpose)."""
+
+
+def hdf5_left_open() -> bool:
+    """True after a failed field write left an HDF5 file that cannot be closed: the process must
+    end without HDF5's clean-up (``cli.main`` aborts the job with its exit code)."""
+    return bool(_LEFT_OPEN)
+
+
+def _abandon(xdmf, comm) -> None:
+    """After a failed write: close ``xdmf`` if HDF5 still can, else keep it open for good."""
+    if comm.size == 1:  # no collective state to break: the serial driver closes it
+        try:
+            xdmf.close()
+            return
+        except RuntimeError:
+            pass
+    import ctypes
+
+    _LEFT_OPEN.append(xdmf)
+    ctypes.pythonapi.Py_IncRef(ctypes.py_object(xdmf))  # not even interpreter shutdown destroys it
+
+
+def check_free_space(path: Path, needed: int) -> None:
+    """Refuse to write ``path`` (OutputError, ENOSPC) when its file system has less than
+    ``needed`` bytes free for this user."""
+    try:
+        st = os.statvfs(path.parent)
+    except OSError:
+        return  # cannot tell: the write itself will say
+    free = st.f_bavail * st.f_frsize
+    if free < needed:
+        raise OutputError(28, f"cannot write {path}: No space left on device ({free / 1024:.0f} kB free, the "
+                              f"step file needs about {needed / 1024:.0f} kB)", str(path))
 
 
 def _step_grid(step_file: Path, t: float) -> ET.Element:

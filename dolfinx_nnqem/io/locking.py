@@ -39,6 +39,7 @@ class OutputLock:
         self.folder = Path(folder)
         self.path = self.folder / LOCK_NAME
         self._fd: int | None = None
+        self._info_bytes = 0
 
     def acquire(self) -> OutputLock:
         self.folder.mkdir(parents=True, exist_ok=True)
@@ -56,16 +57,36 @@ class OutputLock:
             os.close(fd)
         else:
             raise FolderInUse(16, f"cannot lock output folder {self.folder}", str(self.folder))
-        info = {"pid": os.getpid(), "host": socket.gethostname(), "started": time.time()}
+        info = json.dumps({"pid": os.getpid(), "host": socket.gethostname(), "started": time.time()}).encode()
         os.ftruncate(fd, 0)
-        os.pwrite(fd, json.dumps(info).encode(), 0)
-        self._fd = fd
+        os.pwrite(fd, info, 0)
+        self._fd, self._info_bytes = fd, len(info)
         return self
+
+    def reserve(self, nbytes: int) -> None:
+        """Hold ``nbytes`` of disk space in the lock file (after its JSON), so that the run's last
+        words (``summary.json`` saying "error" or "not converged") can still be written when the
+        disk fills up: :meth:`free_reserve` gives the space back just before. Best effort: a
+        file system that cannot allocate leaves the reserve as it was."""
+        if self._fd is None:
+            return
+        try:
+            os.posix_fallocate(self._fd, 0, max(int(nbytes), self._info_bytes))
+        except OSError:
+            pass
+
+    def free_reserve(self) -> None:
+        """Give the reserved space back (the lock file keeps its JSON)."""
+        if self._fd is not None:
+            try:
+                os.ftruncate(self._fd, self._info_bytes)
+            except OSError:
+                pass
 
     def _refuse(self, fd: int) -> None:
         holder = ""
         try:
-            info = json.loads(self.path.read_text() or "{}")
+            info = json.loads(self.path.read_bytes().rstrip(b"\0") or b"{}")  # the reserve is zeros
             holder = (f" (process {info.get('pid')} on {info.get('host')}, started "
                       f"{time.strftime('%Y-%m-%d %H:%M:%S', time.localtime(info.get('started', 0)))})")
         except (OSError, ValueError):

@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 import dolfinx_nnqem.io.results as res
+from dolfinx_nnqem import interrupts
 from dolfinx_nnqem.collective import on_rank0
 from dolfinx_nnqem.contact.laws import STATE_NAMES
 from dolfinx_nnqem.io.field_series import FieldSeriesWriter
@@ -42,6 +43,7 @@ from dolfinx_nnqem.io.run_pictures import draw_live_pictures, pictures_enabled
 from dolfinx_nnqem.io.safe_io import atomic_write, atomic_write_text, remove_stale_temporaries
 from dolfinx_nnqem.material.von_mises import von_mises_stress
 from dolfinx_nnqem.problem.validation import check_output_folder
+from dolfinx_nnqem.solvers.convergence import ConvergenceError
 
 
 def von_mises(sigma: np.ndarray) -> np.ndarray:
@@ -134,20 +136,27 @@ class PairWriter:
 
 
 def _save_as_vtp(cloud, path: Path) -> None:
-    """VTK XML PolyData at ``path`` whatever its suffix (temporary names); a failed write raises."""
+    """VTK XML PolyData at ``path`` whatever its suffix (temporary names); a failed write raises.
+
+    VTK builds the file in memory and Python writes it: VTK's own file output crashes the
+    process (SIGSEGV, or "free(): invalid pointer" and SIGABRT, VTK 9.7) when the disk fills up
+    during the write, which killed rank 0 of an MPI run with no message (issue 31). Python's
+    write raises OSError (ENOSPC) instead, which :func:`~dolfinx_nnqem.io.safe_io.atomic_write`
+    reports with the file's name. The binary data mode is base64 text, so the bytes are those
+    VTK would have written itself.
+    """
     from vtkmodules.vtkIOXML import vtkXMLPolyDataWriter
 
     writer = vtkXMLPolyDataWriter()
-    writer.SetFileName(str(path))
+    writer.WriteToOutputStringOn()
     writer.SetInputData(cloud)
     writer.SetDataModeToBinary()
     if writer.Write() != 1 or writer.GetErrorCode() != 0:
         import errno
 
-        code = writer.GetErrorCode() or errno.EIO
-        raise OSError(errno.ENOSPC if code == 20007 else errno.EIO,  # vtkErrorCode::OutOfDiskSpaceError
-                      f"VTK could not write {path} (error code {code})",
-                      str(path))
+        raise OSError(errno.EIO, f"VTK could not write {path} (error code {writer.GetErrorCode()})", str(path))
+    with open(path, "w", encoding="ascii") as fh:
+        fh.write(writer.GetOutputString())
 
 
 class SummaryWriter:
@@ -241,7 +250,7 @@ class SummaryWriter:
 
     def write(self) -> None:
         """Write the summary (rank 0; atomic: a crash never leaves half a file; collective)."""
-        on_rank0(self.problem.comm, lambda: atomic_write_text(self.path, json.dumps(_jsonable(self.data), indent=1)))
+        on_rank0(self.problem.comm, lambda: atomic_write_text(self.path, summary_json(self.data)))
 
     def failed(self, failure: dict) -> None:
         """Record the increment that did not converge (from :func:`solve_load_steps`)."""
@@ -265,7 +274,7 @@ class SummaryWriter:
         # (each through its own temporary file and an atomic rename); a failure to write is
         # ignored: the run is ending on an error already (e.g. a full disk), keep that one
         try:
-            atomic_write_text(self.path, json.dumps(_jsonable(self.data), indent=1))
+            atomic_write_text(self.path, summary_json(self.data))
         except OSError:
             pass
 
@@ -280,16 +289,31 @@ class SummaryWriter:
         self.t0 -= float(data.get("wall_time_s", 0.0))
 
 
-def _jsonable(value):
-    """``value`` with numpy scalars and arrays turned into Python numbers and lists."""
+def summary_json(data: dict) -> str:
+    """``data`` as strict JSON text: a value that is not a finite number (NaN, ±inf: e.g. a
+    residual of a diverged iterate) is written as ``null``, and ``non_finite`` lists each such
+    key with the value it had (JSON has no NaN: ``json.dumps`` would write a bare ``NaN``,
+    which strict readers refuse)."""
+    non_finite: dict[str, str] = {}
+    clean = _jsonable({k: v for k, v in data.items() if k != "non_finite"}, "", non_finite)
+    if non_finite:
+        clean["non_finite"] = non_finite
+    return json.dumps(clean, indent=1, allow_nan=False)
+
+
+def _jsonable(value, path: str = "", non_finite: dict | None = None):
+    """``value`` with numpy scalars and arrays turned into Python numbers and lists; a float
+    that is not finite becomes None (recorded in ``non_finite`` under its path)."""
     if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return value.tolist()
+        return {str(k): _jsonable(v, f"{path}.{k}" if path else str(k), non_finite) for k, v in value.items()}
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return [_jsonable(v, f"{path}[{i}]", non_finite) for i, v in enumerate(value)]
     if isinstance(value, np.generic):
-        return value.item()
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        if non_finite is not None:
+            non_finite[path] = repr(value)
+        return None
     return value
 
 
@@ -361,14 +385,47 @@ class ResultsWriter:
     def __call__(self, result) -> None:
         for w in self.writers:
             w(result)
+        self._reserve()
+
+    def _reserve(self) -> None:
+        """Keep room on disk for the summary's last rewrite (rank 0, which holds the lock): its
+        size now plus 64 kB for the failure or error it may add; twice that under MPI, where
+        :meth:`SummaryWriter.ended` may write from two ranks at once."""
+        if self._lock is not None and self.problem.comm.rank == 0 and self.summary.path.is_file():
+            copies = 2 if self.problem.comm.size > 1 else 1
+            self._lock.reserve(copies * self.summary.path.stat().st_size + 65536)
+
+    def _free_reserve(self) -> None:
+        if self._lock is not None and self.problem.comm.rank == 0:
+            self._lock.free_reserve()
 
     def failed(self, failure: dict) -> None:
         """The run gave up at an increment: ``summary.json`` says which, and why."""
+        self._free_reserve()
         self.summary.failed(failure)
 
     def ended(self, status: str, message: str = "") -> None:
-        """The run stopped otherwise ("interrupted", "error"): ``summary.json`` says so."""
+        """The run stopped otherwise ("interrupted", "error"): ``summary.json`` says so (on a
+        full disk too: the space reserved after every increment is given back first)."""
+        self._free_reserve()
         self.summary.ended(status, message)
+
+    def record_end(self, error: BaseException) -> None:
+        """Record in ``summary.json`` how a run ended on ``error`` (call it from the run's
+        ``except``): "interrupted" for Ctrl-C or SIGTERM (also when numba wrapped the interrupt
+        in a SystemError), nothing for a :class:`ConvergenceError` (:meth:`failed` recorded it),
+        "error" with the message otherwise."""
+        seen, cause = set(), error
+        while cause is not None and id(cause) not in seen:
+            if isinstance(cause, KeyboardInterrupt):
+                self.ended("interrupted")
+                return
+            seen.add(id(cause))
+            cause = cause.__cause__ or cause.__context__
+        if interrupts.received:  # an error raised while the command line handled an interrupt
+            self.ended("interrupted")
+        elif not isinstance(error, ConvergenceError):
+            self.ended("error", f"{type(error).__name__}: {error}")
 
     def state(self) -> dict:
         """The writers' state for a checkpoint (JSON)."""

@@ -118,6 +118,9 @@ def plot_deformed(problem, path: str | os.PathLike, *, field: str = "von_mises",
         return
     import pyvista
 
+    from dolfinx_nnqem.chatter import apply_vtk_options
+
+    apply_vtk_options()  # VTK's "bad X server connection" (it renders off-screen anyway): only with -v
     pyvista.OFF_SCREEN = True
     topology, cell_types, x, u, values = grid_data
     grid = pyvista.UnstructuredGrid(topology, cell_types, x)
@@ -216,6 +219,9 @@ def plot_contact_pressure(problem_or_table, path: str | os.PathLike, *, problem=
         select = table["interface"] == interface
     import pyvista
 
+    from dolfinx_nnqem.chatter import apply_vtk_options
+
+    apply_vtk_options()  # as above: two-beams -q without fields printed VTK's X warning (issue 31)
     pyvista.OFF_SCREEN = True
     points = table["position_b"]
     pressure = np.where(select, table["pressure"], np.nan)

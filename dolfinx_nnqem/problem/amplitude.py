@@ -13,6 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from dolfinx_nnqem.numerics.ranges import check_magnitude
+
 __all__ = ["PiecewiseLinear", "PiecewiseLinearPath"]
 
 
@@ -25,6 +27,7 @@ def _table(points, width: int, what: str) -> np.ndarray:
         raise ValueError(f"{what}: expected rows of {width} numbers (ℓ then the value), got shape {table.shape}")
     if not np.all(np.isfinite(table)):
         raise ValueError(f"{what}: every entry must be finite")
+    check_magnitude(what, table)
     if np.any(np.diff(table[:, 0]) <= 0.0):
         raise ValueError(f"{what}: the load factors ℓ of the rows must increase strictly, got {table[:, 0].tolist()}")
     return table

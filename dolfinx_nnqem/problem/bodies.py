@@ -16,7 +16,7 @@ contact rows.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from dolfinx_nnqem import compat  # noqa: I001  (first: loads MPI/PETSc for the PyPI wheel)
 
@@ -28,7 +28,10 @@ from mpi4py import MPI
 from petsc4py import PETSc
 from scipy.sparse.csgraph import connected_components
 
-__all__ = ["Bodies", "RigidModes", "check_rigid_modes", "find_bodies", "free_rigid_modes"]
+from dolfinx_nnqem.contact.laws import STICK
+
+__all__ = ["Bodies", "FrictionHeld", "RigidModes", "check_rigid_modes", "find_bodies", "free_rigid_modes",
+           "friction_held_motions"]
 
 MODE_NAMES = ("translation x", "translation y", "translation z", "rotation about x", "rotation about y",
               "rotation about z")
@@ -294,6 +297,14 @@ def check_rigid_modes(modes: RigidModes, contact=None) -> None:
     A = np.concatenate(rows, axis=0)
     if A.shape[0] == 0:
         _raise_drifting(modes, np.eye(modes.count), "no contact pair sees it")
+    rank, vt = _rank_and_null_space(A)
+    if rank < modes.count:
+        _raise_drifting(modes, vt[rank:], "no support holds it and no contact surface faces that motion "
+                                          "(frictionless contact cannot hold a sliding motion)")
+
+
+def _rank_and_null_space(A: np.ndarray) -> tuple[int, np.ndarray]:
+    """The rank of A (modes as columns) and Vᵀ of its SVD: rows rank: span A's null space."""
     # Only s and vt are needed: full_matrices=True would also build U, (3 pairs)² numbers (7.5 GB
     # at 10⁴ pairs). Zero rows up to the number of modes keep vt square (the null space's rows
     # included) without changing AᵀA, hence s and vt.
@@ -301,19 +312,105 @@ def check_rigid_modes(modes: RigidModes, contact=None) -> None:
         A = np.vstack([A, np.zeros((A.shape[1] - A.shape[0], A.shape[1]))])
     _, s, vt = np.linalg.svd(A, full_matrices=False)
     scale = max(float(s.max(initial=0.0)), 1.0)
-    rank = int(np.count_nonzero(s > 1e-10 * scale))
-    if rank < modes.count:
-        _raise_drifting(modes, vt[rank:], "no support holds it and no contact surface faces that motion "
-                                          "(frictionless contact cannot hold a sliding motion)")
+    return int(np.count_nonzero(s > 1e-10 * scale)), vt
+
+
+@dataclass(frozen=True)
+class FrictionHeld:
+    """The free rigid motions that only friction holds (see :func:`friction_held_motions`).
+
+    Attributes
+    ----------
+    motions
+        Each motion in words, e.g. ``"body 2 (cells tagged 2): translation along (1, 0, 0)"``.
+    pairs
+        (pairs, in the contact model's gathered order) True where a pair's friction resists one
+        of them.
+    """
+
+    motions: tuple[str, ...] = ()
+    pairs: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+
+    def saturated(self, states: np.ndarray | None) -> bool:
+        """Whether no pair holding these motions sticks (``states``: the gathered pair states):
+        friction then carries all it can along them and a larger load makes the body slide."""
+        if not self.motions or states is None or len(states) != len(self.pairs):
+            return False
+        return not bool(np.any(np.asarray(states)[self.pairs] == STICK))
+
+
+def friction_held_motions(modes: RigidModes, contact=None) -> FrictionHeld:
+    """The free rigid motions that only friction holds, and the pairs that hold them (collective).
+
+    Such a motion meets no support and no contact normal (no pair's normal row of B sees it);
+    pairs with friction resist it only up to μ_f p_n: once the load along it exceeds that, the
+    body slides without resistance and no equilibrium exists. Call after
+    :func:`check_rigid_modes` (every free mode is held by something).
+    """
+    if modes.count == 0 or contact is None or contact.num_global == 0:
+        return FrictionHeld()
+    BN = contact.gather(np.stack([contact.B_times(v) for v in modes.vectors], axis=-1))  # (pairs, 3, modes)
+    rank, vt = _rank_and_null_space(BN[:, 0, :])
+    if rank == modes.count:
+        return FrictionHeld()
+    combinations = _row_echelon(vt[rank:])
+    tangential = np.linalg.norm(BN[:, 1:, :] @ combinations.T, axis=1)  # (pairs, motions)
+    scale = max(float(np.abs(BN).max(initial=0.0)), 1e-300)
+    held = np.any(tangential > 1e-10 * scale, axis=1) & (contact.gather(contact.mu_f) > 0.0)
+    return FrictionHeld(tuple(_describe_combination(modes, c) for c in combinations), held)
+
+
+def _describe_combination(modes: RigidModes, c: np.ndarray) -> str:
+    """A combination of free modes in words, body by body."""
+    by_body: dict[int, list[str]] = {}
+    for k in np.flatnonzero(np.abs(c) > 1e-8):
+        by_body.setdefault(modes.body[k], []).append(modes.description[k])
+    return "; ".join(f"{modes.bodies.name(b)}: {' / '.join(d)}" for b, d in by_body.items())
 
 
 def _raise_drifting(modes: RigidModes, combinations: np.ndarray, why: str) -> None:
-    lines = []
-    for c in _row_echelon(np.atleast_2d(combinations)):
-        by_body: dict[int, list[str]] = {}
-        for k in np.flatnonzero(np.abs(c) > 1e-8):
-            by_body.setdefault(modes.body[k], []).append(modes.description[k])
-        parts = [f"{modes.bodies.name(b)}: {' / '.join(d)}" for b, d in by_body.items()]
-        lines.append("  - " + "; ".join(parts))
+    lines = ["  - " + _describe_combination(modes, c) for c in _row_echelon(np.atleast_2d(combinations))]
     raise ValueError("a body can move rigidly without resistance (" + why + "):\n" + "\n".join(lines)
                      + "\nAdd a support (Dirichlet condition) against that motion, or contact that holds it.")
+
+
+def tags_sharing_nodes(V: dolfinx.fem.FunctionSpace, cell_tags, facet_tags, surfaces) -> list[tuple[int, int, int]]:
+    """The cell tags on either side of the facets tagged ``surfaces`` that share nodes, as
+    (tag a, tag b, number of common nodes) (collective).
+
+    Contact surfaces must be boundaries of bodies meshed apart. A facet tagged as a contact
+    surface that lies between cells of two different tags which share nodes means those "bodies"
+    were meshed as one (e.g. gmsh volumes fragmented together): the facet is inside the mesh, and
+    a surface tag on it may even be lost (two physical surfaces on the same facets keep one tag).
+    """
+    comm = V.mesh.comm
+    if cell_tags is None or facet_tags is None:
+        return []
+    mesh = V.mesh
+    tdim = mesh.topology.dim
+    mesh.topology.create_connectivity(tdim - 1, tdim)
+    f2c = mesh.topology.connectivity(tdim - 1, tdim)
+    imap = mesh.topology.index_map(tdim)
+    tag_of = np.full(imap.size_local + imap.num_ghosts, -1, dtype=np.int64)
+    tag_of[cell_tags.indices] = cell_tags.values
+    sides = set()
+    for surface in surfaces:
+        for facet in facet_tags.find(int(surface)):
+            cells = f2c.links(facet)
+            if len(cells) == 2:
+                a, b = sorted(int(t) for t in tag_of[cells])
+                if a >= 0 and a != b:
+                    sides.add((a, b))
+    sides = sorted(set().union(*comm.allgather(sides)))
+    blocks = V.dofmap.index_map
+
+    def nodes_of(tag: int) -> np.ndarray:
+        local = np.unique(V.dofmap.list[cell_tags.find(tag)].reshape(-1))
+        return np.unique(np.concatenate(comm.allgather(blocks.local_to_global(local.astype(np.int32)))))
+
+    shared = []
+    for a, b in sides:
+        n = len(np.intersect1d(nodes_of(a), nodes_of(b)))
+        if n:
+            shared.append((a, b, n))
+    return shared

@@ -36,11 +36,13 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from dolfinx_nnqem import compat, jit
-from dolfinx_nnqem.problem.bodies import check_rigid_modes, find_bodies, free_rigid_modes
+from dolfinx_nnqem.problem.bodies import (check_rigid_modes, find_bodies, free_rigid_modes, friction_held_motions,
+                                          tags_sharing_nodes)
 from dolfinx_nnqem.contact.model import Contact, ContactModel
+from dolfinx_nnqem.contact.surfaces import ContactPairError
 from dolfinx_nnqem.contact.obstacles import Cylinder, Plane, Sphere  # noqa: F401  (the user's imports)
 from dolfinx_nnqem.material.von_mises import GaussPointValues, PlasticState
-from dolfinx_nnqem.problem.validation import check_cell_tag, check_mesh
+from dolfinx_nnqem.problem.validation import check_cell_tag, check_magnitude, check_mesh
 
 
 # -- problem data ---------------------------------------------------------------------------
@@ -176,11 +178,18 @@ class ContactProblem:
         self.force_floor = FORCE_FLOOR_STRAIN * E_max * self.characteristic_length() ** 2
         """The smallest force scale F (N): what a strain of 1e-6 sets up over one cell face."""
         if contacts:
-            self.contact = ContactModel(self.V, facet_tags, contacts, E=E_max, h=self.characteristic_length(),
-                                        constrained_dofs=self.constrained_flags())
+            try:
+                self.contact = ContactModel(self.V, facet_tags, contacts, E=E_max, h=self.characteristic_length(),
+                                            constrained_dofs=self.constrained_flags())
+            except ContactPairError as error:  # the cause may be bodies meshed as one: say so
+                raise self._bodies_meshed_together(contacts) or error
+
         self.bodies = find_bodies(self.V, cell_tags)
         self.rigid_modes = free_rigid_modes(self.V, self.bodies, self.bc_dofs)
         check_rigid_modes(self.rigid_modes, self.contact)
+        self.friction_held = friction_held_motions(self.rigid_modes, self.contact)
+        """Rigid motions that only friction holds (:class:`~dolfinx_nnqem.problem.bodies.FrictionHeld`:
+        named before solving and when a run fails)."""
 
     @property
     def petsc_comms(self) -> list:
@@ -197,6 +206,23 @@ class ContactProblem:
         return self._petsc_comms
 
     # -- set-up helpers ---------------------------------------------------------------------
+    def _bodies_meshed_together(self, contacts) -> ValueError | None:
+        """The error naming cell tags that share nodes across a contact surface, or None.
+
+        A contact between volumes meshed together (common nodes) used to end with a symptom
+        ("no facet is tagged 22": both surface tags sat on the same interior facets and one was
+        lost) instead of the cause (issue 31)."""
+        surfaces = [c.surface2 for c in contacts] + [c.surface1 for c in contacts if c.obstacle is None]
+        shared = tags_sharing_nodes(self.V, self.cell_tags, self.facet_tags, surfaces)
+        if not shared:
+            return None
+        pairs = "; ".join(f"the cells tagged {a} and {b} share {n} nodes" for a, b, n in shared)
+        return ContactPairError(
+            f"{pairs}: those bodies are meshed as one, so the contact surfaces between them (facet tags "
+            f"{sorted(set(int(t) for t in surfaces))}) lie inside the mesh, not on a boundary. Bodies in contact "
+            "must be meshed without common nodes (in gmsh: do not fragment or glue their volumes)")
+
+
     def _check_facet_tags(self, tags: Sequence[int]) -> None:
         if not tags:
             return
@@ -219,9 +245,8 @@ class ContactProblem:
             components = (0, 1, 2) if d.components is None else tuple(d.components)
             if any(c not in (0, 1, 2) for c in components):
                 raise ValueError(f"Dirichlet(tag={d.tag}): components {components} must be among 0, 1, 2")
+            _check_finite(f"Dirichlet(tag={d.tag}).value", d.value)
             value = np.broadcast_to(np.asarray(d.value, dtype=float), (len(components),))
-            if not np.all(np.isfinite(value)):
-                raise ValueError(f"Dirichlet(tag={d.tag}): value {d.value} is not finite")
             for c, val in zip(components, value):
                 Vc = self.V.sub(c)
                 dofs = fem.locate_dofs_topological(Vc, fdim, facets)
@@ -536,8 +561,16 @@ def _amplitude(amplitude: Callable[[float], float] | None, load_factor: float) -
 
 
 def _check_finite(name: str, values, length: int | None = None) -> None:
-    values = np.atleast_1d(np.asarray(values, dtype=float))
-    if length is not None and values.shape != (length,):
-        raise ValueError(f"{name} = {values.tolist()}: expected {length} components")
-    if not np.all(np.isfinite(values)):
-        raise ValueError(f"{name} = {values.tolist()} is not finite")
+    """``values`` are ``length`` finite numbers within the supported magnitude (else an error
+    naming ``name``: not numpy's "could not convert string to float")."""
+    expected = f"{length} numbers" if length is not None else "numbers"
+    try:
+        array = np.atleast_1d(np.asarray(values, dtype=float))
+    except (TypeError, ValueError):
+        raise TypeError(f"{name} = {values!r}: expected {expected}"
+                        + (", e.g. (0.0, -9.81, 0.0)" if length == 3 else "")) from None
+    if length is not None and array.shape != (length,):
+        raise ValueError(f"{name} = {array.tolist()}: expected {length} components")
+    if not np.all(np.isfinite(array)):
+        raise ValueError(f"{name} = {array.tolist()} is not finite")
+    check_magnitude(name, array)

@@ -200,7 +200,27 @@ def _initialize_gmsh() -> bool:
         gmsh.initialize(interruptible=False)
     else:
         gmsh.initialize()
+    restore_signal_handlers()
     return True
+
+
+def restore_signal_handlers() -> None:
+    """Give SIGTERM and SIGINT back to the Python handlers gmsh replaced.
+
+    ``gmsh.initialize`` (even with ``interruptible=False``) installs its own C-level SIGTERM
+    handler behind Python's back (``signal.getsignal`` still names the Python one): a SIGTERM
+    then killed ``dolfinx-nnqem two-beams`` with no message and left its summary "running"
+    (issue 31). Setting each Python handler again re-installs it at the C level.
+    """
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return  # signal handlers belong to the main thread
+    for signum in (signal.SIGTERM, signal.SIGINT):
+        handler = signal.getsignal(signum)
+        if handler is not None:  # None: not installed from Python; nothing to give back
+            signal.signal(signum, handler)
 
 
 def _mesh_from_gmsh(

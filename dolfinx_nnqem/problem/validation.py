@@ -7,14 +7,14 @@ are collective and give the same answer on every rank.
 
 from __future__ import annotations
 
-import math
-import numbers
-
 import numpy as np
 from mpi4py import MPI
 
-__all__ = ["MAX_CUTBACKS", "MAX_INCREMENTS", "check_cell_tag", "check_integer", "check_mesh",
-           "check_output_folder", "check_real", "check_stepping_arguments"]
+from dolfinx_nnqem.numerics.ranges import (MAX_MAGNITUDE, MIN_MODULUS, check_integer,  # noqa: F401  (re-exported)
+                                           check_magnitude, check_real)
+
+__all__ = ["MAX_CUTBACKS", "MAX_INCREMENTS", "MAX_MAGNITUDE", "MIN_MODULUS", "check_cell_tag", "check_integer",
+           "check_magnitude", "check_mesh", "check_output_folder", "check_real", "check_stepping_arguments"]
 
 MAX_INCREMENTS = 100_000
 """Largest number of load increments accepted (a larger number is a typo, not a plan)."""
@@ -22,33 +22,11 @@ MAX_CUTBACKS = 50
 """Largest number of halvings in a row (2⁻⁵⁰ of an increment is below any meaning)."""
 
 
-def check_real(name: str, value, *, low: float = -math.inf, high: float = math.inf,
-               low_inclusive: bool = False) -> float:
-    """``value`` as a float: a finite real (not a bool) in (low, high] (or [low, high])."""
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
-        raise TypeError(f"{name} = {value!r}: expected a number")
-    x = float(value)
-    if not math.isfinite(x):
-        raise ValueError(f"{name} = {value!r}: expected a finite number")
-    if (x < low if low_inclusive else x <= low) or x > high:
-        bracket = "[" if low_inclusive else "("
-        raise ValueError(f"{name} = {value!r}: expected a value in {bracket}{low:g}, {high:g}]")
-    return x
-
-
-def check_integer(name: str, value, *, low: int, high: int) -> int:
-    """``value`` as an int: an integer (Python or numpy, not a bool) in [low, high]."""
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral):
-        raise TypeError(f"{name} = {value!r}: expected an integer")
-    n = int(value)
-    if not low <= n <= high:
-        raise ValueError(f"{name} = {value!r}: expected an integer in [{low}, {high}]")
-    return n
-
-
 def check_stepping_arguments(increments, max_cutbacks, final_load_factor, max_displacement) -> tuple:
-    """The arguments of :func:`~dolfinx_nnqem.solvers.stepping.solve_load_steps`, checked."""
-    increments = check_integer("increments", increments, low=1, high=MAX_INCREMENTS)
+    """The arguments of :func:`~dolfinx_nnqem.solvers.stepping.solve_load_steps`, checked
+    (``increments`` None: automatic incrementation, nothing to check)."""
+    if increments is not None:
+        increments = check_integer("increments", increments, low=1, high=MAX_INCREMENTS)
     max_cutbacks = check_integer("max_cutbacks", max_cutbacks, low=0, high=MAX_CUTBACKS)
     final_load_factor = check_real("final_load_factor", final_load_factor)
     if max_displacement is not None:

@@ -25,10 +25,12 @@ class IterationRecord:
     states: tuple[int, int, int] = (0, 0, 0)  #: numbers of open, stick, slip pairs
     plastic_points: int = 0  #: Gauss points on the plastic branch at this iterate
     inner_iterations: int = 0  #: iterations of a nested nonsmooth solve (NNEQM1), else 0
+    yield_residual: float = 0.0  #: ‖G̃‖ of NNEQM2's yield rows (relative to the stress unit), else 0
 
     def line(self, solver: str) -> str:
         alpha = "   -  " if np.isnan(self.step_length) else f"{self.step_length:6.3f}"
         inner = f" inner {self.inner_iterations:3d}" if self.inner_iterations else ""
+        inner += f"  |G|/σ_u {self.yield_residual:9.3e}" if self.yield_residual else ""
         return (
             f"[{solver}] it {self.iteration:3d}  |R|/F {self.equilibrium:9.3e}  |H|/F {self.contact:9.3e}"
             f"  step {alpha} {self.kind:6s} open/stick/slip {self.states[0]}/{self.states[1]}/{self.states[2]}"

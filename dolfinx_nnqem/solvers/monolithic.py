@@ -294,7 +294,7 @@ class MonolithicSolver(ReleasesPETSc):
         JtJ = J.transposeMatMult(J)
         diag = JtJ.getDiagonal()
         mean_diag = diag.sum() / max(diag.getSize(), 1)
-        eps = math.sqrt(ev.norm_R ** 2 + ev.norm_H ** 2) / max(ev.scale, self.options.atol)
+        eps = math.sqrt(ev.norm_R ** 2 + ev.norm_H ** 2) / ev.scale  # F > 0: it has a floor
         JtJ.shift(g.lm_c * min(eps, 1.0) ** g.lm_delta * mean_diag)
         rhs = JtJ.createVecRight()
         J.multTranspose(minus_F, rhs)
@@ -362,7 +362,7 @@ class _NewtonSystem:
     def record(self, iteration: int, step_length: float, kind: str) -> None:
         p, ev = self.problem, self.current
         free_dropped_objects(p.petsc_comms)  # once per iteration, on every rank
-        ref = max(ev.scale, self.solver.options.atol)
+        ref = ev.scale  # F, as the independent check has it (atol is no scale: issue 31)
         states = count_states(ev.law.state, p.comm) if ev.law is not None else (0, 0, 0)
         record = IterationRecord(iteration, ev.norm_R / ref, ev.norm_H / ref, step_length, kind, states,
                                  p.state.count_trial_plastic_points(p.u))
@@ -389,7 +389,7 @@ class _NewtonSystem:
 
     def newton_direction(self, merit: Merit) -> str | None:
         ev = self._start[2]
-        ref = max(ev.scale, self.solver.options.atol)
+        ref = ev.scale
         self.solver.linear.set_forcing(math.sqrt(ev.norm_R ** 2 + ev.norm_H ** 2) / ref)
         self._direction = self.solver.newton_direction(ev)
         if self._direction is None:

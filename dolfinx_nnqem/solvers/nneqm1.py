@@ -205,7 +205,7 @@ class _OuterSystem:
         p = self.problem
         free_dropped_objects(p.petsc_comms)  # once per iteration, on every rank
         _, _, law, scale, norm_R, norm_H = self.current
-        ref = max(scale, self.solver.options.atol)
+        ref = scale  # F, as the independent check has it (atol is no scale: issue 31)
         record = IterationRecord(iteration, norm_R / ref, norm_H / ref, step_length, "newton" if iteration else "",
                                  count_states(law.state, p.comm), p.state.count_trial_plastic_points(p.u),
                                  self.inner_iterations)

@@ -146,7 +146,8 @@ class NNEQM2Solver(ReleasesPETSc):
         self.increment_info.append(info)
         last = report.history[-1]
         report.history[-1] = IterationRecord(last.iteration, info["equilibrium_residual"], last.contact,
-                                             last.step_length, "", last.states, info["plastic_points"])
+                                             last.step_length, "", last.states, info["plastic_points"],
+                                             yield_residual=last.yield_residual)
         logger.info(f"[{self.name}] ℓ = {load_factor:.6g}: {self.settings.flow_directions} directions, "
                     f"{report.iterations} iterations, own-stress |R|/F = {info['equilibrium_residual']:.2e}, "
                     f"max f/σ_y = {info['max_yield_violation']:.2e}, "
@@ -244,7 +245,7 @@ class NNEQM2Solver(ReleasesPETSc):
         scale = p.force_scale(F_int, F_ext)
         R = p.residual(F_int=F_int)
         R_free = p.free_residual(R)
-        eq = R_free.norm() / max(scale, self.options.atol)
+        eq = R_free.norm() / scale  # F, as the independent check has it (atol is no scale: issue 31)
         # the radial-return stress of the same displacement, from the same converged state
         self._sigma_rm.interpolate(self._return_map)
         diff = np.linalg.norm((values.sigma - self._sigma_rm.x.array[:9 * gp.n_gp].reshape(gp.n_gp, 3, 3))

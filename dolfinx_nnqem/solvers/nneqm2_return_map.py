@@ -371,10 +371,10 @@ class ReturnMapIncrement:
         norm_H, norm_E, norm_G = x.norms
         states = count_states(x.law.state, p.comm) if p.has_contact else (0, 0, 0)
         plastic = p.comm.allreduce(int(np.count_nonzero(np.linalg.norm(x.eps_p, axis=1) > 0.0)), op=MPI.SUM)
-        record = IterationRecord(iteration, norm_E, math.hypot(norm_H, norm_G), step_length,
-                                 kind if iteration else "", states, plastic)
+        record = IterationRecord(iteration, norm_E, norm_H, step_length, kind if iteration else "", states,
+                                 plastic, yield_residual=norm_G)
         self.report.history.append(record)
-        logger.info(record.line("nneqm2") + f" (pairs {norm_H:.3e}, yield {norm_G:.3e})")
+        logger.info(record.line("nneqm2"))
 
     def _tick(self, key: str, t0: float) -> None:
         self.timings[key] = self.timings.get(key, 0.0) + time.perf_counter() - t0

@@ -23,26 +23,39 @@ class PetscSetupError(RuntimeError):
         self.ierr = ierr
 
 
+PREFLIGHT_RTOL = 1e-10
+"""The test system must be solved to this relative residual: a direct solve reaches 1e-16."""
+
+
 def check_direct_solver(comm, petsc_options: dict | None) -> None:
-    """Factorise a small diagonal matrix with the direct-solver options (the package's defaults
-    updated by ``petsc_options``) on ``comm``; raise :class:`PetscSetupError` if PETSc fails."""
+    """Solve a small tridiagonal system with the direct-solver options (the package's defaults
+    updated by ``petsc_options``) on ``comm``; raise :class:`PetscSetupError` if PETSc fails,
+    and ValueError naming the options if the solve is not a solve (e.g. ``pc_type = "none"``
+    with the default ``ksp_type = "preonly"`` returns the right-hand side: the Newton
+    iterations then stall with no hint of the cause, issue 31)."""
     options = direct_options(petsc_options)
     prefix = "nnqem_preflight_"
-    n = 3
-    A = PETSc.Mat().createAIJ(((n, None), (n, None)), nnz=1, comm=comm)
+    n = 4  # tridiagonal (−1, 2, −1) + 1: not the identity, which any preconditioner "solves"
+    A = PETSc.Mat().createAIJ(((None, n), (None, n)), nnz=3, comm=comm)
     start, end = A.getOwnershipRange()
     for i in range(start, end):
-        A.setValue(i, i, 1.0)
+        A.setValue(i, i, 3.0)
+        for j in (i - 1, i + 1):
+            if 0 <= j < n:
+                A.setValue(i, j, -1.0)
     A.assemble()
     ksp = create_ksp(comm, prefix, options)
+    b, x = A.createVecs()
     try:
         ksp.setOperators(A)
         ksp.setUp()
-        b, x = A.createVecs()
         b.set(1.0)
         ksp.solve(b, x)
-        b.destroy()
-        x.destroy()
+        r = b.duplicate()
+        A.mult(x, r)
+        r.axpy(-1.0, b)
+        residual = r.norm() / b.norm()
+        r.destroy()
     except PETSc.Error as error:
         package = options.get("pc_factor_mat_solver_type", "")
         raise PetscSetupError(
@@ -50,5 +63,12 @@ def check_direct_solver(comm, petsc_options: dict | None) -> None:
             f"solver package {package!r}); PETSc's own message is printed above", error.ierr) from None
     finally:
         clear_options(prefix, options)
-        ksp.destroy()
-        A.destroy()
+        for obj in (ksp, A, b, x):
+            obj.destroy()
+    if not residual <= PREFLIGHT_RTOL:
+        given = {k: v for k, v in (petsc_options or {}).items()}
+        raise ValueError(
+            f"[solver.petsc_options] {given}: the linear solver they make does not solve a 4 x 4 test system "
+            f"(relative residual {residual:.2g} > {PREFLIGHT_RTOL:g}; ksp_type = {options.get('ksp_type')!r}, "
+            f"pc_type = {options.get('pc_type')!r}): every Newton step would be wrong and the iterations stall. "
+            "The solvers need a direct solve: leave pc_type out (LU) or use pc_type = \"lu\" or \"cholesky\"")

@@ -106,15 +106,16 @@ def solve_load_steps(
         attribute (a dict: increment, load factor, reason, the worst nodes and pairs) is also
         handed to every callback that has a ``failed`` method before it is raised.
     """
-    increments, control = as_step_control(increments)
+    increments, control = as_step_control(increments)  # increments None: automatic
     increments, max_cutbacks, final_load_factor, max_displacement = check_stepping_arguments(
-        increments or 1, max_cutbacks, final_load_factor, max_displacement)
+        increments, max_cutbacks, final_load_factor, max_displacement)
     check = check or CheckOptions()
     solver_options = getattr(solver, "options", None)
     if resume is None:
         start = problem.load_factor_n
-        step = (final_load_factor - start) / increments
-        if control is not None:
+        if control is None:
+            step = (final_load_factor - start) / increments
+        else:
             step = control.first_step(final_load_factor - start)
         cutbacks, index0 = 0, 0
     else:
@@ -150,8 +151,10 @@ def solve_load_steps(
                 failure = {"increment": index0 + len(results) + 1, "load_factor": float(target),
                            "last_converged_load_factor": float(ell), "cutbacks": cutbacks,
                            "reason": report.message, **failure_details(problem)}
+                if _sliding_bodies(problem, report):
+                    failure["friction_held"] = list(problem.friction_held.motions)
                 problem.restore()
-                _give_up(_failure_message(solver, target, report, cutbacks), failure, callbacks)
+                _give_up(_failure_message(solver, target, report, cutbacks, problem), failure, callbacks)
             problem.restore()
             cutbacks += 1
             step /= 2.0
@@ -203,14 +206,31 @@ def _max_displacement(problem) -> float:
     return problem.comm.allreduce(local, op=MPI.MAX)
 
 
-def _failure_message(solver, target: float, report: SolveReport, cutbacks: int) -> str:
+def _failure_message(solver, target: float, report: SolveReport, cutbacks: int, problem=None) -> str:
     last = report.final
     lines = [f"{solver.name}: the increment to load factor {target:.6g} did not converge after "
              f"{cutbacks} cutbacks: {report.message}"]
     if last is not None:
         lines.append(f"  last iterate: |R|/F = {last.equilibrium:.3e}, |H|/F = {last.contact:.3e}, "
                      f"open/stick/slip = {last.states}, plastic Gauss points = {last.plastic_points}")
+    lines += _sliding_bodies(problem, report)
     return "\n".join(lines)
+
+
+def _sliding_bodies(problem, report: SolveReport) -> list[str]:
+    """The likely cause when the failed iterate slips and some rigid motion only friction holds:
+    past the friction limit that body slides without resistance, and no equilibrium exists."""
+    held = getattr(problem, "friction_held", None)
+    last = report.final
+    if held is None or not held.motions or last is None or last.states[2] == 0:
+        return []
+    return (["  likely cause: friction alone holds "
+             + ("this rigid motion" if len(held.motions) == 1 else "these rigid motions")
+             + " (no support, no contact normal faces it):"]
+            + [f"    - {motion}" for motion in held.motions]
+            + ["  pairs slip at the last iterate: once the load along such a motion exceeds what friction can "
+               "carry (mu_f times the contact pressure), the body slides freely and no equilibrium exists; "
+               "add a support against that motion, or reduce the load along it"])
 
 
 def solve_load_path(problem, solver, load_factors: Sequence[float], *,
@@ -235,8 +255,10 @@ def solve_load_path(problem, solver, load_factors: Sequence[float], *,
         if not report.converged:
             failure = {"increment": len(results) + 1, "load_factor": float(target), "cutbacks": 0,
                        "reason": report.message, **failure_details(problem)}
+            if _sliding_bodies(problem, report):
+                failure["friction_held"] = list(problem.friction_held.motions)
             problem.restore()
-            _give_up(_failure_message(solver, float(target), report, 0), failure, callbacks)
+            _give_up(_failure_message(solver, float(target), report, 0, problem), failure, callbacks)
         problem.commit(report.gauss_point_values)
         result = IncrementResult(index=len(results) + 1, load_factor=float(target), report=report,
                                  plastic_points=problem.state.count_plastic_points(),

@@ -1,0 +1,61 @@
+"""Ctrl-C and SIGTERM in the command line: held during the start-up, remembered during the run.
+
+The command line ends every run by its exit-code contract (130 after Ctrl-C, 143 after SIGTERM,
+one line, the summary saying "interrupted"). Two things stood in its way and are handled here:
+
+* an interrupt during the first imports showed a KeyboardInterrupt traceback, and a SIGTERM met
+  PETSc's own handler (an error dump, exit 15): :func:`hold_in_command_line` defers both signals
+  from the package's first import on, in the command line only (never in a user's program);
+* an error raised while an interrupt was being handled (VTK's lazy importer turns the
+  KeyboardInterrupt into an ImportError) must still be reported as the interrupt:
+  :data:`received` remembers the signals the command line's handlers acted on.
+
+This module imports nothing of the package: ``dolfinx_nnqem/__init__.py`` calls it first.
+"""
+
+from __future__ import annotations
+
+import signal
+import sys
+
+__all__ = ["deferred", "received", "defer", "is_command_line", "hold_in_command_line"]
+
+deferred: list[int] = []
+"""Signals received while the command line was starting (imports, MPI and PETSc set-up):
+:func:`dolfinx_nnqem.cli.main` acts on them once its own handlers are in place."""
+
+received: list[int] = []
+"""Signals the command line's handlers raised an exception for during this run."""
+
+
+def defer(signum: int, frame) -> None:
+    """A signal handler that only records the signal in :data:`deferred`."""
+    deferred.append(signum)
+
+
+def is_command_line() -> bool:
+    """This process runs ``dolfinx-nnqem`` or ``python -m dolfinx_nnqem`` (not a user's program)."""
+    argv = getattr(sys, "orig_argv", sys.argv)
+    return sys.argv[0].rsplit("/", 1)[-1] == "dolfinx-nnqem" or any(
+        a == "-m" and b == "dolfinx_nnqem" for a, b in zip(argv, argv[1:]))
+
+
+def hold_in_command_line() -> None:
+    """Defer SIGINT and SIGTERM until ``cli.main`` can end the run by the exit-code contract.
+
+    PETSc installs its SIGTERM handler at the C level when it initialises: it is initialised here
+    at once (after ``dolfinx_solver``, as the PyPI wheel needs) and the hold renewed, before the
+    long imports.
+    """
+    def hold():
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(signum, defer)
+
+    hold()
+    try:
+        import dolfinx_solver  # noqa: F401  (the PyPI wheel: before petsc4py)
+    except ImportError:
+        pass
+    from petsc4py import PETSc  # noqa: F401
+
+    hold()
