@@ -174,42 +174,59 @@ def _increment_line(method: str):
 
 
 def _run(args) -> int:
-    import hashlib
-
     from mpi4py import MPI
 
-    from dolfinx_nnqem.io import checkpoint
     from dolfinx_nnqem.collective import agree
-    from dolfinx_nnqem.io.output import ResultsWriter
-    from dolfinx_nnqem.problem_file import (build_problem, check_options, load_problem_file,
-                                            solver_options)
+    from dolfinx_nnqem.problem_file import build_problem, load_problem_file, solver_options
     from dolfinx_nnqem.solvers.registry import make_solver
-    from dolfinx_nnqem.solvers.stepping import solve_load_steps
 
     comm = MPI.COMM_WORLD
     spec = agree(comm, load_problem_file, args.problem)
-    solver_spec = spec.solver
-    method = args.method or solver_spec["method"]
-    increments = args.increments or solver_spec["increments"]
+    method = args.method or spec.solver["method"]
+    increments = args.increments or spec.solver["increments"]
     problem = build_problem(spec, comm)
     rank0 = comm.rank == 0
     if rank0 and not args.quiet:
-        print(f"{args.problem}: {problem.V.dofmap.index_map.size_global * 3} displacement dofs, "
-              f"{problem.num_pairs} contact pairs, {problem.state.num_gauss_points()} Gauss points, "
-              f"method {method}, {_increments_text(increments)}", flush=True)
-        for line in problem.contact.describe() if problem.has_contact else []:
-            print(f"  {line}", flush=True)
-        for motion in problem.friction_held.motions:  # fine while friction holds; named again if the run fails
-            print(f"  held by friction only: {motion}", flush=True)
+        _print_header(args.problem, problem, method, increments)
     if args.check:
         return EXIT_OK
     options, method_options = solver_options(spec, method)
-    checks = check_options(spec)
-    if method != "monolithic" or solver_spec["linear_solver"] == "direct":
+    if method != "monolithic" or spec.solver["linear_solver"] == "direct":
         from dolfinx_nnqem.solvers.preflight import check_direct_solver
 
         check_direct_solver(comm, options.petsc_options)  # an unknown solver package is reported as such
-    solver = make_solver(method, problem, options, **method_options)
+    with make_solver(method, problem, options, **method_options) as solver:  # frees PETSc's objects
+        writer = _solve_problem_file(args, spec, problem, solver, method, increments)
+    if rank0 and not args.quiet:
+        s = writer.summary.data
+        print(f"converged: {s['converged']}; iterations {s['iterations']}; global equilibrium "
+              f"{s.get('equilibrium_residual', float('nan')):.2e}; results in {writer.folder}/", flush=True)
+        _print_pictures(writer.drawn)
+    return EXIT_OK
+
+
+def _print_header(path: str, problem, method: str, increments) -> None:
+    """What is about to be solved: the sizes, the contact interfaces, the motions friction holds."""
+    print(f"{path}: {problem.V.dofmap.index_map.size_global * 3} displacement dofs, "
+          f"{problem.num_pairs} contact pairs, {problem.state.num_gauss_points()} Gauss points, "
+          f"method {method}, {_increments_text(increments)}", flush=True)
+    for line in problem.contact.describe() if problem.has_contact else []:
+        print(f"  {line}", flush=True)
+    for motion in problem.friction_held.motions:  # fine while friction holds; named again if the run fails
+        print(f"  held by friction only: {motion}", flush=True)
+
+
+def _solve_problem_file(args, spec, problem, solver, method: str, increments):
+    """Solve the load steps of ``run`` with its writers, checkpoints and progress lines; returns
+    the :class:`~dolfinx_nnqem.io.output.ResultsWriter` (closed). ``summary.json`` records how a
+    run that started solving ended."""
+    import hashlib
+
+    from dolfinx_nnqem.io import checkpoint
+    from dolfinx_nnqem.io.output import ResultsWriter
+    from dolfinx_nnqem.problem_file import check_options
+    from dolfinx_nnqem.solvers.stepping import solve_load_steps
+
     out = Path(args.out or spec.output["folder"])
     identity = {"problem_sha256": hashlib.sha256(Path(args.problem).read_bytes()).hexdigest(),
                 "method": method, "increments": int(increments) if isinstance(increments, int) else "auto"}
@@ -224,45 +241,38 @@ def _run(args) -> int:
         if args.restart:
             resume, meta = checkpoint.restore(problem, out, expected_meta=identity)
             writer.resume(meta["writers"][0])
-            if rank0 and not args.quiet:
+            if problem.comm.rank == 0 and not args.quiet:
                 print(f"restarting after increment {resume.index} (load factor {problem.load_factor_n:.6g}) "
                       f"from {out}/checkpoints", flush=True)
         every = spec.output["checkpoint_every"]
         ckpt = checkpoint.Checkpointer(out, every, writers=[writer], meta=identity) if every else None
-        callbacks = [writer]
-        bar = None if args.quiet else _progress_bar(increments, method)
-        if bar is not None:
-            callbacks.append(bar)
-        if args.verbose == 1 and not args.quiet and rank0:  # -v: a line per increment (-vv: the log has it)
-            callbacks.append(_increment_line(method))
         solving = args.solving = True
-        solve_load_steps(problem, solver, increments, max_cutbacks=solver_spec["max_cutbacks"],
-                         callbacks=callbacks, check=checks, checkpoint=ckpt, resume=resume)
-    except KeyboardInterrupt:
+        solve_load_steps(problem, solver, increments, max_cutbacks=spec.solver["max_cutbacks"],
+                         callbacks=[writer] + _progress_callbacks(args, increments, method, problem.comm.rank),
+                         check=check_options(spec), checkpoint=ckpt, resume=resume)
+    except BaseException as error:  # noqa: BLE001  (re-raised: the summary says how the run ended)
         if solving:
-            writer.ended("interrupted")
-        raise
-    except Exception as error:
-        from dolfinx_nnqem.solvers.convergence import ConvergenceError
-
+            writer.record_end(error)
         interrupt = _interrupt_behind(error)
-        if interrupt is not None:  # a signal that arrived inside compiled code (numba wraps it)
-            if solving:
-                writer.ended("interrupted")
+        if interrupt is not None and interrupt is not error:  # a signal inside compiled code (numba wraps it)
             raise interrupt from None
-        if solving and not isinstance(error, ConvergenceError):
-            writer.ended("error", f"{type(error).__name__}: {error}")
         raise
     finally:
         writer.close()
-        if rank0 and not args.quiet and writer.summary.data.get("status") == "not converged":
+        if problem.comm.rank == 0 and not args.quiet and writer.summary.data.get("status") == "not converged":
             _print_pictures(writer.drawn)  # the converged increments' pictures
-    if rank0 and not args.quiet:
-        s = writer.summary.data
-        print(f"converged: {s['converged']}; iterations {s['iterations']}; global equilibrium "
-              f"{s.get('equilibrium_residual', float('nan')):.2e}; results in {out}/", flush=True)
-        _print_pictures(writer.drawn)
-    return EXIT_OK
+    return writer
+
+
+def _progress_callbacks(args, increments, method: str, rank: int) -> list:
+    """The progress bar, and with -v a line per increment (-vv: the log has it)."""
+    callbacks = []
+    bar = None if args.quiet else _progress_bar(increments, method)
+    if bar is not None:
+        callbacks.append(bar)
+    if args.verbose == 1 and not args.quiet and rank == 0:
+        callbacks.append(_increment_line(method))
+    return callbacks
 
 
 def _print_pictures(drawn: dict) -> None:

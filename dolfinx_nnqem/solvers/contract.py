@@ -18,6 +18,8 @@ from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from dolfinx_nnqem.solvers.convergence import ConvergenceError
+
 if TYPE_CHECKING:
     from petsc4py import PETSc
 
@@ -157,7 +159,14 @@ class Solver(Protocol):
 
 
 class ReleasesPETSc:
-    """``with solver: ...`` calls ``solver.destroy()`` at the end, as DOLFINx's own solvers do."""
+    """``with solver: ...`` calls ``solver.destroy()`` at the end, as DOLFINx's own solvers do.
+
+    Not after an exception that only some ranks may have raised: destroying PETSc objects is
+    collective, and a rank waiting for the others inside a solve would never join (the job
+    hung instead of ending with the error's exit code). A :class:`ConvergenceError` is raised
+    on every rank together, so the objects are destroyed then; after any other exception they
+    are left to the garbage collector.
+    """
 
     def destroy(self) -> None:  # pragma: no cover - every solver defines its own
         raise NotImplementedError
@@ -167,4 +176,5 @@ class ReleasesPETSc:
 
     def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
                  traceback: TracebackType | None) -> None:
-        self.destroy()
+        if kind is None or issubclass(kind, ConvergenceError):
+            self.destroy()

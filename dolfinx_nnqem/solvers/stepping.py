@@ -20,6 +20,8 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
+from mpi4py import MPI
+
 from dolfinx_nnqem.solvers.checks import CheckOptions, StateCheck, check_state, failure_details
 from dolfinx_nnqem.solvers.convergence import ConvergenceError, SolveReport, logger
 from dolfinx_nnqem.numerics.linalg import free_dropped_objects
@@ -110,82 +112,154 @@ def solve_load_steps(
     increments, max_cutbacks, final_load_factor, max_displacement = check_stepping_arguments(
         increments, max_cutbacks, final_load_factor, max_displacement)
     check = check or CheckOptions()
-    solver_options = getattr(solver, "options", None)
     if resume is None:
-        start = problem.load_factor_n
-        if control is None:
-            step = (final_load_factor - start) / increments
-        else:
-            step = control.first_step(final_load_factor - start)
-        cutbacks, index0 = 0, 0
+        schedule = _Schedule.starting(problem.load_factor_n, final_load_factor, increments, control)
+        index0 = 0
     else:
-        start, step, cutbacks, index0 = resume.start, resume.step, resume.cutbacks, resume.index
+        schedule = _Schedule(resume.start, final_load_factor, resume.step, resume.cutbacks, increments, control)
+        index0 = resume.index
     results: list[IncrementResult] = []
     ell = problem.load_factor_n
-    direction = 1.0 if final_load_factor >= start else -1.0  # unloading paths run downwards
-    span = abs(final_load_factor - start)
-    while direction * (final_load_factor - ell) > 1e-12 * span:
-        if control is None:
-            target = ell + step
-            if direction * (target - final_load_factor) > 0:
-                target = final_load_factor
-        else:
-            target = control.target(ell, abs(step), final_load_factor, direction, span)
+    while not schedule.reached(ell):
+        target = schedule.target(ell)
         free_dropped_objects(problem.petsc_comms)
         t0 = time.perf_counter()
-        report = solver.solve_increment(target)
-        verdict = None
-        if report.converged:
-            verdict = check_state(problem, report, solver_options, check)
-            if not verdict.ok:
-                report.converged = False
-                report.message = f"the solver reported convergence, but the independent check failed: {verdict.reason}"
-        if report.converged and max_displacement is not None:
-            u_max = _max_displacement(problem)
-            if u_max > max_displacement:
-                report.converged = False
-                report.message = (f"largest displacement {u_max:.4g} exceeds max_displacement = "
-                                  f"{max_displacement:.4g} (collapse)")
+        report, verdict = _solve_and_check(problem, solver, target, check, max_displacement)
         if not report.converged:
-            if cutbacks >= max_cutbacks or (control is not None and control.too_small(abs(step) / 2.0, span)):
-                failure = {"increment": index0 + len(results) + 1, "load_factor": float(target),
-                           "last_converged_load_factor": float(ell), "cutbacks": cutbacks,
-                           "reason": report.message, **failure_details(problem)}
-                if _sliding_bodies(problem, report):
-                    failure["friction_held"] = list(problem.friction_held.motions)
-                problem.restore()
-                _give_up(_failure_message(solver, target, report, cutbacks, problem), failure, callbacks)
+            if not schedule.can_cut_back(max_cutbacks):
+                _fail(problem, solver, report, target, increment=index0 + len(results) + 1,
+                      cutbacks=schedule.cutbacks, callbacks=callbacks, last_converged=ell)
             problem.restore()
-            cutbacks += 1
-            step /= 2.0
+            schedule.cut_back()
             logger.warning(f"[{solver.name}] increment to load factor {target:.6g} failed "
-                           f"({report.message}); cutback {cutbacks}, new step {step:.6g}")
+                           f"({report.message}); cutback {schedule.cutbacks}, new step {schedule.step:.6g}")
             continue
-        t_commit = time.perf_counter()
-        problem.commit(report.gauss_point_values)
-        ell = target
-        result = IncrementResult(
-            index=index0 + len(results) + 1, load_factor=target, report=report,
-            plastic_points=problem.state.count_plastic_points(),
-            wall_time_s=time.perf_counter() - t0, cutbacks=cutbacks,
-            commit_time_s=time.perf_counter() - t_commit, check=verdict,
-        )
+        result = _commit(problem, solver, report, target, index=index0 + len(results) + 1,
+                         cutbacks=schedule.cutbacks, verdict=verdict, t0=t0, callbacks=callbacks)
         results.append(result)
-        logger.info(f"[{solver.name}] increment {result.index}: load factor {target:.6g} converged in "
-                    f"{report.iterations} iterations, {result.plastic_points} plastic Gauss points")
-        t_out = time.perf_counter()
-        for callback in callbacks:
-            callback(result)
-        result.output_time_s = time.perf_counter() - t_out
-        if control is not None:  # automatic: the size follows the Newton iterations
-            step = direction * control.next_step(abs(step), report.iterations, span)
-            cutbacks = 0
-        elif cutbacks:  # after a successful cut step, try the original step size again
-            step = direction * min(abs(2.0 * step), span / increments)
-            cutbacks = max(cutbacks - 1, 0)
+        ell = target
+        schedule.accepted(report.iterations)
         if checkpoint is not None:
-            checkpoint(problem, StepperState(start, step, cutbacks, result.index), result)
+            checkpoint(problem, schedule.state(result.index), result)
     return results
+
+
+@dataclass
+class _Schedule:
+    """The load factors to aim at: equal increments (or automatic ones), halved after a failure.
+
+    ``step`` is signed for equal increments (unloading paths run downwards) and a size for
+    automatic ones, whose ``control`` turns it into a target.
+    """
+
+    start: float  #: the load factor the run started from
+    final: float
+    step: float
+    cutbacks: int  #: halvings in force
+    increments: int | None  #: N equal increments, or None (automatic)
+    control: AutomaticIncrements | None
+
+    @classmethod
+    def starting(cls, start: float, final: float, increments: int | None,
+                 control: AutomaticIncrements | None) -> _Schedule:
+        step = (final - start) / increments if control is None else control.first_step(final - start)
+        return cls(start, final, step, 0, increments, control)
+
+    @property
+    def direction(self) -> float:
+        return 1.0 if self.final >= self.start else -1.0
+
+    @property
+    def span(self) -> float:
+        return abs(self.final - self.start)
+
+    def reached(self, ell: float) -> bool:
+        """ℓ is the final load factor (to rounding)."""
+        return self.direction * (self.final - ell) <= 1e-12 * self.span
+
+    def target(self, ell: float) -> float:
+        """The next increment's end, not past the final load factor."""
+        if self.control is not None:
+            return self.control.target(ell, abs(self.step), self.final, self.direction, self.span)
+        target = ell + self.step
+        return self.final if self.direction * (target - self.final) > 0 else target
+
+    def can_cut_back(self, max_cutbacks: int) -> bool:
+        """Another halving is allowed (not past ``max_cutbacks`` in a row, nor below the
+        automatic control's smallest step)."""
+        if self.cutbacks >= max_cutbacks:
+            return False
+        return self.control is None or not self.control.too_small(abs(self.step) / 2.0, self.span)
+
+    def cut_back(self) -> None:
+        self.cutbacks += 1
+        self.step /= 2.0
+
+    def accepted(self, iterations: int) -> None:
+        """After a converged increment: the automatic size follows the Newton iterations; after a
+        successful cut step, the equal step is tried again, doubling back."""
+        if self.control is not None:
+            self.step = self.direction * self.control.next_step(abs(self.step), iterations, self.span)
+            self.cutbacks = 0
+        elif self.cutbacks:
+            self.step = self.direction * min(abs(2.0 * self.step), self.span / self.increments)
+            self.cutbacks = max(self.cutbacks - 1, 0)
+
+    def state(self, index: int) -> StepperState:
+        return StepperState(self.start, self.step, self.cutbacks, index)
+
+
+def _solve_and_check(problem, solver, target: float, check: CheckOptions | None,
+                     max_displacement: float | None = None) -> tuple[SolveReport, StateCheck | None]:
+    """Solve the increment to ``target``; a solver's "converged" stands only if the independent
+    check confirms it and the displacement stays below ``max_displacement``."""
+    report = solver.solve_increment(float(target))
+    verdict = None
+    if report.converged:
+        verdict = check_state(problem, report, getattr(solver, "options", None), check)
+        if not verdict.ok:
+            report.converged = False
+            report.message = f"the solver reported convergence, but the independent check failed: {verdict.reason}"
+    if report.converged and max_displacement is not None:
+        u_max = _max_displacement(problem)
+        if u_max > max_displacement:
+            report.converged = False
+            report.message = (f"largest displacement {u_max:.4g} exceeds max_displacement = "
+                              f"{max_displacement:.4g} (collapse)")
+    return report, verdict
+
+
+def _commit(problem, solver, report: SolveReport, target: float, *, index: int, cutbacks: int,
+            verdict: StateCheck | None, t0: float, callbacks) -> IncrementResult:
+    """Commit a converged increment and hand it to the callbacks (the writers)."""
+    t_commit = time.perf_counter()
+    problem.commit(report.gauss_point_values)
+    result = IncrementResult(
+        index=index, load_factor=float(target), report=report,
+        plastic_points=problem.state.count_plastic_points(),
+        wall_time_s=time.perf_counter() - t0, cutbacks=cutbacks,
+        commit_time_s=time.perf_counter() - t_commit, check=verdict,
+    )
+    logger.info(f"[{solver.name}] increment {index}: load factor {target:.6g} converged in "
+                f"{report.iterations} iterations, {result.plastic_points} plastic Gauss points")
+    t_out = time.perf_counter()
+    for callback in callbacks:
+        callback(result)
+    result.output_time_s = time.perf_counter() - t_out
+    return result
+
+
+def _fail(problem, solver, report: SolveReport, target: float, *, increment: int, cutbacks: int, callbacks,
+          last_converged: float | None = None) -> None:
+    """Restore the last converged state and raise ConvergenceError with the failure record."""
+    failure = {"increment": increment, "load_factor": float(target)}
+    if last_converged is not None:
+        failure["last_converged_load_factor"] = float(last_converged)
+    failure.update({"cutbacks": cutbacks, "reason": report.message, **failure_details(problem)})
+    if _sliding_bodies(problem, report):
+        failure["friction_held"] = list(problem.friction_held.motions)
+    problem.restore()
+    _give_up(_failure_message(solver, float(target), report, cutbacks, problem), failure, callbacks)
 
 
 def _give_up(message: str, failure: dict, callbacks) -> None:
@@ -201,8 +275,6 @@ def _give_up(message: str, failure: dict, callbacks) -> None:
 def _max_displacement(problem) -> float:
     n_owned = problem.V.dofmap.index_map.size_local * 3
     local = float(abs(problem.u.x.array[:n_owned]).max(initial=0.0))
-    from mpi4py import MPI
-
     return problem.comm.allreduce(local, op=MPI.MAX)
 
 
@@ -245,25 +317,9 @@ def solve_load_path(problem, solver, load_factors: Sequence[float], *,
     results: list[IncrementResult] = []
     for target in load_factors:
         t0 = time.perf_counter()
-        report = solver.solve_increment(float(target))
-        verdict = None
-        if report.converged:
-            verdict = check_state(problem, report, getattr(solver, "options", None), check)
-            if not verdict.ok:
-                report.converged = False
-                report.message = f"the solver reported convergence, but the independent check failed: {verdict.reason}"
+        report, verdict = _solve_and_check(problem, solver, target, check)
         if not report.converged:
-            failure = {"increment": len(results) + 1, "load_factor": float(target), "cutbacks": 0,
-                       "reason": report.message, **failure_details(problem)}
-            if _sliding_bodies(problem, report):
-                failure["friction_held"] = list(problem.friction_held.motions)
-            problem.restore()
-            _give_up(_failure_message(solver, float(target), report, 0, problem), failure, callbacks)
-        problem.commit(report.gauss_point_values)
-        result = IncrementResult(index=len(results) + 1, load_factor=float(target), report=report,
-                                 plastic_points=problem.state.count_plastic_points(),
-                                 wall_time_s=time.perf_counter() - t0, cutbacks=0, check=verdict)
-        results.append(result)
-        for callback in callbacks:
-            callback(result)
+            _fail(problem, solver, report, target, increment=len(results) + 1, cutbacks=0, callbacks=callbacks)
+        results.append(_commit(problem, solver, report, target, index=len(results) + 1, cutbacks=0,
+                               verdict=verdict, t0=t0, callbacks=callbacks))
     return results
