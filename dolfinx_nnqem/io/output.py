@@ -441,6 +441,16 @@ class ResultsWriter:
         self.summary.resume(state["summary"])
         self.summary.write()
 
+    def __enter__(self) -> ResultsWriter:
+        return self
+
+    def __exit__(self, kind, error, traceback) -> None:
+        """``with ResultsWriter(...) as writer:`` records how a run ended on an exception
+        (:meth:`record_end`), then closes (:meth:`close`)."""
+        if error is not None:
+            self.record_end(error)
+        self.close()
+
     def close(self) -> None:
         """Close the files, draw the pictures (see ``pictures``), release the folder's lock."""
         for w in self.writers:
