@@ -31,7 +31,7 @@ from petsc4py import PETSc
 from scipy.spatial import cKDTree
 
 from dolfinx_nnqem.contact.pairset import PairRows, rows_matrix
-from dolfinx_nnqem.contact.surfaces import (ContactPairError, SurfaceNodes, first_by_position, format_point,
+from dolfinx_nnqem.contact.surfaces import (ContactPairError, SurfaceNodes, check_no_shared_nodes, format_point,
                                             gather_surfaces, local_frames, mesh_tolerance)
 
 __all__ = ["ContactPairError", "ContactPairs", "find_pairs", "local_frames", "owned_by_slave"]
@@ -421,14 +421,8 @@ def find_pairs(
     tags = (int(surface1), int(surface2))
     tolerance = _check_search(V, tags, tolerance, search_distance)
     surfaces = gather_surfaces(V, facet_tags, tags)
+    check_no_shared_nodes(surfaces)
     body1, body2 = surfaces.nodes
-    shared = np.intersect1d(body1.index, body2.index)
-    if len(shared):
-        i = first_by_position(body1.x, np.isin(body1.index, shared))
-        raise ContactPairError(
-            f"contact surfaces {tags[0]} and {tags[1]} share {len(shared)} node(s), e.g. at "
-            f"{format_point(body1.x[i])}: the two bodies must be meshed without common nodes"
-        )
 
     order2, partner, error = _match(body1, body2, tags, tolerance, search_distance)
     if error:
