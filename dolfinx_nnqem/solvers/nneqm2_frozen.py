@@ -260,7 +260,7 @@ class FrozenDirections:
         def log(k, norm, t, kind):
             counts = np.bincount(np.asarray(last.get("states", []), dtype=np.int64), minlength=3)[:3]
             records.append(IterationRecord(k, 0.0, norm, t if k else float("nan"), kind if k else "",
-                                           tuple(int(c) for c in counts), last.get("plastic", 0)))
+                                           (int(counts[0]), int(counts[1]), int(counts[2])), last.get("plastic", 0)))
             logger.debug(f"[nneqm2] it {k}: |H̃| = {norm:.3e} {kind} t={t:.2e}")
 
         t0 = time.perf_counter()
