@@ -33,7 +33,8 @@ import dolfinx.io
 import numpy as np
 from petsc4py import PETSc
 
-DOLFINX_VERSION: tuple[int, int] = tuple(int(v) for v in dolfinx.__version__.split(".")[:2])
+_major, _minor = dolfinx.__version__.split(".")[:2]
+DOLFINX_VERSION: tuple[int, int] = (int(_major), int(_minor))
 """(major, minor) of the DOLFINx in use."""
 
 if DOLFINX_VERSION < (0, 9):

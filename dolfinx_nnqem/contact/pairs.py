@@ -68,27 +68,27 @@ def _match(
     unmatched = np.flatnonzero(partner < 0)
     if len(unmatched) and search_distance is not None:
         candidates = tree.query_ball_point(x2[unmatched], r=search_distance)
-        for j, found in zip(unmatched, candidates):
+        for k, found in zip(unmatched, candidates):
             if not found:
                 continue
             found = np.asarray(found)
-            d = x2[j] - body1.x[found]
+            d = x2[k] - body1.x[found]
             g0 = np.einsum("ij,ij->i", body1.normal[found], d)
             ahead = g0 >= -tolerance
             if not np.any(ahead):
                 i = found[np.argmin(np.linalg.norm(d, axis=1))]
                 return order2, partner, (
-                    f"the node at {format_point(x2[j])} of surface {tag2} (body 2) lies behind surface "
+                    f"the node at {format_point(x2[k])} of surface {tag2} (body 2) lies behind surface "
                     f"{tag1} (body 1): its nearest body-1 node at {format_point(body1.x[i])} with outward "
                     f"normal {format_point(body1.normal[i])} gives the initial gap "
-                    f"{float(np.dot(body1.normal[i], x2[j] - body1.x[i])):.6g} < 0. Are the bodies "
+                    f"{float(np.dot(body1.normal[i], x2[k] - body1.x[i])):.6g} < 0. Are the bodies "
                     "overlapping, or are surface1 and surface2 swapped?"
                 )
             found, d = found[ahead], d[ahead]
             distance = np.linalg.norm(d, axis=1)
             xc = body1.x[found]
             best = np.lexsort((xc[:, 2], xc[:, 1], xc[:, 0], distance))[0]  # ties: by coordinates
-            partner[j] = found[best]
+            partner[k] = found[best]
 
     if np.any(partner < 0):
         j = int(np.flatnonzero(partner < 0)[0])

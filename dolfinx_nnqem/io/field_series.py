@@ -227,16 +227,31 @@ def _step_grid(step_file: Path, t: float) -> ET.Element:
     grid = ET.Element("Grid", {"Name": step_file.stem, "GridType": "Uniform"})
     mesh_grid = next(g for g in tree.iter("Grid") if g.find("Topology") is not None and g.find("Geometry") is not None)
     for tag in ("Topology", "Geometry"):
-        element = mesh_grid.find(tag)
+        element = _child(mesh_grid, tag)
         for item in element.iter("DataItem"):
-            item.text = prefix + item.text.strip()
+            item.text = prefix + _data_path(item)
         grid.append(element)
     ET.SubElement(grid, "Time", {"Value": f"{t:.17g}"})
     for attribute in tree.iter("Attribute"):
         for item in attribute.iter("DataItem"):
-            item.text = prefix + item.text.strip()
+            item.text = prefix + _data_path(item)
         grid.append(attribute)
     return grid
+
+
+def _child(element: ET.Element, tag: str) -> ET.Element:
+    """The first ``tag`` child of ``element``; a ValueError naming both in a damaged file."""
+    child = element.find(tag)
+    if child is None:
+        raise ValueError(f"XDMF: a {element.tag} without {tag}")
+    return child
+
+
+def _data_path(item: ET.Element) -> str:
+    """The data a DataItem points to (``file.h5:/dataset``); a ValueError in a damaged file."""
+    if item.text is None:
+        raise ValueError("XDMF: an empty DataItem")
+    return item.text.strip()
 
 
 def read_field_index(folder: str | os.PathLike) -> list[dict]:
@@ -255,17 +270,17 @@ def read_field_index(folder: str | os.PathLike) -> list[dict]:
     for grid in tree.iter("Grid"):
         if grid.get("GridType") != "Uniform":
             continue
-        step = {"time": float(grid.find("Time").get("Value"))}
+        step: dict[str, float | np.ndarray] = {"time": float(_child(grid, "Time").attrib["Value"])}
         for tag, key in (("Topology", "topology"), ("Geometry", "geometry")):
-            step[key] = _read_item(folder, grid.find(tag).find("DataItem"), h5py)
+            step[key] = _read_item(folder, _child(_child(grid, tag), "DataItem"), h5py)
         for attribute in grid.findall("Attribute"):
-            step[attribute.get("Name")] = _read_item(folder, attribute.find("DataItem"), h5py)
+            step[attribute.attrib["Name"]] = _read_item(folder, _child(attribute, "DataItem"), h5py)
         steps.append(step)
     return steps
 
 
 def _read_item(folder: Path, item: ET.Element, h5py) -> np.ndarray:
-    file, dataset = item.text.strip().split(":", 1)
+    file, dataset = _data_path(item).split(":", 1)
     try:
         with h5py.File(folder / file, "r") as h5:
             return np.asarray(h5[dataset])

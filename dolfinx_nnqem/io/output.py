@@ -29,6 +29,7 @@ import math
 import os
 import time
 import warnings
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -44,6 +45,9 @@ from dolfinx_nnqem.io.safe_io import atomic_write, atomic_write_text, remove_sta
 from dolfinx_nnqem.material.von_mises import von_mises_stress
 from dolfinx_nnqem.problem.validation import check_output_folder
 from dolfinx_nnqem.solvers.convergence import ConvergenceError
+
+Probe = Sequence[float] | tuple[Sequence[float], int]
+"""A probed node: its position (x, y, z), or ((x, y, z), cell_tag) to pick one body's node."""
 
 
 def von_mises(sigma: np.ndarray) -> np.ndarray:
@@ -179,7 +183,7 @@ class SummaryWriter:
     """
 
     def __init__(self, problem, method: str, path: str | os.PathLike, increments: int,
-                 probes: dict[str, np.ndarray] | None = None, extra: dict | None = None):
+                 probes: Mapping[str, Probe] | None = None, extra: dict | None = None):
         self.problem = problem
         self.path = Path(path)
         self.t0 = time.perf_counter()
@@ -191,13 +195,14 @@ class SummaryWriter:
         }
         if extra:
             self.data.update(extra)
-        self.probe_names = list(probes or {})
+        probes = probes or {}
+        self.probe_names = list(probes)
         points, blocks = [], []
         for name in self.probe_names:
             spec = probes[name]
             point, tag = (spec, None) if np.ndim(spec[0]) == 0 else spec
             points.append(np.asarray(point, dtype=float))
-            blocks.append(res.node_blocks_at_points(problem, points[-1], cell_tag=tag)[0])
+            blocks.append(res.node_blocks_at_points(problem, points[-1], cell_tag=None if tag is None else int(tag))[0])
         self.probe_points = np.array(points).reshape(-1, 3)
         self.probe_blocks = np.array(blocks, dtype=np.int64)
 
@@ -340,7 +345,7 @@ class ResultsWriter:
     """
 
     def __init__(self, problem, method: str, folder: str | os.PathLike, increments: int,
-                 probes: dict[str, np.ndarray] | None = None, extra: dict | None = None,
+                 probes: Mapping[str, Probe] | None = None, extra: dict | None = None,
                  fields: bool = True, *, overwrite: bool = True, resume: bool = False, lock: bool = True,
                  pictures: bool | None = None):
 
@@ -371,7 +376,7 @@ class ResultsWriter:
                 raise
 
         on_rank0(problem.comm, prepare)
-        self.writers = []
+        self.writers: list[FieldSeriesWriter | PairWriter | SummaryWriter] = []
         self.fields = FieldSeriesWriter(problem, self.folder) if fields else None
         if self.fields is not None:
             self.writers.append(self.fields)
@@ -415,7 +420,8 @@ class ResultsWriter:
         ``except``): "interrupted" for Ctrl-C or SIGTERM (also when numba wrapped the interrupt
         in a SystemError), nothing for a :class:`ConvergenceError` (:meth:`failed` recorded it),
         "error" with the message otherwise."""
-        seen, cause = set(), error
+        seen: set[int] = set()
+        cause: BaseException | None = error
         while cause is not None and id(cause) not in seen:
             if isinstance(cause, KeyboardInterrupt):
                 self.ended("interrupted")

@@ -239,7 +239,7 @@ def plot_contact_pressure(problem_or_table, path: str | os.PathLike, *, problem=
         # frames the surface
         covered = np.arctan2(points[:, 2], points[:, 0])
         angle = np.linspace(covered.min(), covered.max(), 91)
-        y = points[:, 1].min() - 1e-3 * max(np.ptp(points, axis=0).max(), 1e-300)
+        y = points[:, 1].min() - 1e-3 * max(float(np.ptp(points, axis=0).max()), 1e-300)
         ring = np.column_stack([circle * np.cos(angle), np.full_like(angle, y), circle * np.sin(angle)])
         plotter.add_mesh(pyvista.lines_from_points(ring), color="white", line_width=3)
     plotter.add_text(title or "contact pressure on the slave surface", font_size=11)

@@ -38,7 +38,7 @@ def fsync_directory(folder: Path) -> None:
         os.close(fd)
 
 
-def atomic_write(path: str | os.PathLike, write: Callable[[Path], None], *, durable: bool = True) -> None:
+def atomic_write(path: str | os.PathLike, write: Callable[[Path], object], *, durable: bool = True) -> None:
     """Create ``path`` through ``write(temporary_path)`` and an atomic rename.
 
     ``write`` writes the whole file at the temporary path it is given (any library can: csv,
@@ -73,7 +73,7 @@ def atomic_write_text(path: str | os.PathLike, text: str, *, durable: bool = Tru
 
 def remove_stale_temporaries(folder: str | os.PathLike) -> list[Path]:
     """Remove the temporaries (``.NAME.tmp-PID``) that killed runs left under ``folder``."""
-    removed = []
+    removed: list[Path] = []
     folder = Path(folder)
     if not folder.is_dir():
         return removed
