@@ -341,13 +341,15 @@ def _box_curve_counts(volumes: list[int], count: Callable[[np.ndarray], int]) ->
     return counts
 
 
-def _structured_hexahedra(curve_counts: dict[int, int]) -> None:
-    """Transfinite curves (``n`` elements each), surfaces and volumes, recombined: hexahedra."""
+def _structured_hexahedra(curve_counts: dict[int, int], recombine: bool = True) -> None:
+    """Transfinite curves (``n`` elements each), surfaces and volumes, recombined: hexahedra
+    (not recombined: tetrahedra, each face's triangles with the same diagonals)."""
     for c, n in curve_counts.items():
         gmsh.model.mesh.setTransfiniteCurve(c, n + 1)
     for _, s in gmsh.model.getEntities(2):
         gmsh.model.mesh.setTransfiniteSurface(s)
-        gmsh.model.mesh.setRecombine(2, s)
+        if recombine:
+            gmsh.model.mesh.setRecombine(2, s)
     for _, v in gmsh.model.getEntities(3):
         gmsh.model.mesh.setTransfiniteVolume(v)
 
@@ -593,6 +595,7 @@ def build_block_stack(
     y0: float = 0.0,
     centred: bool = False,
     cell_type: str = "hexahedron",
+    structured: bool = False,
     msh_file: str | os.PathLike | None = None,
 ) -> MeshAndTags:
     """Blocks stacked along y, each meshed on its own (no shared nodes): several contact interfaces.
@@ -603,7 +606,9 @@ def build_block_stack(
     and nz have coincident interface nodes; different ones make non-matching interfaces. With
     ``cell_type="tetrahedron"`` the blocks are meshed with unstructured tetrahedra whose edges
     divide the block's edges into nx, ny, nz parts (the faces are meshed on their own, so even
-    equal divisions give non-matching interfaces).
+    equal divisions give non-matching interfaces); with ``structured`` as well, with tetrahedra
+    from transfinite volumes, whose faces are all triangulated alike: equal nx and nz then give
+    matching interfaces (coincident nodes and triangles).
 
     Returns
     -------
@@ -624,12 +629,12 @@ def build_block_stack(
         raise ValueError(f"cell_type must be 'hexahedron' or 'tetrahedron', got {cell_type!r}")
     return _mesh_from_gmsh(
         comm, "block_stack",
-        lambda: _build_block_stack_model(Lx, Lz, heights, divisions, y0, centred, cell_type), msh_file)
+        lambda: _build_block_stack_model(Lx, Lz, heights, divisions, y0, centred, cell_type, structured), msh_file)
 
 
 def _build_block_stack_model(Lx: float, Lz: float, heights: Sequence[float],
                              divisions: Sequence[tuple[int, int, int]], y0: float = 0.0,
-                             centred: bool = False, cell_type: str = "hexahedron") -> None:
+                             centred: bool = False, cell_type: str = "hexahedron", structured: bool = False) -> None:
     """The gmsh model of :func:`build_block_stack` (current model, rank 0): geometry, groups, mesh."""
     x0 = -Lx / 2 if centred else 0.0
     z0 = -Lz / 2 if centred else 0.0
@@ -642,6 +647,8 @@ def _build_block_stack_model(Lx: float, Lz: float, heights: Sequence[float],
         counts |= _box_curve_counts(body, lambda d: (n_x, n_y, n_z)[int(np.argmax(d))])
     if cell_type == "hexahedron":
         _structured_hexahedra(counts)
+    elif structured:  # transfinite, not recombined: every face's triangles alike (matching interfaces)
+        _structured_hexahedra(counts, recombine=False)
     else:  # the edges' divisions only: unstructured triangles on the faces, tetrahedra inside
         for c, n in counts.items():
             gmsh.model.mesh.setTransfiniteCurve(c, n + 1)
