@@ -1,0 +1,317 @@
+"""Contact with degree-2 displacements: P2 tetrahedra and Q2 hexahedra (issue 28).
+
+* The quadratic facets: the transformed basis gives every tri6 node a positive weight (2A/15 at
+  the corners, A/5 on the edges, α = 1/5), the quad9's own weights are A/36, A/9, 4A/9; the rows
+  d̂ = T⁻ᵀ d represent the same displacement (Σ N_i d_i = Σ N̂_j d̂_j); the projection onto curved
+  6-node triangles of a sphere finds its distance to the facets' own accuracy.
+* Patch test on matching meshes (hexahedra; structured tetrahedra whose interface triangles
+  coincide): a uniform pressure, and a pressure with a uniform shear, are transmitted exactly —
+  the pressure λ_j / ∫N̂_j dA at every slave node (tri6 corners too), the traction and σ at every
+  Gauss point, 1e-8 — by node-to-node and node-to-surface pairs, every method, both laws.
+* Non-matching node-to-surface does not pass it (as with degree 1): the error is printed.
+* A rigid plane pressed into a cube on rollers: the uniaxial force, elastic (E δ) and von Mises
+  (its closed form), on tetrahedra and hexahedra, every method, both laws.
+* Dual mortar refuses quadratic facets before solving and names node-to-surface.
+* A problem file with ``degree = 2``; 2 ranks give the serial answer.
+"""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import box_with_face_tags
+from mpi4py import MPI
+
+from dolfinx_nnqem import compat
+from dolfinx_nnqem.contact import quadratic_facets as qf
+from dolfinx_nnqem.contact.obstacles import Plane
+from dolfinx_nnqem.contact.quadratic_projection import project_points_quadratic
+from dolfinx_nnqem.contact.surfaces import ContactPairError
+from dolfinx_nnqem.io import equilibrium_check, pair_table
+from dolfinx_nnqem.material import VonMises
+from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Pressure, Traction
+from dolfinx_nnqem.problem.meshing import BlockStackTags as T
+from dolfinx_nnqem.problem.meshing import build_block_stack
+from dolfinx_nnqem.solvers import METHODS, SolverOptions, make_solver, solve_load_steps
+
+SCRIPTS = Path(__file__).parent / "mpi_scripts"
+P = 1.0e6
+TAU = 0.2 * P
+MU_F = 0.3
+
+
+# -- the quadratic facets --------------------------------------------------------------------------
+def flat_facet(k, corners):
+    """A straight-sided quadratic facet from its vertices (midpoints, centre)."""
+    corners = np.asarray(corners, dtype=float)
+    extra = [0.5 * (corners[a] + corners[b]) for a, b in qf.EDGES[k]]
+    if k == 9:
+        extra.append(corners.mean(axis=0))
+    return np.vstack([corners, extra])
+
+
+def test_transformed_weights_are_positive_and_the_rows_keep_the_displacement():
+    tri = flat_facet(6, [[0, 0, 0], [2, 0, 0], [0.5, 0, -1.5]])
+    quad = flat_facet(9, [[0, 0, 0], [2, 0, 0], [0.5, 0, -1.5], [2.5, 0, -1.5]])  # a parallelogram
+    for k, x, expected in ((6, tri, [2 / 15] * 3 + [1 / 5] * 3), (9, quad, [1 / 36] * 4 + [1 / 9] * 4 + [4 / 9])):
+        area = np.linalg.norm(np.cross(x[1] - x[0], x[2] - x[0])) / (2 if k == 6 else 1)
+        weights, moments = qf.nodal_integrals(x[None], np.array([[0.0, 1.0, 0.0]]))
+        print(f"\n  k = {k}: ∫N̂_j dA / A = {np.round(weights[0] / area, 6).tolist()}")
+        np.testing.assert_allclose(weights[0] / area, expected, rtol=1e-12)
+        np.testing.assert_allclose(moments[0], weights[0][:, None] * [0.0, 1.0, 0.0], atol=1e-15)
+        # u = Σ N_i d_i = Σ N̂_j d̂_j with d̂ = T⁻ᵀ d, for a random d, at random points
+        d = np.random.default_rng(k).normal(size=k)
+        rows = qf.node_combination(np.arange(k)[None], np.arange(k))
+        xi = np.random.default_rng(1).uniform(0, 0.5, (7, 2))
+        u = qf.shape_functions(k, xi) @ d
+        np.testing.assert_allclose(qf.transformed_shape_functions(k, xi) @ rows.apply(d), u, atol=1e-13)
+        assert np.allclose(np.bincount(np.repeat(np.arange(k), np.diff(rows.indptr)), rows.coefficients), 1.0)
+
+
+def test_projection_on_curved_six_node_triangles():
+    """Slave points above a sphere (R = 2) meshed by curved tri6 facets (h = 0.25): the gap is the
+    distance to the sphere up to the facets' geometric error, O(h³/R²)."""
+    R, n = 2.0, 4
+
+    def on_sphere(xy):
+        xy = np.asarray(xy, dtype=float)
+        return np.column_stack([xy, np.sqrt(R ** 2 - (xy ** 2).sum(axis=-1))])
+
+    g = np.linspace(-0.5, 0.5, n + 1)
+    facets = []
+    for i in range(n):
+        for j in range(n):
+            for tri in (((g[i], g[j]), (g[i + 1], g[j]), (g[i], g[j + 1])),
+                        ((g[i + 1], g[j + 1]), (g[i], g[j + 1]), (g[i + 1], g[j]))):
+                v = np.array(tri)
+                facets.append(on_sphere(np.vstack([v, [(v[1] + v[2]) / 2, (v[0] + v[2]) / 2, (v[0] + v[1]) / 2]])))
+    x = np.array(facets)
+    outward = np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0])
+    outward *= np.sign(outward[:, 2])[:, None]
+    rng = np.random.default_rng(0)
+    points = on_sphere(rng.uniform(-0.45, 0.45, (200, 2))) * (1.0 + rng.uniform(0.0, 0.01, (200, 1)))
+    p = project_points_quadratic(points, x, outward)
+    gap_error = np.abs(p.g0 - (np.linalg.norm(points, axis=1) - R)).max()
+    normal_error = np.abs(p.normal - points / np.linalg.norm(points, axis=1)[:, None]).max()
+    print(f"\n  200 points over a sphere R = 2 meshed by 32 curved tri6 facets (h = 0.25): max gap error "
+          f"{gap_error:.1e}, normal {normal_error:.1e}, tangential offset {p.tangential_offset.max():.1e}")
+    assert np.all(p.facet >= 0) and p.tangential_offset.max() < 1e-12
+    assert gap_error < 2e-4 and normal_error < 3e-3  # the facets' own error (h³/R² ≈ 4e-3 h)
+
+
+# -- patch tests -------------------------------------------------------------------------------------
+MESHES = {"hex matching": ("hexahedron", [(3, 1, 3), (3, 1, 3)], True),
+          "tet matching": ("tetrahedron", [(3, 2, 3), (3, 2, 3)], True),
+          "hex 4x4 / 3x3": ("hexahedron", [(4, 1, 4), (3, 1, 3)], False),
+          "tet 4x4 / 3x3": ("tetrahedron", [(4, 2, 4), (3, 2, 3)], False)}
+
+
+def two_blocks(mesh_name, discretisation, law="alart-curnier", drag=False, comm=MPI.COMM_WORLD):
+    """Body 1 (y in [0, 0.5]) under body 2 (y in [0.5, 1]), degree 2; pressure p (and the drag τ) on top."""
+    cell_type, divisions, structured = MESHES[mesh_name]
+    mesh, ct, ft = build_block_stack(comm, 1.0, 1.0, [0.5, 0.5], divisions, cell_type=cell_type,
+                                     structured=structured)
+    material = VonMises(E=1.0e9, nu=0.0 if drag else 0.3)
+    if drag:  # σ = −p e_y⊗e_y + τ (e_x⊗e_y + e_y⊗e_x): clamped bottom, tractions on the other faces
+        dirichlet = [Dirichlet(T.bottom(1))]
+        tractions = [Traction(T.top(2), (TAU, -P, 0.0))]
+        tractions += [Traction(T.xmax(k), (0.0, TAU, 0.0)) for k in (1, 2)]
+        tractions += [Traction(T.xmin(k), (0.0, -TAU, 0.0)) for k in (1, 2)]
+    else:  # rollers and symmetry planes
+        dirichlet = [Dirichlet(T.bottom(1), 0.0, [1])]
+        dirichlet += [Dirichlet(T.xmin(k), 0.0, [0]) for k in (1, 2)]
+        dirichlet += [Dirichlet(T.zmin(k), 0.0, [2]) for k in (1, 2)]
+        tractions = [Pressure(T.top(2), P)]
+    contact = Contact(T.top(1), T.bottom(2), mu_f=MU_F, law=law, discretisation=discretisation)
+    return ContactProblem(mesh, ct, ft, materials={1: material, 2: material}, dirichlet=dirichlet,
+                          tractions=tractions, contact=contact, degree=2)
+
+
+def patch_errors(problem, drag):
+    """Largest relative errors of the slave nodes' pressures, of their tractions and of σ."""
+    t = pair_table(problem)
+    exact = np.zeros((3, 3))
+    exact[1, 1] = -P
+    if drag:
+        exact[0, 1] = exact[1, 0] = TAU
+    err_p = np.max(np.abs(t["pressure"] - P)) / P
+    traction = t["force_on_body1"] / t["area"][:, None]
+    err_t = np.max(np.abs(traction - t["frame"][:, 0, :] @ exact)) / P
+    sigma = problem.state.sigma_n.x.array.reshape(-1, 3, 3)
+    err_sigma = MPI.COMM_WORLD.allreduce(float(np.max(np.abs(sigma - exact))) / P, op=MPI.MAX)
+    return t, err_p, err_t, err_sigma
+
+
+@pytest.mark.parametrize("drag", [False, True], ids=["pressure", "pressure+drag"])
+@pytest.mark.parametrize("law", ["alart-curnier", "polar"])
+@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("discretisation", ["auto", "node-to-surface"])
+@pytest.mark.parametrize("mesh_name", ["hex matching", "tet matching"])
+def test_patch_test_on_matching_meshes(mesh_name, discretisation, method, law, drag):
+    problem = two_blocks(mesh_name, discretisation, law, drag)
+    results = solve_load_steps(problem, make_solver(method, problem, SolverOptions(rtol=1e-12)), 1)
+    t, err_p, err_t, err_sigma = patch_errors(problem, drag)
+    imbalance = equilibrium_check(problem)["global_imbalance"]
+    print(f"\n  {mesh_name}, {method}/{law}, {'drag' if drag else 'pressure'}: {problem.contact.describe()[0]}; "
+          f"{results[0].iterations} iterations; max |pressure − p|/p = {err_p:.2e}, traction {err_t:.2e}, "
+          f"max |σ − σ_exact|/p = {err_sigma:.2e}, global imbalance {imbalance:.1e} (tolerance 1e-8)")
+    kind = "node-to-node" if discretisation == "auto" else discretisation
+    assert problem.contact.interfaces[0].pairs.kind == kind
+    assert problem.num_pairs == len(t["state"]) == 49 and np.all(t["state_name"] == "stick")  # 7 × 7 nodes
+    assert err_p < 1e-8 and err_t < 1e-8 and err_sigma < 1e-8 and imbalance < 1e-10
+
+
+@pytest.mark.parametrize("mesh_name", ["hex 4x4 / 3x3", "tet 4x4 / 3x3"])
+def test_node_to_surface_fails_the_patch_test_on_non_matching_meshes(mesh_name):
+    """As with degree 1: the slave nodes' forces are spread over the master by its shape functions."""
+    problem = two_blocks(mesh_name, "node-to-surface")
+    solve_load_steps(problem, make_solver("monolithic", problem, SolverOptions(rtol=1e-12)), 1)
+    _, err_p, err_t, err_sigma = patch_errors(problem, False)
+    imbalance = equilibrium_check(problem)["global_imbalance"]
+    print(f"\n  {mesh_name}, node-to-surface, degree 2: {problem.contact.describe()[0]}; max |pressure − p|/p = "
+          f"{err_p:.2e}, traction {err_t:.2e}, max |σ − σ_exact|/p = {err_sigma:.2e}, global imbalance {imbalance:.1e}")
+    assert imbalance < 1e-10
+    assert err_sigma > 1e-3
+
+
+def test_mortar_refuses_quadratic_facets_and_names_node_to_surface():
+    for discretisation in ("mortar", "auto"):
+        with pytest.raises(ContactPairError, match="mortar supports degree 1 only.*node-to-surface"):
+            two_blocks("hex 4x4 / 3x3", discretisation)
+
+
+# -- a rigid plane pressed into a cube -------------------------------------------------------------
+STEEL = VonMises(E=200_000.0, nu=0.3, sigma_y0=400.0, H=20_000.0)
+ELASTIC = VonMises(E=200_000.0, nu=0.3)
+EPS_Y = STEEL.sigma_y0 / STEEL.E
+
+
+def uniaxial_stress(material, eps):
+    """|σ| of a bar compressed to ``eps`` (uniaxial stress, linear hardening)."""
+    if material.sigma_y0 is None or eps <= material.sigma_y0 / material.E:
+        return material.E * eps
+    return material.sigma_y0 + material.E * material.H / (material.E + material.H) * (eps - material.sigma_y0 / material.E)
+
+
+def pressed_cube(cell, material, delta, law):
+    """The unit cube on a frictionless rigid plane at x = 0 (rollers on y = 0, z = 0), a second
+    plane pressing x = 1 by δ; degree 2 (the box's facets: x− 1, x+ 2, y− 3, y+ 4, z− 5, z+ 6)."""
+    mesh, ft = box_with_face_tags((2, 2, 2), cell=cell)
+    support = Contact(Plane(point=(0.0, 0.0, 0.0), normal=(1.0, 0.0, 0.0)), 1, mu_f=0.0, name="support", law=law)
+    press = Contact(Plane(point=(1.0, 0.0, 0.0), normal=(-1.0, 0.0, 0.0), motion=(-delta, 0.0, 0.0)), 2, mu_f=0.0,
+                    name="press", law=law)
+    return ContactProblem(mesh, None, ft, materials=material, dirichlet=[Dirichlet(3, 0.0, [1]), Dirichlet(5, 0.0, [2])],
+                          contact=[support, press], degree=2)
+
+
+@pytest.mark.parametrize("law", ["alart-curnier", "polar"])
+@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("material", ["elastic", "von Mises"])
+@pytest.mark.parametrize("cell", ["tetrahedron", "hexahedron"])
+def test_rigid_plane_pressed_into_a_cube_gives_the_uniaxial_force(cell, material, method, law):
+    mat, delta = (ELASTIC, 0.5 * EPS_Y) if material == "elastic" else (STEEL, 3.0 * EPS_Y)
+    problem = pressed_cube(cell, mat, delta, law)
+    results = solve_load_steps(problem, make_solver(method, problem, SolverOptions(rtol=1e-12)), 1)
+    forces = problem.contact.obstacle_reactions()
+    exact = uniaxial_stress(mat, delta)  # × the unit area
+    err = max(abs(abs(forces[name][0]) - exact) for name in ("support", "press")) / exact
+    t = pair_table(problem)
+    support = t["interface"] == 0
+    err_p = np.abs(t["pressure"][support] - exact).max() / exact
+    p_max = MPI.COMM_WORLD.allreduce(float(problem.state.p_n.x.array.max(initial=0.0)), op=MPI.MAX)
+    print(f"\n  {cell}, {material}, {method}/{law}: {problem.num_pairs} pairs, {results[0].iterations} iterations; "
+          f"force {abs(forces['support'][0]):.9f} against {exact:.9f} (relative {err:.1e}), max |pressure − σ|/σ "
+          f"{err_p:.1e}, max p {p_max:.3e}")
+    assert err < 1e-8 and err_p < 1e-8
+    assert (p_max > 0) == (material == "von Mises")
+
+
+# -- problem files and MPI ---------------------------------------------------------------------------
+PATCH_FILE = """
+[mesh]
+file = "stack.msh"
+degree = 2
+[materials.1]
+E = 1.0e9
+nu = 0.3
+[materials.2]
+E = 1.0e9
+nu = 0.3
+[[contact]]
+surface1 = 201
+surface2 = 102
+mu_f = 0.3
+discretisation = "{discretisation}"
+[[dirichlet]]
+tag = 101
+components = [1]
+[[dirichlet]]
+tag = 301
+components = [0]
+[[dirichlet]]
+tag = 302
+components = [0]
+[[dirichlet]]
+tag = 501
+components = [2]
+[[dirichlet]]
+tag = 502
+components = [2]
+[[pressure]]
+tag = 202
+p = 1.0e6
+[solver]
+method = "{method}"
+increments = 1
+rtol = 1e-12
+"""
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_problem_file_with_degree_2(tmp_path, method):
+    """The matching hexahedral patch test from a problem file (``[mesh] degree = 2``): 49 pairs, exact."""
+    from dolfinx_nnqem.cli import EXIT_OK, main
+
+    if MPI.COMM_WORLD.rank == 0:
+        build_block_stack(MPI.COMM_SELF, 1.0, 1.0, [0.5, 0.5], MESHES["hex matching"][1], msh_file=tmp_path / "stack.msh")
+    MPI.COMM_WORLD.barrier()
+    (tmp_path / "p.toml").write_text(PATCH_FILE.format(discretisation="node-to-surface", method=method))
+    assert main(["-q", "run", str(tmp_path / "p.toml"), "--out", str(tmp_path / "out")]) == EXIT_OK
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    pressure = np.array([p["pressure"] for p in summary["pairs"]])
+    err = np.max(np.abs(pressure - P)) / P
+    print(f"\n  {method}: {len(pressure)} node-to-surface pairs of degree 2, max |pressure − p|/p = {err:.2e}")
+    assert summary["converged"] and len(pressure) == 49 and err < 1e-8
+
+
+def test_problem_file_degree_is_checked(tmp_path):
+    from dolfinx_nnqem.problem_file import ProblemFileError, load_problem_file
+
+    (tmp_path / "stack.msh").write_text("")  # never read: the keys are checked first
+    (tmp_path / "p.toml").write_text(PATCH_FILE.format(discretisation="auto", method="monolithic")
+                                     .replace("degree = 2", "degree = 3"))
+    with pytest.raises(ProblemFileError, match="mesh.degree = 3: the displacement is Lagrange of degree 1 or 2"):
+        load_problem_file(tmp_path / "p.toml")
+
+
+@pytest.mark.mpi
+def test_two_ranks_equal_serial(tmp_path):
+    """Node-to-surface pairs of degree 2 on tetrahedra (non-matching, pressed then dragged until part
+    of the interface slips) and a rigid plane: 2 ranks give the serial answer to 1e-8."""
+    sys.path.insert(0, str(SCRIPTS))
+    from quadratic_blocks import CASES, compare, solve
+
+    serial = {case: solve(case, MPI.COMM_SELF) for case in CASES}
+    out = tmp_path / "out.npz"
+    cmd = [*compat.mpiexec(), "-n", "2", sys.executable, str(SCRIPTS / "quadratic_blocks.py"), str(out)]
+    run = subprocess.run(cmd, capture_output=True, text=True, timeout=900, env=compat.mpi_environment())
+    assert run.returncode == 0, f"{' '.join(cmd)} failed:\n{run.stdout[-3000:]}\n{run.stderr[-3000:]}"
+    parallel = dict(np.load(out))
+    for case in CASES:
+        figures = compare(serial[case], {k.rsplit("/", 1)[1]: v for k, v in parallel.items() if k.startswith(case + "/")})
+        print(f"\n  {case}: 2 ranks vs serial: {figures}")
+        assert figures["pairs_per_rank"][0] > 0 and figures["pairs_per_rank"][1] > 0
+        assert figures["same_states"] and max(figures["force"], figures["u"]) < 1e-8
