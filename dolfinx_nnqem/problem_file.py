@@ -567,7 +567,7 @@ def _read_msh(file: Path, comm):
 
     from dolfinx_nnqem import chatter, compat
     from dolfinx_nnqem.collective import on_rank0
-    from dolfinx_nnqem.problem.meshing import restore_signal_handlers
+    from dolfinx_nnqem.problem.meshing import restore_signal_handlers, unsupported_gmsh_cells
 
     started = [False]
     previous_options: dict = {}
@@ -588,6 +588,9 @@ def _read_msh(file: Path, comm):
             dims = sorted({d for d, _ in gmsh.model.getEntities() if len(gmsh.model.mesh.getElementTypes(d))})
             raise ProblemFileError(f"{file}: a {max(dims, default=0)}D mesh (no 3D cells; elements of dimension "
                                    f"{dims}); dolfinx_nnqem solves 3D solids: mesh the volumes")
+        problem = unsupported_gmsh_cells(types)
+        if problem is not None:
+            raise ProblemFileError(f"{file}: {problem}")
         if len(types) > 1:
             names = [gmsh.model.mesh.getElementProperties(t)[0] for t in types]
             raise ProblemFileError(f"{file}: the volumes mix cell types {names}; use one (all tetrahedra or all "

@@ -13,6 +13,12 @@
   (its closed form), on tetrahedra and hexahedra, every method, both laws.
 * Dual mortar refuses quadratic facets before solving and names node-to-surface.
 * A problem file with ``degree = 2``; 2 ranks give the serial answer.
+* Second-order gmsh meshes (10-node tetrahedra, 27-node hexahedra) written by gmsh and read back
+  with ``read_msh`` and from a problem file: degree 2 by default, the patch test exact; a
+  hemisphere's curved cap keeps every slave node on the sphere; 20-node hexahedra and third-order
+  tetrahedra are refused with the reason.
+* ``fields_p2.pvd``: the quadratic displacement on VTK Lagrange cells, read back (pyvista) equal to
+  u at every P2 node; a restart keeps the steps up to the checkpoint.
 """
 
 import json
@@ -34,8 +40,9 @@ from dolfinx_nnqem.io import equilibrium_check, pair_table
 from dolfinx_nnqem.material import VonMises
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Pressure, Traction
 from dolfinx_nnqem.problem.meshing import BlockStackTags as T
-from dolfinx_nnqem.problem.meshing import build_block_stack
+from dolfinx_nnqem.problem.meshing import build_block_stack, build_sphere_on_block, read_msh
 from dolfinx_nnqem.solvers import METHODS, SolverOptions, make_solver, solve_load_steps
+from dolfinx_nnqem.solvers.contract import contact_model
 
 SCRIPTS = Path(__file__).parent / "mpi_scripts"
 P = 1.0e6
@@ -114,6 +121,11 @@ def two_blocks(mesh_name, discretisation, law="alart-curnier", drag=False, comm=
     cell_type, divisions, structured = MESHES[mesh_name]
     mesh, ct, ft = build_block_stack(comm, 1.0, 1.0, [0.5, 0.5], divisions, cell_type=cell_type,
                                      structured=structured)
+    return stacked_problem(mesh, ct, ft, discretisation, law, drag, degree=2)
+
+
+def stacked_problem(mesh, ct, ft, discretisation, law="alart-curnier", drag=False, degree=None):
+    """The patch test on a :func:`build_block_stack` mesh of two blocks (``degree`` None: the mesh's)."""
     material = VonMises(E=1.0e9, nu=0.0 if drag else 0.3)
     if drag:  # σ = −p e_y⊗e_y + τ (e_x⊗e_y + e_y⊗e_x): clamped bottom, tractions on the other faces
         dirichlet = [Dirichlet(T.bottom(1))]
@@ -127,7 +139,7 @@ def two_blocks(mesh_name, discretisation, law="alart-curnier", drag=False, comm=
         tractions = [Pressure(T.top(2), P)]
     contact = Contact(T.top(1), T.bottom(2), mu_f=MU_F, law=law, discretisation=discretisation)
     return ContactProblem(mesh, ct, ft, materials={1: material, 2: material}, dirichlet=dirichlet,
-                          tractions=tractions, contact=contact, degree=2)
+                          tractions=tractions, contact=contact, degree=degree)
 
 
 def patch_errors(problem, drag):
@@ -315,3 +327,220 @@ def test_two_ranks_equal_serial(tmp_path):
         print(f"\n  {case}: 2 ranks vs serial: {figures}")
         assert figures["pairs_per_rank"][0] > 0 and figures["pairs_per_rank"][1] > 0
         assert figures["same_states"] and max(figures["force"], figures["u"]) < 1e-8
+
+
+# -- second-order gmsh meshes ------------------------------------------------------------------------
+def second_order_stack(tmp_path, cell):
+    """The matching two-block stack as a second-order .msh (27-node hexahedra, 10-node tetrahedra)
+    written by gmsh on rank 0, then read back by every rank with :func:`read_msh`."""
+    _, divisions, structured = MESHES["hex matching" if cell == "hexahedron" else "tet matching"]
+    path = tmp_path / f"stack_{cell}.msh"
+    if MPI.COMM_WORLD.rank == 0:
+        build_block_stack(MPI.COMM_SELF, 1.0, 1.0, [0.5, 0.5], divisions, cell_type=cell, structured=structured,
+                          order=2, msh_file=path)
+    MPI.COMM_WORLD.barrier()
+    return path
+
+
+def read_p2_series(out):
+    """The steps of ``fields_p2.pvd`` as pyvista grids, with their load factors."""
+    import pyvista
+
+    reader = pyvista.get_reader(str(out / "fields_p2.pvd"))
+    grids = []
+    for t in reader.time_values:
+        reader.set_active_time_value(t)
+        grids.append(reader.read()[0])
+    return list(reader.time_values), grids
+
+
+@pytest.mark.parametrize("cell", ["hexahedron", "tetrahedron"])
+def test_second_order_gmsh_mesh_in_contact_written_and_read_back(tmp_path, cell):
+    """A second-order .msh read from Python takes degree 2 by default and passes the patch test; the
+    run's ``fields_p2.pvd`` holds the quadratic displacement on VTK Lagrange cells, read back
+    (pyvista, as ParaView) equal to u at every P2 node, at each increment."""
+    from scipy.spatial import cKDTree
+
+    from dolfinx_nnqem.io.output import ResultsWriter
+
+    mesh, ct, ft = read_msh(second_order_stack(tmp_path, cell))
+    nodes = {"hexahedron": 27, "tetrahedron": 10}[cell]
+    assert compat.coordinate_element(mesh).degree == 2 and compat.geometry_dofmap(mesh).shape[1] == nodes
+    problem = stacked_problem(mesh, ct, ft, "auto")
+    assert problem.V.ufl_element().embedded_superdegree == 2  # the mesh's order
+    out = tmp_path / "out"
+    with ResultsWriter(problem, "monolithic", out, 2) as writer:
+        solve_load_steps(problem, make_solver("monolithic", problem, SolverOptions(rtol=1e-12)), 2, callbacks=[writer])
+    _, err_p, err_t, err_sigma = patch_errors(problem, False)
+    times, grids = read_p2_series(out)
+    print(f"\n  second-order {cell} .msh ({nodes}-node cells): {problem.contact.describe()[0]}; max |pressure − p|/p "
+          f"= {err_p:.1e}, traction {err_t:.1e}, σ {err_sigma:.1e}; fields_p2.pvd: steps {times}, "
+          f"{grids[-1].n_points} points, VTK cell types {sorted(set(grids[-1].celltypes))}")
+    assert problem.num_pairs == 49 and max(err_p, err_t, err_sigma) < 1e-8
+    assert times == [0.5, 1.0]
+    assert set(grids[-1].celltypes) == {72 if cell == "hexahedron" else 71}  # VTK_LAGRANGE_HEXAHEDRON / _TETRAHEDRON
+    if MPI.COMM_WORLD.size == 1:
+        x = problem.V.tabulate_dof_coordinates()
+        distance, node = cKDTree(x).query(grids[-1].points)
+        u = problem.u.x.array.reshape(-1, 3)
+        err_u = np.abs(grids[-1].point_data["u"] - u[node]).max() / np.abs(u).max()
+        print(f"  read back: {len(x)} P2 nodes, max |u_file − u|/max|u| = {err_u:.1e}")
+        assert grids[-1].n_points == len(x) and distance.max() < 1e-12 and err_u < 1e-12
+        assert np.abs(grids[0].point_data["u"] - 0.5 * u[node]).max() < 1e-12 * np.abs(u).max()  # linear: half
+        # fields.xdmf: the mesh's own nodes, here the P2 ones too (quadratic VTK cells from XDMF)
+        import pyvista
+
+        reader = pyvista.get_reader(str(out / "fields.xdmf"))
+        reader.set_active_time_value(1.0)
+        xdmf = reader.read()
+        xdmf = xdmf[0] if isinstance(xdmf, pyvista.MultiBlock) else xdmf
+        assert xdmf.n_points == len(x) and set(xdmf.celltypes) == {29 if cell == "hexahedron" else 24}
+        _, node = cKDTree(x).query(xdmf.points)  # VTK's XDMF reader gives float32
+        assert np.abs(xdmf.point_data["u"] - u[node]).max() < 1e-6 * np.abs(u).max()
+
+
+SPHERE = dict(R=5.0, block=3.0, h_contact=0.5, h_max=1.0, fine_radius=0.8, contact_radius=1.5)  # h = 0.5
+
+
+def sphere_problem(path, degree=None):
+    from dolfinx_nnqem.cases.sphere_on_block import BLOCK_MATERIAL, SPHERE_MATERIAL
+    from dolfinx_nnqem.problem.meshing import SphereOnBlockTags as S
+
+    mesh, ct, ft = read_msh(path)
+    return ContactProblem(mesh, ct, ft, materials={S.BLOCK: BLOCK_MATERIAL, S.SPHERE: SPHERE_MATERIAL},
+                          dirichlet=[Dirichlet(S.BOTTOM), Dirichlet(S.LOAD, -0.1, [1]),
+                                     Dirichlet(S.BLOCK_XMIN, 0.0, [0]), Dirichlet(S.SPHERE_XMIN, 0.0, [0]),
+                                     Dirichlet(S.BLOCK_ZMIN, 0.0, [2]), Dirichlet(S.SPHERE_ZMIN, 0.0, [2])],
+                          contact=Contact(S.CONTACT1, S.CONTACT2, mu_f=0.0, discretisation="node-to-surface"),
+                          degree=degree)
+
+
+def test_second_order_sphere_keeps_its_curved_contact_facets(tmp_path):
+    """A hemisphere on a block meshed by gmsh with 10-node tetrahedra: every node of the cap's 6-node
+    facets lies on the sphere, and so does every slave node of the node-to-surface pairs; P2 on the
+    first-order mesh puts the edge nodes on the chords instead (h²/8R off), and the force moves."""
+    from dolfinx.mesh import entities_to_geometry
+
+    from dolfinx_nnqem.problem.meshing import SphereOnBlockTags as S
+
+    R, centre = SPHERE["R"], np.array([0.0, SPHERE["R"], 0.0])
+    paths = {order: tmp_path / f"sphere_{order}.msh" for order in (1, 2)}
+    if MPI.COMM_WORLD.rank == 0:
+        for order, path in paths.items():
+            build_sphere_on_block(MPI.COMM_SELF, order=order, msh_file=path, **SPHERE)
+    MPI.COMM_WORLD.barrier()
+    figures = {}
+    for order, path in paths.items():
+        problem = sphere_problem(path, degree=2)
+        mesh = problem.mesh
+        cap = np.asarray(entities_to_geometry(mesh, 2, problem.facet_tags.find(S.CONTACT2)))
+        assert cap.shape[1] == (6 if order == 2 else 3)
+        off_geometry = np.abs(np.linalg.norm(mesh.geometry.x[cap.reshape(-1)] - centre, axis=1) - R).max(initial=0.0)
+        results = solve_load_steps(problem, make_solver("monolithic", problem, SolverOptions(rtol=1e-10)), 1)
+        t = pair_table(problem)
+        slave = contact_model(problem).interfaces[0].pairs.slave
+        on_sphere = t["position_b"] if slave == S.CONTACT2 else t["position"]
+        off_pairs = np.abs(np.linalg.norm(on_sphere - centre, axis=1) - R).max()
+        force = -4.0 * t["force_on_body1"][:, 1].sum()  # quarter model
+        figures[order] = (off_geometry, off_pairs, force)
+        print(f"\n  order {order} mesh, P2: geometry nodes of the cap off the sphere by {off_geometry:.1e}, the "
+              f"sphere's pair nodes by {off_pairs:.1e} (h²/8R = {0.25 / (8 * R):.1e}); {len(t['state'])} pairs, "
+              f"{np.count_nonzero(t['state'])} closed, force {force:.1f} N, {results[0].iterations} iterations, "
+              f"imbalance {equilibrium_check(problem)['global_imbalance']:.1e}")
+        assert equilibrium_check(problem)["global_imbalance"] < 1e-10
+    assert figures[2][0] < 1e-9 * R and figures[2][1] < 1e-9 * R  # curved: on the sphere
+    assert figures[1][1] > 1e-3  # straight-sided: the edge nodes of the facets on the chords
+    assert abs(figures[2][2] / figures[1][2] - 1.0) > 0.02  # the geometry changes the answer
+
+
+def write_msh_of(tmp_path, name, cell_order, incomplete, recombine):
+    """A unit box meshed by gmsh with elements of order ``cell_order`` (``incomplete``: serendipity)."""
+    import gmsh
+
+    path = tmp_path / f"{name}.msh"
+    if MPI.COMM_WORLD.rank == 0:
+        gmsh.initialize(interruptible=False)
+        try:
+            gmsh.option.setNumber("General.Verbosity", 0)
+            gmsh.model.add(name)
+            gmsh.model.occ.addBox(0, 0, 0, 1, 1, 1)
+            gmsh.model.occ.synchronize()
+            gmsh.model.addPhysicalGroup(3, [1], 1)
+            gmsh.model.addPhysicalGroup(2, [s for _, s in gmsh.model.getEntities(2)], 1)
+            if recombine:  # hexahedra
+                gmsh.model.mesh.setTransfiniteAutomatic()
+                gmsh.option.setNumber("Mesh.RecombineAll", 1)
+            gmsh.option.setNumber("Mesh.MeshSizeMax", 0.5)
+            gmsh.option.setNumber("Mesh.SecondOrderIncomplete", int(incomplete))
+            gmsh.model.mesh.generate(3)
+            gmsh.model.mesh.setOrder(cell_order)
+            gmsh.write(str(path))
+        finally:
+            gmsh.finalize()
+    MPI.COMM_WORLD.barrier()
+    return path
+
+
+@pytest.mark.parametrize("name, order, incomplete, recombine, reason", [
+    ("hex20", 2, True, True, r"20-node \(serendipity\) hexahedra are not a DOLFINx element.*27-node hexahedra"),
+    ("tet20", 3, False, False, r"gmsh elements 'Tetrahedron 20' are not supported.*10-node tetrahedra")])
+def test_unsupported_gmsh_elements_are_refused_with_the_reason(tmp_path, name, order, incomplete, recombine, reason):
+    """From Python and from a problem file, before any mesh is distributed."""
+    from dolfinx_nnqem.problem_file import ProblemFileError, build_problem, load_problem_file
+
+    path = write_msh_of(tmp_path, name, order, incomplete, recombine)
+    with pytest.raises(ValueError, match=reason) as python:
+        read_msh(path)
+    (tmp_path / "p.toml").write_text(f'[mesh]\nfile = "{path.name}"\n[materials.1]\nE = 1.0e9\nnu = 0.3\n'
+                                     '[[dirichlet]]\ntag = 1\n')
+    with pytest.raises(ProblemFileError, match=reason) as problem_file:
+        build_problem(load_problem_file(tmp_path / "p.toml"), MPI.COMM_WORLD)
+    print(f"\n  {name}: {python.value}\n  problem file: {problem_file.value}")
+
+
+def test_mesh_order_is_checked():
+    with pytest.raises(ValueError, match=r"order = 3: a mesh of first \(1\) or second \(2\) order"):
+        build_block_stack(MPI.COMM_WORLD, 1.0, 1.0, [0.5, 0.5], [(1, 1, 1), (1, 1, 1)], order=3)
+
+
+def test_problem_file_with_a_second_order_mesh(tmp_path):
+    """No ``degree`` key: a second-order .msh gives degree 2; the patch test and ``fields_p2.pvd``."""
+    from dolfinx_nnqem.cli import EXIT_OK, main
+
+    path = second_order_stack(tmp_path, "tetrahedron")
+    text = PATCH_FILE.format(discretisation="auto", method="nneqm2").replace("degree = 2\n", "")
+    (tmp_path / "p.toml").write_text(text.replace("stack.msh", path.name))
+    assert main(["-q", "run", str(tmp_path / "p.toml"), "--out", str(tmp_path / "out")]) == EXIT_OK
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    pressure = np.array([p["pressure"] for p in summary["pairs"]])
+    times, grids = read_p2_series(tmp_path / "out")
+    print(f"\n  problem file, 10-node tetrahedra: {len(pressure)} pairs, max |pressure − p|/p = "
+          f"{np.max(np.abs(pressure - P)) / P:.1e}; fields_p2.pvd steps {times}")
+    assert summary["converged"] and len(pressure) == 49 and np.max(np.abs(pressure - P)) / P < 1e-8
+    assert times == [1.0] and set(grids[0].celltypes) == {71}
+
+
+def test_quadratic_field_series_resumes_from_a_checkpoint(tmp_path):
+    """After a restart the steps beyond the checkpoint are removed and the index lists the kept ones."""
+    from types import SimpleNamespace
+
+    from dolfinx_nnqem.io.quadratic_fields import QuadraticFieldWriter
+
+    problem = pressed_cube("tetrahedron", ELASTIC, 0.0, "alart-curnier")
+    writer = QuadraticFieldWriter(problem, tmp_path)
+    for k in (1, 2, 3):
+        problem.u.x.array[:] = k
+        writer(SimpleNamespace(index=k, load_factor=k / 3))
+        if k == 1:
+            state = writer.state()
+    assert read_p2_series(tmp_path)[0] == pytest.approx([1 / 3, 2 / 3, 1.0])
+    again = QuadraticFieldWriter(problem, tmp_path)
+    again.resume(state)
+    left = sorted(p.name for p in (tmp_path / "fields").iterdir())
+    problem.u.x.array[:] = 5.0
+    again(SimpleNamespace(index=2, load_factor=0.5))
+    times, grids = read_p2_series(tmp_path)
+    print(f"\n  kept after resuming at increment 1: {left}; then steps {times}")
+    assert all(name.startswith("u_p2_0001") for name in left)
+    assert times == pytest.approx([1 / 3, 0.5])
+    assert np.all(grids[0].point_data["u"] == 1.0) and np.all(grids[1].point_data["u"] == 5.0)

@@ -8,7 +8,7 @@ gives every node a positive weight (``formulation.md`` §2c, ``docs/theory.md``,
 facets").
 
 Node order and reference coordinates (basix's, fixed by the facet's vertex order)
--------------------------------------------------------------------------------
+---------------------------------------------------------------------------------
 * tri6 on the unit triangle: vertices v0 (0, 0), v1 (1, 0), v2 (0, 1), then the nodes of the
   edges (v1, v2), (v0, v2), (v0, v1);
 * quad9 on [0, 1]²: vertices v0 (0, 0), v1 (1, 0), v2 (0, 1), v3 (1, 1) (tensor order, the order
