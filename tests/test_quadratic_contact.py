@@ -11,7 +11,9 @@
 * Non-matching node-to-surface does not pass it (as with degree 1): the error is printed.
 * A rigid plane pressed into a cube on rollers: the uniaxial force, elastic (E δ) and von Mises
   (its closed form), on tetrahedra and hexahedra, every method, both laws.
-* Dual mortar refuses quadratic facets before solving and names node-to-surface.
+* Dual mortar refuses quadratic facets before solving and names node-to-surface (from a problem
+  file too: exit code 3, nothing written); so does contact on a mesh of geometry degree 3.
+* The solver variants (NNEQM1 modified, NNEQM2 frozen, monolithic iterative) take degree 2.
 * A problem file with ``degree = 2``; 2 ranks give the serial answer.
 * Second-order gmsh meshes (10-node tetrahedra, 27-node hexahedra) written by gmsh and read back
   with ``read_msh`` and from a problem file: degree 2 by default, the patch test exact; a
@@ -240,6 +242,24 @@ def test_rigid_plane_pressed_into_a_cube_gives_the_uniaxial_force(cell, material
     assert err < 1e-8 and err_p < 1e-8
     assert (p_max > 0) == (material == "von Mises")
 
+
+
+@pytest.mark.parametrize("method, variant", [("nneqm1", {"modified": True}), ("nneqm2", {"flow_directions": "frozen"}),
+                                             ("monolithic", {"linear_solver": "iterative"})],
+                         ids=["nneqm1 modified", "nneqm2 frozen", "monolithic iterative"])
+@pytest.mark.parametrize("cell", ["tetrahedron", "hexahedron"])
+def test_solver_variants_take_degree_2(cell, method, variant):
+    """The variants beside each method's default: nothing of degree 2 needs refusing there."""
+    from dolfinx_nnqem.solvers.options import MonolithicOptions, NNEQM1Options, NNEQM2Options
+
+    options = {"nneqm1": NNEQM1Options, "nneqm2": NNEQM2Options, "monolithic": MonolithicOptions}[method](**variant)
+    delta = 3.0 * EPS_Y
+    problem = pressed_cube(cell, STEEL, delta, "alart-curnier")
+    results = solve_load_steps(problem, make_solver(method, problem, SolverOptions(rtol=1e-12), **{method: options}), 1)
+    exact = uniaxial_stress(STEEL, delta)
+    err = abs(abs(problem.contact.obstacle_reactions()["support"][0]) - exact) / exact
+    print(f"\n  {cell}, {method} {variant}: force error {err:.1e}, {results[0].iterations} iterations")
+    assert err < 1e-8
 
 # -- problem files and MPI ---------------------------------------------------------------------------
 PATCH_FILE = """
@@ -544,3 +564,32 @@ def test_quadratic_field_series_resumes_from_a_checkpoint(tmp_path):
     assert all(name.startswith("u_p2_0001") for name in left)
     assert times == pytest.approx([1 / 3, 0.5])
     assert np.all(grids[0].point_data["u"] == 1.0) and np.all(grids[1].point_data["u"] == 5.0)
+
+
+# -- what degree 2 does not support: refused before solving, with the reason -------------------------
+def test_problem_file_with_mortar_and_degree_2_is_refused_before_solving(tmp_path, capsys):
+    """Exit code 3 (bad input) with the reason and the way out; no increment is solved or written."""
+    from dolfinx_nnqem.cli import EXIT_BAD_INPUT, main
+
+    if MPI.COMM_WORLD.rank == 0:
+        build_block_stack(MPI.COMM_SELF, 1.0, 1.0, [0.5, 0.5], MESHES["hex matching"][1], msh_file=tmp_path / "stack.msh")
+    MPI.COMM_WORLD.barrier()
+    (tmp_path / "p.toml").write_text(PATCH_FILE.format(discretisation="mortar", method="nneqm1"))
+    assert main(["run", str(tmp_path / "p.toml"), "--out", str(tmp_path / "out")]) == EXIT_BAD_INPUT
+    err = capsys.readouterr().err
+    print(f"\n  {err.strip()}")
+    assert "dual mortar supports degree 1 only" in err and 'discretisation = "node-to-surface"' in err
+    out = tmp_path / "out"
+    assert not list(out.glob("fields/*")) and not (out / "fields_p2.pvd").exists() and not (out / "pairs.pvd").exists()
+
+
+def test_contact_on_a_third_order_mesh_is_refused_before_solving(tmp_path):
+    """A mesh of geometry degree 3 (DOLFINx reads gmsh's 20-node tetrahedra; ``read_msh`` does not):
+    degree-2 contact facets need a straight-sided or a second-order geometry."""
+    path = write_msh_of(tmp_path, "tet20", 3, False, False)
+    mesh, ct, ft = compat.read_from_msh(str(path), MPI.COMM_WORLD, 0, gdim=3)
+    assert compat.coordinate_element(mesh).degree == 3
+    with pytest.raises(ContactPairError, match="geometry degree 3: quadratic contact facets need a straight-sided or "
+                                               "a second-order mesh"):
+        ContactProblem(mesh, ct, ft, materials=ELASTIC, degree=2,
+                       contact=Contact(Plane(point=(0.0, 0.0, 0.0), normal=(1.0, 0.0, 0.0)), 1, mu_f=0.0))

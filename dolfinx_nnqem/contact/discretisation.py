@@ -97,9 +97,10 @@ def discretise(V, facet_tags, surface1: int, surface2: int, discretisation: str 
         return find_pairs(V, facet_tags, master, slave, tolerance=tolerance, search_distance=search_distance)
     slave, note = slave_side(surfaces, slave)
     if discretisation in ("auto", "mortar") and surfaces.facets.nodes.shape[1] in QUADRATIC:
+        why = " and do not match node to node (auto would take mortar)" if discretisation == "auto" else ""
         raise ContactPairError(
             f"contact {tags[0]}-{tags[1]}: dual mortar supports degree 1 only (linear facets); these surfaces have "
-            "quadratic facets (degree-2 displacements) and do not match node to node. Use "
+            f"quadratic facets (degree-2 displacements){why}. Use "
             "discretisation = \"node-to-surface\" (every surface node a slave, projected onto the quadratic master "
             "facets), or degree 1")
     if slave == tags[0]:
