@@ -332,7 +332,8 @@ def test_problem_file_degree_is_checked(tmp_path):
 @pytest.mark.mpi
 def test_two_ranks_equal_serial(tmp_path):
     """Node-to-surface pairs of degree 2 on tetrahedra (non-matching, pressed then dragged until part
-    of the interface slips) and a rigid plane: 2 ranks give the serial answer to 1e-8."""
+    of the interface slips), a rigid plane, and a hemisphere on a block from a second-order gmsh
+    mesh (curved cap): 2 ranks give the serial answer to 1e-8."""
     sys.path.insert(0, str(SCRIPTS))
     from quadratic_blocks import CASES, compare, solve
 

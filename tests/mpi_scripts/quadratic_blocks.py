@@ -10,6 +10,8 @@ Cases (every one degree 2):
   ramped, then the top is dragged in x far enough that part of the interface slips.
 * ``hex-plane/monolithic``: a rigid plane pressed into the top of a Q2 block (clamped bottom,
   μ_f = 0.3), then moved sideways until the contact slides.
+* ``sphere-order2/monolithic``: a hemisphere (R = 5) pressed on a block, a second-order gmsh mesh
+  (10-node tetrahedra, the cap's facets curved; degree 2 by default), node-to-surface, frictionless.
 
 For each case rank 0 writes (keys prefixed ``CASE/``) the pair table's slave positions, forces on
 body 1, slave displacements and states, and the pairs each rank owns.
@@ -29,14 +31,16 @@ from dolfinx_nnqem.io.results import pair_table  # noqa: E402
 from dolfinx_nnqem.material import VonMises  # noqa: E402
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, PiecewiseLinearPath, Pressure  # noqa: E402
 from dolfinx_nnqem.problem.meshing import BlockStackTags as T  # noqa: E402
-from dolfinx_nnqem.problem.meshing import build_block_stack  # noqa: E402
+from dolfinx_nnqem.problem.meshing import SphereOnBlockTags as S  # noqa: E402
+from dolfinx_nnqem.problem.meshing import build_block_stack, build_sphere_on_block  # noqa: E402
 from dolfinx_nnqem.solvers import SolverOptions, make_solver, solve_load_steps  # noqa: E402
 
 P = 1.0e6
 DRAG = 2.0e-3
 MU_F = 0.3
 INCREMENTS = 4
-CASES = ("tet-node-to-surface/monolithic", "tet-node-to-surface/nneqm1", "hex-plane/monolithic")
+CASES = ("tet-node-to-surface/monolithic", "tet-node-to-surface/nneqm1", "hex-plane/monolithic",
+         "sphere-order2/monolithic")
 
 
 def pressure_amplitude(load_factor: float) -> float:
@@ -66,10 +70,20 @@ def plane(comm) -> ContactProblem:
                           contact=Contact(obstacle, T.top(1), mu_f=MU_F), degree=2)
 
 
+def sphere(comm) -> ContactProblem:
+    mesh, ct, ft = build_sphere_on_block(comm, 5.0, 3.0, 0.5, h_max=1.0, fine_radius=0.8, contact_radius=1.5, order=2)
+    steel, aluminium = VonMises(E=210e3, nu=0.3), VonMises(E=70e3, nu=0.33)
+    dirichlet = [Dirichlet(S.BOTTOM), Dirichlet(S.LOAD, -0.1, [1])]
+    dirichlet += [Dirichlet(tag, 0.0, [0]) for tag in (S.BLOCK_XMIN, S.SPHERE_XMIN)]
+    dirichlet += [Dirichlet(tag, 0.0, [2]) for tag in (S.BLOCK_ZMIN, S.SPHERE_ZMIN)]
+    return ContactProblem(mesh, ct, ft, materials={S.BLOCK: aluminium, S.SPHERE: steel}, dirichlet=dirichlet,
+                          contact=Contact(S.CONTACT1, S.CONTACT2, mu_f=0.0, discretisation="node-to-surface"))
+
+
 def solve(case: str, comm=MPI.COMM_WORLD) -> dict[str, np.ndarray]:
     """Solve ``case``; the gathered results (the same on every rank)."""
     name, method = case.split("/")
-    problem = blocks(comm) if name.startswith("tet") else plane(comm)
+    problem = {"tet-node-to-surface": blocks, "hex-plane": plane, "sphere-order2": sphere}[name](comm)
     solver = make_solver(method, problem, SolverOptions(rtol=1e-12, max_iterations=40))
     results = solve_load_steps(problem, solver, INCREMENTS)
     t = pair_table(problem)
