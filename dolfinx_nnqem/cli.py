@@ -411,9 +411,38 @@ def main(argv: list[str] | None = None) -> int:
     interrupts.received.clear()
     _hold_signals()  # start-up: an interrupt is recorded, and acted on once the run can end cleanly
     try:
-        return _main(argv)
+        code = _main(argv)
     finally:
         _install_sigterm()  # never leave the start-up handlers behind (in-process callers)
+    if argv is None and interrupts.is_command_line():
+        _exit(code)
+    return code
+
+
+def _exit(code: int) -> None:
+    """End the command line's process: PETSc and MPI finalised (collective: every rank ends
+    here), the standard streams flushed, then ``os._exit`` without the interpreter's tear-down
+    of its modules and objects, which cost 0.1 s, a tenth of a small run (measured from the
+    end of :func:`main` to the process's end: 0.10-0.14 s, 0.02 s this way). Every file of the
+    run is closed by now; in-process callers (``main([...])``) are not affected."""
+    import os
+
+    logging.shutdown()
+    if "petsc4py.PETSc" in sys.modules:
+        from petsc4py import PETSc
+
+        PETSc._finalize()
+    if "mpi4py.MPI" in sys.modules:
+        from mpi4py import MPI
+
+        if MPI.Is_initialized() and not MPI.Is_finalized():
+            MPI.Finalize()
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):  # a closed pipe (dolfinx-nnqem run ... | head): nothing to keep
+            pass
+    os._exit(code)
 
 
 def _main(argv: list[str] | None) -> int:
