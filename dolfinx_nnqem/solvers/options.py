@@ -104,7 +104,7 @@ class MonolithicOptions:
     lag_preconditioner: bool = True
     globalisation: Globalisation = field(default_factory=lambda: Globalisation(
         min_step=1.0 / 64, watchdog=6, watchdog_progress=0.5, watchdog_restarts=2,
-        stall_window=STALL_WINDOW))
+        stall_window=STALL_WINDOW, stagnation=1e-2))
 
     def __post_init__(self):
         if self.linear_solver not in ("direct", "iterative", "auto"):
@@ -196,7 +196,7 @@ class NNEQM2Options:
     extrapolate: bool = True
     globalisation: Globalisation = field(default_factory=lambda: Globalisation(
         min_step=1.0 / 64, watchdog=6, watchdog_progress=0.5, watchdog_restarts=2,
-        stall_window=STALL_WINDOW))
+        stall_window=STALL_WINDOW, stagnation=1e-2))
     inner_max_iterations: int = 100
     inner: Globalisation = field(default_factory=lambda: Globalisation(min_step=1e-10, watchdog=0,
                                                                        stall_window=STALL_WINDOW))
