@@ -42,7 +42,7 @@ import time
 import numpy as np
 from mpi4py import MPI
 
-from dolfinx_nnqem.solvers.condensation import Condensation
+from dolfinx_nnqem.solvers.condensation import Condensation, check_dense_memory
 from dolfinx_nnqem.solvers.condensed import CondensedProblem, CondensedSystem, newton_step, rigid_start
 from dolfinx_nnqem.contact.model import PairLaws
 from dolfinx_nnqem.solvers.contract import ReleasesPETSc
@@ -81,6 +81,7 @@ class NNEQM1Solver(ReleasesPETSc):
         self.problem = problem
         self.options = options or SolverOptions()
         self.settings = nneqm1 or NNEQM1Options()
+        check_dense_memory(problem, self.name, self.settings.max_memory_gb)  # before anything is built
         self.condensation = Condensation(problem, self.name, self.options.petsc_options)
         self._timings: dict[str, float] = {}
         self.last_condensed: CondensedProblem | None = None  #: the latest outer iteration's dense problem
