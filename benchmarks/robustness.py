@@ -27,6 +27,8 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 import dolfinx_nnqem  # noqa: F401  (first: the PyPI wheel)
 from mpi4py import MPI
 
@@ -74,7 +76,41 @@ class Cell:
     wall_time_s: float = 0.0
     message: str = ""
     green: bool = False
+    difference: float | None = None  #: largest difference from the monolithic cell of the same law (Solution)
     extra: dict = field(default_factory=dict)
+
+
+@dataclass
+class Solution:
+    """A converged cell's displacements (owned dofs) and pair forces at every increment, to
+    compare methods along the load path (a final state can be unloaded: near zero)."""
+
+    load_factors: list[float] = field(default_factory=list)
+    u: list[np.ndarray] = field(default_factory=list)
+    forces: list[np.ndarray] = field(default_factory=list)
+
+    def keep(self, problem, load_factor: float) -> None:
+        n = problem.V.dofmap.index_map.size_local * 3
+        self.load_factors.append(round(float(load_factor), 12))
+        self.u.append(problem.u.x.array[:n].copy())
+        self.forces.append(problem.contact.force().copy() if problem.has_contact else np.zeros((0, 3)))
+
+    def difference(self, reference: Solution) -> float | None:
+        """max(|Δu|∞, |Δλ|∞) along the path, each relative to the reference's largest value on
+        the path (the pair forces, not the pair unknowns: a polar angle without force means
+        nothing); None if the two took different load paths (with friction the answer depends
+        on the path)."""
+        if self.load_factors != reference.load_factors:
+            return None
+
+        def largest(arrays):
+            return max((float(np.abs(a).max(initial=0.0)) for a in arrays), default=0.0)
+
+        du = largest([a - b for a, b in zip(self.u, reference.u)]) / max(largest(reference.u), 1e-300)
+        scale = largest(reference.forces)
+        if scale == 0.0:
+            return du
+        return max(du, largest([a - b for a, b in zip(self.forces, reference.forces)]) / scale)
 
 
 # -- the cases ---------------------------------------------------------------------------------
@@ -189,21 +225,24 @@ CASES = [
 
 
 # -- running -------------------------------------------------------------------------------------
-def run_cell(case: Case, method: str, law: str, increments) -> Cell:
+def run_cell(case: Case, method: str, law: str, increments) -> tuple[Cell, Solution | None]:
+    """The cell, and its final solution if it converged."""
     if not case.contact and method != "monolithic":
         return Cell(converged=False, message="n/a: NNEQM1 and NNEQM2 solve contact problems (no pairs here)",
-                    green=True)
+                    green=True), None
     if not case.contact and law != LAWS[0]:
-        return Cell(converged=False, message="n/a: no contact, the law plays no part", green=True)
+        return Cell(converged=False, message="n/a: no contact, the law plays no part", green=True), None
     problem = case.build(law)
     try:
         solver = make_solver(method, problem, SolverOptions())
     except ValueError as error:  # a method refusing the problem before solving, with its reason
-        return Cell(converged=False, message=f"refused before solving: {error}", green=True)
+        return Cell(converged=False, message=f"refused before solving: {error}", green=True), None
+    solution = Solution()
     t0 = time.perf_counter()
     with solver:  # frees its PETSc objects
         try:
-            results = solve_load_steps(problem, solver, increments, max_displacement=case.max_displacement)
+            results = solve_load_steps(problem, solver, increments, max_displacement=case.max_displacement,
+                                       callbacks=[lambda r: solution.keep(problem, r.load_factor)])
             converged, message = True, "converged"
         except ConvergenceError as error:
             results, converged, message = [], False, str(error).splitlines()[0]
@@ -216,7 +255,7 @@ def run_cell(case: Case, method: str, law: str, increments) -> Cell:
         cell.green = not converged
     else:
         cell.green = converged and (cell.cutbacks == 0 or increments == "auto")
-    return cell
+    return cell, solution if converged else None
 
 
 def cell_text(cell: Cell) -> str:
@@ -227,8 +266,9 @@ def cell_text(cell: Cell) -> str:
     if not cell.converged:
         return "refused ✓" if cell.green else "FAILED"
     mark = "" if cell.green else " !"
+    diff = f", Δ {cell.difference:.0e}" if cell.difference is not None else ""
     return (f"{cell.iterations}/{cell.max_per_increment}/{cell.median_per_increment:g} it, "
-            f"{cell.cutbacks} cb, {cell.wall_time_s:.1f} s{mark}")
+            f"{cell.cutbacks} cb, {cell.wall_time_s:.1f} s{diff}{mark}")
 
 
 def main(argv=None) -> int:
@@ -247,9 +287,16 @@ def main(argv=None) -> int:
         columns = [(m, law, case.increments) for m in args.methods for law in args.laws]
         if not args.no_auto:
             columns += [("monolithic", law, "auto") for law in args.laws]
+        if "monolithic" in args.methods:  # the reference of the difference column runs first
+            columns.sort(key=lambda c: c[0] != "monolithic")
+        references: dict[str, Solution] = {}
         for method, law, increments in columns:
             key = f"{method}/{law}" + ("/auto" if increments == "auto" else "")
-            cell = run_cell(case, method, law, increments)
+            cell, solution = run_cell(case, method, law, increments)
+            if solution is not None and method == "monolithic" and increments != "auto":
+                references[law] = solution
+            elif solution is not None and law in references and increments != "auto":  # same load path only
+                cell.difference = solution.difference(references[law])
             row[key] = asdict(cell)
             print(f"{case.name:20s} {key:28s} {cell_text(cell):40s} {'' if cell.green else cell.message[:120]}",
                   flush=True)
@@ -268,7 +315,8 @@ def save(out: Path, cases, matrix) -> None:
 
 def print_matrix(cases, matrix) -> None:
     keys = list(next(iter(matrix.values())).keys()) if matrix else []
-    print("\ncells: total/largest/median Newton iterations per increment, cutbacks, wall time "
+    print("\ncells: total/largest/median Newton iterations per increment, cutbacks, wall time, Δ = largest "
+          "relative difference of u and the pair forces from the monolithic cell of the same law "
           "(! = converged with cutbacks)")
     print("| case | " + " | ".join(keys) + " |")
     print("|---" * (len(keys) + 1) + "|")

@@ -41,7 +41,7 @@ class _Alias(importlib.abc.Loader):
 
     def __init__(self, new: str):
         self.new = new
-        self._spec = None
+        self._spec: importlib.machinery.ModuleSpec | None = None  # the new module's, kept by create_module
 
     def create_module(self, spec):
         warnings.warn(f"{spec.name} is deprecated and will be removed in dolfinx_nnqem {REMOVED_IN}; "

@@ -311,7 +311,7 @@ def _available(method: str) -> bool:
     return importlib.util.find_spec(f"dolfinx_nnqem.{method}") is not None
 
 
-def _interrupt_behind(error: BaseException) -> KeyboardInterrupt | None:
+def _interrupt_behind(error: BaseException | None) -> KeyboardInterrupt | None:
     """The Ctrl-C or SIGTERM behind ``error``, if any.
 
     A KeyboardInterrupt raised while numba-compiled code runs comes back as a SystemError
@@ -345,7 +345,7 @@ def _classify(error: BaseException, args) -> tuple[int, str]:
         from petsc4py import PETSc
 
         if isinstance(error, PETSc.Error):
-            return EXIT_PETSC, f"dolfinx-nnqem: PETSc error {error.ierr}: {_petsc_text(error)}"
+            return EXIT_PETSC, f"dolfinx-nnqem: PETSc error {error.ierr}: {_petsc_text(error)}"  # type: ignore[attr-defined]  # petsc4py's stub lacks Error.ierr
     except ImportError:
         pass
     if hasattr(error, "ierr"):  # preflight.PetscSetupError
@@ -364,7 +364,7 @@ def _classify(error: BaseException, args) -> tuple[int, str]:
 
 
 def _petsc_text(error) -> str:
-    texts = {56: "no support for this operation (e.g. an unknown or unavailable solver package)",
+    texts: dict[int | None, str] = {56: "no support for this operation (e.g. an unknown or unavailable solver package)",
              71: "zero pivot in the factorisation (a singular matrix: a body without supports?)",
              76: "error in an external library (e.g. MUMPS failed to factorise)",
              86: "unknown type (an unknown solver or preconditioner name in petsc_options)",
@@ -513,7 +513,7 @@ def _start_up() -> None:
     interrupts.hold_in_command_line()
     keep_out = "numba" not in sys.modules
     if keep_out:
-        sys.modules["numba"] = None  # type: ignore[assignment]  (importing it raises ImportError)
+        sys.modules["numba"] = None  # type: ignore[assignment]  # None: importing it raises ImportError
     try:
         import dolfinx_nnqem.compat  # noqa: F401
     finally:

@@ -33,7 +33,8 @@ import dolfinx.io
 import numpy as np
 from petsc4py import PETSc
 
-DOLFINX_VERSION: tuple[int, int] = tuple(int(v) for v in dolfinx.__version__.split(".")[:2])
+_major, _minor = dolfinx.__version__.split(".")[:2]
+DOLFINX_VERSION: tuple[int, int] = (int(_major), int(_minor))
 """(major, minor) of the DOLFINx in use."""
 
 if DOLFINX_VERSION < (0, 9):
@@ -180,3 +181,25 @@ def extract_outer_surface(dataset):
     if "algorithm" in inspect.signature(type(dataset).extract_surface).parameters:
         return dataset.extract_surface(algorithm="dataset_surface")
     return dataset.extract_surface()
+
+
+def vtk_render_problem() -> str | None:
+    """Why VTK cannot draw a picture in this process, or None if it can.
+
+    Without a display, VTK ≥ 9.4 (the PyPI wheels) falls back to EGL or OSMesa and renders
+    off-screen; Debian 13's VTK 9.3 renders through X only, and aborts the whole process
+    (SIGABRT) when no X server answers. Told apart by capability: the render window class VTK
+    picks here. Call ``chatter.apply_vtk_options()`` first (VTK logs the failed X connection
+    while it picks).
+    """
+    if not sys.platform.startswith("linux") or os.environ.get("DISPLAY"):
+        return None
+    import vtkmodules.vtkRenderingOpenGL2  # noqa: F401  (registers the OpenGL render windows)
+    from vtkmodules.vtkRenderingCore import vtkRenderWindow
+
+    window = vtkRenderWindow()
+    name = window.GetClassName()
+    if name == "vtkXOpenGLRenderWindow":
+        return ("this VTK renders through X only and no display is set (DISPLAY is empty): run under "
+                "`xvfb-run -a`, or install a VTK that renders off-screen (pip's vtk >= 9.4)")
+    return None

@@ -90,13 +90,15 @@ Every key is checked: an unknown or malformed one raises :class:`ProblemFileErro
 from __future__ import annotations
 
 import math
+import sys
+from collections.abc import Set
 from dataclasses import dataclass, field
 from pathlib import Path
 
-try:
+if sys.version_info >= (3, 11):
     import tomllib
-except ModuleNotFoundError:  # Python 3.10
-    import tomli as tomllib  # type: ignore[no-redef]
+else:  # Python 3.10
+    import tomli as tomllib
 
 
 class ProblemFileError(ValueError):
@@ -201,7 +203,7 @@ def _array(data: dict, key: str, where: str) -> list:
     return value
 
 
-def _checked_keys(table: dict, allowed: set, required: set, where: str) -> dict:
+def _checked_keys(table: dict, allowed: Set[str], required: Set[str], where: str) -> dict:
     if not isinstance(table, dict):
         raise ProblemFileError(f"{where}: must be a table")
     unknown = sorted(set(table) - allowed)
@@ -611,7 +613,7 @@ def _check_xdmf(file: Path, names: dict) -> None:
         tree = ET.parse(file)
     except (ET.ParseError, OSError) as error:
         raise ProblemFileError(f"{file}: not a readable XDMF file ({error})") from None
-    grids = {g.get("Name") for g in tree.iter("Grid")}
+    grids = {g.attrib["Name"] for g in tree.iter("Grid") if "Name" in g.attrib}  # a Grid may have none
     for key in ("mesh_name", "cell_tags", "facet_tags"):
         if names[key] not in grids:
             raise ProblemFileError(f"{file}: no grid named {names[key]!r} (mesh.{key}); the file has {sorted(grids)}")
@@ -638,9 +640,10 @@ def build_problem(spec: ProblemSpec, comm):
             obstacle = dict(obstacle)
             entry["surface1"] = obstacle_classes[obstacle.pop("type")](**obstacle)
         contact.append(Contact(**entry))
-    loads = [Traction(e["tag"], e["value"], e.get("amplitude")) for e in spec.traction]
+    loads: list[Traction | Pressure] = [Traction(e["tag"], e["value"], e.get("amplitude")) for e in spec.traction]
     loads += [Pressure(e["tag"], e["p"], e.get("amplitude")) for e in spec.pressure]
-    body = [BodyForce(e["value"], e.get("cell_tag"), e.get("amplitude")) for e in spec.body_force]
+    body: list[BodyForce | Gravity] = [BodyForce(e["value"], e.get("cell_tag"), e.get("amplitude"))
+                                       for e in spec.body_force]
     if spec.gravity is not None:
         body.append(Gravity(spec.gravity["g"], spec.gravity.get("amplitude")))
     return ContactProblem(

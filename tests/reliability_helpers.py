@@ -57,6 +57,26 @@ def wait_for_checkpoint(out: Path, index: int, process: subprocess.Popen, timeou
     raise AssertionError(f"no checkpoint {index} within {timeout} s")
 
 
+def finish(process: subprocess.Popen, timeout: float = 120.0) -> tuple[str, str]:
+    """``process.communicate(timeout)``; on a timeout every process of its session is killed
+    first (a hung MPI job's ranks would otherwise outlive the test and load the machine)."""
+    try:
+        return process.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        kill_session(process)
+        process.communicate()
+        raise
+
+
+def run_in_session(command: list[str], timeout: float = 120.0, **kwargs) -> subprocess.CompletedProcess:
+    """``subprocess.run(command, capture_output=True, text=True)`` in a new session, killed whole
+    on a timeout (see :func:`finish`)."""
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               start_new_session=True, **kwargs)
+    out, err = finish(process, timeout)
+    return subprocess.CompletedProcess(command, process.returncode, out, err)
+
+
 def kill_session(process: subprocess.Popen, sig=signal.SIGKILL) -> None:
     """Send ``sig`` to every process of the run's session (the test started it: its own ids)."""
     os.killpg(process.pid, sig)

@@ -66,8 +66,8 @@ def compare(runs, reference="monolithic"):
 
 
 def test_body_held_only_by_contact_plastic_every_method_agrees():
-    """p = 1.5 σ_y0: both blocks yield; NNEQM2 with updated flow directions (a dense system of
-    order 3NC + NG + n_r = 590)."""
+    """p = 1.5 σ_y0: both blocks yield; NNEQM2 with its default flow directions (the radial
+    return's), the floating body's rigid motions among its unknowns."""
     compare({method: solve(method, PRESSURE) for method in METHODS})
 
 

@@ -144,3 +144,36 @@ def test_every_method_gives_the_backward_euler_answer(driver, increments, method
     if run["exact"] is not None:
         assert abs(run["force"] - run["exact"]) < 1e-8 * run["exact"]
     assert worst < 1e-8
+
+
+@pytest.mark.mpi
+def test_every_cell_on_two_ranks_equals_the_serial_one(tmp_path):
+    """The whole matrix on 2 ranks in one job: each cell's contact force equals the serial
+    monolithic one (and the closed form where there is one), yield starts in the same increment,
+    and the independent check holds at every Gauss point."""
+    import json
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from dolfinx_nnqem import compat
+
+    out = tmp_path / "cells.json"
+    script = Path(__file__).resolve().parent / "mpi_scripts" / "load_paths.py"
+    cmd = [*compat.mpiexec(), "-n", "2", sys.executable, str(script), str(out)]
+    job = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env=compat.mpi_environment())
+    assert job.returncode == 0, f"{' '.join(cmd)} failed:\n{job.stdout[-3000:]}\n{job.stderr[-3000:]}"
+    cells = json.loads(out.read_text())
+    assert len(cells) == len(ROWS) * 2 * len(METHODS)
+    worst_force, worst_check = 0.0, 0.0
+    for key, cell in cells.items():
+        driver, increments, _ = key.split("/")
+        ref = monolithic(driver, int(increments))
+        df = abs(cell["force"] - ref["force"]) / abs(ref["force"])
+        worst_force, worst_check = max(worst_force, df), max(worst_check, cell["worst_check"])
+        assert cell["cutbacks"] == 0 and cell["first_yield"] == ref["first_yield"], key
+        assert df < 1e-8 and cell["worst_check"] < 1e-8, key
+        if cell["exact"] is not None:
+            assert abs(cell["force"] - cell["exact"]) < 1e-8 * cell["exact"], key
+    print(f"\n  {len(cells)} cells on 2 ranks: contact force vs serial monolithic at most {worst_force:.1e}, "
+          f"worst constitutive relation {worst_check:.1e} σ_u")

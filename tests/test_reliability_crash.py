@@ -4,7 +4,6 @@ PETSc errors as themselves, exit codes, no traceback for a CLI user."""
 import json
 import os
 import signal
-import subprocess
 import sys
 
 import numpy as np
@@ -14,7 +13,7 @@ from dolfinx_nnqem.cli import (EXIT_BAD_INPUT, EXIT_DIVERGED, EXIT_INTERNAL, EXI
                                EXIT_PETSC, EXIT_TERMINATED, main)
 from dolfinx_nnqem.io import read_fields, read_pairs, read_summary
 
-from reliability_helpers import ROOT, env, kill_session, problem_file, start, wait_for_checkpoint
+from reliability_helpers import ROOT, env, finish, kill_session, problem_file, run_in_session, start, wait_for_checkpoint
 
 
 def _final_u(out):
@@ -83,7 +82,7 @@ def test_ctrl_c_and_sigterm_end_cleanly(tmp_path, sig, code, status):
     run = start(["run", str(p), "--out", str(out)])
     wait_for_checkpoint(out, 2, run)
     kill_session(run, sig)
-    _, err = run.communicate(timeout=120)
+    _, err = finish(run)
     summary = read_summary(out)
     print(f"\n  {sig.name}: exit {run.returncode}; {err.strip().splitlines()[-1]}; summary status {summary['status']}, "
           f"{len(summary['load_factors'])} increments kept")
@@ -103,8 +102,7 @@ def test_a_full_disk_names_the_file_and_leaves_no_temporaries(tmp_path):
             "resource.setrlimit(resource.RLIMIT_FSIZE, (8_000, 8_000))\n"
             "from dolfinx_nnqem.cli import main\n"
             "sys.exit(main(sys.argv[1:]))\n")
-    run = subprocess.run([sys.executable, "-c", code, "-q", "run", str(p), "--out", str(out)], env=env(),
-                         capture_output=True, text=True, timeout=300)
+    run = run_in_session([sys.executable, "-c", code, "-q", "run", str(p), "--out", str(out)], 300, env=env())
     err = run.stderr
     entries = read_pairs(out)
     print(f"\n  exit {run.returncode}: {err.strip()}\n  pairs.pvd lists {len(entries)} tables, all non-empty: "
@@ -225,7 +223,7 @@ def test_two_beams_keeps_the_signal_contract(tmp_path, sig, code):
         time.sleep(0.01)
     time.sleep(0.3)  # inside the increments
     kill_session(job, sig)
-    _, err = job.communicate(timeout=120)
+    _, err = finish(job)
     summary = read_summary(out)
     print(f"\n  two-beams, {sig.name}: exit {job.returncode}: {err.strip().splitlines()[-1:]}; summary status "
           f"{summary['status']} after {len(summary['load_factors'])} increments")
@@ -246,7 +244,7 @@ def test_an_interrupt_during_start_up(tmp_path, sig, code, words, delay):
     job = start(["-q", "run", str(p), "--out", str(tmp_path / "out")])
     time.sleep(delay)
     kill_session(job, sig)
-    _, err = job.communicate(timeout=120)
+    _, err = finish(job)
     print(f"\n  {sig.name} {delay} s after the start: exit {job.returncode}: {err.strip()}")
     assert job.returncode == code and err.strip().startswith(f"dolfinx-nnqem: {words}")
     assert "Traceback" not in err and "PETSC ERROR" not in err and len(err.strip().splitlines()) == 1

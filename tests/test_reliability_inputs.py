@@ -250,3 +250,25 @@ def test_bodies_meshed_together_are_named(tmp_path, capsys):
     print(f"\n  exit {code}: {err}\n  API: {error.value}")
     assert code == EXIT_BAD_INPUT and "the cells tagged 1 and 2 share" in err and "no facet is tagged" not in err
     assert "the cells tagged 1 and 2 share" in str(error.value)
+
+
+def test_effective_modulus_needs_both_or_neither():
+    """E2 without nu2 is refused by name (it failed on None ** 2; found by the type checker)."""
+    from dolfinx_nnqem.cases.hertz import effective_modulus
+
+    assert effective_modulus(2.0, 0.0) == 2.0  # body 2 rigid
+    assert effective_modulus(2.0, 0.0, 2.0, 0.0) == 1.0
+    with pytest.raises(ValueError, match="E2 is given without nu2"):
+        effective_modulus(2.0, 0.3, 1.0)
+
+
+def test_xdmf_grid_without_a_name(tmp_path):
+    """A Grid without a Name (XDMF allows one) is left out of the grids a missing name is listed
+    against: sorting None with the names raised a TypeError instead of the file's error (found by
+    the type checker)."""
+    from dolfinx_nnqem.problem_file import ProblemFileError, _check_xdmf
+
+    file = tmp_path / "unnamed.xdmf"
+    file.write_text('<Xdmf><Domain><Grid Name="mesh"/><Grid GridType="Collection"/></Domain></Xdmf>')
+    with pytest.raises(ProblemFileError, match=r"no grid named 'tags' \(mesh.cell_tags\); the file has \['mesh'\]"):
+        _check_xdmf(file, {"mesh_name": "mesh", "cell_tags": "tags", "facet_tags": "tags"})

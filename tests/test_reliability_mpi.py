@@ -2,7 +2,6 @@
 every rank must stop, with one message and the documented exit code, and nothing may hang."""
 
 import json
-import subprocess
 import sys
 import time
 
@@ -12,7 +11,7 @@ import pytest
 from dolfinx_nnqem import compat
 from dolfinx_nnqem.cli import EXIT_BAD_INPUT, EXIT_IO, EXIT_OK
 
-from reliability_helpers import ROOT, env, kill_session, problem_file, start, wait_for_checkpoint
+from reliability_helpers import ROOT, env, finish, kill_session, problem_file, run_in_session, start, wait_for_checkpoint
 
 pytestmark = pytest.mark.mpi
 SCRIPT = ROOT / "tests" / "mpi_scripts" / "rank_failure.py"
@@ -23,8 +22,7 @@ def _mpirun(args, timeout=LIMIT_S, ranks=2, **extra_env):
     e = env()
     e.update(extra_env)
     t0 = time.perf_counter()
-    run = subprocess.run([*compat.mpiexec(), "-n", str(ranks), sys.executable, *args], env=e, capture_output=True,
-                         text=True, timeout=timeout)
+    run = run_in_session([*compat.mpiexec(), "-n", str(ranks), sys.executable, *args], timeout, env=e)
     return run, time.perf_counter() - t0
 
 
@@ -112,7 +110,7 @@ def test_ctrl_c_on_two_ranks(tmp_path):
     wait_for_checkpoint(out, 2, job)
     t0 = time.perf_counter()
     kill_session(job, signal.SIGINT)
-    _, err = job.communicate(timeout=LIMIT_S)
+    _, err = finish(job, LIMIT_S)
     wall = time.perf_counter() - t0
     lines = [line for line in err.splitlines() if line.startswith("dolfinx-nnqem")]
     summary = json.loads((out / "summary.json").read_text())

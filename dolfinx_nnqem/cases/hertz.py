@@ -45,6 +45,8 @@ def effective_modulus(E1: float, nu1: float, E2: float | None = None, nu2: float
     """E* with 1/E* = (1 − ν1²)/E1 + (1 − ν2²)/E2; body 2 rigid when ``E2`` is None."""
     compliance = (1.0 - nu1 ** 2) / E1
     if E2 is not None:
+        if nu2 is None:
+            raise ValueError("effective_modulus: E2 is given without nu2 (give both, or neither for a rigid body 2)")
         compliance += (1.0 - nu2 ** 2) / E2
     return 1.0 / compliance
 
@@ -76,8 +78,8 @@ class NodalLoads:
         ds = ufl.Measure("ds", domain=mesh, subdomain_data=problem.facet_tags,
                          metadata={"quadrature_degree": 16})  # the √ kink at r = a
         x = ufl.SpatialCoordinate(mesh)
-        self._a = fem.Constant(mesh, PETSc.ScalarType(1.0))
-        self._p0 = fem.Constant(mesh, PETSc.ScalarType(1.0))
+        self._a = fem.Constant(mesh, PETSc.ScalarType(1.0))  # type: ignore[operator]  # petsc4py's stub types ScalarType as a dtype; it is np.float64
+        self._p0 = fem.Constant(mesh, PETSc.ScalarType(1.0))  # type: ignore[operator]  # as above
         p = self._p0 * ufl.sqrt(ufl.max_value(1.0 - (x[0] ** 2 + x[2] ** 2) / self._a ** 2, 0.0))
         self._hertz_form = jit.form(p * v[1] * ds(facet_tag))
         self.area = np.abs(self._per_node(jit.form(v[1] * ds(facet_tag))))

@@ -19,11 +19,13 @@ from __future__ import annotations
 from mpi4py import MPI
 
 from dolfinx_nnqem.cases.hertz import NodalLoads, effective_modulus, fit_hertz_profile, measure_hertz
+from dolfinx_nnqem.contact.surface_pairs import SurfacePairs
 from dolfinx_nnqem.material.von_mises import VonMises
 from dolfinx_nnqem.problem.meshing import SphereOnBlockTags as T
 from dolfinx_nnqem.problem.meshing import build_sphere_on_block
 from dolfinx_nnqem.problem.contact_problem import Contact, ContactProblem, Dirichlet
 from dolfinx_nnqem.io.results import equilibrium_check, pair_table
+from dolfinx_nnqem.solvers.contract import contact_model
 
 __all__ = ["A_NOMINAL", "APPROACH", "BLOCK", "BLOCK_MATERIAL", "E_STAR", "R_SPHERE", "SPHERE_MATERIAL",
            "measure_sphere_on_block", "sphere_on_block_problem"]
@@ -69,7 +71,10 @@ def measure_sphere_on_block(problem: ContactProblem, R: float = R_SPHERE) -> dic
     surface's tag), ``imbalance`` (global equilibrium) and ``table`` (the pair table).
     """
     table = pair_table(problem)
-    slave = problem.contact.interfaces[0].pairs.slave
+    pairs = contact_model(problem).interfaces[0].pairs
+    if not isinstance(pairs, SurfacePairs):
+        raise TypeError(f"measure_sphere_on_block: the pairs of a slave surface against a master one, got {type(pairs).__name__}")
+    slave = pairs.slave
     loads = NodalLoads(problem, slave, table["slave_block"])
     forces = table["pressure"] * table["area"]  # the normal pair forces p_n
     m = measure_hertz(loads, forces, table["position_b"], table["state"] != 0, SYMMETRY, R, E_STAR)

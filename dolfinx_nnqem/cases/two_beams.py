@@ -21,6 +21,7 @@ from dolfinx_nnqem.problem.meshing import TwoBeamsTags as T
 from dolfinx_nnqem.problem.meshing import build_two_beams
 from dolfinx_nnqem.problem.contact_problem import Contact, ContactProblem, Dirichlet, Gravity, Traction
 from dolfinx_nnqem.io.output import ResultsWriter
+from dolfinx_nnqem.solvers.contract import contact_model
 from dolfinx_nnqem.solvers.options import SolverOptions
 from dolfinx_nnqem.solvers.registry import make_solver
 from dolfinx_nnqem.solvers.stepping import solve_load_steps
@@ -80,7 +81,7 @@ def run_two_beams(method: str = "monolithic", increments: int = 15, out: str | P
     law = law or DEFAULT_LAW.get(method, "alart-curnier")
     t0 = time.perf_counter()
     problem = two_beams_problem(comm, law=law, refine=refine)
-    extra = {"law": law, "refine": refine, "r": problem.contact.interfaces[0].r,
+    extra = {"law": law, "refine": refine, "r": contact_model(problem).interfaces[0].r,
              "model": "two overlapping cantilevers (benchmark-two-beams.md)"}
     writer = ResultsWriter(problem, method, out, increments, probes=FREE_END_CORNERS, extra=extra,
                            fields=fields)

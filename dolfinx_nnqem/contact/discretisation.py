@@ -26,8 +26,8 @@ from scipy.spatial import cKDTree
 
 from dolfinx_nnqem.contact.pairs import find_pairs
 from dolfinx_nnqem.contact.pairset import PairSet
-from dolfinx_nnqem.contact.surface_pairs import check_no_shared_nodes, facet_size
-from dolfinx_nnqem.contact.surfaces import GatheredSurfaces, gather_surfaces, mesh_tolerance
+from dolfinx_nnqem.contact.surface_pairs import facet_size
+from dolfinx_nnqem.contact.surfaces import GatheredSurfaces, check_no_shared_nodes, gather_surfaces, mesh_tolerance
 
 __all__ = ["DISCRETISATIONS", "OBSTACLE_DISCRETISATIONS", "discretise", "nodes_coincide", "slave_side"]
 

@@ -58,6 +58,7 @@ with the monolithic solver, 1e-50 did not; NNEQM2 failed from 1e4): r = 1e-300 s
 
 def _checked_r(contact: Contact, E: float, h: float) -> float:
     """The interface's r, refused (naming it and the range) outside :data:`R_RANGE` × E h."""
+    assert contact.r is not None  # without r the caller takes E h, which needs no check
     reference = float(default_r(E, h))
     ratio = float(contact.r) / reference
     low, high = R_RANGE
@@ -185,8 +186,8 @@ class Contact:
     def pair_set(self, V, facet_tags, supported: np.ndarray | None = None) -> PairSet:
         """The discretised interface (collective); ``supported``: see
         :func:`~dolfinx_nnqem.contact.discretisation.discretise`."""
-        if self.obstacle is not None:
-            return obstacle_pairs(V, facet_tags, int(self.surface2), self.obstacle, tolerance=self.tolerance)
+        if isinstance(self.surface1, RigidObstacle):  # self.obstacle, narrowed for the type checker
+            return obstacle_pairs(V, facet_tags, int(self.surface2), self.surface1, tolerance=self.tolerance)
         return discretise(V, facet_tags, int(self.surface1), int(self.surface2), self.discretisation,
                           slave=self.slave, tolerance=self.tolerance, search_distance=self.search_distance,
                           initial_gap=self.initial_gap, supported=supported)
@@ -422,7 +423,7 @@ class ContactModel:
         mu_f = np.concatenate([np.full(i.pairs.num_local, float(i.contact.mu_f)) for i in interfaces])
         self.laws = PairLaws(self._groups(self.interface_index), self.g0, mu_f,
                              self._constrained_directions(constrained_dofs))
-        self._gathered_laws = None
+        self._gathered_laws: PairLaws | None = None  # gathered_laws(), at its first call
         self._w = self.B.createVecLeft()
 
         n = self.num_local
@@ -569,7 +570,7 @@ class ContactModel:
         values = self.rows.scaled(D)
         if out is None:
             return rows_matrix(self.comm, self.rows, self.num_global, self.V.dofmap.index_map, values)
-        out.setValuesCSR(self.rows.indptr, self.rows.columns, values)
+        out.setValuesCSR(self.rows.indptr, self.rows.columns, values)  # type: ignore[arg-type]  # petsc4py's stub asks Sequence; arrays are what it takes
         out.assemble()
         return out
 

@@ -79,7 +79,7 @@ def mortar_pairs(V, surfaces: GatheredSurfaces, *, tolerance: float, search_dist
         (on every rank) if no slave node is covered by the master, the master overlaps itself in
         projection, or a slave node lies deep behind the master.
     """
-    tags = surfaces.tags
+    tags = surfaces.tags[0], surfaces.tags[1]  # (master, slave): the two surfaces gathered
     master, slave = surfaces.facets_of(0), surfaces.facets_of(1)
     master_size = facet_size(master)
     if search_distance is None:

@@ -55,7 +55,7 @@ def node_to_surface_pairs(V, surfaces: GatheredSurfaces, *, tolerance: float, se
         (on every rank) if no slave node faces the master, a slave node lies deep behind it, or
         the normals at a projection point the same way.
     """
-    tags = surfaces.tags
+    tags = surfaces.tags[0], surfaces.tags[1]  # (master, slave): the two surfaces gathered
     master, slave = surfaces.facets_of(0), surfaces.facets_of(1)
     nodes = surfaces.nodes[1]
     master_size = facet_size(master)

@@ -31,7 +31,7 @@ from petsc4py import PETSc
 from scipy.spatial import cKDTree
 
 from dolfinx_nnqem.contact.pairset import PairRows, rows_matrix
-from dolfinx_nnqem.contact.surfaces import (ContactPairError, SurfaceNodes, first_by_position, format_point,
+from dolfinx_nnqem.contact.surfaces import (ContactPairError, SurfaceNodes, check_no_shared_nodes, format_point,
                                             gather_surfaces, local_frames, mesh_tolerance)
 
 __all__ = ["ContactPairError", "ContactPairs", "find_pairs", "local_frames", "owned_by_slave"]
@@ -68,27 +68,27 @@ def _match(
     unmatched = np.flatnonzero(partner < 0)
     if len(unmatched) and search_distance is not None:
         candidates = tree.query_ball_point(x2[unmatched], r=search_distance)
-        for j, found in zip(unmatched, candidates):
+        for k, found in zip(unmatched, candidates):
             if not found:
                 continue
             found = np.asarray(found)
-            d = x2[j] - body1.x[found]
+            d = x2[k] - body1.x[found]
             g0 = np.einsum("ij,ij->i", body1.normal[found], d)
             ahead = g0 >= -tolerance
             if not np.any(ahead):
                 i = found[np.argmin(np.linalg.norm(d, axis=1))]
                 return order2, partner, (
-                    f"the node at {format_point(x2[j])} of surface {tag2} (body 2) lies behind surface "
+                    f"the node at {format_point(x2[k])} of surface {tag2} (body 2) lies behind surface "
                     f"{tag1} (body 1): its nearest body-1 node at {format_point(body1.x[i])} with outward "
                     f"normal {format_point(body1.normal[i])} gives the initial gap "
-                    f"{float(np.dot(body1.normal[i], x2[j] - body1.x[i])):.6g} < 0. Are the bodies "
+                    f"{float(np.dot(body1.normal[i], x2[k] - body1.x[i])):.6g} < 0. Are the bodies "
                     "overlapping, or are surface1 and surface2 swapped?"
                 )
             found, d = found[ahead], d[ahead]
             distance = np.linalg.norm(d, axis=1)
             xc = body1.x[found]
             best = np.lexsort((xc[:, 2], xc[:, 1], xc[:, 0], distance))[0]  # ties: by coordinates
-            partner[j] = found[best]
+            partner[k] = found[best]
 
     if np.any(partner < 0):
         j = int(np.flatnonzero(partner < 0)[0])
@@ -421,14 +421,8 @@ def find_pairs(
     tags = (int(surface1), int(surface2))
     tolerance = _check_search(V, tags, tolerance, search_distance)
     surfaces = gather_surfaces(V, facet_tags, tags)
+    check_no_shared_nodes(surfaces)
     body1, body2 = surfaces.nodes
-    shared = np.intersect1d(body1.index, body2.index)
-    if len(shared):
-        i = first_by_position(body1.x, np.isin(body1.index, shared))
-        raise ContactPairError(
-            f"contact surfaces {tags[0]} and {tags[1]} share {len(shared)} node(s), e.g. at "
-            f"{format_point(body1.x[i])}: the two bodies must be meshed without common nodes"
-        )
 
     order2, partner, error = _match(body1, body2, tags, tolerance, search_distance)
     if error:

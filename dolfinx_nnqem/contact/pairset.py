@@ -183,7 +183,7 @@ def rows_matrix(comm: MPI.Comm, rows: PairRows, num_global_pairs: int, index_map
     A = PETSc.Mat().createAIJ(
         size=((3 * n, 3 * num_global_pairs), (3 * index_map.size_local, 3 * index_map.size_global)),
         csr=(rows.indptr, rows.columns, rows.values if values is None else values),
-        comm=comm,
+        comm=comm,  # type: ignore[arg-type]  # petsc4py's stub asks a PETSc.Comm; it takes an mpi4py one too
     )
     A.assemble()
     return A

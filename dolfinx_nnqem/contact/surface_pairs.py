@@ -32,7 +32,7 @@ from dolfinx_nnqem.contact.pairset import PairRows
 from dolfinx_nnqem.contact.surfaces import (ContactPairError, Facets, GatheredSurfaces, first_by_position,
                                             format_point, local_frames, owned_supports, symmetry_normals)
 
-__all__ = ["MAX_INTERFERENCE", "SurfacePairs", "check_no_shared_nodes", "facet_size", "surface_pairs"]
+__all__ = ["MAX_INTERFERENCE", "SurfacePairs", "facet_size", "surface_pairs"]
 
 MAX_INTERFERENCE = 0.1
 """A slave node may start up to this fraction of the master's mean facet size behind the master
@@ -109,17 +109,6 @@ class SurfacePairs:
 def facet_size(facets: Facets) -> float:
     """The square root of the mean facet area: a surface's element size."""
     return float(np.sqrt(np.mean(np.linalg.norm(facets.area, axis=1))))
-
-
-def check_no_shared_nodes(surfaces: GatheredSurfaces) -> None:
-    """Refuse two contact surfaces with common nodes (the bodies must be meshed apart)."""
-    first, second = surfaces.nodes
-    shared = np.intersect1d(first.index, second.index)
-    if len(shared):
-        i = first_by_position(first.x, np.isin(first.index, shared))
-        raise ContactPairError(
-            f"contact surfaces {surfaces.tags[0]} and {surfaces.tags[1]} share {len(shared)} node(s), e.g. at "
-            f"{format_point(first.x[i])}: the two bodies must be meshed without common nodes")
 
 
 def _check_gaps(g0: np.ndarray, x: np.ndarray, master_size: float, tags: tuple[int, int]) -> None:

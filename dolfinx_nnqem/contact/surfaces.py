@@ -21,7 +21,8 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
-__all__ = ["ContactPairError", "Facets", "GatheredSurfaces", "SurfaceNodes", "check_contact_space", "first_by_position",
+__all__ = ["ContactPairError", "Facets", "GatheredSurfaces", "SurfaceNodes", "check_contact_space", "check_no_shared_nodes",
+           "first_by_position",
            "format_point", "gather_surfaces", "local_frames", "owned_supports", "raise_together",
            "mesh_tolerance", "symmetry_normals"]
 
@@ -424,3 +425,14 @@ def gather_surfaces(V: dolfinx.fem.FunctionSpace, facet_tags: dolfinx.mesh.MeshT
             raise ContactPairError(error)
         nodes.append(surface)
     return GatheredSurfaces(tags, facets, nodes)
+
+
+def check_no_shared_nodes(surfaces: GatheredSurfaces) -> None:
+    """Refuse two contact surfaces with common nodes (the bodies must be meshed apart)."""
+    first, second = surfaces.nodes
+    shared = np.intersect1d(first.index, second.index)
+    if len(shared):
+        i = first_by_position(first.x, np.isin(first.index, shared))
+        raise ContactPairError(
+            f"contact surfaces {surfaces.tags[0]} and {surfaces.tags[1]} share {len(shared)} node(s), e.g. at "
+            f"{format_point(first.x[i])}: the two bodies must be meshed without common nodes")

@@ -127,7 +127,12 @@ class Checkpointer:
         index = int(stepper_state.index)
         name = f"ckpt_{index:05d}"
         target = self.folder / name
-        on_rank0(comm, lambda: (shutil.rmtree(target, ignore_errors=True), target.mkdir(parents=True)))
+
+        def fresh_folder() -> None:
+            shutil.rmtree(target, ignore_errors=True)
+            target.mkdir(parents=True)
+
+        on_rank0(comm, fresh_folder)
         path = target / f"rank_{comm.rank:04d}.npz"
         agree(comm, atomic_write, path, lambda tmp: _write_rank(tmp, problem), durable=False)
         meta = {

@@ -123,7 +123,7 @@ import os
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -150,7 +150,10 @@ def _import_h5py():
     return h5py
 
 
-h5py = _import_h5py()
+if TYPE_CHECKING:
+    import h5py
+else:
+    h5py = _import_h5py()
 
 __all__ = [
     "FCLIB_REFERENCE",
@@ -552,7 +555,7 @@ def read_fclib_local(path: str | Path) -> dict:
         mu = main["vectors/mu"][()]
         if W.shape[0] % spacedim:
             raise ValueError("number of W rows is not divisible by the spatial dimension")
-        info = {"title": None, "description": None, "math_info": None, "attributes": {}}
+        info: dict[str, Any] = {"title": None, "description": None, "math_info": None, "attributes": {}}
         if "info" in main:
             for name in ("title", "description", "math_info"):
                 if name in main["info"]:
@@ -579,7 +582,7 @@ def read_fclib_local(path: str | Path) -> dict:
 
 
 def _read_matrix(group: h5py.Group):
-    storage = {k: int(group[k][0]) for k in ("nzmax", "m", "n", "nz")}
+    storage: dict[str, Any] = {k: int(group[k][0]) for k in ("nzmax", "m", "n", "nz")}
     storage.update({k: group[k][()] for k in ("p", "i", "x")})
     A = fclib_matrix_to_dense(storage["m"], storage["n"], storage["nz"], storage["p"], storage["i"],
                               storage["x"])

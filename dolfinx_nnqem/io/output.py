@@ -29,6 +29,7 @@ import math
 import os
 import time
 import warnings
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -45,6 +46,9 @@ from dolfinx_nnqem.io.vtk_xml import point_cloud_text
 from dolfinx_nnqem.material.von_mises import von_mises_stress
 from dolfinx_nnqem.problem.validation import check_output_folder
 from dolfinx_nnqem.solvers.convergence import ConvergenceError
+
+Probe = Sequence[float] | tuple[Sequence[float], int]
+"""A probed node: its position (x, y, z), or ((x, y, z), cell_tag) to pick one body's node."""
 
 
 def von_mises(sigma: np.ndarray) -> np.ndarray:
@@ -143,7 +147,7 @@ class PairWriter:
                  '<VTKFile type="Collection" version="0.1">', "  <Collection>"]
         lines += [f'    <DataSet timestep="{t:.12g}" file="{f}"/>' for t, f in self.entries]
         lines += ["  </Collection>", "</VTKFile>"]
-        if at_once:
+        if at_once or self.staged is None:
             atomic_write_text(path, "\n".join(lines) + "\n")
         else:
             self.staged.stage(path, "\n".join(lines) + "\n")
@@ -172,7 +176,7 @@ class SummaryWriter:
     """
 
     def __init__(self, problem, method: str, path: str | os.PathLike, increments: int,
-                 probes: dict[str, np.ndarray] | None = None, extra: dict | None = None,
+                 probes: Mapping[str, Probe] | None = None, extra: dict | None = None,
                  staged: StagedFiles | None = None):
         self.problem = problem
         self.path = Path(path)
@@ -187,13 +191,14 @@ class SummaryWriter:
         }
         if extra:
             self.data.update(extra)
-        self.probe_names = list(probes or {})
+        probes = probes or {}
+        self.probe_names = list(probes)
         points, blocks = [], []
         for name in self.probe_names:
             spec = probes[name]
             point, tag = (spec, None) if np.ndim(spec[0]) == 0 else spec
             points.append(np.asarray(point, dtype=float))
-            blocks.append(res.node_blocks_at_points(problem, points[-1], cell_tag=tag)[0])
+            blocks.append(res.node_blocks_at_points(problem, points[-1], cell_tag=None if tag is None else int(tag))[0])
         self.probe_points = np.array(points).reshape(-1, 3)
         self.probe_blocks = np.array(blocks, dtype=np.int64)
 
@@ -250,7 +255,7 @@ class SummaryWriter:
         def write():
             text = summary_json(self.data)
             self.size = len(text)
-            if at_once:
+            if at_once or self.staged is None:
                 atomic_write_text(self.path, text)
             else:
                 self.staged.stage(self.path, text)
@@ -365,7 +370,7 @@ class ResultsWriter:
     """
 
     def __init__(self, problem, method: str, folder: str | os.PathLike, increments: int,
-                 probes: dict[str, np.ndarray] | None = None, extra: dict | None = None,
+                 probes: Mapping[str, Probe] | None = None, extra: dict | None = None,
                  fields: bool = True, *, overwrite: bool = True, resume: bool = False, lock: bool = True,
                  pictures: bool | None = None):
 
@@ -398,7 +403,7 @@ class ResultsWriter:
         on_rank0(problem.comm, prepare)
         self.staged = StagedFiles()  #: the index files of the increment, renamed at its commit point
         self.checkpoint_every = 0  #: set by a Checkpointer of this writer: it commits those increments
-        self.writers = []
+        self.writers: list[FieldSeriesWriter | PairWriter | SummaryWriter] = []
         self.fields = FieldSeriesWriter(problem, self.folder, self.staged) if fields else None
         if self.fields is not None:
             self.writers.append(self.fields)
@@ -460,7 +465,8 @@ class ResultsWriter:
         ``except``): "interrupted" for Ctrl-C or SIGTERM (also when numba wrapped the interrupt
         in a SystemError), nothing for a :class:`ConvergenceError` (:meth:`failed` recorded it),
         "error" with the message otherwise."""
-        seen, cause = set(), error
+        seen: set[int] = set()
+        cause: BaseException | None = error
         while cause is not None and id(cause) not in seen:
             if isinstance(cause, KeyboardInterrupt):
                 self.ended("interrupted")
@@ -485,6 +491,16 @@ class ResultsWriter:
             self.pairs.resume(state["pairs"])
         self.summary.resume(state["summary"])
         self.summary.write()
+
+    def __enter__(self) -> ResultsWriter:
+        return self
+
+    def __exit__(self, kind, error, traceback) -> None:
+        """``with ResultsWriter(...) as writer:`` records how a run ended on an exception
+        (:meth:`record_end`), then closes (:meth:`close`)."""
+        if error is not None:
+            self.record_end(error)
+        self.close()
 
     def close(self) -> None:
         """Close the files, draw the pictures (see ``pictures``), release the folder's lock."""

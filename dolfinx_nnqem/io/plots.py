@@ -1,8 +1,9 @@
 """Pictures: pyvista (off-screen PNG) for fields, matplotlib for curves.
 
 Collective functions gather what they draw on rank 0, which alone writes the file.
-Off-screen pyvista needs no X server with the PyPI VTK; with Debian's VTK run under
-``xvfb-run -a`` (see ``docs/install.md``).
+Off-screen pyvista needs no X server with the PyPI VTK; Debian's VTK needs one (run under
+``xvfb-run -a``, see ``docs/install.md``): without it the pyvista pictures are skipped with that
+reason (:mod:`dolfinx_nnqem.io.offscreen`).
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import numpy as np
 
 from dolfinx_nnqem import compat
 import dolfinx_nnqem.io.results as res
+from dolfinx_nnqem.io.offscreen import offscreen_plotter
 from dolfinx_nnqem.material.von_mises import von_mises_stress
 
 STATE_COLOURS = {0: "white", 1: "royalblue", 2: "crimson"}  # open, stick, slip
@@ -118,10 +120,7 @@ def plot_deformed(problem, path: str | os.PathLike, *, field: str = "von_mises",
         return
     import pyvista
 
-    from dolfinx_nnqem.chatter import apply_vtk_options
-
-    apply_vtk_options()  # VTK's "bad X server connection" (it renders off-screen anyway): only with -v
-    pyvista.OFF_SCREEN = True
+    plotter = offscreen_plotter((1200, 700))
     topology, cell_types, x, u, values = grid_data
     grid = pyvista.UnstructuredGrid(topology, cell_types, x)
     if scale is None:
@@ -130,7 +129,6 @@ def plot_deformed(problem, path: str | os.PathLike, *, field: str = "von_mises",
         scale = 0.1 * size / umax if umax > 0 else 1.0
     grid.points = x + scale * u
     grid.cell_data[field] = values
-    plotter = pyvista.Plotter(off_screen=True, window_size=(1200, 700))
     plotter.add_mesh(grid, scalars=field, show_edges=True, cmap="viridis",
                      scalar_bar_args={"title": {"von_mises": "von Mises (Pa)", "p": "p"}[field]})
     if table is not None:
@@ -219,13 +217,9 @@ def plot_contact_pressure(problem_or_table, path: str | os.PathLike, *, problem=
         select = table["interface"] == interface
     import pyvista
 
-    from dolfinx_nnqem.chatter import apply_vtk_options
-
-    apply_vtk_options()  # as above: two-beams -q without fields printed VTK's X warning (issue 31)
-    pyvista.OFF_SCREEN = True
+    plotter = offscreen_plotter((1000, 800))  # two-beams -q without fields printed VTK's X warning (issue 31)
     points = table["position_b"]
     pressure = np.where(select, table["pressure"], np.nan)
-    plotter = pyvista.Plotter(off_screen=True, window_size=(1000, 800))
     bar = {"title": f"contact pressure ({unit})"}
     finite = pressure[np.isfinite(pressure)]
     clim = (0.0, float(finite.max()) if len(finite) and finite.max() > 0 else 1.0)
@@ -245,7 +239,7 @@ def plot_contact_pressure(problem_or_table, path: str | os.PathLike, *, problem=
         # frames the surface
         covered = np.arctan2(points[:, 2], points[:, 0])
         angle = np.linspace(covered.min(), covered.max(), 91)
-        y = points[:, 1].min() - 1e-3 * max(np.ptp(points, axis=0).max(), 1e-300)
+        y = points[:, 1].min() - 1e-3 * max(float(np.ptp(points, axis=0).max()), 1e-300)
         ring = np.column_stack([circle * np.cos(angle), np.full_like(angle, y), circle * np.sin(angle)])
         plotter.add_mesh(pyvista.lines_from_points(ring), color="white", line_width=3)
     plotter.add_text(title or "contact pressure on the slave surface", font_size=11)

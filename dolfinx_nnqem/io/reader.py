@@ -41,10 +41,10 @@ def read_pairs(folder: str | os.PathLike) -> list[dict]:
         return []
     out = []
     for dataset in ET.parse(pvd).iter("DataSet"):
-        csv_path = folder / Path(dataset.get("file")).with_suffix(".csv")
+        csv_path = folder / Path(dataset.attrib["file"]).with_suffix(".csv")
         with open(csv_path, newline="") as fh:
             rows = list(csv.DictReader(fh))
-        out.append({"load_factor": float(dataset.get("timestep")), "file": str(csv_path), "rows": rows})
+        out.append({"load_factor": float(dataset.attrib["timestep"]), "file": str(csv_path), "rows": rows})
     return out
 
 

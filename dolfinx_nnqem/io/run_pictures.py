@@ -36,7 +36,7 @@ import numpy as np
 
 import dolfinx_nnqem.io.plots as plots
 from dolfinx_nnqem import compat
-from dolfinx_nnqem.chatter import apply_vtk_options
+from dolfinx_nnqem.io.offscreen import PictureUnavailable, offscreen_plotter
 from dolfinx_nnqem.io.reader import read_pairs, read_summary, start_reading_fields
 
 __all__ = ["PICTURE_FOLDER", "PICTURES", "draw_live_pictures", "draw_run_pictures", "pictures_enabled"]
@@ -121,15 +121,10 @@ def _pair_points(rows: list[dict], scale: float) -> tuple[np.ndarray, np.ndarray
 def draw_deformed(step: dict, rows: list[dict], path: Path, *, title: str = "", scale: float | None = None,
                   field: str = "von_mises", camera: str = "iso") -> Path:
     """The deformed shape coloured by ``field``, the plastic zone outlined, pairs by state."""
-    import pyvista
-
-
-    apply_vtk_options()  # VTK's "bad X server connection" (it renders off-screen anyway): only with -v
-    pyvista.OFF_SCREEN = True
     grid, scale = _field_grid(step, scale)
     if field not in grid.cell_data:
         raise ValueError(f"field {field!r}: the results hold {sorted(grid.cell_data)}")
-    plotter = pyvista.Plotter(off_screen=True, window_size=(1200, 800))
+    plotter = offscreen_plotter((1200, 800))
     label = {"von_mises": "von Mises stress (Pa)", "p": "equivalent plastic strain p"}.get(field, field)
     plotter.add_mesh(grid, scalars=field, show_edges=True, cmap="viridis", scalar_bar_args={"title": label})
     if "p" in grid.cell_data and np.any(grid.cell_data["p"] > 0):
@@ -310,7 +305,7 @@ def draw_run_pictures(folder: str | os.PathLike, *, out: str | os.PathLike | Non
     def attempt(name, draw, *args, **kwargs):
         try:
             done[name] = draw(*args, out / name, **kwargs)
-        except (ValueError, KeyError, OSError, IndexError) as error:  # a picture's data missing or unreadable
+        except (ValueError, KeyError, OSError, IndexError, PictureUnavailable) as error:  # data missing, no VTK
             done[name] = f"not drawn: {error}"
 
     if not summary.get("load_factors"):

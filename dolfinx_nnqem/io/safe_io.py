@@ -18,6 +18,7 @@ After a SIGKILL nothing is lost that was written: the kernel keeps the data.
 from __future__ import annotations
 
 import errno as _errno
+import functools
 import os
 from collections.abc import Callable
 from pathlib import Path
@@ -50,7 +51,7 @@ def fsync_directory(folder: Path) -> None:
         os.close(fd)
 
 
-def atomic_write(path: str | os.PathLike, write: Callable[[Path], None], *, durable: bool = True) -> None:
+def atomic_write(path: str | os.PathLike, write: Callable[[Path], object], *, durable: bool = True) -> None:
     """Create ``path`` through ``write(temporary_path)`` and an atomic rename.
 
     ``write`` writes the whole file at the temporary path it is given (any library can: csv,
@@ -65,7 +66,7 @@ def atomic_write(path: str | os.PathLike, write: Callable[[Path], None], *, dura
         fsync_directory(path.parent)
 
 
-def _write_temporary(path: Path, tmp: Path, write: Callable[[Path], None], durable: bool,
+def _write_temporary(path: Path, tmp: Path, write: Callable[[Path], object], durable: bool,
                      rename: bool = True) -> None:
     """``write(tmp)``, fsync'd if ``durable``, renamed to ``path`` if ``rename``; any error
     removes ``tmp`` and raises :class:`OutputError` naming ``path``."""
@@ -112,18 +113,19 @@ def sync_file_system(folder: str | os.PathLike) -> None:
 
 def _syncfs(fd: int) -> int:
     """libc's ``syncfs(fd)``; -1 where there is none (not Linux)."""
-    global _LIBC_SYNCFS
-    if _LIBC_SYNCFS is None:
-        try:
-            import ctypes
-
-            _LIBC_SYNCFS = ctypes.CDLL(None, use_errno=True).syncfs
-        except (OSError, AttributeError):
-            _LIBC_SYNCFS = False
-    return -1 if _LIBC_SYNCFS is False else int(_LIBC_SYNCFS(fd))
+    syncfs = _libc_syncfs()
+    return -1 if syncfs is None else int(syncfs(fd))
 
 
-_LIBC_SYNCFS = None
+@functools.cache
+def _libc_syncfs() -> Callable[[int], int] | None:
+    """libc's ``syncfs``, looked up once; None where there is none."""
+    try:
+        import ctypes
+
+        return ctypes.CDLL(None, use_errno=True).syncfs
+    except (OSError, AttributeError):
+        return None
 
 
 class StagedFiles:
@@ -177,12 +179,16 @@ def commit(comm, folder: str | os.PathLike, *staged: StagedFiles) -> None:
     of ``folder`` (its own new files, a checkpoint's rank file among them), then rank 0 renames
     the staged files into place. A failure on any rank is raised on every rank."""
     agree(comm, sync_file_system, folder)
-    on_rank0(comm, lambda: [s.replace_all() for s in staged])
+    def replace() -> None:
+        for files in staged:
+            files.replace_all()
+
+    on_rank0(comm, replace)
 
 
 def remove_stale_temporaries(folder: str | os.PathLike) -> list[Path]:
     """Remove the temporaries (``.NAME.tmp-PID``) that killed runs left under ``folder``."""
-    removed = []
+    removed: list[Path] = []
     folder = Path(folder)
     if not folder.is_dir():
         return removed

@@ -34,16 +34,26 @@ def read_field_index(folder: str | os.PathLike, last_only: bool = False) -> list
     grids = [grid for grid in tree.iter("Grid") if grid.get("GridType") == "Uniform"]
     steps = []
     for grid in grids[-1:] if last_only else grids:
-        step = {"time": float(grid.find("Time").get("Value"))}
+        step: dict[str, float | np.ndarray] = {"time": float(_child(grid, "Time").attrib["Value"])}
         for tag, key in (("Topology", "topology"), ("Geometry", "geometry")):
-            step[key] = _read_item(folder, grid.find(tag).find("DataItem"), h5py)
+            step[key] = _read_item(folder, _child(_child(grid, tag), "DataItem"), h5py)
         for attribute in grid.findall("Attribute"):
-            step[attribute.get("Name")] = _read_item(folder, attribute.find("DataItem"), h5py)
+            step[attribute.attrib["Name"]] = _read_item(folder, _child(attribute, "DataItem"), h5py)
         steps.append(step)
     return steps
 
 
+def _child(element: ET.Element, tag: str) -> ET.Element:
+    """The first ``tag`` child of ``element``; a ValueError naming both in a damaged file."""
+    child = element.find(tag)
+    if child is None:
+        raise ValueError(f"XDMF: a {element.tag} without {tag}")
+    return child
+
+
 def _read_item(folder: Path, item: ET.Element, h5py) -> np.ndarray:
+    if item.text is None:
+        raise ValueError("XDMF: an empty DataItem")
     file, dataset = item.text.strip().split(":", 1)
     try:
         with h5py.File(folder / file, "r") as h5:

@@ -206,7 +206,11 @@ class PlasticState:
         self.deps_p_n = fem.Function(W_tensor, name="deps_p")  # Δε_p of the last converged increment
         self.u_n = fem.Function(V, name="u_converged")  # converged displacement
         self._points = compat.interpolation_points(W_scalar)
-        self._commit_expressions = None
+        # compiled at the first commit and count_trial_plastic_points, for the u they are given
+        self._commit_expressions: tuple[fem.Expression, fem.Expression, fem.Expression] | None = None
+        self._commit_u: fem.Function | None = None
+        self._trial_dp: tuple[fem.Expression, fem.Function] | None = None
+        self._trial_u: fem.Function | None = None
 
     # -- the return map -------------------------------------------------------------------
     def elastic_stress(self, eps) -> ufl.core.expr.Expr:
@@ -340,7 +344,7 @@ class PlasticState:
 
     def count_trial_plastic_points(self, u: fem.Function) -> int:
         """Number of Gauss points (over all ranks) where the return map at ``u`` is plastic."""
-        if getattr(self, "_trial_dp", None) is None or self._trial_u is not u:
+        if self._trial_dp is None or self._trial_u is not u:
             self._trial_u = u
             self._trial_dp = (jit.expression(self.return_map(u).dp, self._points), fem.Function(self.W_scalar))
         expression, dp = self._trial_dp

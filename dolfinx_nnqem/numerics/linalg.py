@@ -46,7 +46,7 @@ def create_ksp(comm, prefix: str, options: dict) -> PETSc.KSP:
     """
     opts = PETSc.Options()
     for key, value in options.items():
-        opts[prefix + key] = value
+        opts.setValue(prefix + key, value)  # what opts[name] = value calls (petsc4py's stub has no __setitem__)
     ksp = PETSc.KSP().create(comm)
     ksp.setOptionsPrefix(prefix)
     ksp.setFromOptions()
@@ -73,9 +73,18 @@ def factorise(ksp: PETSc.KSP, A: PETSc.Mat, solver: str, what: str) -> None:
         ksp.setUp()
     except PETSc.Error as error:
         raise ValueError(
-            f"{solver}: the factorisation of {what} failed (PETSc error {error.ierr}); "
+            f"{solver}: the factorisation of {what} failed (PETSc error {error.ierr}); "  # type: ignore[attr-defined]  # petsc4py's stub lacks Error.ierr
             "the matrix is singular or the solver package is unavailable"
         ) from error
+
+
+def vec_norm(vec: PETSc.Vec) -> float:
+    """The 2-norm of a PETSc vector (collective).
+
+    ``Vec.norm()`` returns a float for the default 2-norm; petsc4py's stub types it
+    ``float | tuple[float, float]`` for every norm type (NORM_1_AND_2 returns the pair).
+    """
+    return vec.norm()  # type: ignore[return-value]  # the 2-norm is a float (see above)
 
 
 def global_norm(array: np.ndarray, comm) -> float:

@@ -112,8 +112,16 @@ class DenseSystem:
         self.tol, self.scale, self.rcond_min, self.log = tol, scale, rcond_min, log
         self.norms: list[float] = []
         self._iteration = 0  # the iterate being evaluated (errors name it)
-        self.F = self.A = self.chart = None
-        self._x0 = self._F0 = self._A0 = self._chart0 = self.dx = None
+        # The evaluation D H, D J (and chart) at x, the step's start and its direction: set by
+        # evaluate(), start_step() and the directions, which the driver calls before any reads them
+        self.F: np.ndarray
+        self.A: np.ndarray
+        self.chart: object = None
+        self._x0: np.ndarray
+        self._F0: np.ndarray
+        self._A0: np.ndarray
+        self._chart0: object = None
+        self.dx: np.ndarray
 
     # -- evaluation ---------------------------------------------------------------------------
     def _evaluate_at(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -383,7 +391,8 @@ def solve_dense(residual: ResidualFunction, x0: npt.ArrayLike, *, tol: float, ma
     if not globalisations:
         raise ValueError("solve_dense needs at least one globalisation")
     fallbacks = () if fallback is None else (fallback,) if isinstance(fallback, Fallback) else tuple(fallback)
-    attempts = [(g, x0, advance, _describe(g)) for g in globalisations]
+    attempts: list[tuple[Globalisation, npt.ArrayLike | Fallback, AdvanceFunction | None, str]] = [
+        (g, x0, advance, _describe(g)) for g in globalisations]
     for way in fallbacks:
         attempts += [(g, way, way.advance, f"{_describe(g)} {way.label}") for g in globalisations]
     starts: dict[int, np.ndarray] = {}  # each fallback's start, computed once, when first needed

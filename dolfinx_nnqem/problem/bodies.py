@@ -393,7 +393,7 @@ def tags_sharing_nodes(V: dolfinx.fem.FunctionSpace, cell_tags, facet_tags, surf
     imap = mesh.topology.index_map(tdim)
     tag_of = np.full(imap.size_local + imap.num_ghosts, -1, dtype=np.int64)
     tag_of[cell_tags.indices] = cell_tags.values
-    sides = set()
+    sides: set[tuple[int, int]] = set()  # this rank's
     for surface in surfaces:
         for facet in facet_tags.find(int(surface)):
             cells = f2c.links(facet)
@@ -401,7 +401,7 @@ def tags_sharing_nodes(V: dolfinx.fem.FunctionSpace, cell_tags, facet_tags, surf
                 a, b = sorted(int(t) for t in tag_of[cells])
                 if a >= 0 and a != b:
                     sides.add((a, b))
-    sides = sorted(set().union(*comm.allgather(sides)))
+    all_sides = sorted(set().union(*comm.allgather(sides)))
     blocks = V.dofmap.index_map
 
     def nodes_of(tag: int) -> np.ndarray:
@@ -409,7 +409,7 @@ def tags_sharing_nodes(V: dolfinx.fem.FunctionSpace, cell_tags, facet_tags, surf
         return np.unique(np.concatenate(comm.allgather(blocks.local_to_global(local.astype(np.int32)))))
 
     shared = []
-    for a, b in sides:
+    for a, b in all_sides:
         n = len(np.intersect1d(nodes_of(a), nodes_of(b)))
         if n:
             shared.append((a, b, n))

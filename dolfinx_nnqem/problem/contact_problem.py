@@ -43,6 +43,7 @@ from dolfinx_nnqem.contact.surfaces import ContactPairError
 from dolfinx_nnqem.contact.obstacles import Cylinder, Plane, Sphere  # noqa: F401  (the user's imports)
 from dolfinx_nnqem.material.von_mises import GaussPointValues, PlasticState
 from dolfinx_nnqem.problem.validation import check_cell_tag, check_magnitude, check_mesh
+from dolfinx_nnqem.numerics.linalg import vec_norm
 
 
 # -- problem data ---------------------------------------------------------------------------
@@ -129,6 +130,8 @@ class ContactProblem:
         body and the motion).
     """
 
+    _h: float  # the mean cell size, computed once by characteristic_length
+
     def __init__(
         self,
         mesh: dolfinx.mesh.Mesh,
@@ -172,7 +175,8 @@ class ContactProblem:
 
         self.load_factor = 0.0  # ℓ of the current iterate
         self.load_factor_n = 0.0  # ℓ of the last converged increment
-        self._previous = None  # (ℓ, u, z) of the increment before the last: the secant predictor
+        # (ℓ, u, z) of the increment before the last: the secant predictor
+        self._previous: tuple[float, np.ndarray, np.ndarray | None] | None = None
         self.contact: ContactModel | None = None
         E_max = self.comm.allreduce(float(np.max(self.state.E.x.array, initial=0.0)), op=MPI.MAX)
         self.force_floor = FORCE_FLOOR_STRAIN * E_max * self.characteristic_length() ** 2
@@ -250,7 +254,7 @@ class ContactProblem:
             for c, val in zip(components, value):
                 Vc = self.V.sub(c)
                 dofs = fem.locate_dofs_topological(Vc, fdim, facets)
-                bcs.append(fem.dirichletbc(PETSc.ScalarType(0.0), dofs, Vc))
+                bcs.append(fem.dirichletbc(PETSc.ScalarType(0.0), dofs, Vc))  # type: ignore[operator]  # petsc4py's stub types ScalarType as a dtype; it is np.float64
                 unrolled = bcs[-1].dof_indices()[0]
                 dofs_all.append(np.asarray(unrolled, dtype=np.int32))
                 values_all.append(np.full(len(unrolled), val))
@@ -379,6 +383,8 @@ class ContactProblem:
 
     def relative_displacement(self, u: PETSc.Vec | None = None) -> np.ndarray:
         """w = B u + m(ℓ) of the local pairs, (num_local_pairs, 3) (default: the current u)."""
+        if self.contact is None:
+            raise ValueError("relative_displacement: the problem has no contact")
         return self.contact.relative_displacement(self.u.x.petsc_vec if u is None else u, self.load_factor)
 
     def residual(self, z: np.ndarray | None = None, F_int: PETSc.Vec | None = None, *,
@@ -398,7 +404,7 @@ class ContactProblem:
             F_int.copy(out)
             R = out
         R.axpy(-1.0, self.external_force() if F_ext is None else F_ext)
-        if self.has_contact:
+        if self.contact is not None:
             R.axpy(-1.0, self.contact.global_force(self.contact.force(z)) if contact_force is None else contact_force)
         return R
 
@@ -422,14 +428,11 @@ class ContactProblem:
         else:
             F_ext_norm = F_ext.norm()
         scale = max(F_ext_norm, F_int.norm(), self.force_floor)
-        if self.has_contact:
-            given = contact_force is not None
-            if not given:
-                contact_force = self.contact.global_force(self.contact.force())
-            scale = max(scale, contact_force.norm(),
-                        self.contact.motion_force_scale(self.load_factor, self.load_factor_n))
-            if not given:
-                contact_force.destroy()
+        if self.contact is not None:
+            force = self.contact.global_force(self.contact.force()) if contact_force is None else contact_force
+            scale = max(scale, vec_norm(force), self.contact.motion_force_scale(self.load_factor, self.load_factor_n))
+            if contact_force is None:
+                force.destroy()
         return scale
 
     def tangent_action(self, delta: np.ndarray) -> PETSc.Vec:
@@ -461,7 +464,7 @@ class ContactProblem:
         """The amplitudes of every load, Dirichlet condition and obstacle motion at ``load_factor``."""
         values = ([_amplitude(a, load_factor) for a, _ in self.F_ext_parts]
                   + [_amplitude(a, load_factor) for a, _ in self._bc_amplitudes])
-        motion = self.contact.motion_amplitudes(load_factor) if self.has_contact else np.zeros(0)
+        motion = self.contact.motion_amplitudes(load_factor) if self.contact is not None else np.zeros(0)
         return np.concatenate([np.array(values), motion])
 
     def extrapolation_factor(self, load_factor: float) -> float | None:
@@ -496,10 +499,12 @@ class ContactProblem:
         beta = self.extrapolation_factor(load_factor)
         if beta is None:
             return False
+        assert self._previous is not None  # beta needs it
         _, u_prev, z_prev = self._previous
         u_n = self.state.u_n.x.array
         self.u.x.array[:] = u_n + beta * (u_n - u_prev)
-        if self.has_contact:
+        if self.contact is not None:
+            assert z_prev is not None  # committed with contact
             self.contact.extrapolate(z_prev, beta)
         return True
 
@@ -517,7 +522,7 @@ class ContactProblem:
             u = np.array(u, dtype=float)
             if u.shape != self.u.x.array.shape:
                 raise ValueError(f"predictor history: u has shape {u.shape}, expected {self.u.x.array.shape}")
-            if self.has_contact:
+            if self.contact is not None:
                 z = np.array(z, dtype=float).reshape(self.contact.num_local, 3)
             else:
                 z = None
@@ -526,7 +531,7 @@ class ContactProblem:
 
     def predict_contact(self) -> None:
         """Starting active set (see :meth:`ContactModel.predict`)."""
-        if self.has_contact:
+        if self.contact is not None:
             self.contact.predict(self.relative_displacement())
 
     # -- increments --------------------------------------------------------------------------------
@@ -538,21 +543,21 @@ class ContactProblem:
         within the increment, is not the radial return).
         """
         self._previous = (self.load_factor_n, self.state.u_n.x.array.copy(),
-                          self.contact.z_n.copy() if self.has_contact else None)
+                          self.contact.z_n.copy() if self.contact is not None else None)
         if gauss_point_values is not None and np.array_equal(gauss_point_values.u, self.u.x.array):
             self.state.commit_values(self.u, gauss_point_values.sigma, gauss_point_values.dp,
                                      gauss_point_values.deps_p)
         else:
             self.state.commit(self.u)
         self.load_factor_n = self.load_factor
-        if self.has_contact:
+        if self.contact is not None:
             self.contact.commit(self.relative_displacement())
 
     def restore(self) -> None:
         """Return to the last converged increment (after a failed attempt)."""
         self.u.x.array[:] = self.state.u_n.x.array
         self.load_factor = self.load_factor_n
-        if self.has_contact:
+        if self.contact is not None:
             self.contact.restore()
 
     def destroy(self) -> None:

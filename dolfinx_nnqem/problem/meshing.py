@@ -636,9 +636,10 @@ def _build_block_stack_model(Lx: float, Lz: float, heights: Sequence[float],
     bottoms = y0 + np.concatenate([[0.0], np.cumsum(heights)[:-1]])
     volumes = [_fragment_boxes([(x0, yb, z0, Lx, h, Lz)]) for yb, h in zip(bottoms, heights)]
     gmsh.model.occ.synchronize()
-    counts = {}
+    counts: dict[int, int] = {}
     for body, (n_x, n_y, n_z) in zip(volumes, divisions):
-        counts |= _box_curve_counts(body, lambda d, n=(n_x, n_y, n_z): n[int(np.argmax(d))])
+        # called before the next body: the lambda needs no default to hold this body's divisions
+        counts |= _box_curve_counts(body, lambda d: (n_x, n_y, n_z)[int(np.argmax(d))])
     if cell_type == "hexahedron":
         _structured_hexahedra(counts)
     else:  # the edges' divisions only: unstructured triangles on the faces, tetrahedra inside
@@ -773,12 +774,12 @@ def build_thick_cylinder(
 def graded_nodes(h: float, n_fine: int, length: float, ratio: float = 1.3) -> np.ndarray:
     """Node positions 0 ≤ s ≤ length: ``n_fine`` elements of size ``h``, then sizes growing by
     ``ratio``, the last ones stretched so that the grid ends exactly at ``length``."""
-    nodes = list(h * np.arange(n_fine + 1))
+    grid = list(h * np.arange(n_fine + 1))
     size = h
-    while nodes[-1] < length - 1e-12:
+    while grid[-1] < length - 1e-12:
         size *= ratio
-        nodes.append(nodes[-1] + size)
-    nodes = np.array(nodes)
+        grid.append(grid[-1] + size)
+    nodes = np.array(grid)
     s0 = nodes[n_fine]
     nodes[n_fine:] = s0 + (nodes[n_fine:] - s0) * (length - s0) / (nodes[-1] - s0)
     return nodes
@@ -850,8 +851,11 @@ def _write_graded_msh(msh_file, comm, nx, ny, nz, xs, ys, zs) -> None:
         for tag, i in zip(tags, index):
             gmsh.model.mesh.setNode(int(tag), [xs[i[0]], ys[i[1]], zs[i[2]]], [])
 
-    _mesh_from_gmsh(MPI.COMM_SELF, "graded_block", lambda: (_build_block_stack_model(nx, nz, [ny], [(nx, ny, nz)]),
-                                                             move()), msh_file)
+    def build() -> None:
+        _build_block_stack_model(nx, nz, [ny], [(nx, ny, nz)])
+        move()
+
+    _mesh_from_gmsh(MPI.COMM_SELF, "graded_block", build, msh_file)
 
 
 # --------------------------------------------------------------------------------------------

@@ -41,7 +41,8 @@ class BlockDiagonal:
 
     def fill(self, D: np.ndarray) -> PETSc.Mat:
         """The matrix with the blocks ``D`` (n, 3, 3)."""
-        self.matrix.setValuesCSR(self.indptr, self.columns, np.ascontiguousarray(D, dtype=np.float64).reshape(-1))
+        values = np.ascontiguousarray(D, dtype=np.float64).reshape(-1)
+        self.matrix.setValuesCSR(self.indptr, self.columns, values)  # type: ignore[arg-type]  # petsc4py's stub asks Sequence; arrays are what it takes
         self.matrix.assemble()
         return self.matrix
 
@@ -79,9 +80,10 @@ class _ContactBlocks:
     def __init__(self, model, rows_free: PairRows):
         self.model = model
         self.rows_free = rows_free
-        self._MtB = None
-        self.A01 = None
-        self.A10 = None
+        # made at the first fill, refilled afterwards
+        self._MtB: PETSc.Mat | None = None
+        self.A01: PETSc.Mat | None = None
+        self.A10: PETSc.Mat | None = None
         self._A11 = BlockDiagonal(model.num_local, model.offset, model.num_global, model.comm)
 
     def fill(self, M: np.ndarray, dH_dw: np.ndarray, dH_dz: np.ndarray) -> tuple[PETSc.Mat, PETSc.Mat, PETSc.Mat]:
@@ -93,10 +95,11 @@ class _ContactBlocks:
             self._MtB = rows_matrix(model.comm, self.rows_free, model.num_global, model.V.dofmap.index_map, values)
             self.A01 = self._MtB.transpose(PETSc.Mat())
         else:
-            self._MtB.setValuesCSR(self.rows_free.indptr, self.rows_free.columns, values)
+            self._MtB.setValuesCSR(self.rows_free.indptr, self.rows_free.columns, values)  # type: ignore[arg-type]  # as in BlockDiagonal.fill
             self._MtB.assemble()
             self._MtB.transpose(self.A01)  # MAT_REUSE_MATRIX
         self.A10 = model.scaled_B(dH_dw, out=self.A10)
+        assert self.A01 is not None  # made with _MtB
         return self.A01, self.A10, self._A11.fill(dH_dz)
 
     def destroy(self) -> None:
@@ -119,8 +122,8 @@ class MonolithicMatrix:
 
     def __init__(self, model, free_mask: PETSc.Vec):
         self._blocks = _ContactBlocks(model, free_rows(model, free_mask))
-        self._nest = None
-        self.J = None
+        self._nest: PETSc.Mat | None = None  # made at the first assemble, refilled afterwards
+        self.J: PETSc.Mat | None = None
 
     def assemble(self, K: PETSc.Mat, dH_dw: np.ndarray, dH_dz: np.ndarray, dlam_dz: np.ndarray) -> PETSc.Mat:
         """J at the current law evaluation; ``K`` is the tangent, assembled into the same matrix each time."""
@@ -173,12 +176,13 @@ class AugmentedSystem:
         self.B_free = rows_matrix(model.comm, rows, model.num_global, model.V.dofmap.index_map)
         self._blocks = _ContactBlocks(model, rows)
         self._P = BlockDiagonal(model.num_local, model.offset, model.num_global, model.comm)
-        self._BtPB = None
-        self._nest = None
+        # made at the first matrix, refilled afterwards
+        self._BtPB: PETSc.Mat | None = None
+        self._nest: PETSc.Mat | None = None
         self._g = model.create_lambda_vector()
         self._Btg = self.B_free.createVecRight()
-        self._b = None  # the right-hand side, created once (the nest's layout is fixed)
-        self.A00 = None
+        self._b: PETSc.Vec | None = None  # the right-hand side, created once (the nest's layout is fixed)
+        self.A00: PETSc.Mat | None = None  # K, widened at the first matrix
 
     def _u_block(self, K: PETSc.Mat, dH_dw: np.ndarray) -> PETSc.Mat:
         """K + B_freeᵀ P B_free, added in place to ``K``.
@@ -194,13 +198,13 @@ class AugmentedSystem:
             P.PtAP(self.B_free, self._BtPB)
         if self.A00 is None:
             lgmap = K.getLGMap()  # the new pattern comes without DOLFINx's local-to-global maps
-            K.axpy(1.0, self._BtPB, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+            K.axpy(1.0, self._BtPB, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)  # type: ignore[arg-type]  # petsc4py's stub types the Structure constants as int
             K.setLGMap(*lgmap)
             self.A00 = K
         elif K is not self.A00:
             raise ValueError("AugmentedSystem: assemble the tangent into the matrix returned before")
         else:
-            K.axpy(1.0, self._BtPB, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
+            K.axpy(1.0, self._BtPB, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)  # type: ignore[arg-type]  # as above
         return K
 
     def matrix(self, K: PETSc.Mat, dH_dw: np.ndarray, dH_dz: np.ndarray, dlam_dz: np.ndarray) -> PETSc.Mat:

@@ -217,7 +217,7 @@ def check_state(problem, report=None, solver_options=None, options: CheckOptions
         reasons.append(f"equilibrium residual |R|/F = {eq:.3e} > {tol:.1e} (F = {F:.4g} N){hint}")
 
     # -- the constitutive law at every Gauss point, of the values the commit will store
-    values = gpv if own else forms.return_map_values(problem)
+    values = gpv if own and gpv is not None else forms.return_map_values(problem)  # own: gpv is not None
     constitutive, yield_violation = _constitutive(problem, forms, values)
     if comm.allreduce(int(np.any(np.asarray(values.dp) < 0.0)), op=MPI.MAX):
         yield_violation = math.inf
@@ -373,7 +373,7 @@ def failure_details(problem) -> dict:
     try:
         F_int = problem.assemble_internal_force()
         F_ext = problem.external_force()
-        out = {}
+        out: dict[str, object] = {}
         finite_forces = not problem.has_contact or problem.comm.allreduce(
             int(np.all(np.isfinite(problem.contact.force()))), op=MPI.MIN)  # the same choice on every rank
         if finite_forces:

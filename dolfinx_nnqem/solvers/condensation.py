@@ -129,12 +129,20 @@ class Condensation:
         self._options = direct_options(petsc_options)
         self.ksp = create_ksp(problem.comm, self.prefix, self._options)
         self._options_cleared = False
-        self.K = None
-        self._Bt_dense = None
-        self._X = None
-        self._C_rows = None
-        self._BN = None
+        self._K: PETSc.Mat | None = None  # K̃, assembled by factorise into the same matrix every time
+        # made at the first pair_flexibility (mode_coupling), refilled (kept) afterwards
+        self._Bt_dense: PETSc.Mat | None = None
+        self._X: PETSc.Mat | None = None
+        self._C_rows: PETSc.Mat | None = None
+        self._BN: np.ndarray | None = None
         self.timings: dict[str, float] = {}
+
+    @property
+    def K(self) -> PETSc.Mat:
+        """K̃ as last factorised (vectors laid out like V's owned dofs come from it)."""
+        if self._K is None:
+            raise RuntimeError(f"{self.solver}: no stiffness factorised yet")
+        return self._K
 
     @property
     def num_modes(self) -> int:
@@ -178,18 +186,18 @@ class Condensation:
             local_dofs = np.zeros(0, dtype=np.int32)
             if k < len(blocks) and blocks[order][k] == block:
                 local_dofs = np.array([3 * order[k] + component], dtype=np.int32)
-            bcs.append(fem.dirichletbc(PETSc.ScalarType(0.0), local_dofs, V.sub(component)))
+            bcs.append(fem.dirichletbc(PETSc.ScalarType(0.0), local_dofs, V.sub(component)))  # type: ignore[operator]  # petsc4py's stub types ScalarType as a dtype; it is the scalar type (np.float64)
         return fixing, bcs
 
     # -- factorisation and solves ----------------------------------------------------------------
     def factorise(self, assemble, what: str) -> None:
         """Assemble K̃ with ``assemble(A, extra_bcs)`` (into the same matrix every time) and factorise it."""
         t0 = time.perf_counter()
-        self.K = assemble(self.K, self.fixing_bcs)
+        self._K = assemble(self._K, self.fixing_bcs)
         self._tick("assembly", t0)
         t0 = time.perf_counter()
         try:
-            factorise(self.ksp, self.K, self.solver.upper(), what)
+            factorise(self.ksp, self._K, self.solver.upper(), what)
         finally:
             if not self._options_cleared:
                 clear_options(self.prefix, self._options)
@@ -216,7 +224,7 @@ class Condensation:
         ``loads`` is changed in place: its constrained and fixing rows are zeroed (they are
         loads) and it is converted to a dense matrix.
         """
-        loads.zeroRows(self.zero_rows, diag=0.0)
+        loads.zeroRows(self.zero_rows, diag=0.0)  # type: ignore[arg-type]  # petsc4py's stub asks IS or Sequence; arrays are what it takes
         dense = loads.convert("dense")  # petsc4py converts in place: ``loads`` is now dense
         Y = dense.duplicate()
         self.ksp.matSolve(dense, Y)
@@ -235,6 +243,7 @@ class Condensation:
         if self._Bt_dense is None:
             self._Bt_dense = self.transposed_B().convert("dense")  # petsc4py converts in place
             self._X = self._Bt_dense.duplicate()
+        assert self._X is not None  # made with _Bt_dense
         self.ksp.matSolve(self._Bt_dense, self._X)
         if self._C_rows is None:
             self._C_rows = model.B.matMult(self._X)
@@ -280,6 +289,6 @@ class Condensation:
         self.timings[key] = self.timings.get(key, 0.0) + time.perf_counter() - t0
 
     def destroy(self) -> None:
-        for obj in (self.ksp, self.K, self._Bt_dense, self._X, self._C_rows):
+        for obj in (self.ksp, self._K, self._Bt_dense, self._X, self._C_rows):
             if obj is not None:
                 obj.destroy()

@@ -138,7 +138,11 @@ class CondensedSystem:
         self.n_r = cond.BN.shape[1]
         self.m = 0 if W_xi is None else W_xi.shape[1]
         self.n = self.n3 + self.m + self.n_r
-        self.W_xi, self.E_xi = W_xi, E_xi
+        if self.m and self.n_r and E_xi is None:
+            raise ValueError("CondensedSystem: W_xi with free rigid modes needs E_xi, ξ's load on them")
+        # without ξ (or without free modes): no columns (rows) to add, the same as the branches skipped
+        self.W_xi = np.zeros((self.n3, 0)) if W_xi is None else W_xi
+        self.E_xi = np.zeros((self.n_r, self.m)) if E_xi is None else E_xi
         self.xi_scale = np.ones(self.m) if xi_scale is None else np.asarray(xi_scale, dtype=float)
         self.z_scale = laws.unknown_scale(self.F).reshape(-1)
         self.a_scale = self.F / cond.r  # α = α̃ · F / r

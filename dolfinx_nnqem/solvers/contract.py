@@ -30,7 +30,7 @@ if TYPE_CHECKING:
     from dolfinx_nnqem.solvers.convergence import SolveReport
     from dolfinx_nnqem.solvers.options import SolverOptions
 
-__all__ = ["ReleasesPETSc", "SolvableProblem", "Solver"]
+__all__ = ["ReleasesPETSc", "SolvableProblem", "Solver", "contact_model"]
 
 
 @runtime_checkable
@@ -128,6 +128,19 @@ class SolvableProblem(Protocol):
     def commit(self, gauss_point_values: GaussPointValues | None = None) -> None: ...
 
     def restore(self) -> None: ...
+
+
+def contact_model(problem: SolvableProblem) -> ContactModel:
+    """The problem's contact model, for code that runs only with contact (NNEQM1, the pair steps).
+
+    Raises
+    ------
+    ValueError
+        If the problem has no contact.
+    """
+    if problem.contact is None:
+        raise ValueError("the problem has no contact (no Contact was given); this needs one")
+    return problem.contact
 
 
 @runtime_checkable

@@ -57,6 +57,8 @@ class SolveReport:
 class ConvergenceError(RuntimeError):
     """An increment did not converge even after the allowed cutbacks."""
 
+    failure: dict  #: set by load stepping: increment, load factor, reason, the worst nodes and pairs
+
 
 def count_states(states_local: np.ndarray, comm) -> tuple[int, int, int]:
     """Global numbers of open (0), stick (1) and slip (2) pairs."""

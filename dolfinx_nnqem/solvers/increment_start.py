@@ -104,7 +104,7 @@ def start_increment(problem: ContactProblem, gp: GaussPointOperators, elastic: C
     scale = p.force_scale(F_n, F_ext)
     du0 = elastic.solve(b)
     laws = w_prev = z = w_start = None
-    if p.has_contact:
+    if p.contact is not None:  # p.has_contact
         model = p.contact
         laws = model.gathered_laws()
         w_prev = model.gather(model.w_n)

@@ -27,7 +27,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from dolfinx_nnqem.numerics.linalg import (ITERATIVE_NO_CONTACT_OPTIONS, ITERATIVE_SOLVER_OPTIONS, clear_options, create_ksp,
-                                  direct_options, rigid_body_modes)
+                                  direct_options, rigid_body_modes, vec_norm)
 
 __all__ = ["DirectSolver", "IterativeSolver"]
 
@@ -82,7 +82,7 @@ class DirectSolver:
             self._clear_options()
         self.linear_iterations += self.ksp.getIterationNumber()
         reason = self.ksp.getConvergedReason()
-        if reason <= 0 or not np.all(np.isfinite(x.getArray(readonly=True))):
+        if reason <= 0 or not np.all(np.isfinite(x.getArray(readonly=True))):  # type: ignore[operator]  # petsc4py's stub: the reason is an int, not the ConvergedReason namespace
             # e.g. a zero pivot: PETSc keeps the failed factor, and reusing the same matrix object
             # (same pattern: numeric factorisation only) would fail from then on
             self.ksp.reset()
@@ -133,14 +133,14 @@ class IterativeSolver:
         self._set_up_once = False
         self._rtol_floor, _, _, self._max_it = self.ksp.getTolerances()
         self._configured = False
-        self._keep = ()
+        self._keep: tuple[PETSc.IS | PETSc.NullSpace, ...] = ()  # what PETSc holds by reference only
         self._lagging = bool(num_pairs) and lag_preconditioner
         self.refresh_fraction = 0.05
         self._refresh = True
-        self._lag_state = None
+        self._lag_state: np.ndarray | None = None  # the pair states the lagged hierarchy was built at
         self._lag_refreshed = True
-        self._fresh_rate = None  # Krylov convergence rate right after the last AMG set-up
-        self._last_forcing = None  # (ε, η) of the last inexact Newton step of the increment
+        self._fresh_rate: float | None = None  # Krylov convergence rate right after the last AMG set-up
+        self._last_forcing: tuple[float, float] | None = None  # (ε, η) of the last inexact Newton step of the increment
         self.timings: dict[str, float] = {}
         self.linear_iterations = 0  #: Krylov iterations over all solves
         self.amg_setups = 0  #: AMG hierarchies built (with contact)
@@ -202,7 +202,7 @@ class IterativeSolver:
             self._krylov_solve(b, x, pair_state)
             self._lagged_solve_is_poor(b)  # records the fresh hierarchy's convergence rate
         reason = self.ksp.getConvergedReason()
-        if reason <= 0 or not np.all(np.isfinite(x.getArray(readonly=True))):
+        if reason <= 0 or not np.all(np.isfinite(x.getArray(readonly=True))):  # type: ignore[operator]  # as in DirectSolver.solve
             return f"the linear solve failed (KSP reason {reason})"
         return None
 
@@ -251,6 +251,7 @@ class IterativeSolver:
             self.ksp.setTolerances(max_it=self._max_it)
         else:
             rtol = self.ksp.getTolerances()[0]
+            assert self._fresh_rate is not None  # without a rate the hierarchy is refreshed (above)
             expected = math.log(rtol) / math.log(self._fresh_rate)
             self.ksp.setTolerances(max_it=int(2 * expected) + 5)
         self._lag_refreshed = self._refresh
@@ -260,10 +261,10 @@ class IterativeSolver:
         """True if this solve used a lagged hierarchy and did not converge within its budget."""
         if self._lag_refreshed:
             its = max(self.ksp.getIterationNumber(), 1)
-            reduction = self.ksp.getResidualNorm() / max(b.norm(), 1e-300)
+            reduction = self.ksp.getResidualNorm() / max(vec_norm(b), 1e-300)
             self._fresh_rate = min(max(reduction ** (1.0 / its), 1e-3), 0.95)
             return False
-        return self.ksp.getConvergedReason() <= 0
+        return self.ksp.getConvergedReason() <= 0  # type: ignore[operator]  # as in DirectSolver.solve
 
     def destroy(self) -> None:
         self.ksp.destroy()

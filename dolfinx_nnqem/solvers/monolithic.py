@@ -30,10 +30,12 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from dolfinx_nnqem import compat
+from dolfinx_nnqem.contact.laws import LawEvaluation, Linearisation
 from dolfinx_nnqem.solvers.block_system import AugmentedSystem, MonolithicMatrix, free_mask
 from dolfinx_nnqem.solvers.contract import ReleasesPETSc
 from dolfinx_nnqem.solvers.convergence import IterationRecord, SolveReport, count_states, logger
-from dolfinx_nnqem.numerics.linalg import clear_options, create_ksp, direct_options, free_dropped_objects, global_norm
+from dolfinx_nnqem.numerics.linalg import (clear_options, create_ksp, direct_options, free_dropped_objects, global_norm,
+                                           vec_norm)
 from dolfinx_nnqem.solvers.linear_solver import DirectSolver, IterativeSolver
 from dolfinx_nnqem.numerics.newton import Globalisation, Merit, NewtonResult, solve
 from dolfinx_nnqem.problem.contact_problem import ContactProblem
@@ -48,11 +50,11 @@ class _Evaluation:
 
     R_free: PETSc.Vec  #: equilibrium residual, constrained rows zeroed
     H: np.ndarray  #: (num_local_pairs, 3) pair laws
-    law: object  #: the LawEvaluation (Jacobian blocks, states), or None without contact
+    law: LawEvaluation | None  #: the LawEvaluation (Jacobian blocks, states), or None without contact
     scale: float  #: the force scale F
     norm_R: float
     norm_H: float
-    lin: object = None  #: the laws' Linearisation (Newton step coordinates), or None without contact
+    lin: Linearisation | None = None  #: the laws' Linearisation (Newton step coordinates), or None without contact
 
 
 class MonolithicSolver(ReleasesPETSc):
@@ -79,15 +81,15 @@ class MonolithicSolver(ReleasesPETSc):
         self.prefix = f"nnqem_monolithic_{id(self)}_"
         self.iterative = self._use_iterative()
         if self.iterative:
-            self.linear = IterativeSolver(problem.V, self.prefix, self.options.petsc_options, self.options.rtol,
+            self.linear: IterativeSolver | DirectSolver = IterativeSolver(problem.V, self.prefix, self.options.petsc_options, self.options.rtol,
                                           problem.num_pairs, self.settings.lag_preconditioner)
         else:
             self.linear = DirectSolver(problem.comm, self.prefix, self.options.petsc_options)
-        self._K = None
+        self._K: PETSc.Mat | None = None
         self._mask = free_mask(problem) if problem.has_contact else None
-        self._matrix = None  # the direct Newton matrix (also the LM fallback's)
-        self._augmented = None
-        if self.iterative and problem.has_contact:
+        self._matrix: MonolithicMatrix | None = None  # the direct Newton matrix (also the LM fallback's)
+        self._augmented: AugmentedSystem | None = None
+        if self.iterative and problem.contact is not None and self._mask is not None:  # the mask: with contact
             r = max(i.r for i in problem.contact.interfaces)
             self._augmented = AugmentedSystem(problem.contact, self._mask, r, self.settings.augmentation)
         self._timings: dict[str, float] = {}
@@ -123,7 +125,7 @@ class MonolithicSolver(ReleasesPETSc):
         report = SolveReport(converged=False, iterations=0,
                              system_order=p.V.dofmap.index_map.size_global * 3 + 3 * p.num_pairs)
         outcome = self._attempt(load_factor, report, align_sliding=False)
-        if not outcome.converged and p.has_contact and p.contact.slip_following and outcome.iterations > 0:
+        if not outcome.converged and p.contact is not None and p.contact.slip_following and outcome.iterations > 0:
             # The polar law's H3 = r |s| sin(θ − θ_s) is a sine that a Newton step can follow only
             # within a quarter turn; where slips are small and turn between iterates, steps clipped
             # to that turn can stall. Put θ of sliding pairs on the slip after every step instead
@@ -192,14 +194,14 @@ class MonolithicSolver(ReleasesPETSc):
         R_lifted = p.free_residual(K_delta)
         R_lifted.axpy(1.0, ev.R_free)
         H_lifted = ev.H
-        if p.has_contact:
+        if p.contact is not None and ev.law is not None:  # the law: with contact
             delta_vec = p.u.x.petsc_vec.duplicate()
             with delta_vec.localForm() as local:
                 local.array[:] = delta
             H_lifted = ev.H + np.einsum("nij,nj->ni", ev.law.dH_dw, p.contact.B_times(delta_vec))
         self.linear.set_forcing(1.0, record=False)  # the lifted system's residual is not the iterate's
         u0 = p.u.x.array[:ev.R_free.getLocalSize()].copy()
-        z0 = p.contact.z.copy() if p.has_contact else None
+        z0 = p.contact.z.copy() if p.contact is not None else None
         lifted = _Evaluation(R_lifted, H_lifted, ev.law, ev.scale, math.nan, math.nan, ev.lin)
         direction = self.newton_direction(lifted)
         if direction is None:
@@ -224,20 +226,21 @@ class MonolithicSolver(ReleasesPETSc):
         self._tick("assembly", t0)
         F_ext = p.external_force(out=self._vector("F_ext", lambda: compat.create_vector(p.V)))
         contact_force = None
-        if p.has_contact:
-            contact_force = p.contact.global_force(p.contact.force(),
-                                                   out=self._vector("contact_force", p.contact.B.createVecRight))
+        if p.contact is not None:
+            contact = p.contact
+            contact_force = contact.global_force(contact.force(),
+                                                 out=self._vector("contact_force", contact.B.createVecRight))
         R = p.residual(F_int=F_int, F_ext=F_ext, contact_force=contact_force,
                        out=self._vector("R", lambda: compat.create_vector(p.V)))
         R_free = p.free_residual(R)
         law, lin, H = None, None, np.zeros((0, 3))
-        if p.has_contact:
+        if p.contact is not None:
             t0 = time.perf_counter()
             law = p.contact.evaluate(p.relative_displacement())
             lin = p.contact.linearise(law)
             H = law.H
             self._tick("contact", t0)
-        return _Evaluation(R_free, H, law, p.force_scale(F_int, F_ext, contact_force), R_free.norm(),
+        return _Evaluation(R_free, H, law, p.force_scale(F_int, F_ext, contact_force), vec_norm(R_free),
                            global_norm(H, p.comm), lin)
 
     def _newton_matrix(self, ev: _Evaluation) -> PETSc.Mat:
@@ -246,8 +249,9 @@ class MonolithicSolver(ReleasesPETSc):
         t0 = time.perf_counter()
         self._K = p.assemble_tangent(self._K)
         self._tick("assembly", t0)
-        if not p.has_contact:
+        if p.contact is None:
             return self._K
+        assert self._mask is not None and ev.law is not None and ev.lin is not None  # all made with contact
         t0 = time.perf_counter()
         if self._matrix is None:
             self._matrix = MonolithicMatrix(p.contact, self._mask)
@@ -262,6 +266,7 @@ class MonolithicSolver(ReleasesPETSc):
         self._K = p.assemble_tangent(self._K)
         self._tick("assembly", t0)
         t0 = time.perf_counter()
+        assert self._augmented is not None and ev.law is not None and ev.lin is not None  # with contact
         J = self._augmented.matrix(self._K, ev.law.dH_dw, ev.lin.dH_dy, ev.lin.dlam_dy)
         b = self._augmented.rhs(ev.R_free, ev.H, ev.law.dH_dw)
         self._tick("block_matrix", t0)
@@ -337,7 +342,8 @@ class MonolithicSolver(ReleasesPETSc):
         du, dz = direction[0], direction[1]
         p.u.x.array[:du.shape[0]] = u0 + alpha * du
         p.u.x.scatter_forward()
-        if p.has_contact:
+        if p.contact is not None:
+            assert z0 is not None  # the pair unknowns of the start, with contact
             p.contact.z = p.contact.advance(z0, dz, alpha, None if lin is None else lin.cartesian)
             p.contact.follow_slip(p.relative_displacement(), sliding_too=align_sliding)
 
@@ -353,9 +359,9 @@ class MonolithicSolver(ReleasesPETSc):
         for obj in (self._matrix, self._augmented):
             if obj is not None:
                 obj.destroy()
-        for obj in (self._K, self._mask):
-            if obj is not None:
-                obj.destroy()
+        for petsc_object in (self._K, self._mask):
+            if petsc_object is not None:
+                petsc_object.destroy()
 
 
 class _NewtonSystem:
@@ -367,8 +373,8 @@ class _NewtonSystem:
         self.report = report
         self.align_sliding = align_sliding  #: see MonolithicSolver.set_iterate
         self.current: _Evaluation | None = None
-        self._start = None  # (u0, z0, evaluation) of the step being taken
-        self._direction = None
+        self._start: tuple[np.ndarray, np.ndarray | None, _Evaluation] | None = None  # (u0, z0, evaluation) of the step being taken
+        self._direction: tuple[np.ndarray, np.ndarray] | None = None
         self._slope = math.nan
 
     def _merit(self, ev: _Evaluation) -> Merit:
@@ -383,6 +389,7 @@ class _NewtonSystem:
 
     def record(self, iteration: int, step_length: float, kind: str) -> None:
         p, ev = self.problem, self.current
+        assert ev is not None  # the driver evaluates before it records
         free_dropped_objects(p.petsc_comms)  # once per iteration, on every rank
         ref = ev.scale  # F, as the independent check has it (atol is no scale: issue 31)
         states = count_states(ev.law.state, p.comm) if ev.law is not None else (0, 0, 0)
@@ -393,23 +400,25 @@ class _NewtonSystem:
 
     def snapshot(self):
         p = self.problem
-        return p.u.x.array.copy(), (p.contact.z.copy() if p.has_contact else None), self.current
+        return p.u.x.array.copy(), (p.contact.z.copy() if p.contact is not None else None), self.current
 
     def restore(self, snapshot) -> Merit:
         p = self.problem
         u, z, ev = snapshot
         p.u.x.array[:] = u
-        if p.has_contact:
+        if p.contact is not None:
             p.contact.z = z.copy()
         self.current = ev
         return self._merit(ev)
 
     def start_step(self) -> None:
         p = self.problem
+        assert self.current is not None  # the driver evaluates before a step
         u0 = p.u.x.array[:self.current.R_free.getLocalSize()].copy()
-        self._start = (u0, p.contact.z.copy() if p.has_contact else None, self.current)
+        self._start = (u0, p.contact.z.copy() if p.contact is not None else None, self.current)
 
     def newton_direction(self, merit: Merit) -> str | None:
+        assert self._start is not None  # start_step came first
         ev = self._start[2]
         ref = ev.scale
         self.solver.linear.set_forcing(math.sqrt(ev.norm_R ** 2 + ev.norm_H ** 2) / ref)
@@ -420,6 +429,7 @@ class _NewtonSystem:
         return None
 
     def lm_direction(self, merit: Merit, globalisation: Globalisation) -> str | None:
+        assert self._start is not None  # start_step came first
         u0, z0, ev = self._start
         self.solver.set_iterate(u0, z0, (np.zeros_like(u0), None if z0 is None else np.zeros_like(z0)), 0.0)
         du, dz, self._slope = self.solver.lm_direction(ev, globalisation)
@@ -430,6 +440,7 @@ class _NewtonSystem:
         return self._slope
 
     def move(self, step_length: float) -> Merit:
+        assert self._start is not None and self._direction is not None  # start_step and a direction came first
         u0, z0, ev = self._start
         self.solver.set_iterate(u0, z0, self._direction, step_length, ev.lin, self.align_sliding)
         return self.evaluate()

@@ -41,13 +41,15 @@ import time
 
 import numpy as np
 from mpi4py import MPI
+from petsc4py import PETSc
 
 from dolfinx_nnqem.solvers.condensation import Condensation, check_dense_memory
 from dolfinx_nnqem.solvers.condensed import CondensedProblem, CondensedSystem, newton_step, rigid_start
+from dolfinx_nnqem.contact.laws import LawEvaluation
 from dolfinx_nnqem.contact.model import PairLaws
-from dolfinx_nnqem.solvers.contract import ReleasesPETSc
+from dolfinx_nnqem.solvers.contract import ReleasesPETSc, contact_model
 from dolfinx_nnqem.solvers.convergence import IterationRecord, SolveReport, count_states, logger
-from dolfinx_nnqem.numerics.linalg import free_dropped_objects, global_norm
+from dolfinx_nnqem.numerics.linalg import free_dropped_objects, global_norm, vec_norm
 from dolfinx_nnqem.numerics.newton import Globalisation, Merit, solve
 from dolfinx_nnqem.numerics.nonsmooth import Fallback, solve_dense
 from dolfinx_nnqem.problem.contact_problem import ContactProblem
@@ -123,6 +125,7 @@ class NNEQM1Solver(ReleasesPETSc):
         elif system.inner_failure is not None:
             report.message = system.inner_failure
         else:
+            assert final is not None  # the driver recorded the start at least
             report.message = (f"no convergence in {self.options.max_iterations} outer iterations "
                               f"(|R|/F = {final.equilibrium:.3e}, |H|/F = {final.contact:.3e})")
         return report
@@ -172,20 +175,25 @@ class NNEQM1Solver(ReleasesPETSc):
         self.condensation.destroy()
 
 
+_Evaluation = tuple[PETSc.Vec, np.ndarray, LawEvaluation, float, float, float]
+"""The outer iterate's (R_free, w, law, F, |R_free|, |H|)."""
+
+
 class _OuterSystem:
     """NNEQM1's outer Newton–Raphson as a backend of the Newton driver (full steps only)."""
 
     def __init__(self, solver: NNEQM1Solver, report: SolveReport):
         self.solver = solver
         self.problem = solver.problem
+        self.contact = contact_model(self.problem)  # the problem's, which NNEQM1Solver asks for
         self.report = report
-        self.laws = self.problem.contact.gathered_laws()
-        self.w_prev = self.problem.contact.gather(self.problem.contact.w_n)
+        self.laws = self.contact.gathered_laws()
+        self.w_prev = self.contact.gather(self.contact.w_n)
         self.steps = 0
         self.inner_iterations = 0
         self.inner_failure: str | None = None
-        self.current = None
-        self._step = None
+        self.current: _Evaluation | None = None  #: set by evaluate()
+        self._step: tuple[np.ndarray, np.ndarray] | None = None  #: (du, z_new), set by newton_direction
 
     def evaluate(self) -> Merit:
         p, s = self.problem, self.solver
@@ -194,9 +202,9 @@ class _OuterSystem:
         s._timings["assembly"] = s._timings.get("assembly", 0.0) + time.perf_counter() - t0
         R_free = p.free_residual(p.residual(F_int=F_int))
         w = p.relative_displacement()
-        law = p.contact.evaluate(w)
+        law = self.contact.evaluate(w)
         scale = p.force_scale(F_int)
-        norm_R, norm_H = R_free.norm(), global_norm(law.H, p.comm)
+        norm_R, norm_H = vec_norm(R_free), global_norm(law.H, p.comm)
         self.current = (R_free, w, law, scale, norm_R, norm_H)
         opts = s.options
         tol = opts.rtol * scale + opts.atol
@@ -205,6 +213,7 @@ class _OuterSystem:
     def record(self, iteration: int, step_length: float, kind: str) -> None:
         p = self.problem
         free_dropped_objects(p.petsc_comms)  # once per iteration, on every rank
+        assert self.current is not None  # the driver evaluates before it records
         _, _, law, scale, norm_R, norm_H = self.current
         ref = scale  # F, as the independent check has it (atol is no scale: issue 31)
         record = IterationRecord(iteration, norm_R / ref, norm_H / ref, step_length, "newton" if iteration else "",
@@ -214,12 +223,12 @@ class _OuterSystem:
         logger.info(record.line(self.solver.name))
 
     def snapshot(self):
-        return self.problem.u.x.array.copy(), self.problem.contact.z.copy(), self.current
+        return self.problem.u.x.array.copy(), self.contact.z.copy(), self.current
 
     def restore(self, snapshot) -> Merit:
         u, z, self.current = snapshot
         self.problem.u.x.array[:] = u
-        self.problem.contact.z = z.copy()
+        self.contact.z = z.copy()
         return self.evaluate()
 
     def start_step(self) -> None:
@@ -248,7 +257,8 @@ class _OuterSystem:
         dofs) that the step makes, with K_t δ on the right-hand side (:meth:`lifted_step`).
         """
         p, s, cond_solver = self.problem, self.solver, self.solver.condensation
-        model = p.contact
+        model = self.contact
+        assert self.current is not None  # evaluate() ran at this iterate
         R_free, w, _, scale, _, _ = self.current
         if not (s.settings.modified and self.steps > 0):
             cond_solver.factorise(p.assemble_tangent, "the tangent stiffness K_t")
@@ -299,11 +309,12 @@ class _OuterSystem:
 
     def move(self, step_length: float) -> Merit:
         p = self.problem
+        assert self._step is not None  # newton_direction made it
         du, z_new = self._step
         n_u = du.shape[0]
         p.u.x.array[:n_u] += step_length * du
         p.u.x.scatter_forward()
-        p.contact.z = z_new
+        self.contact.z = z_new
         self.steps += 1
         return self.evaluate()
 

@@ -40,6 +40,7 @@ from mpi4py import MPI
 
 from dolfinx_nnqem import compat, jit
 from dolfinx_nnqem.material.von_mises import GaussPointValues, deviator_coordinates, deviator_tensors, elastic_stress
+from dolfinx_nnqem.numerics.linalg import vec_norm
 from dolfinx_nnqem.numerics.newton import solve
 from dolfinx_nnqem.problem.contact_problem import ContactProblem
 from dolfinx_nnqem.solvers.condensation import Condensation, check_dense_memory
@@ -169,7 +170,7 @@ class NNEQM2Solver(ReleasesPETSc):
         report.iterations = outcome.iterations
         if outcome.converged:
             return self._own_values(start, backend.x)
-        if p.has_contact and p.contact.slip_following and outcome.iterations > 0:
+        if p.contact is not None and p.contact.slip_following and outcome.iterations > 0:
             logger.info(f"[{self.name}] increment to load factor {start.load_factor:.6g}: {outcome.message}; "
                         "trying again with the angle of sliding pairs on their slip after every step")
             tried = outcome.iterations
@@ -189,6 +190,7 @@ class NNEQM2Solver(ReleasesPETSc):
     def _newton(self, start: IncrementStart, tol: float, report: SolveReport, align_sliding: bool):
         """One attempt: the predictor step, then the Newton driver. (backend, outcome)."""
         p = self.problem
+        assert self.tangent is not None  # the return-map variant factorises K_t
         backend = ReturnMapIncrement(p, self.gp, self.elastic, self.tangent, start, tol, report, align_sliding)
         # the first step linearises where the increment starts, as the other solvers' first
         # iteration does; where prescribed values jump and nothing is extrapolated, at u_n with
@@ -205,7 +207,7 @@ class NNEQM2Solver(ReleasesPETSc):
     def _own_values(self, start: IncrementStart, x) -> GaussPointValues:
         """The converged iterate into the problem (z) and its Gauss-point values."""
         p, gp = self.problem, self.gp
-        if p.has_contact:
+        if p.contact is not None:
             p.contact.z = x.z.copy()
         du = self.elastic.K.createVecRight()
         du.getArray()[:] = x.du
@@ -219,6 +221,7 @@ class NNEQM2Solver(ReleasesPETSc):
     def _frozen_increment(self, start: IncrementStart, tol: float, report: SolveReport) -> GaussPointValues | None:
         """The seed's variant; its Gauss-point values, or None."""
         p, gp, st = self.problem, self.gp, self.problem.state
+        assert self._frozen is not None  # the frozen variant's
         solution = self._frozen.solve(start, tol, report)
         if solution is None:
             return None
@@ -227,7 +230,7 @@ class NNEQM2Solver(ReleasesPETSc):
         p.u.x.array[:n_u] = st.u_n.x.array[:n_u] + solution.du
         p.u.x.scatter_forward()
         p.u.x.array[p.bc_dofs] = u_bc
-        if p.has_contact:
+        if p.contact is not None:
             p.contact.z = p.contact.local_rows(solution.z).copy()
         du = self.elastic.K.createVecRight()
         du.getArray()[:] = solution.du
@@ -247,7 +250,7 @@ class NNEQM2Solver(ReleasesPETSc):
         scale = p.force_scale(F_int, F_ext)
         R = p.residual(F_int=F_int)
         R_free = p.free_residual(R)
-        eq = R_free.norm() / scale  # F, as the independent check has it (atol is no scale: issue 31)
+        eq = vec_norm(R_free) / scale  # F, as the independent check has it (atol is no scale: issue 31)
         # the radial-return stress of the same displacement, from the same converged state
         self._sigma_rm.interpolate(self._return_map)
         diff = np.linalg.norm((values.sigma - self._sigma_rm.x.array[:9 * gp.n_gp].reshape(gp.n_gp, 3, 3))

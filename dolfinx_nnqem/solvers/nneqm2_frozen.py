@@ -44,6 +44,7 @@ from dolfinx_nnqem.numerics.newton import Globalisation
 from dolfinx_nnqem.problem.contact_problem import ContactProblem
 from dolfinx_nnqem.solvers.condensation import Condensation
 from dolfinx_nnqem.solvers.condensed import CondensedProblem, CondensedSystem, newton_step, rigid_start
+from dolfinx_nnqem.solvers.contract import contact_model
 from dolfinx_nnqem.solvers.convergence import IterationRecord, SolveReport, logger
 from dolfinx_nnqem.solvers.gauss_points import GaussPointOperators
 from dolfinx_nnqem.solvers.increment_start import IncrementStart
@@ -89,12 +90,12 @@ class FrozenDirections:
         """Y = G loads (owned rows), S = dev ε(Y) gathered (NG, 5, m), B Y gathered (3NC, m)."""
         p, gp = self.p, self.gp
         if loads.getSize()[1] == 0:  # no Gauss point can yield (MUMPS refuses zero right-hand sides)
-            WB = np.zeros((3 * p.contact.num_global, 0)) if p.has_contact else None
+            WB = np.zeros((3 * p.contact.num_global, 0)) if p.contact is not None else None
             return np.zeros((loads.getLocalSize()[0], 0)), np.zeros((gp.num_yield_points, 5, 0)), WB
         Y = self.elastic.solve_columns(loads)
         S = gp.dev_strains_of_columns(Y)
         WB = None
-        if p.has_contact:
+        if p.contact is not None:
             model = p.contact
             BY = model.B.matMult(Y)
             m = Y.getSize()[1]
@@ -154,16 +155,17 @@ class FrozenDirections:
         s_n = gp.gather_yielding(start.s_n)
         mu = gp.gather_yielding(gp.mu)
         su = gp.gather_yielding(gp.stress_unit)
-        z, alpha = (start.z, np.zeros(self.elastic.num_modes)) if nc else (np.zeros((0, 3)), np.zeros(0))
+        z, alpha = np.zeros((0, 3)), np.zeros(0)  # with contact: the elastic contact solution's, below
         lam = np.zeros(0)
         elastic_iterations = 0
         if nc:
+            assert start.laws is not None  # the start has the pairs' data with contact
             z, alpha, elastic_iterations = self._elastic_contact(start, du0, WBB, F, tol)
             lam = start.laws.force(z)[0].reshape(-1)
         # -- the directions, frozen: from σ_n, else from the elastic contact solution's trial stress
         s_dir = s_n.copy()
         flat = equivalent_stress(s_n) <= 1e-8 * su
-        s_dir[flat] = s_n[flat] + 2.0 * mu[flat, None] * (e0[flat] + (SB[flat] @ lam if nc else 0.0))
+        s_dir[flat] = s_n[flat] + 2.0 * mu[flat, None] * (e0[flat] + (SB[flat] @ lam if SB is not None else 0.0))
         N = flow_direction(s_dir, su)
         t0 = time.perf_counter()
         Q = self._flow_matrix(N)
@@ -188,6 +190,7 @@ class FrozenDirections:
         z, dg = system.pair_unknowns(x), system.xi(x)
         du = start.du0 + YQ @ dg
         if nc:
+            assert YB is not None and start.laws is not None  # made, given with contact
             du += YB @ start.laws.force(z)[0].reshape(-1)
         if system.n_r:
             du += self.elastic.mode_array() @ system.modes(x)
@@ -205,9 +208,10 @@ class FrozenDirections:
         p = self.p
         n_r = self.elastic.num_modes
         if nc:
+            assert start.laws is not None and start.w_prev is not None  # given with contact
             u = p.state.u_n.x.petsc_vec.copy()
             u.axpy(1.0, du0)
-            w0 = p.contact.gather(p.relative_displacement(u))
+            w0 = contact_model(p).gather(p.relative_displacement(u))
             u.destroy()
             laws, w_prev, r = start.laws, start.w_prev, max(group.r for group in start.laws.groups)
             BN = self.elastic.mode_coupling()
@@ -227,6 +231,7 @@ class FrozenDirections:
         dense solve fails (then the directions come from what the predictor says), and the
         iterations it took."""
         p = self.p
+        assert start.z is not None and start.w_prev is not None and start.w_start is not None  # called with contact
         system = self._system(start, du0, WBB, np.zeros((3 * p.num_pairs, 0)), np.zeros((self.elastic.num_modes, 0)),
                               F, p.num_pairs)
         x0 = system.scaled(start.z, alpha=rigid_start(system.cond.BN, system.cond.w_free - start.w_prev.reshape(-1)))
@@ -255,7 +260,7 @@ class FrozenDirections:
         def log(k, norm, t, kind):
             counts = np.bincount(np.asarray(last.get("states", []), dtype=np.int64), minlength=3)[:3]
             records.append(IterationRecord(k, 0.0, norm, t if k else float("nan"), kind if k else "",
-                                           tuple(int(c) for c in counts), last.get("plastic", 0)))
+                                           (int(counts[0]), int(counts[1]), int(counts[2])), last.get("plastic", 0)))
             logger.debug(f"[nneqm2] it {k}: |H̃| = {norm:.3e} {kind} t={t:.2e}")
 
         t0 = time.perf_counter()
@@ -263,6 +268,7 @@ class FrozenDirections:
             # a floating body's predictor strains come from a load not yet balanced by contact:
             # one Newton step with the pairs' branches frozen where the increment starts and each
             # Gauss point on the branch it ended the last increment on
+            assert start.w_start is not None  # free modes: bodies held by contact
             frozen = system.at(start.w_start, system.pair_unknowns(x0))
             x0 = newton_step(residual(x0, frozen=frozen, yield_branch=rows.last_yielded), x0, system.advance)
         step_rule = system.advance

@@ -50,12 +50,14 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from dolfinx_nnqem.contact.laws import LawEvaluation
 from dolfinx_nnqem.material.von_mises import deviator_tensors
 from dolfinx_nnqem.numerics.linalg import free_dropped_objects, global_norm
 from dolfinx_nnqem.numerics.newton import Globalisation, Merit
 from dolfinx_nnqem.problem.contact_problem import ContactProblem
 from dolfinx_nnqem.solvers.condensation import Condensation
 from dolfinx_nnqem.solvers.condensed import CondensedProblem, CondensedSystem
+from dolfinx_nnqem.solvers.contract import contact_model
 from dolfinx_nnqem.solvers.convergence import IterationRecord, SolveReport, count_states, logger
 from dolfinx_nnqem.solvers.gauss_points import GaussPointOperators
 from dolfinx_nnqem.solvers.increment_start import IncrementStart
@@ -63,6 +65,9 @@ from dolfinx_nnqem.solvers.increment_start import IncrementStart
 __all__ = ["ReturnMapIncrement"]
 
 _SQRT23 = math.sqrt(2.0 / 3.0)
+
+_PairStep = tuple[CondensedSystem, np.ndarray, np.ndarray, object]
+"""The contact step: the condensed system, its start x0, the step dx and its chart."""
 
 
 class _Iterate:
@@ -74,7 +79,7 @@ class _Iterate:
         self.t: np.ndarray | None = None  #: trial deviators (n_gp, 5)
         self.G: np.ndarray | None = None  #: Δε_p − P(t) (n_gp, 5)
         self.w: np.ndarray | None = None  #: (num_local, 3)
-        self.law = None  #: the pair laws' evaluation at (w, z)
+        self.law: LawEvaluation | None = None  #: the pair laws' evaluation at (w, z)
         self.E = np.zeros(0)  #: the self-equilibrium rows Nᵀ(b + Bᵀλ + q)
         self.norms = (0.0, 0.0, 0.0)  #: |H|/F, |E|/F, |G̃|
 
@@ -113,9 +118,9 @@ class ReturnMapIncrement:
         self.F = start.force_scale
         self.row_scale = np.where(gp.yields, _SQRT23 * (3.0 * gp.mu + gp.material.hardening()) / gp.stress_unit, 0.0)
         self.timings: dict[str, float] = {}
-        z = problem.contact.z.copy() if problem.has_contact else np.zeros((0, 3))
+        z = problem.contact.z.copy() if problem.contact is not None else np.zeros((0, 3))
         self.x = _Iterate(z, np.zeros((gp.n_gp, 5)), np.zeros(elastic.num_modes))
-        self._direction = None
+        self._direction: tuple[_PairStep | None, np.ndarray, np.ndarray] | None = None  #: (pairs, dΔε_p, dα)
         self._x0: _Iterate | None = None
         self._psi0 = math.nan
 
@@ -124,7 +129,7 @@ class ReturnMapIncrement:
         """Bᵀλ(z) + q(Δε_p), constrained rows zeroed (a new vector laid out like V)."""
         p = self.p
         f = self._plastic_force(x.eps_p)
-        if p.has_contact:
+        if p.contact is not None:
             contact_force = p.contact.global_force(p.contact.force(x.z))
             f.axpy(1.0, contact_force)
             contact_force.destroy()
@@ -181,7 +186,7 @@ class ReturnMapIncrement:
         t0 = time.perf_counter()
         self._displace(x)
         norm_H = 0.0
-        if p.has_contact:
+        if p.contact is not None:
             x.w = p.relative_displacement()
             x.law = p.contact.evaluate(x.w, x.z)
             norm_H = global_norm(x.law.H, p.comm) / self.F
@@ -193,10 +198,11 @@ class ReturnMapIncrement:
         return Merit(psi, max(x.norms) <= self.tol)
 
     # -- steps ---------------------------------------------------------------------------------------
-    def _contact_step(self, r: PETSc.Vec, e: np.ndarray, z: np.ndarray, w_lin: np.ndarray):
+    def _contact_step(self, r: PETSc.Vec, e: np.ndarray, z: np.ndarray, w_lin: np.ndarray | None):
         """The step through the factorised K_t for the out-of-balance load ``r`` (free rows; the
         constrained rows carry the step's prescribed values), the floating bodies' residual ``e``
-        and the pair laws linearised at (``w_lin``, ``z``) (this rank's pairs): the pairs' new
+        and the pair laws linearised at (``w_lin``, ``z``) (this rank's pairs; no ``w_lin`` without
+        contact): the pairs' new
         unknowns by one frozen-branch step of the condensed contact problem
         (:class:`~dolfinx_nnqem.solvers.condensed.CondensedSystem`), and the displacement step
         y = G_t r + X dλ + N dα (owned rows).
@@ -207,13 +213,14 @@ class ReturnMapIncrement:
         x_r = tangent.solve(r)
         y = x_r.getArray(readonly=True).copy()
         pairs, dalpha = None, np.zeros(tangent.num_modes)
-        if p.has_contact:
+        if p.contact is not None:
             X, C = tangent.pair_flexibility()
-            model, laws = p.contact, self.start.laws
+            model, laws, w_prev = p.contact, self.start.laws, self.start.w_prev
+            assert laws is not None and w_prev is not None and w_lin is not None  # all given with contact
             z_all, w_all = model.gather(z), model.gather(w_lin)
             lam_m, _ = laws.force(z_all)
             cond = CondensedProblem(C=C, w_free=model.gather(model.B_times(x_r)).reshape(-1), w_m=w_all.reshape(-1),
-                                    lam_m=lam_m.reshape(-1), mu_f=laws.mu_f, g0=laws.g0, w_prev=self.start.w_prev,
+                                    lam_m=lam_m.reshape(-1), mu_f=laws.mu_f, g0=laws.g0, w_prev=w_prev,
                                     r=max(group.r for group in laws.groups), BN=tangent.mode_coupling(), e=e)
             system = CondensedSystem(laws, cond, self.F)
             x0 = system.scaled(z_all)
@@ -238,7 +245,7 @@ class ReturnMapIncrement:
         x_r.destroy()
         return pairs, dalpha, y
 
-    def _stepped_pairs(self, pairs, step_length: float) -> np.ndarray:
+    def _stepped_pairs(self, pairs: _PairStep, step_length: float) -> np.ndarray:
         """This rank's pair unknowns after ``step_length`` of the contact step ``pairs``; with the
         polar law the angles no force depends on (and, with ``align_sliding``, those of sliding
         pairs) put on the slip the step predicts, as the monolithic solver does after every step
@@ -248,9 +255,10 @@ class ReturnMapIncrement:
         z_all = system.pair_unknowns(x)
         laws = system.laws
         if laws.slip_following:
+            assert self.start.w_prev is not None  # a contact step: the start has the pairs' data
             w = system.relative_displacement(x, laws.force(z_all)[0]).reshape(system.nc, 3)
             z_all = laws.follow_slip(z_all, w, self.start.w_prev, sliding_too=self.align_sliding)
-        return self.p.contact.local_rows(z_all).copy()
+        return contact_model(self.p).local_rows(z_all).copy()
 
     def _owned_vector(self, owned: np.ndarray) -> PETSc.Vec:
         vec = self.elastic.K.createVecRight()
@@ -318,6 +326,7 @@ class ReturnMapIncrement:
         """The exact Newton step (module docstring): K_t at the iterate, the condensed contact
         step, the Gauss points' plastic strain corrections dΔε_p = −G + R' dev ε(y)."""
         p, gp, x, tangent = self.p, self.gp, self._x0, self.tangent
+        assert x is not None and x.G is not None and x.t is not None  # start_step copied the evaluated iterate
         t0 = time.perf_counter()
         tangent.factorise(p.assemble_tangent, "the tangent stiffness K_t")
         g = self._plastic_force(x.G)
@@ -343,6 +352,7 @@ class ReturnMapIncrement:
         return -2.0 * self._psi0
 
     def move(self, step_length: float) -> Merit:
+        assert self._x0 is not None and self._direction is not None  # set by start_step and newton_direction
         x0, (pairs, d_eps, dalpha) = self._x0, self._direction
         x = x0.copy()
         if pairs is not None:
@@ -369,7 +379,7 @@ class ReturnMapIncrement:
         p, x = self.p, self.x
         free_dropped_objects(p.petsc_comms)
         norm_H, norm_E, norm_G = x.norms
-        states = count_states(x.law.state, p.comm) if p.has_contact else (0, 0, 0)
+        states = count_states(x.law.state, p.comm) if x.law is not None else (0, 0, 0)  # x.law: with contact
         plastic = p.comm.allreduce(int(np.count_nonzero(np.linalg.norm(x.eps_p, axis=1) > 0.0)), op=MPI.SUM)
         record = IterationRecord(iteration, norm_E, norm_H, step_length, kind if iteration else "", states,
                                  plastic, yield_residual=norm_G)

@@ -121,7 +121,7 @@ def _check_memory(owner: str, value) -> None:
     """``max_memory_gb``: None or a finite number > 0."""
     if value is None:
         return
-    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not (math.isfinite(value) and value > 0):
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not (math.isfinite(value) and float(value) > 0):
         raise ValueError(f"{owner}: max_memory_gb = {value!r}; expected None or a number of GB > 0")
 
 

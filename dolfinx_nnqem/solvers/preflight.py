@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from petsc4py import PETSc
 
-from dolfinx_nnqem.numerics.linalg import clear_options, create_ksp, direct_options
+from dolfinx_nnqem.numerics.linalg import clear_options, create_ksp, direct_options, vec_norm
 
 __all__ = ["PetscSetupError", "check_direct_solver"]
 
@@ -45,7 +45,7 @@ def check_direct_solver(comm, petsc_options: dict | None) -> None:
                 A.setValue(i, j, -1.0)
     A.assemble()
     ksp = create_ksp(comm, prefix, options)
-    b, x = A.createVecs()
+    b, x = A.createVecs()  # type: ignore[misc]  # petsc4py's stub: Vec | tuple; without a side it is the pair
     try:
         ksp.setOperators(A)
         ksp.setUp()
@@ -54,13 +54,13 @@ def check_direct_solver(comm, petsc_options: dict | None) -> None:
         r = b.duplicate()
         A.mult(x, r)
         r.axpy(-1.0, b)
-        residual = r.norm() / b.norm()
+        residual = vec_norm(r) / vec_norm(b)
         r.destroy()
     except PETSc.Error as error:
         package = options.get("pc_factor_mat_solver_type", "")
         raise PetscSetupError(
-            f"PETSc error {error.ierr} setting up the linear solver (pc_type = {options.get('pc_type')!r}, "
-            f"solver package {package!r}); PETSc's own message is printed above", error.ierr) from None
+            f"PETSc error {error.ierr} setting up the linear solver (pc_type = {options.get('pc_type')!r}, "  # type: ignore[attr-defined]  # petsc4py's stub lacks Error.ierr
+            f"solver package {package!r}); PETSc's own message is printed above", error.ierr) from None  # type: ignore[attr-defined]  # as above
     finally:
         clear_options(prefix, options)
         for obj in (ksp, A, b, x):

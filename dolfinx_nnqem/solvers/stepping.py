@@ -108,15 +108,15 @@ def solve_load_steps(
         attribute (a dict: increment, load factor, reason, the worst nodes and pairs) is also
         handed to every callback that has a ``failed`` method before it is raised.
     """
-    increments, control = as_step_control(increments)  # increments None: automatic
-    increments, max_cutbacks, final_load_factor, max_displacement = check_stepping_arguments(
-        increments, max_cutbacks, final_load_factor, max_displacement)
+    equal, control = as_step_control(increments)  # equal: N equal increments, None: automatic
+    equal, max_cutbacks, final_load_factor, max_displacement = check_stepping_arguments(
+        equal, max_cutbacks, final_load_factor, max_displacement)
     check = check or CheckOptions()
     if resume is None:
-        schedule = _Schedule.starting(problem.load_factor_n, final_load_factor, increments, control)
+        schedule = _Schedule.starting(problem.load_factor_n, final_load_factor, equal, control)
         index0 = 0
     else:
-        schedule = _Schedule(resume.start, final_load_factor, resume.step, resume.cutbacks, increments, control)
+        schedule = _Schedule(resume.start, final_load_factor, resume.step, resume.cutbacks, equal, control)
         index0 = resume.index
     results: list[IncrementResult] = []
     ell = problem.load_factor_n
@@ -162,7 +162,11 @@ class _Schedule:
     @classmethod
     def starting(cls, start: float, final: float, increments: int | None,
                  control: AutomaticIncrements | None) -> _Schedule:
-        step = (final - start) / increments if control is None else control.first_step(final - start)
+        if control is None:
+            assert increments is not None  # as_step_control gives one of the two
+            step = (final - start) / increments
+        else:
+            step = control.first_step(final - start)
         return cls(start, final, step, 0, increments, control)
 
     @property
@@ -202,6 +206,7 @@ class _Schedule:
             self.step = self.direction * self.control.next_step(abs(self.step), iterations, self.span)
             self.cutbacks = 0
         elif self.cutbacks:
+            assert self.increments is not None  # equal increments (no control)
             self.step = self.direction * min(abs(2.0 * self.step), self.span / self.increments)
             self.cutbacks = max(self.cutbacks - 1, 0)
 
@@ -252,7 +257,7 @@ def _commit(problem, solver, report: SolveReport, target: float, *, index: int, 
 def _fail(problem, solver, report: SolveReport, target: float, *, increment: int, cutbacks: int, callbacks,
           last_converged: float | None = None) -> None:
     """Restore the last converged state and raise ConvergenceError with the failure record."""
-    failure = {"increment": increment, "load_factor": float(target)}
+    failure: dict[str, object] = {"increment": increment, "load_factor": float(target)}
     if last_converged is not None:
         failure["last_converged_load_factor"] = float(last_converged)
     failure.update({"cutbacks": cutbacks, "reason": report.message, **failure_details(problem)})
