@@ -393,10 +393,12 @@ def _install_sigterm() -> None:
 
     def on_term(signum, frame):
         interrupts.received.append(signum)
+        _abort_unless_ended(EXIT_TERMINATED, "terminated (SIGTERM)")
         raise Terminated()
 
     def on_int(signum, frame):
         interrupts.received.append(signum)
+        _abort_unless_ended(EXIT_INTERRUPTED, "interrupted (Ctrl-C)")
         raise KeyboardInterrupt()
 
     try:
@@ -407,6 +409,15 @@ def _install_sigterm() -> None:
         pass
 
 
+def _abort_unless_ended(code: int, reason: str) -> None:
+    """Under MPI, an interrupt that does not end the job in bounded time aborts it
+    (:func:`dolfinx_nnqem.collective.abort_unless_ended`)."""
+    if "mpi4py.MPI" in sys.modules:
+        from dolfinx_nnqem import collective
+
+        collective.abort_unless_ended(code, reason)
+
+
 def main(argv: list[str] | None = None) -> int:
     interrupts.received.clear()
     _hold_signals()  # start-up: an interrupt is recorded, and acted on once the run can end cleanly
@@ -414,6 +425,8 @@ def main(argv: list[str] | None = None) -> int:
         code = _main(argv)
     finally:
         _install_sigterm()  # never leave the start-up handlers behind (in-process callers)
+        if "dolfinx_nnqem.collective" in sys.modules and not interrupts.is_command_line():
+            sys.modules["dolfinx_nnqem.collective"].disarm_abort()  # (the command line's process ends)
     if argv is None and interrupts.is_command_line():
         _exit(code)
     return code
@@ -542,7 +555,11 @@ def _raise_held_signal() -> None:
     if interrupts.deferred:
         first = interrupts.deferred[0]
         interrupts.deferred.clear()
-        raise Terminated() if first == signal.SIGTERM else KeyboardInterrupt()
+        if first == signal.SIGTERM:
+            _abort_unless_ended(EXIT_TERMINATED, "terminated (SIGTERM)")
+            raise Terminated()
+        _abort_unless_ended(EXIT_INTERRUPTED, "interrupted (Ctrl-C)")
+        raise KeyboardInterrupt()
 
 
 if __name__ == "__main__":
