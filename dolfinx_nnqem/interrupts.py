@@ -16,8 +16,11 @@ This module imports nothing of the package: ``dolfinx_nnqem/__init__.py`` calls 
 
 from __future__ import annotations
 
+import contextlib
 import signal
 import sys
+import threading
+from collections.abc import Iterator
 
 __all__ = ["deferred", "received", "defer", "hold", "is_command_line", "hold_in_command_line"]
 
@@ -63,3 +66,27 @@ def hold_in_command_line() -> None:
     from petsc4py import PETSc  # noqa: F401
 
     hold()
+
+
+@contextlib.contextmanager
+def held() -> Iterator[None]:
+    """Hold SIGINT and SIGTERM for a short block that must not stop half-way (the renames of a
+    commit point: an interrupt between two of them left a staged temporary behind); a signal
+    received meanwhile is raised again, to the handler in place before, when the block ends.
+    Never around a collective call (a rank held there could not be interrupted at all). Outside
+    the main thread, where Python runs no handler, it holds nothing."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    pending: list[int] = []
+    signums = (signal.SIGINT, signal.SIGTERM)
+    previous = {signum: signal.getsignal(signum) for signum in signums}
+    for signum in signums:
+        signal.signal(signum, lambda signum, frame: pending.append(signum))
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+        if pending:
+            signal.raise_signal(pending[0])

@@ -23,6 +23,7 @@ import os
 from collections.abc import Callable
 from pathlib import Path
 
+from dolfinx_nnqem import interrupts
 from dolfinx_nnqem.collective import agree, on_rank0
 
 __all__ = ["OutputError", "StagedFiles", "atomic_write", "atomic_write_text", "commit", "fsync_directory",
@@ -142,18 +143,20 @@ class StagedFiles:
         """Write ``text`` to ``path``'s temporary (a later stage of the same path replaces it)."""
         path = Path(path)
         tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}-staged")  # not atomic_write's temporary
-        _write_temporary(path, tmp, lambda t: t.write_text(text), durable=False, rename=False)
-        self._files[path] = tmp
+        with interrupts.held():  # the temporary is written and listed, or neither
+            _write_temporary(path, tmp, lambda t: t.write_text(text), durable=False, rename=False)
+            self._files[path] = tmp
 
     def replace_all(self) -> None:
         """Rename every staged file into place, in the order staged (call after a sync)."""
-        files, self._files = self._files, {}
-        for path, tmp in files.items():
-            try:
-                os.replace(tmp, path)
-            except OSError as error:
-                raise OutputError(error.errno or _errno.EIO, f"cannot write {path}: {error.strerror}",
-                                  str(path)) from error
+        with interrupts.held():  # every rename, or none (an interrupt half-way left a temporary)
+            files, self._files = self._files, {}
+            for path, tmp in files.items():
+                try:
+                    os.replace(tmp, path)
+                except OSError as error:
+                    raise OutputError(error.errno or _errno.EIO, f"cannot write {path}: {error.strerror}",
+                                      str(path)) from error
 
     def commit_here(self, folder: str | os.PathLike) -> None:
         """Sync and replace on this rank alone (the end of a run, which may be no collective
@@ -166,12 +169,13 @@ class StagedFiles:
 
     def discard(self) -> None:
         """Remove the staged temporaries (nothing is renamed)."""
-        files, self._files = self._files, {}
-        for tmp in files.values():
-            try:
-                tmp.unlink()
-            except OSError:
-                pass
+        with interrupts.held():
+            files, self._files = self._files, {}
+            for tmp in files.values():
+                try:
+                    tmp.unlink()
+                except OSError:
+                    pass
 
 
 def commit(comm, folder: str | os.PathLike, *staged: StagedFiles) -> None:
