@@ -32,7 +32,7 @@ from dolfinx.io import XDMFFile
 from dolfinx_nnqem import compat
 from dolfinx_nnqem.collective import on_rank0
 from dolfinx_nnqem.io.safe_io import OutputError, StagedFiles, atomic_write_text
-from dolfinx_nnqem.io.xdmf_steps import read_field_index
+from dolfinx_nnqem.io.xdmf_steps import child, data_path, read_field_index
 from dolfinx_nnqem.material.von_mises import von_mises_stress
 
 __all__ = ["CellMeans", "FieldSeriesWriter", "read_field_index"]
@@ -243,29 +243,13 @@ def _step_grid(step_file: Path, t: float) -> ET.Element:
     grid = ET.Element("Grid", {"Name": step_file.stem, "GridType": "Uniform"})
     mesh_grid = next(g for g in tree.iter("Grid") if g.find("Topology") is not None and g.find("Geometry") is not None)
     for tag in ("Topology", "Geometry"):
-        element = _child(mesh_grid, tag)
+        element = child(mesh_grid, tag)
         for item in element.iter("DataItem"):
-            item.text = prefix + _data_path(item)
+            item.text = prefix + data_path(item)
         grid.append(element)
     ET.SubElement(grid, "Time", {"Value": f"{t:.17g}"})
     for attribute in tree.iter("Attribute"):
         for item in attribute.iter("DataItem"):
-            item.text = prefix + _data_path(item)
+            item.text = prefix + data_path(item)
         grid.append(attribute)
     return grid
-
-
-def _child(element: ET.Element, tag: str) -> ET.Element:
-    """The first ``tag`` child of ``element``; a ValueError naming both in a damaged file."""
-    child = element.find(tag)
-    if child is None:
-        raise ValueError(f"XDMF: a {element.tag} without {tag}")
-    return child
-
-
-def _data_path(item: ET.Element) -> str:
-    """The data a DataItem points to (``file.h5:/dataset``); a ValueError in a damaged file."""
-    if item.text is None:
-        raise ValueError("XDMF: an empty DataItem")
-    return item.text.strip()
-

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["read_field_index"]
+__all__ = ["child", "data_path", "read_field_index"]
 
 
 def read_field_index(folder: str | os.PathLike, last_only: bool = False) -> list[dict]:
@@ -34,27 +34,32 @@ def read_field_index(folder: str | os.PathLike, last_only: bool = False) -> list
     grids = [grid for grid in tree.iter("Grid") if grid.get("GridType") == "Uniform"]
     steps = []
     for grid in grids[-1:] if last_only else grids:
-        step: dict[str, float | np.ndarray] = {"time": float(_child(grid, "Time").attrib["Value"])}
+        step: dict[str, float | np.ndarray] = {"time": float(child(grid, "Time").attrib["Value"])}
         for tag, key in (("Topology", "topology"), ("Geometry", "geometry")):
-            step[key] = _read_item(folder, _child(_child(grid, tag), "DataItem"), h5py)
+            step[key] = _read_item(folder, child(child(grid, tag), "DataItem"), h5py)
         for attribute in grid.findall("Attribute"):
-            step[attribute.attrib["Name"]] = _read_item(folder, _child(attribute, "DataItem"), h5py)
+            step[attribute.attrib["Name"]] = _read_item(folder, child(attribute, "DataItem"), h5py)
         steps.append(step)
     return steps
 
 
-def _child(element: ET.Element, tag: str) -> ET.Element:
+def child(element: ET.Element, tag: str) -> ET.Element:
     """The first ``tag`` child of ``element``; a ValueError naming both in a damaged file."""
-    child = element.find(tag)
-    if child is None:
+    found = element.find(tag)
+    if found is None:
         raise ValueError(f"XDMF: a {element.tag} without {tag}")
-    return child
+    return found
+
+
+def data_path(item: ET.Element) -> str:
+    """The data a DataItem points to (``file.h5:/dataset``); a ValueError in a damaged file."""
+    if item.text is None:
+        raise ValueError("XDMF: an empty DataItem")
+    return item.text.strip()
 
 
 def _read_item(folder: Path, item: ET.Element, h5py) -> np.ndarray:
-    if item.text is None:
-        raise ValueError("XDMF: an empty DataItem")
-    file, dataset = item.text.strip().split(":", 1)
+    file, dataset = data_path(item).split(":", 1)
     try:
         with h5py.File(folder / file, "r") as h5:
             return np.asarray(h5[dataset])
