@@ -15,9 +15,10 @@ setting, and logging's ERROR records are always shown.
 from __future__ import annotations
 
 import logging
+import sys
 import warnings
 
-__all__ = ["GMSH_QUIET", "GMSH_VERBOSE", "apply_gmsh_options", "apply_vtk_options", "gmsh_options", "show_third_party_output",
+__all__ = ["GMSH_QUIET", "GMSH_VERBOSE", "apply_gmsh_options", "apply_numba_options", "apply_vtk_options", "gmsh_options", "show_third_party_output",
            "third_party_output_shown"]
 
 # gmsh's General.Verbosity: 0 silent, 1 errors, 2 warnings, 3 direct, 4 information, 5 status
@@ -25,15 +26,32 @@ GMSH_QUIET = {"General.Terminal": 0, "General.Verbosity": 1}
 GMSH_VERBOSE = {"General.Terminal": 1, "General.Verbosity": 5}
 
 _shown = False
+_silenced = False  # show_third_party_output(False) was called (a user's program never calls it)
 
 
 def show_third_party_output(shown: bool) -> None:
     """Show (``-v``) or silence (the default) gmsh, numba and Python warnings of other packages."""
-    global _shown
+    global _shown, _silenced
     _shown = bool(shown)
+    _silenced = not _shown
     numba_logger = logging.getLogger("numba")
     numba_logger.setLevel(logging.DEBUG if _shown else logging.ERROR)
+    if "numba" in sys.modules:  # else when numba is imported (it is only where a kernel compiles)
+        apply_numba_options()
     if _shown:
+        return
+    # warnings raised in other packages (deprecations in VTK, h5py, ...): silent by default; this
+    # package's own warnings (module dolfinx_nnqem.*) keep Python's default filters
+    warnings.filterwarnings("ignore", category=DeprecationWarning)
+    warnings.filterwarnings("ignore", category=FutureWarning, module=r"^(?!dolfinx_nnqem).*")
+    warnings.filterwarnings("ignore", category=UserWarning, module=r"^(?!dolfinx_nnqem).*")
+
+
+def apply_numba_options() -> None:
+    """numba's warnings silenced where :func:`show_third_party_output` silenced the libraries
+    (call it where numba is imported: its import costs a run 0.1–0.2 s of CPU, so numba is
+    imported only where a kernel is compiled)."""
+    if not _silenced:
         return
     try:
         from numba.core.errors import NumbaWarning
@@ -41,11 +59,6 @@ def show_third_party_output(shown: bool) -> None:
         warnings.simplefilter("ignore", NumbaWarning)
     except ImportError:  # numba is a dependency, but a missing one must not end the run here
         pass
-    # warnings raised in other packages (deprecations in VTK, h5py, ...): silent by default; this
-    # package's own warnings (module dolfinx_nnqem.*) keep Python's default filters
-    warnings.filterwarnings("ignore", category=DeprecationWarning)
-    warnings.filterwarnings("ignore", category=FutureWarning, module=r"^(?!dolfinx_nnqem).*")
-    warnings.filterwarnings("ignore", category=UserWarning, module=r"^(?!dolfinx_nnqem).*")
 
 
 def third_party_output_shown() -> bool:

@@ -11,14 +11,17 @@ for the other ranks to fail too, and otherwise aborts the whole job with the exi
 
 from __future__ import annotations
 
+import faulthandler
 import os
 import sys
+import threading
 import time
 from collections.abc import Callable
 
 from mpi4py import MPI
 
-__all__ = ["CollectiveError", "agree", "end_job", "finish_collectively", "on_rank0", "rebuild"]
+__all__ = ["CollectiveError", "abort_unless_ended", "agree", "disarm_abort", "end_job", "finish_collectively",
+           "on_rank0", "rebuild"]
 
 ABORT_TIMEOUT_S = float(os.environ.get("NNQEM_ABORT_TIMEOUT", "10"))
 """How long a failing rank waits for the others to fail too before aborting the job (seconds)."""
@@ -148,3 +151,46 @@ def end_job(code: int) -> None:
         time.sleep(ABORT_GRACE_S)  # let mpiexec forward the message first (see finish_collectively)
         MPI.COMM_WORLD.Abort(code)
     os._exit(code)
+
+
+_WATCHDOG: threading.Timer | None = None
+
+
+def abort_unless_ended(code: int, reason: str, timeout: float | None = None) -> None:
+    """Abort the whole job with ``code`` if this process has not ended ``timeout`` seconds from now
+    (default: twice :data:`ABORT_TIMEOUT_S` plus 5 s); under MPI with several ranks only, armed once.
+
+    For an interrupt: each rank meets the signal wherever it is, and a rank that stops between
+    two collective calls can leave another waiting in a call it will never make, a collective
+    that neither :func:`agree` nor :func:`finish_collectively` reaches (measured on OpenMPI: 1 of
+    6 runs with SIGINT sent to the two ranks alone waited forever). A timer thread aborts the job
+    when the main thread waits in MPI (mpi4py releases the GIL there); should the main thread
+    hold the GIL inside a library call, ``faulthandler`` ends this rank 10 s later (it needs no
+    GIL; exit code 1, the job's launcher then ends the other ranks).
+    """
+    global _WATCHDOG
+    if _WATCHDOG is not None or MPI.COMM_WORLD.size == 1:
+        return
+    timeout = 2 * ABORT_TIMEOUT_S + 5 if timeout is None else timeout
+    rank = MPI.COMM_WORLD.rank
+
+    def fire() -> None:
+        sys.stderr.write(f"dolfinx-nnqem: {reason}; rank {rank} had not ended {timeout:g} s later (the ranks "
+                         f"stopped at different collective calls): aborting the job with exit code {code}\n")
+        sys.stderr.flush()
+        time.sleep(ABORT_GRACE_S)  # let mpiexec forward the message first (see finish_collectively)
+        MPI.COMM_WORLD.Abort(code)
+
+    _WATCHDOG = threading.Timer(timeout, fire)
+    _WATCHDOG.daemon = True
+    _WATCHDOG.start()
+    faulthandler.dump_traceback_later(timeout + 10, exit=True)
+
+
+def disarm_abort() -> None:
+    """Cancel :func:`abort_unless_ended` (the run ended; an in-process caller goes on)."""
+    global _WATCHDOG
+    if _WATCHDOG is not None:
+        _WATCHDOG.cancel()
+        faulthandler.cancel_dump_traceback_later()
+        _WATCHDOG = None

@@ -4,8 +4,9 @@ The command line ends every run by its exit-code contract (130 after Ctrl-C, 143
 one line, the summary saying "interrupted"). Two things stood in its way and are handled here:
 
 * an interrupt during the first imports showed a KeyboardInterrupt traceback, and a SIGTERM met
-  PETSc's own handler (an error dump, exit 15): :func:`hold_in_command_line` defers both signals
-  from the package's first import on, in the command line only (never in a user's program);
+  PETSc's own handler (an error dump, exit 15): :func:`hold` defers both signals from the
+  package's first import on, in the command line only (never in a user's program), and
+  :func:`hold_in_command_line` renews the hold after PETSc's set-up;
 * an error raised while an interrupt was being handled (VTK's lazy importer turns the
   KeyboardInterrupt into an ImportError) must still be reported as the interrupt:
   :data:`received` remembers the signals the command line's handlers acted on.
@@ -15,10 +16,13 @@ This module imports nothing of the package: ``dolfinx_nnqem/__init__.py`` calls 
 
 from __future__ import annotations
 
+import contextlib
 import signal
 import sys
+import threading
+from collections.abc import Iterator
 
-__all__ = ["deferred", "received", "defer", "is_command_line", "hold_in_command_line"]
+__all__ = ["deferred", "received", "defer", "hold", "is_command_line", "hold_in_command_line"]
 
 deferred: list[int] = []
 """Signals received while the command line was starting (imports, MPI and PETSc set-up):
@@ -40,17 +44,20 @@ def is_command_line() -> bool:
         a == "-m" and b == "dolfinx_nnqem" for a, b in zip(argv, argv[1:]))
 
 
+def hold() -> None:
+    """Defer SIGINT and SIGTERM (record them in :data:`deferred`)."""
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, defer)
+
+
 def hold_in_command_line() -> None:
     """Defer SIGINT and SIGTERM until ``cli.main`` can end the run by the exit-code contract.
 
     PETSc installs its SIGTERM handler at the C level when it initialises: it is initialised here
     at once (after ``dolfinx_solver``, as the PyPI wheel needs) and the hold renewed, before the
-    long imports.
+    long imports. The command line calls this once it has read its arguments (``--help`` and a
+    bad command line need no MPI and no PETSc).
     """
-    def hold():
-        for signum in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(signum, defer)
-
     hold()
     try:
         import dolfinx_solver  # noqa: F401  (the PyPI wheel: before petsc4py)
@@ -59,3 +66,27 @@ def hold_in_command_line() -> None:
     from petsc4py import PETSc  # noqa: F401
 
     hold()
+
+
+@contextlib.contextmanager
+def held() -> Iterator[None]:
+    """Hold SIGINT and SIGTERM for a short block that must not stop half-way (the renames of a
+    commit point: an interrupt between two of them left a staged temporary behind); a signal
+    received meanwhile is raised again, to the handler in place before, when the block ends.
+    Never around a collective call (a rank held there could not be interrupted at all). Outside
+    the main thread, where Python runs no handler, it holds nothing."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    pending: list[int] = []
+    signums = (signal.SIGINT, signal.SIGTERM)
+    previous = {signum: signal.getsignal(signum) for signum in signums}
+    for signum in signums:
+        signal.signal(signum, lambda signum, frame: pending.append(signum))
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+        if pending:
+            signal.raise_signal(pending[0])

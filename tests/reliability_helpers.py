@@ -82,6 +82,23 @@ def kill_session(process: subprocess.Popen, sig=signal.SIGKILL) -> None:
     os.killpg(process.pid, sig)
 
 
+def signal_ranks(process: subprocess.Popen, sig: int) -> int:
+    """Send ``sig`` to the Python processes of the run's session (the MPI ranks), not to the
+    launcher; returns how many were signalled."""
+    python = os.path.realpath(sys.executable)
+    count = 0
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit() or int(entry.name) == process.pid:
+            continue
+        try:
+            if os.getsid(int(entry.name)) == process.pid and os.path.realpath(entry / "exe") == python:
+                os.kill(int(entry.name), sig)
+                count += 1
+        except OSError:
+            pass  # the process ended meanwhile, or is not ours to inspect
+    return count
+
+
 @contextlib.contextmanager
 def small_file_system(folder: Path, size: str = "1m"):
     """A tmpfs of ``size`` mounted at ``folder`` for the test (a full disk gives ENOSPC, which

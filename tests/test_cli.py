@@ -193,3 +193,43 @@ def test_a_picture_vtk_cannot_render_is_skipped_with_the_reason(tmp_path, monkey
     print(f"\n  {drawn}")
     assert drawn["deformed.png"] == "not drawn: no display (a test)"
     assert not isinstance(drawn["load_curve.png"], str) and not isinstance(drawn["convergence.png"], str)
+
+
+def test_the_command_line_reads_its_arguments_before_the_heavy_imports():
+    """Issue 32: ``--help`` and a bad command line import neither MPI nor PETSc nor DOLFINx (they
+    took 1 s before), and the command line's list of methods is the solvers' own."""
+    import subprocess
+    import sys
+
+    from reliability_helpers import env
+
+    from dolfinx_nnqem.cli import METHODS
+    from dolfinx_nnqem.solvers.options import METHODS as SOLVER_METHODS
+
+    assert METHODS == SOLVER_METHODS
+    for args in (["--help"], ["run", "--help"], ["run", "--increments", "0", "p.toml"]):
+        run = subprocess.run([sys.executable, "-X", "importtime", "-m", "dolfinx_nnqem", *args], env=env(),
+                             capture_output=True, text=True, timeout=120)
+        imported = {line.split("|")[-1].strip() for line in run.stderr.splitlines() if line.startswith("import time:")}
+        heavy = sorted(imported & {"mpi4py", "petsc4py", "dolfinx", "dolfinx_solver", "numpy", "numba"})
+        print(f"\n  {' '.join(args)}: exit {run.returncode}, {len(imported)} modules imported, of the heavy ones {heavy}")
+        assert run.returncode == (EXIT_USAGE if "0" in args else EXIT_OK) and heavy == []
+
+
+def test_a_small_run_does_not_import_numba(tmp_path):
+    """Issue 32: the two-beam run evaluates its pair laws as Python (laws._CompiledWhenItPays) and
+    keeps numba out of DOLFINx's import (cli._start_up): numba's import and start cost a run of
+    this size a third of its CPU time."""
+    import subprocess
+    import sys
+
+    from reliability_helpers import env, problem_file
+
+    p = problem_file(tmp_path, increments=2)
+    run = subprocess.run([sys.executable, "-X", "importtime", "-m", "dolfinx_nnqem", "-q", "run", str(p), "--out",
+                          str(tmp_path / "out"), "--no-pictures"], env=env(), capture_output=True, text=True,
+                         timeout=300)
+    imported = {line.split("|")[-1].strip() for line in run.stderr.splitlines() if line.startswith("import time:")}
+    numba = sorted(m for m in imported if m.startswith("numba."))
+    print(f"\n  exit {run.returncode}; {len(imported)} modules imported; numba's modules among them: {numba[:5]}")
+    assert run.returncode == EXIT_OK and numba == [] and "dolfinx.fem.petsc" in imported

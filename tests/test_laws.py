@@ -812,3 +812,42 @@ def test_polar_advance_keeps_the_angle_of_a_rounding_size_friction_force():
     assert turned[0, 2] != 0.7
     np.testing.assert_allclose(law.force(turned)[0][0, 1:], dy[0, 1:], rtol=1e-12)
     np.testing.assert_array_equal(AlartCurnierLaw().advance(z, dy, 1.0, None, force_unit), z + dy)
+
+
+def test_the_python_kernels_equal_numbas_bit_for_bit():
+    """The laws run their kernels as plain Python until compiling pays (issue 32,
+    ``laws._CompiledWhenItPays``): both must give the same bits, on smooth points, on every kink
+    of the module docstring (a = 0, |x| = rho, y = ±rho, rho = 0) and on open pairs, and the
+    switch must happen once the Python time reaches ``COMPILE_AFTER_S``."""
+    from dolfinx_nnqem.contact import laws
+
+    rng = np.random.default_rng(32)
+    nc = 40
+    r = 3.0e9
+    cases = 0
+    for trial in range(60):
+        w = rng.normal(size=(nc, 3)) * 1e-5
+        w_prev = w + rng.normal(size=(nc, 3)) * 1e-6 * rng.integers(0, 2, (nc, 1))
+        z = rng.normal(size=(nc, 3)) * 1e4
+        z[:, 0] = np.abs(z[:, 0]) * rng.integers(0, 2, nc)
+        if trial % 2:
+            z[:, 2] = rng.uniform(-4.0, 4.0, nc)  # polar angles
+        g0 = rng.normal(size=nc) * 1e-5 * rng.integers(0, 2, nc)
+        mu = rng.uniform(0.0, 1.0, nc) * rng.integers(0, 2, nc)
+        # kinks: a = p_n - r g = 0 exactly on some pairs, |x| = rho (stick/slip edge) on others
+        z[:5, 0] = r * (g0[:5] + w[:5, 0])
+        s = w[5:10, 1:] - w_prev[5:10, 1:]
+        rho = mu[5:10] * np.maximum(z[5:10, 0] - r * (g0[5:10] + w[5:10, 0]), 0.0)
+        z[5:10, 1:] = r * s + rho[:, None] * np.array([1.0, 0.0])
+        for kernel in (laws.alart_curnier_kernel, laws.polar_kernel):
+            python = kernel(w, w_prev, z, g0, mu, r)
+            compiled = laws._CompiledWhenItPays(kernel).compile()(w, w_prev, z, g0, mu, r)
+            for a, b in zip(python, compiled):
+                assert a.dtype == b.dtype and np.array_equal(a, b)
+            cases += 1
+    runner = laws._CompiledWhenItPays(laws.alart_curnier_kernel)
+    runner.python_s = laws.COMPILE_AFTER_S - 1e-9
+    runner(w, w_prev, z, g0, mu, r)
+    print(f"\n  {cases} kernel evaluations of {nc} pairs: Python and numba bit for bit equal; "
+          f"compiled after {runner.python_s:.3f} s of Python: {runner.compiled is not None}")
+    assert runner.compiled is not None

@@ -11,7 +11,8 @@ import pytest
 from dolfinx_nnqem import compat
 from dolfinx_nnqem.cli import EXIT_BAD_INPUT, EXIT_IO, EXIT_OK
 
-from reliability_helpers import ROOT, env, finish, kill_session, problem_file, run_in_session, start, wait_for_checkpoint
+from reliability_helpers import (ROOT, env, finish, kill_session, problem_file, run_in_session, signal_ranks, start,
+                                 wait_for_checkpoint)
 
 pytestmark = pytest.mark.mpi
 SCRIPT = ROOT / "tests" / "mpi_scripts" / "rank_failure.py"
@@ -108,18 +109,31 @@ def test_ctrl_c_on_two_ranks(tmp_path):
     out = tmp_path / "out"
     job = start(["-q", "run", str(p), "--out", str(out)], ranks=2)
     wait_for_checkpoint(out, 2, job)
+    from mpi4py import MPI
+
+    open_mpi = "Open MPI" in MPI.Get_library_version()
     t0 = time.perf_counter()
-    kill_session(job, signal.SIGINT)
+    if open_mpi:
+        # OpenMPI's mpirun answers its own SIGINT by killing the ranks about 0.5 s later, which
+        # a loaded machine's ranks may not outrun (documented in docs/reliability.md): the
+        # ranks' side of the contract is tested with the signal sent to them alone
+        assert signal_ranks(job, signal.SIGINT) == 2
+    else:
+        kill_session(job, signal.SIGINT)
     _, err = finish(job, LIMIT_S)
     wall = time.perf_counter() - t0
     lines = [line for line in err.splitlines() if line.startswith("dolfinx-nnqem")]
     summary = json.loads((out / "summary.json").read_text())
     print(f"\n  exit {job.returncode} {wall:.1f} s after SIGINT: {lines}; summary status {summary['status']}")
-    assert summary["status"] == "interrupted" and not list(out.rglob(".*.tmp-*"))
-    from mpi4py import MPI
-
-    if "Open MPI" in MPI.Get_library_version():
-        return  # OpenMPI's mpirun, itself interrupted, ends with its own code (1) and drops the ranks' output
+    assert not list(out.rglob(".*.tmp-*"))
+    if "had not ended" in err:
+        # the ranks met the signal at different collective calls: the watchdog ended the job
+        # (collective.abort_unless_ended) with the interrupt's code; the summary could not be told
+        assert job.returncode == EXIT_INTERRUPTED and summary["status"] == "running"
+        return
+    assert summary["status"] == "interrupted", err[-4000:]
+    if open_mpi:
+        return  # OpenMPI's mpirun ends a job whose ranks exited with an error with its own code (1)
     assert job.returncode == EXIT_INTERRUPTED and len(lines) == 1
 
 
@@ -154,3 +168,26 @@ def test_a_nearly_full_file_system(tmp_path, ranks):
         assert code == EXIT_IO and len(lines) == 1, (free_kb, code, lines)
         assert "No space left on device" in lines[0] and str(tmp_path / "disk" / "out") in lines[0]
         assert status == "error" and not left
+
+
+def test_ranks_stuck_at_different_collective_calls_after_an_interrupt_are_aborted(tmp_path):
+    """Each rank meets an interrupt where it is; when rank 0 then waits in one collective call and
+    rank 1 in another, the watchdog armed by the interrupt (collective.abort_unless_ended) ends
+    the job with the interrupt's exit code and a message, instead of a job that waits forever."""
+    from dolfinx_nnqem.cli import EXIT_INTERRUPTED
+
+    script = tmp_path / "stuck.py"
+    script.write_text(
+        "import dolfinx_nnqem\n"
+        "from mpi4py import MPI\n"
+        "from dolfinx_nnqem import collective\n"
+        "comm = MPI.COMM_WORLD\n"
+        "collective.abort_unless_ended(130, 'interrupted (a test)', timeout=2.0)\n"
+        "if comm.rank == 0:\n"
+        "    comm.barrier()\n"
+        "else:\n"
+        "    comm.recv(source=0, tag=7)\n")
+    run, wall = _mpirun([str(script)])
+    lines = [line for line in run.stderr.splitlines() if "had not ended" in line]
+    print(f"\n  exit {run.returncode} after {wall:.1f} s: {lines}")
+    assert run.returncode == EXIT_INTERRUPTED and lines and wall < 60

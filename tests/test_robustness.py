@@ -229,3 +229,27 @@ def test_nneqm2_frozen_directions_refuse_a_dense_system_too_large_before_solving
                     nneqm2=NNEQM2Options(flow_directions="frozen", max_dense_order=100))
     print(f"\n  {error.value}")
     make_solver("nneqm2", problem, SolverOptions(), nneqm2=NNEQM2Options(max_dense_order=100)).destroy()
+
+
+def test_the_dense_methods_refuse_a_condensation_that_does_not_fit_before_solving():
+    """Issue 32: NNEQM1 (and NNEQM2's default variant) hold Bᵀ made dense, X = G Bᵀ and its copy
+    (displacement dofs × 3NC each) and the dense contact system; a problem whose condensation
+    needs more than ``max_memory_gb`` (default: the memory available) is refused before anything
+    is assembled, with the sizes; within the limit the solver is made."""
+    from dolfinx_nnqem.solvers import NNEQM1Options
+    from dolfinx_nnqem.solvers.condensation import dense_memory
+
+    problem = robustness.pressed_and_dragged(0.2)("alart-curnier")
+    need = sum(dense_memory(problem).values())
+    n_u, m = 3 * problem.V.dofmap.index_map.size_global, 3 * problem.num_pairs
+    assert dense_memory(problem)["columns"] == 3 * 8 * 3 * problem.V.dofmap.index_map.size_local * m
+    for method, options in (("nneqm1", {"nneqm1": NNEQM1Options(max_memory_gb=0.5 * need / 1e9)}),
+                            ("nneqm2", {"nneqm2": NNEQM2Options(max_memory_gb=0.5 * need / 1e9)})):
+        with pytest.raises(ValueError, match=rf"{method}: the dense condensation .* needs about .* GB") as error:
+            make_solver(method, problem, SolverOptions(), **options)
+        print(f"\n  {error.value}")
+        assert f"{n_u:,} displacement dofs" in str(error.value) and f"{m:,} columns" in str(error.value)
+    make_solver("nneqm1", problem, SolverOptions(), nneqm1=NNEQM1Options(max_memory_gb=2 * need / 1e9)).destroy()
+    make_solver("nneqm2", problem, SolverOptions(), nneqm2=NNEQM2Options(max_memory_gb=2 * need / 1e9)).destroy()
+    with pytest.raises(ValueError, match="max_memory_gb"):
+        NNEQM1Options(max_memory_gb=0.0)

@@ -24,8 +24,6 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from dolfinx_nnqem.contact.mortar import mortar_pairs
-from dolfinx_nnqem.contact.node_to_surface import node_to_surface_pairs
 from dolfinx_nnqem.contact.pairs import find_pairs
 from dolfinx_nnqem.contact.pairset import PairSet
 from dolfinx_nnqem.contact.quadratic_facets import QUADRATIC
@@ -105,5 +103,9 @@ def discretise(V, facet_tags, surface1: int, surface2: int, discretisation: str 
             "facets), or degree 1")
     if slave == tags[0]:
         surfaces = surfaces.swapped()  # the builders take (master, slave)
-    build = node_to_surface_pairs if discretisation == "node-to-surface" else mortar_pairs
+    # imported here: their numba kernels (and numba) are not needed for matching meshes
+    if discretisation == "node-to-surface":
+        from dolfinx_nnqem.contact.node_to_surface import node_to_surface_pairs as build
+    else:
+        from dolfinx_nnqem.contact.mortar import mortar_pairs as build
     return build(V, surfaces, tolerance=tolerance, search_distance=search_distance, note=note, supported=supported)

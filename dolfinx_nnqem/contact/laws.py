@@ -51,9 +51,9 @@ with s = 0 is therefore STICK for the Cartesian law (rule 3) and SLIP for the po
 from __future__ import annotations
 
 import math
+import time
 from typing import NamedTuple, Protocol
 
-import numba
 import numpy as np
 import numpy.typing as npt
 
@@ -130,11 +130,10 @@ class Linearisation(NamedTuple):
 
 
 # ---------------------------------------------------------------------------------------------
-# numba kernels (one loop over pairs each; no Python loop over pairs anywhere)
+# the kernels (one loop over pairs each), compiled by numba when it pays (_CompiledWhenItPays)
 # ---------------------------------------------------------------------------------------------
 
 
-@numba.njit(cache=True)
 def alart_curnier_kernel(
     w: np.ndarray,
     w_prev: np.ndarray,
@@ -223,7 +222,6 @@ def alart_curnier_kernel(
     return H, dH_dw, dH_dz, state
 
 
-@numba.njit(cache=True)
 def polar_kernel(
     w: np.ndarray,
     w_prev: np.ndarray,
@@ -346,6 +344,56 @@ def _check_mu_f(mu_f: npt.ArrayLike, nc: int) -> np.ndarray:
     return np.ascontiguousarray(mu)
 
 
+class _CompiledWhenItPays:
+    """A pair-law kernel run as plain Python until compiling it with numba pays.
+
+    Numba's first call of a kernel costs about a quarter of a second even with its disk cache
+    warm (its import and the set-up of its compiler; together 0.35 s of CPU, of the 1.1 s a
+    whole run of the two-beam benchmark took), while the plain Python kernel takes about 6 µs
+    per pair (``docs/performance.md``). So the kernel runs as Python until the time spent there
+    reaches what numba's start costs (:data:`COMPILE_AFTER_S`), then compiled (``cache=True``:
+    numba's disk cache next to this file): never much more than twice the cheaper of the two
+    choices in hindsight (the ski-rental rule), and a small run never pays for numba. Both
+    perform the same IEEE operations in the same order (numba neither fuses nor reorders them
+    without ``fastmath``): the results are bit for bit the same (``tests/test_laws.py``).
+    """
+
+    def __init__(self, kernel):
+        self.kernel = kernel
+        self.compiled = None  #: numba's dispatcher, once compiling has paid
+        self.python_s = 0.0  #: seconds spent in the Python kernel so far
+
+    def __call__(self, *args):
+        if self.compiled is not None:
+            return self.compiled(*args)
+        t0 = time.perf_counter()
+        try:
+            return self.kernel(*args)
+        finally:
+            self.python_s += time.perf_counter() - t0
+            if self.python_s >= COMPILE_AFTER_S:
+                self.compile()
+
+    def compile(self):
+        """numba's compiled kernel (from its disk cache when it is there); used from now on."""
+        if self.compiled is None:
+            import numba
+
+            from dolfinx_nnqem.chatter import apply_numba_options
+
+            apply_numba_options()
+            self.compiled = numba.njit(cache=True)(self.kernel)
+        return self.compiled
+
+
+COMPILE_AFTER_S: float = 0.25
+"""Seconds a pair-law kernel runs as plain Python before numba's compiled version takes over
+(about what numba's start costs, :class:`_CompiledWhenItPays`)."""
+
+_ALART_CURNIER = _CompiledWhenItPays(alart_curnier_kernel)
+_POLAR = _CompiledWhenItPays(polar_kernel)
+
+
 def _check_inputs(
     w: npt.ArrayLike,
     w_prev: npt.ArrayLike,
@@ -466,7 +514,7 @@ class AlartCurnierLaw:
         r
             Scaling parameter (force/length), finite and > 0.
         """
-        return LawEvaluation(*alart_curnier_kernel(*_check_inputs(w, w_prev, z, g0, mu_f, r)))
+        return LawEvaluation(*_ALART_CURNIER(*_check_inputs(w, w_prev, z, g0, mu_f, r)))
 
     def force(self, z: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Force lambda = z and d lambda/dz = I (nc, 3, 3)."""
@@ -551,7 +599,7 @@ class PolarLaw:
 
         Parameters as in :meth:`AlartCurnierLaw.evaluate`.
         """
-        return LawEvaluation(*polar_kernel(*_check_inputs(w, w_prev, z, g0, mu_f, r)))
+        return LawEvaluation(*_POLAR(*_check_inputs(w, w_prev, z, g0, mu_f, r)))
 
     def force(self, z: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Force lambda = (p_n, -p_r cos theta, -p_r sin theta) and d lambda/dz (nc, 3, 3)."""

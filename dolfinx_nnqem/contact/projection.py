@@ -37,6 +37,10 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial import cKDTree
 
+from dolfinx_nnqem.chatter import apply_numba_options
+
+apply_numba_options()  # numba's warnings as the command line asked (imported here, not at start-up)
+
 __all__ = [
     "TIE_TOLERANCE",
     "Projection",

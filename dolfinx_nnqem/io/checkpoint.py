@@ -16,7 +16,11 @@ factors and the secant predictor's history (:attr:`ContactProblem.predictor_hist
 fingerprint of the rank's layout (owned dofs and their coordinates, Gauss points, pairs). A
 checkpoint is complete when every rank's file and ``meta.json`` are on disk; only then does
 rank 0 replace ``latest.json`` (temporary + rename), so a kill at any moment leaves the previous
-complete checkpoint in force. The last ``keep`` checkpoints are kept.
+complete checkpoint in force. The checkpoint shares its increment's commit point with the
+writers it was given (:func:`dolfinx_nnqem.io.safe_io.commit`): one sync makes every rank's
+file, ``meta.json`` and the increment's result files durable, then the writers' index files
+and ``latest.json`` are renamed into place. The last ``keep`` checkpoints are kept (at least
+two on disk: the one ``latest.json`` named at the last sync stays until the new name is durable).
 
 A restart needs the same problem on the same number of ranks (the same partition: DOLFINx
 partitions a mesh deterministically for a given rank count); anything else is refused with a
@@ -35,7 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from dolfinx_nnqem.collective import agree, on_rank0
-from dolfinx_nnqem.io.safe_io import atomic_write, atomic_write_text, fsync_directory
+from dolfinx_nnqem.io.safe_io import StagedFiles, atomic_write, commit
 from dolfinx_nnqem.problem.validation import check_integer
 from dolfinx_nnqem.solvers.stepping import StepperState
 
@@ -94,6 +98,8 @@ class Checkpointer:
     writers
         Objects with ``state() -> dict`` (JSON) whose state is saved with the checkpoint and
         handed back by :func:`restore` (e.g. the :class:`~dolfinx_nnqem.io.output.ResultsWriter`).
+        A writer with ``staged`` files and ``checkpoint_every`` (the ``ResultsWriter``) leaves
+        the commit of the increments this checkpointer saves to it.
     meta
         Further JSON data saved with every checkpoint (e.g. the problem file's hash); a restart
         may compare it.
@@ -106,6 +112,10 @@ class Checkpointer:
         self.writers = list(writers)
         self.meta = dict(meta or {})
         self.written: list[int] = []
+        self.staged = StagedFiles()  # latest.json, renamed at the commit point
+        for w in self.writers:
+            if hasattr(w, "staged") and hasattr(w, "checkpoint_every"):
+                w.checkpoint_every = self.every
 
     def __call__(self, problem, stepper_state, result) -> None:
         if result.index % self.every == 0:
@@ -124,7 +134,7 @@ class Checkpointer:
 
         on_rank0(comm, fresh_folder)
         path = target / f"rank_{comm.rank:04d}.npz"
-        agree(comm, atomic_write, path, lambda tmp: _write_rank(tmp, problem))
+        agree(comm, atomic_write, path, lambda tmp: _write_rank(tmp, problem), durable=False)
         meta = {
             "format": FORMAT, "index": index, "load_factor": float(problem.load_factor_n),
             "stepper": {"start": float(stepper_state.start), "step": float(stepper_state.step),
@@ -134,17 +144,22 @@ class Checkpointer:
             **self.meta,
         }
 
-        def commit():
-            atomic_write_text(target / "meta.json", json.dumps(meta, indent=1))
-            fsync_directory(target)
-            atomic_write_text(self.folder / "latest.json", json.dumps(
+        def stage():
+            atomic_write(target / "meta.json", lambda tmp: tmp.write_text(json.dumps(meta)), durable=False)
+            self.staged.stage(self.folder / "latest.json", json.dumps(
                 {"index": index, "path": name, "ranks": comm.size, "load_factor": meta["load_factor"]}))
+
+        def tidy():
             self.written.append(index)
             kept = sorted(p for p in self.folder.glob("ckpt_*") if p.is_dir())
-            for old in kept[:-self.keep]:
+            for old in kept[:-max(self.keep, 2)]:
                 shutil.rmtree(old, ignore_errors=True)
 
-        on_rank0(comm, commit)
+        on_rank0(comm, stage)
+        folder = self.folder.parent
+        commit(comm, folder, *[w.staged for w in self.writers if isinstance(getattr(w, "staged", None), StagedFiles)],
+               self.staged)
+        on_rank0(comm, tidy)
         return target
 
 

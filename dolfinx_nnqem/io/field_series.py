@@ -10,7 +10,9 @@ crash-safe:
 * increment k is written, with the mesh, into ``fields/fields_k.xdmf`` + ``.h5`` by DOLFINx's
   ``XDMFFile`` and the file is closed (HDF5 flushes everything) before anything refers to it;
 * then rank 0 replaces ``fields.xdmf`` atomically (temporary file + rename): a temporal
-  collection of every completed increment, each grid pointing into its own file.
+  collection of every completed increment, each grid pointing into its own file. Given the
+  run's :class:`~dolfinx_nnqem.io.safe_io.StagedFiles`, the new index is staged instead and
+  renamed at the increment's commit point, after the sync that makes the step file durable.
 
 So ``fields.xdmf`` always lists complete, readable increments only; a step file of an increment
 the index does not list yet is ignored and overwritten by a later run or restart. Each step
@@ -29,7 +31,8 @@ from dolfinx.io import XDMFFile
 
 from dolfinx_nnqem import compat
 from dolfinx_nnqem.collective import on_rank0
-from dolfinx_nnqem.io.safe_io import OutputError, atomic_write_text
+from dolfinx_nnqem.io.safe_io import OutputError, StagedFiles, atomic_write_text
+from dolfinx_nnqem.io.xdmf_steps import child, data_path, read_field_index
 from dolfinx_nnqem.material.von_mises import von_mises_stress
 
 __all__ = ["CellMeans", "FieldSeriesWriter", "read_field_index"]
@@ -81,11 +84,16 @@ class FieldSeriesWriter:
         The :class:`~dolfinx_nnqem.problem.contact_problem.ContactProblem`.
     folder
         The run's output folder: writes ``fields.xdmf`` and ``fields/``.
+    staged
+        Stage the index here (renamed at the run's commit point, :func:`~dolfinx_nnqem.io.safe_io.commit`)
+        instead of replacing it durably at once.
     """
 
-    def __init__(self, problem, folder: str | os.PathLike):
+    def __init__(self, problem, folder: str | os.PathLike, staged: StagedFiles | None = None):
         self.problem = problem
         self.folder = Path(folder)
+        self.staged = staged
+        self._grids: dict[tuple[int, float], ET.Element] = {}  # a step's grid, read once from its file
         self.comm = problem.mesh.comm
         self.steps: list[tuple[int, float]] = []  # (increment, load factor) in the index
         self._means = CellMeans(problem)
@@ -114,6 +122,7 @@ class FieldSeriesWriter:
         on_rank0(self.comm, check_free_space, path.with_suffix(".h5"), self._bytes_needed())
         self._write_step(path, [u, *self._means.fields], t)
         self.steps = [s for s in self.steps if s[0] < result.index] + [(result.index, t)]
+        self._grids.pop((result.index, t), None)  # a step file written again (after a restart)
         on_rank0(self.comm, self._write_index)
 
     def _bytes_needed(self) -> int:
@@ -149,15 +158,22 @@ class FieldSeriesWriter:
             _abandon(xdmf, self.comm)
             raise OutputError(28, f"cannot write {path.with_suffix('.h5')}: {error}", str(path)) from error
 
-    def _write_index(self) -> None:
+    def _write_index(self, at_once: bool = False) -> None:
+        """The index of the steps (rank 0): staged, or with ``at_once`` (or no staging) replaced now."""
         root = ET.Element("Xdmf", {"Version": "3.0", "xmlns:xi": "http://www.w3.org/2001/XInclude"})
         domain = ET.SubElement(root, "Domain")
         series = ET.SubElement(domain, "Grid", {"Name": "fields", "GridType": "Collection",
                                                 "CollectionType": "Temporal"})
         for index, t in self.steps:
-            series.append(_step_grid(self.folder / FOLDER / f"{_step_name(index)}.xdmf", t))
+            if (index, t) not in self._grids:
+                self._grids[(index, t)] = _step_grid(self.folder / FOLDER / f"{_step_name(index)}.xdmf", t)
+            series.append(self._grids[(index, t)])
         ET.indent(root)
-        atomic_write_text(self.folder / INDEX, '<?xml version="1.0"?>\n' + ET.tostring(root, encoding="unicode") + "\n")
+        text = '<?xml version="1.0"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+        if self.staged is None or at_once:
+            atomic_write_text(self.folder / INDEX, text)
+        else:
+            self.staged.stage(self.folder / INDEX, text)
 
     # -- restart -------------------------------------------------------------------------------------
     def state(self) -> dict:
@@ -175,7 +191,7 @@ class FieldSeriesWriter:
                         f.unlink()
                 except (ValueError, IndexError):
                     pass
-            self._write_index()
+            self._write_index(at_once=True)  # now: the files of later steps are gone
 
         on_rank0(self.comm, tidy)
 
@@ -228,63 +244,13 @@ def _step_grid(step_file: Path, t: float) -> ET.Element:
     grid = ET.Element("Grid", {"Name": step_file.stem, "GridType": "Uniform"})
     mesh_grid = next(g for g in tree.iter("Grid") if g.find("Topology") is not None and g.find("Geometry") is not None)
     for tag in ("Topology", "Geometry"):
-        element = _child(mesh_grid, tag)
+        element = child(mesh_grid, tag)
         for item in element.iter("DataItem"):
-            item.text = prefix + _data_path(item)
+            item.text = prefix + data_path(item)
         grid.append(element)
     ET.SubElement(grid, "Time", {"Value": f"{t:.17g}"})
     for attribute in tree.iter("Attribute"):
         for item in attribute.iter("DataItem"):
-            item.text = prefix + _data_path(item)
+            item.text = prefix + data_path(item)
         grid.append(attribute)
     return grid
-
-
-def _child(element: ET.Element, tag: str) -> ET.Element:
-    """The first ``tag`` child of ``element``; a ValueError naming both in a damaged file."""
-    child = element.find(tag)
-    if child is None:
-        raise ValueError(f"XDMF: a {element.tag} without {tag}")
-    return child
-
-
-def _data_path(item: ET.Element) -> str:
-    """The data a DataItem points to (``file.h5:/dataset``); a ValueError in a damaged file."""
-    if item.text is None:
-        raise ValueError("XDMF: an empty DataItem")
-    return item.text.strip()
-
-
-def read_field_index(folder: str | os.PathLike) -> list[dict]:
-    """The increments ``fields.xdmf`` lists, read with h5py (no DOLFINx, any number of ranks).
-
-    Returns one dict per increment: ``time`` (the load factor), ``geometry`` (nodes, 3),
-    ``topology`` (cells, nodes per cell) and every field by name (nodal or cell values).
-    Raises :class:`OSError` naming the file that cannot be read.
-    """
-    import h5py
-
-    folder = Path(folder)
-    index = folder / INDEX
-    tree = ET.parse(index)
-    steps = []
-    for grid in tree.iter("Grid"):
-        if grid.get("GridType") != "Uniform":
-            continue
-        step: dict[str, float | np.ndarray] = {"time": float(_child(grid, "Time").attrib["Value"])}
-        for tag, key in (("Topology", "topology"), ("Geometry", "geometry")):
-            step[key] = _read_item(folder, _child(_child(grid, tag), "DataItem"), h5py)
-        for attribute in grid.findall("Attribute"):
-            step[attribute.attrib["Name"]] = _read_item(folder, _child(attribute, "DataItem"), h5py)
-        steps.append(step)
-    return steps
-
-
-def _read_item(folder: Path, item: ET.Element, h5py) -> np.ndarray:
-    file, dataset = _data_path(item).split(":", 1)
-    try:
-        with h5py.File(folder / file, "r") as h5:
-            return np.asarray(h5[dataset])
-    except (OSError, KeyError) as error:
-        raise OSError(f"cannot read {dataset} from {folder / file}: {error}") from error
-

@@ -44,7 +44,8 @@ from dolfinx_nnqem.io.field_series import FieldSeriesWriter
 from dolfinx_nnqem.io.locking import OutputLock, clear_outputs, previous_outputs
 from dolfinx_nnqem.io.quadratic_fields import QuadraticFieldWriter, writes_quadratic_fields
 from dolfinx_nnqem.io.run_pictures import draw_live_pictures, pictures_enabled
-from dolfinx_nnqem.io.safe_io import atomic_write, atomic_write_text, remove_stale_temporaries
+from dolfinx_nnqem.io.safe_io import StagedFiles, atomic_write, atomic_write_text, commit, remove_stale_temporaries
+from dolfinx_nnqem.io.vtk_xml import point_cloud_text
 from dolfinx_nnqem.material.von_mises import von_mises_stress
 from dolfinx_nnqem.problem.validation import check_output_folder
 from dolfinx_nnqem.solvers.convergence import ConvergenceError
@@ -61,11 +62,16 @@ def von_mises(sigma: np.ndarray) -> np.ndarray:
 
 
 class PairWriter:
-    """Pair point cloud (VTK .vtp per increment + .pvd collection) and a CSV table per increment."""
+    """Pair point cloud (VTK .vtp per increment + .pvd collection) and a CSV table per increment.
 
-    def __init__(self, problem, folder: str | os.PathLike):
+    ``staged``: stage ``pairs.pvd`` there (renamed at the run's commit point, which also makes the
+    increment's files durable) instead of writing every file durably at once.
+    """
+
+    def __init__(self, problem, folder: str | os.PathLike, staged: StagedFiles | None = None):
         self.problem = problem
         self.folder = Path(folder)
+        self.staged = staged
         self.rank = problem.comm.rank
         self.entries: list[tuple[float, str]] = []
         if self.rank == 0:
@@ -78,10 +84,13 @@ class PairWriter:
     def _write(self, result, table) -> None:
         name = f"pairs_{result.index:04d}"
         t = float(result.load_factor)
-        atomic_write(self.folder / "pairs" / f"{name}.csv", lambda tmp: self._write_csv(tmp, table, t))
-        atomic_write(self.folder / "pairs" / f"{name}.vtp", lambda tmp: self._write_vtp(tmp, table, t))
+        durable = self.staged is None  # else the commit point's sync makes them durable
+        atomic_write(self.folder / "pairs" / f"{name}.csv", lambda tmp: self._write_csv(tmp, table, t),
+                     durable=durable)
+        atomic_write(self.folder / "pairs" / f"{name}.vtp", lambda tmp: self._write_vtp(tmp, table, t),
+                     durable=durable)
         self.entries = [e for e in self.entries if e[1] != f"pairs/{name}.vtp"] + [(t, f"pairs/{name}.vtp")]
-        self._write_pvd(self.folder / "pairs.pvd")  # only after the .vtp is complete
+        self._write_pvd(self.folder / "pairs.pvd", at_once=durable)  # only after the .vtp is complete
 
     def state(self) -> dict:
         return {"entries": [list(e) for e in self.entries]}
@@ -95,7 +104,7 @@ class PairWriter:
             for f in (self.folder / "pairs").glob("pairs_*.*"):
                 if f.stem not in keep:
                     f.unlink()
-            self._write_pvd(self.folder / "pairs.pvd")
+            self._write_pvd(self.folder / "pairs.pvd", at_once=True)  # now: later files are gone
 
         on_rank0(self.problem.comm, tidy)
 
@@ -115,55 +124,36 @@ class PairWriter:
 
     @staticmethod
     def _write_vtp(path: Path, t: dict, load_factor: float = float("nan")) -> None:
-        import pyvista
-
-        cloud = pyvista.PolyData(np.asarray(t["position"], dtype=float))
         local = t["force_local_body1"]
-        cloud["p_n"] = -local[:, 0]  # compression on body 2, N
-        cloud["friction_on_body2"] = -t["force_on_body1"] - (-local[:, 0])[:, None] * t["frame"][:, 0, :]
-        cloud["force_on_body1"] = t["force_on_body1"]
-        cloud["state"] = t["state"].astype(np.int32)
-        cloud["interface"] = t["interface"].astype(np.int32)
-        cloud["gap"] = t["gap"]
-        cloud["pressure"] = t["pressure"]  # p_n / tributary area, Pa
-        cloud["weighted_gap"] = t["weighted_gap"]
-        cloud["area"] = t["area"]
-        cloud["slip"] = np.linalg.norm(t["slip"], axis=1)
-        cloud["u_body1"] = t["u_body1"]
-        cloud["u_body2"] = t["u_body2"]
-        cloud.field_data["load_factor"] = np.array([load_factor])
-        _save_as_vtp(cloud, path)
+        arrays = {
+            "p_n": -local[:, 0],  # compression on body 2, N
+            "friction_on_body2": -t["force_on_body1"] - (-local[:, 0])[:, None] * t["frame"][:, 0, :],
+            "force_on_body1": t["force_on_body1"],
+            "state": t["state"].astype(np.int32),
+            "interface": t["interface"].astype(np.int32),
+            "gap": t["gap"],
+            "pressure": t["pressure"],  # p_n / tributary area, Pa
+            "weighted_gap": t["weighted_gap"],
+            "area": t["area"],
+            "slip": np.linalg.norm(t["slip"], axis=1),
+            "u_body1": t["u_body1"],
+            "u_body2": t["u_body2"],
+        }
+        text = point_cloud_text(t["position"], {k: np.asarray(v, dtype=np.int32 if v.dtype == np.int32 else np.float64)
+                                                for k, v in arrays.items()},
+                                {"load_factor": np.array([load_factor])})
+        with open(path, "w", encoding="ascii") as fh:  # a full disk raises OSError, named by atomic_write
+            fh.write(text)
 
-    def _write_pvd(self, path: Path) -> None:
+    def _write_pvd(self, path: Path, at_once: bool) -> None:
         lines = ['<?xml version="1.0"?>',
                  '<VTKFile type="Collection" version="0.1">', "  <Collection>"]
         lines += [f'    <DataSet timestep="{t:.12g}" file="{f}"/>' for t, f in self.entries]
         lines += ["  </Collection>", "</VTKFile>"]
-        atomic_write_text(path, "\n".join(lines) + "\n")
-
-
-def _save_as_vtp(cloud, path: Path) -> None:
-    """VTK XML PolyData at ``path`` whatever its suffix (temporary names); a failed write raises.
-
-    VTK builds the file in memory and Python writes it: VTK's own file output crashes the
-    process (SIGSEGV, or "free(): invalid pointer" and SIGABRT, VTK 9.7) when the disk fills up
-    during the write, which killed rank 0 of an MPI run with no message (issue 31). Python's
-    write raises OSError (ENOSPC) instead, which :func:`~dolfinx_nnqem.io.safe_io.atomic_write`
-    reports with the file's name. The binary data mode is base64 text, so the bytes are those
-    VTK would have written itself.
-    """
-    from vtkmodules.vtkIOXML import vtkXMLPolyDataWriter
-
-    writer = vtkXMLPolyDataWriter()
-    writer.WriteToOutputStringOn()
-    writer.SetInputData(cloud)
-    writer.SetDataModeToBinary()
-    if writer.Write() != 1 or writer.GetErrorCode() != 0:
-        import errno
-
-        raise OSError(errno.EIO, f"VTK could not write {path} (error code {writer.GetErrorCode()})", str(path))
-    with open(path, "w", encoding="ascii") as fh:
-        fh.write(writer.GetOutputString())
+        if at_once or self.staged is None:
+            atomic_write_text(path, "\n".join(lines) + "\n")
+        else:
+            self.staged.stage(path, "\n".join(lines) + "\n")
 
 
 class SummaryWriter:
@@ -183,12 +173,18 @@ class SummaryWriter:
         where bodies have coincident nodes.
     extra
         Further JSON-serialisable data to include (e.g. the benchmark's parameters).
+    staged
+        Stage each increment's summary there (renamed at the run's commit point) instead of
+        replacing it durably at once.
     """
 
     def __init__(self, problem, method: str, path: str | os.PathLike, increments: int,
-                 probes: Mapping[str, Probe] | None = None, extra: dict | None = None):
+                 probes: Mapping[str, Probe] | None = None, extra: dict | None = None,
+                 staged: StagedFiles | None = None):
         self.problem = problem
         self.path = Path(path)
+        self.staged = staged
+        self.size = 0  #: bytes of the last summary text
         self.t0 = time.perf_counter()
         self.data = {
             "method": method, "increments": int(increments) if isinstance(increments, int) else "auto", "converged": False, "status": "running",
@@ -254,11 +250,20 @@ class SummaryWriter:
                  "weighted_gap": float(t["weighted_gap"][i]), "area": float(t["area"][i]),
                  "interface": str(t["interface_name"][i])}
                 for i in range(len(t["state"]))]
-        self.write()
+        self.write(at_once=self.staged is None)
 
-    def write(self) -> None:
-        """Write the summary (rank 0; atomic: a crash never leaves half a file; collective)."""
-        on_rank0(self.problem.comm, lambda: atomic_write_text(self.path, summary_json(self.data)))
+    def write(self, at_once: bool = True) -> None:
+        """Write the summary (rank 0; atomic: a crash never leaves half a file; collective);
+        unless ``at_once``, stage it for the commit point."""
+        def write():
+            text = summary_json(self.data)
+            self.size = len(text)
+            if at_once or self.staged is None:
+                atomic_write_text(self.path, text)
+            else:
+                self.staged.stage(self.path, text)
+
+        on_rank0(self.problem.comm, write)
 
     def failed(self, failure: dict) -> None:
         """Record the increment that did not converge (from :func:`solve_load_steps`)."""
@@ -287,7 +292,7 @@ class SummaryWriter:
             pass
 
     def state(self) -> dict:
-        return {"data": _jsonable(self.data)}
+        return {"data": jsonable_copy(self.data)}
 
     def resume(self, state: dict) -> None:
         data = dict(state.get("data", {}))
@@ -298,15 +303,29 @@ class SummaryWriter:
 
 
 def summary_json(data: dict) -> str:
-    """``data`` as strict JSON text: a value that is not a finite number (NaN, ±inf: e.g. a
-    residual of a diverged iterate) is written as ``null``, and ``non_finite`` lists each such
-    key with the value it had (JSON has no NaN: ``json.dumps`` would write a bare ``NaN``,
-    which strict readers refuse)."""
-    non_finite: dict[str, str] = {}
-    clean = _jsonable({k: v for k, v in data.items() if k != "non_finite"}, "", non_finite)
-    if non_finite:
-        clean["non_finite"] = non_finite
-    return json.dumps(clean, indent=1, allow_nan=False)
+    """``data`` as strict JSON text, one top-level key per line: a value that is not a finite
+    number (NaN, ±inf: e.g. a residual of a diverged iterate) is written as ``null``, and
+    ``non_finite`` lists each such key with the value it had (JSON has no NaN: ``json.dumps``
+    would write a bare ``NaN``, which strict readers refuse)."""
+    try:  # the usual case, plain finite data: the json module's C encoder (it has no indentation)
+        values = {str(k): json.dumps(v, allow_nan=False) for k, v in data.items() if k != "non_finite"}
+    except (TypeError, ValueError):  # numpy values, or a number that is not finite: cleaned first
+        non_finite: dict[str, str] = {}
+        clean = _jsonable({k: v for k, v in data.items() if k != "non_finite"}, "", non_finite)
+        if non_finite:
+            clean["non_finite"] = non_finite
+        values = {k: json.dumps(v, allow_nan=False) for k, v in clean.items()}
+    return "{\n" + ",\n".join(f" {json.dumps(k)}: {v}" for k, v in values.items()) + "\n}"
+
+
+def jsonable_copy(value):
+    """A JSON-ready deep copy of ``value`` (numpy values as Python ones, non-finite floats as
+    None), through the C encoder when it can (a checkpoint saves the writers' state every
+    increment)."""
+    try:
+        return json.loads(json.dumps(value, allow_nan=False))
+    except (TypeError, ValueError):
+        return _jsonable(value)
 
 
 def _jsonable(value, path: str = "", non_finite: dict | None = None):
@@ -327,6 +346,12 @@ def _jsonable(value, path: str = "", non_finite: dict | None = None):
 
 class ResultsWriter:
     """All writers of a run in one folder: fields.xdmf, pairs (when there is contact), summary.json.
+
+    Each increment has one durable commit point (:func:`~dolfinx_nnqem.io.safe_io.commit`): the
+    writers write the increment's new files and stage the index files that list them
+    (``fields.xdmf``, ``pairs.pvd``, ``summary.json``); one sync of the file system, and the
+    staged files are renamed into place. When a :class:`~dolfinx_nnqem.io.checkpoint.Checkpointer`
+    of this writer saves at the increment, its files join the same commit point.
 
     Parameters
     ----------
@@ -379,8 +404,10 @@ class ResultsWriter:
                 raise
 
         on_rank0(problem.comm, prepare)
+        self.staged = StagedFiles()  #: the index files of the increment, renamed at its commit point
+        self.checkpoint_every = 0  #: set by a Checkpointer of this writer: it commits those increments
         self.writers: list[FieldSeriesWriter | QuadraticFieldWriter | PairWriter | SummaryWriter] = []
-        self.fields = FieldSeriesWriter(problem, self.folder) if fields else None
+        self.fields = FieldSeriesWriter(problem, self.folder, self.staged) if fields else None
         if self.fields is not None:
             self.writers.append(self.fields)
         # degree 2: the displacement at its own nodes too (fields.xdmf holds the mesh's nodes only)
@@ -388,25 +415,41 @@ class ResultsWriter:
         self.quadratic = QuadraticFieldWriter(problem, self.folder) if quadratic else None
         if self.quadratic is not None:
             self.writers.append(self.quadratic)
-        self.pairs = PairWriter(problem, self.folder) if problem.has_contact else None
+        self.pairs = PairWriter(problem, self.folder, self.staged) if problem.has_contact else None
         if self.pairs is not None:
             on_rank0(problem.comm, lambda: (self.folder / "pairs").mkdir(parents=True, exist_ok=True))
             self.writers.append(self.pairs)
-        self.summary = SummaryWriter(problem, method, self.folder / "summary.json", increments, probes, extra)
+        self.summary = SummaryWriter(problem, method, self.folder / "summary.json", increments, probes, extra,
+                                     staged=self.staged)
         self.writers.append(self.summary)
 
     def __call__(self, result) -> None:
+        if self.problem.comm.allreduce(bool(self.staged)):  # a checkpoint due at the last one did not come
+            self.commit()
         for w in self.writers:
             w(result)
+        if not (self.checkpoint_every and result.index % self.checkpoint_every == 0):
+            self.commit()
         self._reserve()
+
+    def commit(self) -> None:
+        """The increment's commit point (collective): sync, then the staged index files in place."""
+        commit(self.problem.comm, self.folder, self.staged)
+
+    def _commit_here(self) -> None:
+        """What is staged, committed by this rank alone (the run ends; every rank may not be here)."""
+        try:
+            self.staged.commit_here(self.folder)
+        except OSError:
+            self.staged.discard()  # the previous complete index stays in force
 
     def _reserve(self) -> None:
         """Keep room on disk for the summary's last rewrite (rank 0, which holds the lock): its
         size now plus 64 kB for the failure or error it may add; twice that under MPI, where
         :meth:`SummaryWriter.ended` may write from two ranks at once."""
-        if self._lock is not None and self.problem.comm.rank == 0 and self.summary.path.is_file():
+        if self._lock is not None and self.problem.comm.rank == 0 and self.summary.size:
             copies = 2 if self.problem.comm.size > 1 else 1
-            self._lock.reserve(copies * self.summary.path.stat().st_size + 65536)
+            self._lock.reserve(copies * self.summary.size + 65536)
 
     def _free_reserve(self) -> None:
         if self._lock is not None and self.problem.comm.rank == 0:
@@ -415,12 +458,14 @@ class ResultsWriter:
     def failed(self, failure: dict) -> None:
         """The run gave up at an increment: ``summary.json`` says which, and why."""
         self._free_reserve()
+        self._commit_here()
         self.summary.failed(failure)
 
     def ended(self, status: str, message: str = "") -> None:
         """The run stopped otherwise ("interrupted", "error"): ``summary.json`` says so (on a
         full disk too: the space reserved after every increment is given back first)."""
         self._free_reserve()
+        self._commit_here()
         self.summary.ended(status, message)
 
     def record_end(self, error: BaseException) -> None:
@@ -470,6 +515,7 @@ class ResultsWriter:
 
     def close(self) -> None:
         """Close the files, draw the pictures (see ``pictures``), release the folder's lock."""
+        self._commit_here()  # the last renames made durable too
         for w in self.writers:
             if hasattr(w, "close"):
                 w.close()

@@ -18,11 +18,12 @@ import subprocess
 import sys
 import tempfile
 import xml.etree.ElementTree as ET
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["read_fields", "read_pairs", "read_results", "read_summary"]
+__all__ = ["read_fields", "read_pairs", "read_results", "read_summary", "start_reading_fields"]
 
 MPI_LAUNCHER_PREFIXES = ("PMI_", "PMIX_", "HYDRA_", "MPIR_", "MPI_LOCAL", "OMPI_", "PRTE_")
 
@@ -53,36 +54,60 @@ def _h5py_usable_here() -> bool:
     return compat.H5PY_BEFORE_DOLFINX or "dolfinx" not in sys.modules
 
 
-def read_fields(folder: str | os.PathLike) -> list[dict]:
-    """The increments ``fields.xdmf`` lists (see :func:`dolfinx_nnqem.io.field_series.read_field_index`)."""
-    if _h5py_usable_here():
-        from dolfinx_nnqem.io.field_series import read_field_index
+def read_fields(folder: str | os.PathLike, last_only: bool = False) -> list[dict]:
+    """The increments ``fields.xdmf`` lists (see :func:`dolfinx_nnqem.io.xdmf_steps.read_field_index`);
+    with ``last_only`` the last one only."""
+    return start_reading_fields(folder, last_only)()
 
-        return read_field_index(folder)
-    with tempfile.TemporaryDirectory() as tmp:
-        out = Path(tmp) / "fields.npz"
-        code = ("import h5py, sys, numpy as np, json\n"
-                "from dolfinx_nnqem.io.field_series import read_field_index\n"
-                "steps = read_field_index(sys.argv[1])\n"
-                "arrays = {f'{i}/{k}': np.asarray(v) for i, s in enumerate(steps) for k, v in s.items()}\n"
-                "np.savez(sys.argv[2], **arrays)\n")
-        # a child of an MPI rank (mpirun) must not take the launcher's variables: it would try to
-        # join the parallel job (MPICH: "PMI_Init returned -1") and fail to start
-        env = {k: v for k, v in os.environ.items() if not k.startswith(MPI_LAUNCHER_PREFIXES)}
-        root = str(Path(__file__).resolve().parents[1])
-        env["PYTHONPATH"] = root + os.pathsep + env.get("PYTHONPATH", "")
-        run = subprocess.run([sys.executable, "-c", code, str(folder), str(out)], capture_output=True, text=True,
-                             env=env, timeout=600)
-        if run.returncode != 0:
-            last = (run.stderr.strip().splitlines() or ["?"])[-1]
-            raise OSError(f"cannot read the fields of {folder}: {last}")
-        steps: dict[int, dict] = {}
-        with np.load(out) as data:
-            for key in data.files:
-                i, name = key.split("/", 1)
-                value = data[key]
-                steps.setdefault(int(i), {})[name] = float(value) if name == "time" else value
-        return [steps[i] for i in sorted(steps)]
+
+def start_reading_fields(folder: str | os.PathLike, last_only: bool = False) -> Callable[[], list[dict]]:
+    """Start reading the fields; returns the function that waits for them (:func:`read_fields`).
+
+    Where h5py cannot be used in this process, a child process reads them, and this process
+    can go on meanwhile (the run's pictures draw their curves). The child loads
+    :mod:`dolfinx_nnqem.io.xdmf_steps` by its file: through the package it would load DOLFINx.
+    """
+    if _h5py_usable_here():
+        from dolfinx_nnqem.io.xdmf_steps import read_field_index
+
+        steps = read_field_index(folder, last_only)
+        return lambda: steps
+    tmp = tempfile.TemporaryDirectory()
+    out = Path(tmp.name) / "fields.npz"
+    code = ("import h5py, sys, importlib.util, numpy as np\n"
+            "spec = importlib.util.spec_from_file_location('_nnqem_xdmf_steps', sys.argv[1])\n"
+            "module = importlib.util.module_from_spec(spec)\n"
+            "spec.loader.exec_module(module)\n"
+            "steps = module.read_field_index(sys.argv[2], sys.argv[4] == '1')\n"
+            "arrays = {f'{i}/{k}': np.asarray(v) for i, s in enumerate(steps) for k, v in s.items()}\n"
+            "np.savez(sys.argv[3], **arrays)\n")
+    # a child of an MPI rank (mpirun) must not take the launcher's variables: it would try to
+    # join the parallel job (MPICH: "PMI_Init returned -1") and fail to start
+    env = {k: v for k, v in os.environ.items() if not k.startswith(MPI_LAUNCHER_PREFIXES)}
+    module = Path(__file__).resolve().with_name("xdmf_steps.py")
+    child = subprocess.Popen([sys.executable, "-c", code, str(module), str(folder), str(out), "1" if last_only else "0"],
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+
+    def wait() -> list[dict]:
+        with tmp:
+            try:
+                _, stderr = child.communicate(timeout=600)
+            except subprocess.TimeoutExpired:
+                child.kill()
+                child.communicate()
+                raise OSError(f"cannot read the fields of {folder}: the reading process took over 600 s") from None
+            if child.returncode != 0:
+                last = (stderr.strip().splitlines() or ["?"])[-1]
+                raise OSError(f"cannot read the fields of {folder}: {last}")
+            steps: dict[int, dict] = {}
+            with np.load(out) as data:
+                for key in data.files:
+                    i, name = key.split("/", 1)
+                    value = data[key]
+                    steps.setdefault(int(i), {})[name] = float(value) if name == "time" else value
+            return [steps[i] for i in sorted(steps)]
+
+    return wait
 
 
 def read_results(folder: str | os.PathLike) -> dict:

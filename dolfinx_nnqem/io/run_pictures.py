@@ -37,7 +37,7 @@ import numpy as np
 import dolfinx_nnqem.io.plots as plots
 from dolfinx_nnqem import compat
 from dolfinx_nnqem.io.offscreen import PictureUnavailable, offscreen_plotter
-from dolfinx_nnqem.io.reader import read_fields, read_pairs, read_summary
+from dolfinx_nnqem.io.reader import read_pairs, read_summary, start_reading_fields
 
 __all__ = ["PICTURE_FOLDER", "PICTURES", "draw_live_pictures", "draw_run_pictures", "pictures_enabled"]
 
@@ -245,12 +245,16 @@ def draw_convergence(summary: dict, path: Path, *, title: str = "") -> Path:
     with_contact = any(np.any(h[:, 1] > 0) for h in histories)
     names = ["equilibrium ‖R‖/F"] + (["contact ‖H‖/F"] if with_contact else [])
     plt = _matplotlib()
+    from matplotlib import ticker
+
     fig, axes = plt.subplots(1, len(names), figsize=(6 * len(names), 4.5), squeeze=False)
     colours = plt.get_cmap("viridis")(np.linspace(0.0, 0.9, len(histories)))
     for column, (ax, name) in enumerate(zip(axes[0], names)):
         for k, (h, colour) in enumerate(zip(histories, colours)):
             ax.semilogy(np.arange(len(h)), np.maximum(h[:, column], 1e-17), "o-", ms=3, color=colour,
                         label=f"increment {k + 1}" if len(histories) <= 12 else None)
+        # plain "1e−08" labels: the default ones are mathtext, whose parser cost this picture 0.5 s
+        ax.yaxis.set_major_formatter(ticker.LogFormatter())
         ax.set_xlabel("iteration")
         ax.set_ylabel(name)
         ax.grid(True, which="both", alpha=0.3)
@@ -306,22 +310,29 @@ def draw_run_pictures(folder: str | os.PathLike, *, out: str | os.PathLike | Non
 
     if not summary.get("load_factors"):
         return {name: "not drawn: no converged increment" for name in PICTURES}
-    if (folder / "fields.xdmf").exists():
+    fields = None
+    if (folder / "fields.xdmf").exists():  # the last step is read (by a child process) while the curves are drawn
         try:
-            steps = read_fields(folder)
+            fields = start_reading_fields(folder, last_only=True)
+        except OSError as error:
+            done["deformed.png"] = f"not drawn: {error}"
+    try:
+        if rows:
+            attempt("pair_pressure.png", draw_pair_pressure, rows, title=title)
+        else:
+            done["pair_pressure.png"] = "not drawn: no contact pairs"
+        attempt("load_curve.png", draw_load_curve, summary, title=title)
+        attempt("convergence.png", draw_convergence, summary, title=title)
+    finally:  # the reading process is waited for whatever happened
+        try:
+            steps = fields() if fields is not None else []
         except OSError as error:
             steps, done["deformed.png"] = [], f"not drawn: {error}"
-        if steps:
-            attempt("deformed.png", draw_deformed, steps[-1], rows, title=title, scale=scale, field=field,
-                    camera=camera)
+    if steps:
+        attempt("deformed.png", draw_deformed, steps[-1], rows, title=title, scale=scale, field=field,
+                camera=camera)
     done.setdefault("deformed.png", "not drawn: no fields (the run was made with fields = false)")
-    if rows:
-        attempt("pair_pressure.png", draw_pair_pressure, rows, title=title)
-    else:
-        done["pair_pressure.png"] = "not drawn: no contact pairs"
-    attempt("load_curve.png", draw_load_curve, summary, title=title)
-    attempt("convergence.png", draw_convergence, summary, title=title)
-    return done
+    return {name: done[name] for name in PICTURES}
 
 
 def draw_live_pictures(problem, folder: str | os.PathLike, *, completed: bool) -> dict[str, Path | str]:

@@ -153,3 +153,7 @@ class PointwisePlasticity(Protocol):
     def hardening(self) -> np.ndarray:
         """dσ_y/dp (n,): the slope of the yield stress in p (H for linear hardening)."""
         ...
+
+    def subset(self, index: slice) -> PointwisePlasticity:
+        """The material at the points ``index`` selects (a check goes through the points in chunks)."""
+        ...

@@ -551,6 +551,9 @@ class VonMisesAtPoints:
     def hardening(self) -> np.ndarray:
         return self.H
 
+    def subset(self, index: slice) -> VonMisesAtPoints:
+        return VonMisesAtPoints(self.mu[index], self.lmbda[index], self.sigma_y0[index], self.H[index], self.E[index])
+
 
 def elastic_stress(eps: np.ndarray, lmbda: np.ndarray, mu: np.ndarray) -> np.ndarray:
     """σ = λ tr(ε) I + 2μ ε for strains (n, 3, 3) and per-point Lamé parameters (n,)."""

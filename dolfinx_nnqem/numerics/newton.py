@@ -72,6 +72,11 @@ class Globalisation:
         fraction, 0.81 of Ψ, asks |H| to fall by a tenth in the window. Stricter fractions cut
         damped attempts that crawl (a few per cent a step) before they find the right pair
         states and converge quadratically.
+    stagnation
+        The watchdog takes a full step that fails the Armijo test only if it changes Ψ by more
+        than this fraction (a pair changing state makes Ψ jump); a full step that leaves Ψ
+        where it was (a two-point cycle: one pair between stick and slip, the rest converged)
+        is backtracked like any other. None: every full step within ``max_increase``.
     """
 
     line_search: bool = True
@@ -86,6 +91,7 @@ class Globalisation:
     lm_delta: float = 1.0
     stall_window: int | None = None
     stall_progress: float = 0.81
+    stagnation: float | None = None
 
     def __post_init__(self):
         if not 0.0 < self.armijo < 0.5:
@@ -109,6 +115,8 @@ class Globalisation:
             raise ValueError(f"stall_window must be an integer >= 1 or None, got {self.stall_window!r}")
         if not 0.0 < self.stall_progress < 1.0:
             raise ValueError(f"stall_progress must be in (0, 1), got {self.stall_progress!r}")
+        if self.stagnation is not None and not 0.0 < self.stagnation < 1.0:
+            raise ValueError(f"stagnation must be in (0, 1) or None, got {self.stagnation!r}")
 
 
 @dataclass(frozen=True)
@@ -322,7 +330,8 @@ def _take_step(system: NewtonSystem, merit: Merit, g: Globalisation,
         trial = system.move(alpha)
         if trial.finite and descent and trial.psi <= merit.psi + g.armijo * alpha * slope:
             return (alpha, trial, True), rejected
-        if allow_increase and alpha == 1.0 and trial.finite and trial.psi <= g.max_increase * merit.psi:
+        if allow_increase and alpha == 1.0 and trial.finite and trial.psi <= g.max_increase * merit.psi \
+                and (g.stagnation is None or abs(trial.psi - merit.psi) > g.stagnation * merit.psi):
             return (alpha, trial, False), rejected
         alpha *= 0.5
         rejected += 1

@@ -43,6 +43,7 @@ from dolfinx_nnqem.contact.surfaces import ContactPairError
 from dolfinx_nnqem.contact.obstacles import Cylinder, Plane, Sphere  # noqa: F401  (the user's imports)
 from dolfinx_nnqem.material.von_mises import GaussPointValues, PlasticState
 from dolfinx_nnqem.problem.validation import check_cell_tag, check_magnitude, check_mesh
+from dolfinx_nnqem.numerics.linalg import vec_norm
 
 
 # -- problem data ---------------------------------------------------------------------------
@@ -302,10 +303,11 @@ class ContactProblem:
             parts.append((b.amplitude, form))
         return [(amplitude, assemble_vector(jit.form(form), self.V)) for amplitude, form in parts]
 
-    def external_force(self, load_factor: float | None = None) -> PETSc.Vec:
-        """F_ext(ℓ) = Σ_k a_k(ℓ) F_k (a_k(ℓ) = ℓ unless the load has an amplitude)."""
+    def external_force(self, load_factor: float | None = None, out: PETSc.Vec | None = None) -> PETSc.Vec:
+        """F_ext(ℓ) = Σ_k a_k(ℓ) F_k (a_k(ℓ) = ℓ unless the load has an amplitude): a new vector
+        of V, or ``out`` (one, refilled by a solver every iteration) overwritten."""
         ell = self.load_factor if load_factor is None else load_factor
-        F = compat.create_vector(self.V)
+        F = compat.create_vector(self.V) if out is None else out
         with F.localForm() as local:
             local.set(0.0)
         for amplitude, F_k in self.F_ext_parts:
@@ -387,18 +389,29 @@ class ContactProblem:
             raise ValueError("relative_displacement: the problem has no contact")
         return self.contact.relative_displacement(self.u.x.petsc_vec if u is None else u, self.load_factor)
 
-    def residual(self, z: np.ndarray | None = None, F_int: PETSc.Vec | None = None) -> PETSc.Vec:
+    def residual(self, z: np.ndarray | None = None, F_int: PETSc.Vec | None = None, *,
+                 F_ext: PETSc.Vec | None = None, contact_force: PETSc.Vec | None = None,
+                 out: PETSc.Vec | None = None) -> PETSc.Vec:
         """Equilibrium residual R = F_int(u) − ℓ F_ext − Bᵀλ(z) (constrained rows NOT zeroed).
 
-        At constrained dofs R holds the support reactions.
+        At constrained dofs R holds the support reactions. A solver that has them passes F_ext(ℓ)
+        and Bᵀλ(z) (:meth:`external_force`, ``contact.global_force``) and a vector ``out`` to
+        overwrite (a new vector otherwise).
         """
-        R = self.assemble_internal_force() if F_int is None else F_int.copy()
-        R.axpy(-1.0, self.external_force())
+        if F_int is None:
+            R = self.assemble_internal_force(out)
+        elif out is None:
+            R = F_int.copy()
+        else:
+            F_int.copy(out)
+            R = out
+        R.axpy(-1.0, self.external_force() if F_ext is None else F_ext)
         if self.contact is not None:
-            R.axpy(-1.0, self.contact.global_force(self.contact.force(z)))
+            R.axpy(-1.0, self.contact.global_force(self.contact.force(z)) if contact_force is None else contact_force)
         return R
 
-    def force_scale(self, F_int: PETSc.Vec, F_ext: PETSc.Vec | None = None) -> float:
+    def force_scale(self, F_int: PETSc.Vec, F_ext: PETSc.Vec | None = None,
+                    contact_force: PETSc.Vec | None = None) -> float:
         """The problem's force scale F at the current iterate, for convergence tests: the one
         recipe every solver and the independent check use.
 
@@ -407,7 +420,8 @@ class ContactProblem:
         rigid obstacle sets up over the increment (``ContactModel.motion_force_scale``), and
         ``force_floor``: a state without forces (a body moved rigidly before it touches, every
         pair open) would otherwise be judged by its rounding errors against zero. ``F_ext``:
-        F_ext(ℓ) if the caller has it (assembled otherwise).
+        F_ext(ℓ) if the caller has it (assembled otherwise); ``contact_force``: Bᵀλ at the
+        current z if the caller has it.
         """
         if F_ext is None:
             F_ext = self.external_force()
@@ -417,10 +431,10 @@ class ContactProblem:
             F_ext_norm = F_ext.norm()
         scale = max(F_ext_norm, F_int.norm(), self.force_floor)
         if self.contact is not None:
-            contact_force = self.contact.global_force(self.contact.force())
-            scale = max(scale, contact_force.norm(),
-                        self.contact.motion_force_scale(self.load_factor, self.load_factor_n))
-            contact_force.destroy()
+            force = self.contact.global_force(self.contact.force()) if contact_force is None else contact_force
+            scale = max(scale, vec_norm(force), self.contact.motion_force_scale(self.load_factor, self.load_factor_n))
+            if contact_force is None:
+                force.destroy()
         return scale
 
     def tangent_action(self, delta: np.ndarray) -> PETSc.Vec:
@@ -436,9 +450,14 @@ class ContactProblem:
         self._delta.x.array[:] = delta
         return assemble_vector(self._tangent_action, self.V)
 
-    def free_residual(self, R: PETSc.Vec) -> PETSc.Vec:
-        """A copy of ``R`` with the constrained rows zeroed (what equilibrium must satisfy)."""
-        Rf = R.copy()
+    def free_residual(self, R: PETSc.Vec, out: PETSc.Vec | None = None) -> PETSc.Vec:
+        """A copy of ``R`` (a new vector, or into ``out``) with the constrained rows zeroed (what
+        equilibrium must satisfy)."""
+        if out is None:
+            Rf = R.copy()
+        else:
+            R.copy(out)
+            Rf = out
         with Rf.localForm() as local:
             local.array[self.bc_dofs] = 0.0
         return Rf

@@ -181,6 +181,7 @@ class AugmentedSystem:
         self._nest: PETSc.Mat | None = None
         self._g = model.create_lambda_vector()
         self._Btg = self.B_free.createVecRight()
+        self._b: PETSc.Vec | None = None  # the right-hand side, created once (the nest's layout is fixed)
         self.A00: PETSc.Mat | None = None  # K, widened at the first matrix
 
     def _u_block(self, K: PETSc.Mat, dH_dw: np.ndarray) -> PETSc.Mat:
@@ -217,11 +218,13 @@ class AugmentedSystem:
         return self._nest
 
     def rhs(self, R_free: PETSc.Vec, H: np.ndarray, dH_dw: np.ndarray) -> PETSc.Vec:
-        """−(R + c B_freeᵀ D_wᵀ H, H) in the nest's layout (a plain vector)."""
+        """−(R + c B_freeᵀ D_wᵀ H, H) in the nest's layout (a plain vector, the same one each call)."""
         self._g.getArray()[:] = np.einsum("nki,nk->ni", dH_dw, H).reshape(-1)
         self.B_free.multTranspose(self._g, self._Btg)
         n_u = R_free.getLocalSize()
-        b = PETSc.Vec().createMPI((n_u + H.size, PETSc.DECIDE), comm=R_free.getComm())
+        if self._b is None:
+            self._b = PETSc.Vec().createMPI((n_u + H.size, PETSc.DECIDE), comm=R_free.getComm())
+        b = self._b
         arr = b.getArray()
         arr[:n_u] = -R_free.getArray(readonly=True) - self.c * self._Btg.getArray(readonly=True)
         arr[n_u:] = -H.reshape(-1)
@@ -230,6 +233,6 @@ class AugmentedSystem:
     def destroy(self) -> None:
         self._blocks.destroy()
         self._P.destroy()
-        for m in (self.B_free, self._BtPB, self._nest, self._g, self._Btg):
+        for m in (self.B_free, self._BtPB, self._nest, self._g, self._Btg, self._b):
             if m is not None:
                 m.destroy()

@@ -126,9 +126,12 @@ class _Forms:
     def __init__(self, problem):
         st = problem.state
         points = compat.interpolation_points(st.W_tensor)
+        # one Gauss-point tensor function holds ∇u, Δε and the radial return's Δε_p in turn, and
+        # the stress function the radial return's σ too: each is 72 bytes a point (94 MB a rank
+        # at 10⁶ dofs), and the check needs them one after the other (copies are taken)
         self.grad = fem.Function(st.W_tensor)
         self.grad_expr = jit.expression(ufl.grad(problem.u), points)
-        self.strain_increment = fem.Function(st.W_tensor)
+        self.strain_increment = self.grad
         self.strain_increment_expr = jit.expression(strain(problem.u) - strain(st.u_n), points)
         self.sigma = fem.Function(st.W_tensor)
         self.own_force = jit.form(ufl.inner(self.sigma, strain(ufl.TestFunction(problem.V))) * st.dx)
@@ -152,8 +155,8 @@ class _Forms:
             rm = st.return_map(p.u)
             points = compat.interpolation_points(st.W_tensor)
             self._return_map = (jit.expression(rm.sigma, points), jit.expression(rm.dp, points),
-                                jit.expression(rm.deps_p, points), fem.Function(st.W_tensor),
-                                fem.Function(st.W_scalar), fem.Function(st.W_tensor))
+                                jit.expression(rm.deps_p, points), self.sigma, fem.Function(st.W_scalar),
+                                self.grad)
         e_sigma, e_dp, e_deps, sigma, dp, deps = self._return_map
         for f, e in ((sigma, e_sigma), (dp, e_dp), (deps, e_deps)):
             f.interpolate(e)

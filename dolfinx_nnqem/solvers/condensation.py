@@ -24,16 +24,82 @@ With no free mode, nothing changes: G = K⁻¹.
 
 from __future__ import annotations
 
+import math
 import time
 
 import dolfinx.fem as fem
 import numpy as np
 import scipy.linalg
+from mpi4py import MPI
 from petsc4py import PETSc
 
 from dolfinx_nnqem.numerics.linalg import clear_options, create_ksp, direct_options, factorise
 
-__all__ = ["Condensation"]
+__all__ = ["Condensation", "check_dense_memory", "dense_memory"]
+
+DENSE_SYSTEM_COPIES = 6
+"""(3NC + n_r)² arrays the dense contact solve holds at once, counted in :func:`dense_memory`:
+the gathered flexibility C, the Jacobian and its LU factors, ∂_wH·C, and the driver's trial
+and best iterates' Jacobians."""
+
+
+def dense_memory(problem, factorisations: int = 1) -> dict[str, float]:
+    """Bytes this rank's dense condensation needs (:meth:`Condensation.pair_flexibility` and the
+    dense contact solve), by part; the factorisations of the stiffness come on top of it.
+
+    The flexibility is computed as X = G Bᵀ from Bᵀ made dense (n_u × 3NC, n_u this rank's
+    displacement dofs), X itself and the copy of X the solvers keep: three n_u × 3NC arrays. On
+    the pressed blocks of level 8 (n_u = 111 078, 3NC = 3 267 on one rank) that is 8.7 GB.
+    """
+    n_u = 3 * problem.V.dofmap.index_map.size_local
+    m = 3 * problem.num_pairs
+    order = m + problem.rigid_modes.count
+    return {"columns": 3.0 * 8 * n_u * m * factorisations, "rows": 8.0 * 3 * problem.contact.num_local * m,
+            "dense system": 8.0 * DENSE_SYSTEM_COPIES * order * order}
+
+
+def available_memory() -> float | None:
+    """Bytes of memory this machine has available now (``MemAvailable``), None where unknown."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return 1024.0 * float(line.split()[1])
+    except OSError:
+        pass
+    return None
+
+
+def check_dense_memory(problem, solver: str, limit_gb: float | None, factorisations: int = 1) -> None:
+    """Refuse, before anything is assembled, a problem whose dense condensation does not fit.
+
+    The need is :func:`dense_memory` summed over the ranks of each node; it must fit in
+    ``limit_gb`` (GB per node) or, if None, in the memory the node has available. Raises
+    ValueError on every rank, with the sizes, when it does not.
+    """
+    comm = problem.comm
+    parts = dense_memory(problem, factorisations)
+    node = comm.Split_type(MPI.COMM_TYPE_SHARED)
+    try:
+        need = node.allreduce(sum(parts.values()), op=MPI.SUM)
+        limit = 1e9 * limit_gb if limit_gb is not None else available_memory()
+        limit = node.allreduce(limit if limit is not None else math.inf, op=MPI.MIN)
+    finally:
+        node.Free()
+    refuse = comm.allreduce(bool(need > limit), op=MPI.LOR)
+    if not refuse:
+        return
+    n_u = 3 * problem.V.dofmap.index_map.size_global
+    m = 3 * problem.num_pairs
+    where = "set by max_memory_gb" if limit_gb is not None else "this machine has available"
+    raise ValueError(
+        f"{solver}: the dense condensation onto the {problem.num_pairs} pairs needs about {need / 1e9:.3g} GB "
+        f"(on this node, besides the factorisation{'s' if factorisations > 1 else ''} of the stiffness): "
+        f"{factorisations * 3} dense arrays of {n_u:,} displacement dofs × 3NC = {m:,} columns "
+        f"({parts['columns'] / 1e9:.3g} GB on this rank) and the dense contact system of order {m:,} "
+        f"({parts['dense system'] / 1e9:.3g} GB), more than the {limit / 1e9:.3g} GB {where}; use the "
+        "monolithic solver (linear_solver='iterative' for large meshes), or set max_memory_gb in the "
+        "method's options")
 
 
 class Condensation:

@@ -29,6 +29,7 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from dolfinx_nnqem import compat
 from dolfinx_nnqem.contact.laws import LawEvaluation, Linearisation
 from dolfinx_nnqem.solvers.block_system import AugmentedSystem, MonolithicMatrix, free_mask
 from dolfinx_nnqem.solvers.contract import ReleasesPETSc
@@ -92,6 +93,9 @@ class MonolithicSolver(ReleasesPETSc):
             r = max(i.r for i in problem.contact.interfaces)
             self._augmented = AugmentedSystem(problem.contact, self._mask, r, self.settings.augmentation)
         self._timings: dict[str, float] = {}
+        # the vectors of every iteration, created once and refilled (as DOLFINx's NonlinearProblem
+        # does); only the free residual of an evaluation is new, since the watchdog keeps evaluations
+        self._work: dict[str, PETSc.Vec] = {}
 
     @property
     def timings(self) -> dict[str, float]:
@@ -207,13 +211,28 @@ class MonolithicSolver(ReleasesPETSc):
         return True
 
     # -- the pieces the Newton system uses ------------------------------------------------------
+    def _vector(self, name: str, create) -> PETSc.Vec:
+        """The work vector ``name``, created by ``create()`` the first time."""
+        vector = self._work.get(name)
+        if vector is None:
+            vector = self._work[name] = create()
+        return vector
+
     def evaluate(self) -> _Evaluation:
         """R (free part), H, the law evaluation and the force scale at the current iterate."""
         p = self.problem
         t0 = time.perf_counter()
-        F_int = p.assemble_internal_force()
+        F_int = p.assemble_internal_force(self._vector("F_int", lambda: compat.create_vector(p.V)))
         self._tick("assembly", t0)
-        R_free = p.free_residual(p.residual(F_int=F_int))
+        F_ext = p.external_force(out=self._vector("F_ext", lambda: compat.create_vector(p.V)))
+        contact_force = None
+        if p.contact is not None:
+            contact = p.contact
+            contact_force = contact.global_force(contact.force(),
+                                                 out=self._vector("contact_force", contact.B.createVecRight))
+        R = p.residual(F_int=F_int, F_ext=F_ext, contact_force=contact_force,
+                       out=self._vector("R", lambda: compat.create_vector(p.V)))
+        R_free = p.free_residual(R)
         law, lin, H = None, None, np.zeros((0, 3))
         if p.contact is not None:
             t0 = time.perf_counter()
@@ -221,7 +240,8 @@ class MonolithicSolver(ReleasesPETSc):
             lin = p.contact.linearise(law)
             H = law.H
             self._tick("contact", t0)
-        return _Evaluation(R_free, H, law, p.force_scale(F_int), vec_norm(R_free), global_norm(H, p.comm), lin)
+        return _Evaluation(R_free, H, law, p.force_scale(F_int, F_ext, contact_force), vec_norm(R_free),
+                           global_norm(H, p.comm), lin)
 
     def _newton_matrix(self, ev: _Evaluation) -> PETSc.Mat:
         """J as one AIJ matrix (the direct system, and the LM fallback's)."""
@@ -252,9 +272,9 @@ class MonolithicSolver(ReleasesPETSc):
         self._tick("block_matrix", t0)
         return J, b
 
-    def _rhs(self, J: PETSc.Mat, ev: _Evaluation) -> PETSc.Vec:
-        """−(R_free, H) in J's layout."""
-        b = J.createVecRight()
+    def _rhs(self, J: PETSc.Mat, ev: _Evaluation, b: PETSc.Vec | None = None) -> PETSc.Vec:
+        """−(R_free, H) in J's layout (a new vector, or ``b`` overwritten)."""
+        b = J.createVecRight() if b is None else b
         n_u = ev.R_free.getLocalSize()
         arr = b.getArray()
         arr[:n_u] = -ev.R_free.getArray()
@@ -279,8 +299,8 @@ class MonolithicSolver(ReleasesPETSc):
             J, b = self._augmented_system(ev)
         else:
             J = self._newton_matrix(ev)
-            b = self._rhs(J, ev)
-        x = b.duplicate()
+            b = self._rhs(J, ev, self._vector("b", J.createVecRight))
+        x = self._vector("x", b.duplicate)
         why_not = self.linear.solve(J, b, x, None if ev.law is None else ev.law.state)
         if why_not is not None:
             logger.info(f"{self.name}: {why_not}")
@@ -331,8 +351,11 @@ class MonolithicSolver(ReleasesPETSc):
         self._timings[key] = self._timings.get(key, 0.0) + time.perf_counter() - t0
 
     def destroy(self) -> None:
-        """Free the PETSc objects (linear solver, matrices)."""
+        """Free the PETSc objects (linear solver, matrices, work vectors)."""
         self.linear.destroy()
+        for vector in self._work.values():
+            vector.destroy()
+        self._work.clear()
         for obj in (self._matrix, self._augmented):
             if obj is not None:
                 obj.destroy()

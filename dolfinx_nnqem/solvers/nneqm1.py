@@ -43,7 +43,7 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from dolfinx_nnqem.solvers.condensation import Condensation
+from dolfinx_nnqem.solvers.condensation import Condensation, check_dense_memory
 from dolfinx_nnqem.solvers.condensed import CondensedProblem, CondensedSystem, newton_step, rigid_start
 from dolfinx_nnqem.contact.laws import LawEvaluation
 from dolfinx_nnqem.contact.model import PairLaws
@@ -83,6 +83,7 @@ class NNEQM1Solver(ReleasesPETSc):
         self.problem = problem
         self.options = options or SolverOptions()
         self.settings = nneqm1 or NNEQM1Options()
+        check_dense_memory(problem, self.name, self.settings.max_memory_gb)  # before anything is built
         self.condensation = Condensation(problem, self.name, self.options.petsc_options)
         self._timings: dict[str, float] = {}
         self.last_condensed: CondensedProblem | None = None  #: the latest outer iteration's dense problem

@@ -43,7 +43,7 @@ from dolfinx_nnqem.material.von_mises import GaussPointValues, deviator_coordina
 from dolfinx_nnqem.numerics.linalg import vec_norm
 from dolfinx_nnqem.numerics.newton import solve
 from dolfinx_nnqem.problem.contact_problem import ContactProblem
-from dolfinx_nnqem.solvers.condensation import Condensation
+from dolfinx_nnqem.solvers.condensation import Condensation, check_dense_memory
 from dolfinx_nnqem.solvers.contract import ReleasesPETSc
 from dolfinx_nnqem.solvers.convergence import IterationRecord, SolveReport, logger
 from dolfinx_nnqem.solvers.gauss_points import GaussPointOperators
@@ -98,6 +98,8 @@ class NNEQM2Solver(ReleasesPETSc):
                 f"GB per matrix, above NNEQM2Options.max_dense_order = {self.settings.max_dense_order}; use "
                 "flow_directions='return-map' (no dense matrix over the Gauss points), the monolithic solver or "
                 "NNEQM1, or raise max_dense_order")
+        if not self.frozen and problem.has_contact:
+            check_dense_memory(problem, self.name, self.settings.max_memory_gb)
         self.elastic = Condensation(problem, self.name, self.options.petsc_options)
         self.tangent = None if self.frozen else Condensation(problem, f"{self.name}_tangent",
                                                              self.options.petsc_options)

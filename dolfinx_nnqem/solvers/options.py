@@ -104,7 +104,7 @@ class MonolithicOptions:
     lag_preconditioner: bool = True
     globalisation: Globalisation = field(default_factory=lambda: Globalisation(
         min_step=1.0 / 64, watchdog=6, watchdog_progress=0.5, watchdog_restarts=2,
-        stall_window=STALL_WINDOW))
+        stall_window=STALL_WINDOW, stagnation=1e-2))
 
     def __post_init__(self):
         if self.linear_solver not in ("direct", "iterative", "auto"):
@@ -115,6 +115,14 @@ class MonolithicOptions:
                 or not (math.isfinite(float(self.augmentation)) and self.augmentation > 0):
             raise ValueError(f"MonolithicSolver: augmentation = {self.augmentation!r}; expected a finite value > 0 "
                              "(the u block's penalty on closed pair directions, in units of r)")
+
+
+def _check_memory(owner: str, value) -> None:
+    """``max_memory_gb``: None or a finite number > 0."""
+    if value is None:
+        return
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not (math.isfinite(value) and float(value) > 0):
+        raise ValueError(f"{owner}: max_memory_gb = {value!r}; expected None or a number of GB > 0")
 
 
 def _in_turn(inner: Globalisation, retry: Globalisation | None) -> tuple[Globalisation, ...]:
@@ -145,6 +153,12 @@ class NNEQM1Options:
         Tried from the same start when ``inner`` stops without converging (None: no retry).
         The default, monotone Armijo steps, breaks the stick ↔ slip cycles that full steps
         can fall into (:func:`~dolfinx_nnqem.numerics.nonsmooth.solve_dense`).
+    max_memory_gb
+        The memory (GB per node) the dense condensation may take: Bᵀ made dense, X = G Bᵀ and its
+        copy (three arrays of displacement dofs × 3NC) and the dense contact system
+        (:func:`~dolfinx_nnqem.solvers.condensation.dense_memory`). A problem that needs more is
+        refused before anything is assembled, with the sizes. None (default): the memory the
+        machine has available when the solver is made.
     """
 
     modified: bool = False
@@ -154,9 +168,11 @@ class NNEQM1Options:
                                                                        stall_window=STALL_WINDOW))
     inner_retry: Globalisation | None = field(default_factory=lambda: Globalisation(min_step=1e-10, watchdog=0,
                                                                                     stall_window=STALL_WINDOW))
+    max_memory_gb: float | None = None
 
     def __post_init__(self):
         _check_integer("NNEQM1Options", "inner_max_iterations", self.inner_max_iterations, 1)
+        _check_memory("NNEQM1Options", self.max_memory_gb)
 
     @property
     def inner_globalisations(self) -> tuple[Globalisation, ...]:
@@ -190,25 +206,30 @@ class NNEQM2Options:
         of the materials that can yield). Its matrices grow as the order squared (8 bytes each
         entry; 20 000 is 3.2 GB per matrix); a larger problem is refused before anything is
         assembled. The default variant has no dense matrix over the Gauss points.
+    max_memory_gb
+        "return-map": the memory (GB per node) its dense condensation onto the pairs may take,
+        as :attr:`NNEQM1Options.max_memory_gb` (None: what the machine has available).
     """
 
     flow_directions: str = "return-map"
     extrapolate: bool = True
     globalisation: Globalisation = field(default_factory=lambda: Globalisation(
         min_step=1.0 / 64, watchdog=6, watchdog_progress=0.5, watchdog_restarts=2,
-        stall_window=STALL_WINDOW))
+        stall_window=STALL_WINDOW, stagnation=1e-2))
     inner_max_iterations: int = 100
     inner: Globalisation = field(default_factory=lambda: Globalisation(min_step=1e-10, watchdog=0,
                                                                        stall_window=STALL_WINDOW))
     inner_retry: Globalisation | None = field(default_factory=lambda: Globalisation(min_step=1e-10, watchdog=6,
                                                                                     stall_window=STALL_WINDOW))
     max_dense_order: int = 20_000
+    max_memory_gb: float | None = None
 
     def __post_init__(self):
         if self.flow_directions not in FLOW_DIRECTIONS:
             raise ValueError(f"NNEQM2Options: flow_directions = {self.flow_directions!r}; expected one of "
                              f"{list(FLOW_DIRECTIONS)}")
         _check_integer("NNEQM2Options", "max_dense_order", self.max_dense_order, 1)
+        _check_memory("NNEQM2Options", self.max_memory_gb)
         _check_integer("NNEQM2Options", "inner_max_iterations", self.inner_max_iterations, 1)
         for name in ("globalisation", "inner"):
             if not isinstance(getattr(self, name), Globalisation):

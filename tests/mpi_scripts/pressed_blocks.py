@@ -1,6 +1,6 @@
-"""MPI helper of tests/test_iterative.py: the pressed blocks (level 2) solved by the monolithic solver.
+"""MPI helper of tests/test_iterative.py: the pressed blocks (level 2, or LEVEL) solved by the monolithic solver.
 
-    mpiexec -n N python pressed_blocks.py LINEAR_SOLVER OUT.npz
+    mpiexec -n N python pressed_blocks.py LINEAR_SOLVER OUT.npz [LEVEL]
 
 Rank 0 writes the pair positions, the pair forces on body 1 and the displacements of body 2's
 pair nodes (gathered, in the global pair order) and the Newton iterations per increment. At the
@@ -22,7 +22,7 @@ from dolfinx_nnqem.io import pair_table
 from dolfinx_nnqem.solvers import solve_load_steps
 
 linear_solver, out = sys.argv[1], sys.argv[2]
-problem = pressed_blocks_problem(2, MPI.COMM_WORLD)
+problem = pressed_blocks_problem(int(sys.argv[3]) if len(sys.argv) > 3 else 2, MPI.COMM_WORLD)
 results = solve_load_steps(problem, MonolithicSolver(problem, monolithic=MonolithicOptions(linear_solver=linear_solver)), 6)
 table = pair_table(problem)
 if MPI.COMM_WORLD.rank == 0:

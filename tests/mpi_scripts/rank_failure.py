@@ -36,12 +36,13 @@ def main() -> int:
         elif case == "writer":
             import errno
 
-            from dolfinx_nnqem.io import output
+            from dolfinx_nnqem.io import output, safe_io
 
             def full(path, text, **kwargs):  # what safe_io raises when the disk is full
                 raise OSError(errno.ENOSPC, f"cannot write {path}: No space left on device", str(path))
 
             output.atomic_write_text = full
+            safe_io.StagedFiles.stage = lambda self, path, text: full(path, text)  # the increments' index files
     return cli.main(argv)
 
 

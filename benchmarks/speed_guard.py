@@ -1,0 +1,159 @@
+"""Speed guard: the figures of issue 32 as ratios against a baseline measured in the same run.
+
+A machine's speed varies from run to run (this shared development machine: 2.5x between a quiet
+and a busy moment), so absolute times do not show a slowdown. Every figure here is divided by
+a baseline of the same kind measured in the same run, interleaved with it (A B A B ...), and
+the median of the pairwise ratios is printed with their spread:
+
+* whole processes: ``dolfinx-nnqem run demos/two_beams.toml --no-pictures`` and ``--help``
+  against ``python -c "import dolfinx_solver, dolfinx"`` (the import floor of any run), and
+  against CalculiX on the same model when ``ccx`` is installed
+  (``benchmarks/calculix_two_beams.py``);
+* in this process: one Newton iteration of the pressed blocks (monolithic, iterative, level
+  ``--level``), one outer iteration of NNEQM1 and one Newton step of NNEQM2 (level 2), against
+  an assembly and MUMPS solve of linear elasticity on a cube of the same kind, with DOLFINx
+  alone (no code of the package);
+* counts that do not depend on the machine: Newton and Krylov iterations.
+
+Compare its output with the one in ``docs/performance.md`` (the last run of the issue's
+closing note): a ratio that grew by more than its spread is a slowdown. Prints figures;
+asserts nothing::
+
+    python benchmarks/speed_guard.py [--runs 5] [--level 4]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _time(cmd: list[str], cwd: str | None = None, env: dict | None = None) -> float:
+    t0 = time.perf_counter()
+    subprocess.run(cmd, cwd=cwd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, check=True)
+    return time.perf_counter() - t0
+
+
+def _ratios(a, b, runs: int) -> str:
+    """A and B in turn ``runs`` times: 'median (min–max)' of A/B, and the medians of A and B."""
+    pairs = []
+    for _ in range(runs):
+        pairs.append((a(), b()))
+    r = sorted(x / y for x, y in pairs)
+    return (f"{statistics.median(r):.2f} ({r[0]:.2f}–{r[-1]:.2f}); A median {statistics.median(x for x, _ in pairs):.3f} s,"
+            f" B median {statistics.median(y for _, y in pairs):.3f} s")
+
+
+def whole_processes(runs: int) -> None:
+    env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""),
+           "OPENBLAS_NUM_THREADS": "1"}
+    env.pop("PYTHONDONTWRITEBYTECODE", None)  # a user's run has its bytecode cached
+    py = sys.executable
+    with tempfile.TemporaryDirectory() as tmp:
+        run = [py, "-m", "dolfinx_nnqem", "-q", "run", str(ROOT / "demos" / "two_beams.toml"), "--out",
+               f"{tmp}/out", "--overwrite", "--no-pictures"]
+        floor = [py, "-c", "import dolfinx_solver, dolfinx"]
+        _time(run, env=env)  # warm caches (FFCx, bytecode)
+        print(f"two beams, whole process / import floor:   {_ratios(lambda: _time(run, env=env), lambda: _time(floor, env=env), runs)}")
+        help_ = [py, "-m", "dolfinx_nnqem", "--help"]
+        print(f"--help / python -c pass:                     "
+              f"{_ratios(lambda: _time(help_, env=env), lambda: _time([py, '-c', 'pass'], env=env), runs)}")
+        ccx = shutil.which("ccx")
+        if ccx is None:
+            print("CalculiX (ccx) not installed: no comparison with it")
+            return
+        subprocess.run([py, str(ROOT / "benchmarks" / "calculix_two_beams.py"), tmp], check=True,
+                       stdout=subprocess.DEVNULL)
+        print(f"two beams, whole process / CalculiX 2.20:   "
+              f"{_ratios(lambda: _time(run, env=env), lambda: _time([ccx, '-i', 'two_beams'], cwd=tmp), runs)}")
+
+
+def baseline_solve(n: int = 12) -> float:
+    """Seconds for DOLFINx alone: assemble linear elasticity on an n³ hexahedral cube and solve it
+    with MUMPS (the kind of work the package's iterations do)."""
+    import dolfinx
+    import dolfinx.fem.petsc
+    import numpy as np
+    import ufl
+    from mpi4py import MPI
+    from petsc4py import PETSc
+
+    t0 = time.perf_counter()
+    mesh = dolfinx.mesh.create_unit_cube(MPI.COMM_SELF, n, n, n, dolfinx.mesh.CellType.hexahedron)
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (3,)))
+    u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
+    eps = lambda w: ufl.sym(ufl.grad(w))  # noqa: E731
+    a = dolfinx.fem.form(2.0 * ufl.inner(eps(u), eps(v)) * ufl.dx + ufl.div(u) * ufl.div(v) * ufl.dx)
+    L = dolfinx.fem.form(ufl.inner(dolfinx.fem.Constant(mesh, np.array([0.0, -1.0, 0.0])), v) * ufl.dx)
+    facets = dolfinx.mesh.locate_entities_boundary(mesh, 2, lambda x: np.isclose(x[0], 0.0))
+    bc = dolfinx.fem.dirichletbc(np.zeros(3), dolfinx.fem.locate_dofs_topological(V, 2, facets), V)
+    t0 = time.perf_counter()
+    A = dolfinx.fem.petsc.assemble_matrix(a, bcs=[bc])
+    A.assemble()
+    b = dolfinx.fem.petsc.assemble_vector(L)
+    ksp = PETSc.KSP().create(MPI.COMM_SELF)
+    ksp.setOperators(A)
+    ksp.setType("preonly")
+    ksp.getPC().setType("lu")
+    ksp.getPC().setFactorSolverType("mumps")
+    x = b.duplicate()
+    ksp.solve(b, x)
+    elapsed = time.perf_counter() - t0
+    for obj in (ksp, A, b, x):
+        obj.destroy()
+    return elapsed
+
+
+def iteration_costs(level: int, runs: int) -> None:
+    """Seconds per Newton (outer) iteration of the three methods, against :func:`baseline_solve`."""
+    import dolfinx_nnqem  # noqa: F401
+    from mpi4py import MPI
+
+    from dolfinx_nnqem.cases.pressed_blocks import pressed_blocks_problem
+    from dolfinx_nnqem.solvers import MonolithicOptions, SolverOptions, make_solver, solve_load_steps
+
+    baseline_solve()  # JIT and caches
+    cases = [("monolithic, iterative", level, {"monolithic": MonolithicOptions(linear_solver="iterative")}, 6),
+             ("nneqm1", 2, {}, 6), ("nneqm2", 2, {}, 6)]
+    for name, lvl, extra, increments in cases:
+        counts = {}
+
+        def one(lvl=lvl, extra=extra, name=name, increments=increments, counts=counts):
+            problem = pressed_blocks_problem(lvl, MPI.COMM_WORLD)
+            method = name.split(",")[0]
+            with make_solver(method, problem, SolverOptions(max_iterations=40), **extra) as solver:
+                t0 = time.perf_counter()
+                results = solve_load_steps(problem, solver, increments)
+                elapsed = time.perf_counter() - t0
+                counts["newton"] = [r.iterations for r in results]
+                counts["krylov"] = getattr(solver, "linear_iterations", None)
+            return elapsed / max(sum(counts["newton"]), 1)
+
+        ratio = _ratios(one, baseline_solve, runs)
+        print(f"{name} (level {lvl}), s per iteration / baseline solve: {ratio}; iterations {counts['newton']}"
+              + (f", Krylov {counts['krylov']}" if counts.get("krylov") else ""), flush=True)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--runs", type=int, default=5, help="pairs of runs per ratio (default 5)")
+    parser.add_argument("--level", type=int, default=4, help="pressed-blocks level of the monolithic figure")
+    parser.add_argument("--skip-processes", action="store_true", help="only the in-process figures")
+    args = parser.parse_args()
+    print(f"figure: median of A/B over {args.runs} pairs (min–max)")
+    if not args.skip_processes:
+        whole_processes(args.runs)
+    iteration_costs(args.level, max(1, args.runs // 2))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,46 @@
+"""The commit point's renames cannot be cut half-way by Ctrl-C or SIGTERM (interrupts.held).
+
+Found by the two-beam signal test: a SIGINT that arrived between two renames of a commit point
+left a staged ``.summary.json.tmp-PID-staged`` behind (1 run of the default suite).
+"""
+
+import os
+import signal
+
+import pytest
+
+from dolfinx_nnqem import interrupts
+from dolfinx_nnqem.io.safe_io import StagedFiles
+
+
+def test_a_signal_inside_held_is_raised_when_the_block_ends():
+    before = signal.getsignal(signal.SIGINT)
+    reached_the_end = False
+    with pytest.raises(KeyboardInterrupt):
+        with interrupts.held():
+            os.kill(os.getpid(), signal.SIGINT)
+            reached_the_end = True
+    assert reached_the_end
+    assert signal.getsignal(signal.SIGINT) is before
+
+
+def test_an_interrupt_during_the_renames_leaves_every_file_renamed(tmp_path, monkeypatch):
+    staged = StagedFiles()
+    for name in ("fields.xdmf", "pairs.pvd", "summary.json"):
+        staged.stage(tmp_path / name, f"new {name}")
+    real_replace = os.replace
+    calls = []
+
+    def replace_then_interrupt(src, dst):
+        real_replace(src, dst)
+        calls.append(dst)
+        if len(calls) == 1:
+            os.kill(os.getpid(), signal.SIGINT)  # Ctrl-C after the first rename
+
+    monkeypatch.setattr(os, "replace", replace_then_interrupt)
+    with pytest.raises(KeyboardInterrupt):
+        staged.replace_all()
+    names = sorted(p.name for p in tmp_path.iterdir())
+    print(f"\n  renames before the interrupt was raised: {len(calls)}; files: {names}")
+    assert len(calls) == 3 and names == ["fields.xdmf", "pairs.pvd", "summary.json"]
+    assert (tmp_path / "summary.json").read_text() == "new summary.json"
