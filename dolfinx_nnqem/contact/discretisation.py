@@ -26,7 +26,7 @@ from scipy.spatial import cKDTree
 
 from dolfinx_nnqem.contact.pairs import find_pairs
 from dolfinx_nnqem.contact.pairset import PairSet
-from dolfinx_nnqem.contact.quadratic_facets import QUADRATIC
+from dolfinx_nnqem.contact.facet_layout import QUADRATIC
 from dolfinx_nnqem.contact.surface_pairs import facet_size
 from dolfinx_nnqem.contact.surfaces import (ContactPairError, GatheredSurfaces, check_no_shared_nodes, gather_surfaces,
                                             mesh_tolerance)

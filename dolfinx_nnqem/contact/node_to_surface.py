@@ -36,7 +36,7 @@ from __future__ import annotations
 import numpy as np
 
 from dolfinx_nnqem.contact.projection import Projection, project_points
-from dolfinx_nnqem.contact.quadratic_facets import NodeCombination
+from dolfinx_nnqem.contact.facet_layout import NodeCombination
 from dolfinx_nnqem.contact.quadratic_projection import project_points_quadratic
 from dolfinx_nnqem.contact.surface_pairs import SurfacePairs, facet_size, surface_pairs
 from dolfinx_nnqem.contact.surfaces import ContactPairError, GatheredSurfaces, first_by_position, format_point

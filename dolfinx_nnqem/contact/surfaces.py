@@ -22,8 +22,8 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
-from dolfinx_nnqem.contact import quadratic_facets
-from dolfinx_nnqem.contact.quadratic_facets import NodeCombination
+from dolfinx_nnqem.contact import facet_layout
+from dolfinx_nnqem.contact.facet_layout import NodeCombination
 
 __all__ = ["ContactPairError", "Facets", "GatheredSurfaces", "SurfaceNodes", "check_contact_space", "check_no_shared_nodes",
            "first_by_position",
@@ -174,12 +174,12 @@ class Facets:
     @property
     def num_vertices(self) -> int:
         """Vertices per facet (the first nodes of each row)."""
-        return quadratic_facets.NUM_VERTICES[self.nodes.shape[1]]
+        return facet_layout.NUM_VERTICES[self.nodes.shape[1]]
 
     @property
     def degree(self) -> int:
         """1 for linear facets (tri3, quad4), 2 for quadratic ones (tri6, quad9)."""
-        return 2 if quadratic_facets.is_quadratic(self.nodes.shape[1]) else 1
+        return 2 if facet_layout.is_quadratic(self.nodes.shape[1]) else 1
 
 
 def space_degree(V: dolfinx.fem.FunctionSpace) -> int:
@@ -229,7 +229,7 @@ def _facet_node_closures(layout, cell_type, degree: int) -> np.ndarray:
         k = 6 if len(vertices) == 3 else 9
         row = [layout.entity_dofs(0, v)[0] for v in vertices]
         row += [layout.entity_dofs(1, edges.index(tuple(sorted((vertices[a], vertices[b])))))[0]
-                for a, b in quadratic_facets.EDGES[k]]
+                for a, b in facet_layout.EDGES[k]]
         if k == 9:
             row.append(layout.entity_dofs(fdim, j)[0])
         rows.append(row)
@@ -246,7 +246,7 @@ def _facet_coordinates(mesh, cells: np.ndarray, local_facet: np.ndarray, closure
     quadrilateral's centre (the map of a bilinear facet at its centre is its vertex mean).
     """
     k = closure.shape[1]
-    nv = quadratic_facets.NUM_VERTICES[k]
+    nv = facet_layout.NUM_VERTICES[k]
     cell_nodes = compat.geometry_dofmap(mesh)[cells]
     x = mesh.geometry.x[np.take_along_axis(cell_nodes, closure[local_facet, :nv], axis=1)]
     if nv == k:
@@ -258,7 +258,7 @@ def _facet_coordinates(mesh, cells: np.ndarray, local_facet: np.ndarray, closure
     if cmap.degree > 2:
         raise ContactPairError(f"contact surfaces on a mesh of geometry degree {cmap.degree}: quadratic contact "
                                "facets need a straight-sided or a second-order mesh")
-    extra = [0.5 * (x[:, a] + x[:, b]) for a, b in quadratic_facets.EDGES[k]]
+    extra = [0.5 * (x[:, a] + x[:, b]) for a, b in facet_layout.EDGES[k]]
     if k == 9:
         extra.append(x.mean(axis=1))
     return np.concatenate([x, np.stack(extra, axis=1)], axis=1)
@@ -323,7 +323,7 @@ def _local_facets(
     num_vertices = dolfinx.cpp.mesh.cell_num_vertices(cell_type)
     x = _facet_coordinates(mesh, cells, local_facet, closure)
     cell_vertices = compat.geometry_dofmap(mesh)[cells][:, :num_vertices]
-    area = _outward_area_vectors(x[:, :quadratic_facets.NUM_VERTICES[k]], mesh.geometry.x[cell_vertices].mean(axis=1))
+    area = _outward_area_vectors(x[:, :facet_layout.NUM_VERTICES[k]], mesh.geometry.x[cell_vertices].mean(axis=1))
     nodes = V.dofmap.index_map.local_to_global(facet_dofs.ravel().astype(np.int32)).reshape(m, k)
     return Facets(np.full(m, surface, np.int8), nodes.astype(np.int64), x, area, num_cells)
 
@@ -376,13 +376,16 @@ def _surface_nodes(facets: Facets, surface: int, tag: int) -> tuple[SurfaceNodes
     k = nodes.shape[1]
     index, first, inverse = np.unique(nodes.ravel(), return_index=True, return_inverse=True)
     xs = x.reshape(-1, 3)[first]
-    if quadratic_facets.is_quadratic(k):
-        # each node's share ∫ N̂_j dA of its facets and its normal ∫ N̂_j n dA (quadratic_facets)
+    if facet_layout.is_quadratic(k):
+        # each node's share ∫ N̂_j dA of its facets and its normal ∫ N̂_j n dA; imported here, as
+        # its numba kernels are needed only where quadratic facets are (facet_layout)
+        from dolfinx_nnqem.contact import quadratic_facets
+
         weights, moments = quadratic_facets.nodal_integrals(x, area)
         tributary = np.bincount(inverse.ravel(), weights.ravel(), minlength=len(index))
         normal = np.zeros((len(index), 3))
         np.add.at(normal, inverse.ravel(), moments.reshape(-1, 3))
-        combination = quadratic_facets.node_combination(nodes, index)
+        combination = facet_layout.node_combination(nodes, index)
     else:
         # sum of the adjacent facets' area vectors = area-weighted sum of their unit normals
         normal = np.zeros((len(index), 3))
