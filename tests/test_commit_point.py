@@ -13,15 +13,24 @@ from dolfinx_nnqem import interrupts
 from dolfinx_nnqem.io.safe_io import StagedFiles
 
 
+@pytest.fixture(autouse=True)
+def python_sigint_handler():
+    """Python's own Ctrl-C handler during the test: an earlier in-process ``cli.main`` leaves its
+    handler, which records the signal in ``interrupts.received``, and a later test's
+    ResultsWriter would then take its run for an interrupted one."""
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, before)
+
+
 def test_a_signal_inside_held_is_raised_when_the_block_ends():
-    before = signal.getsignal(signal.SIGINT)
     reached_the_end = False
     with pytest.raises(KeyboardInterrupt):
         with interrupts.held():
             os.kill(os.getpid(), signal.SIGINT)
             reached_the_end = True
     assert reached_the_end
-    assert signal.getsignal(signal.SIGINT) is before
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # the handler in place before
 
 
 def test_an_interrupt_during_the_renames_leaves_every_file_renamed(tmp_path, monkeypatch):

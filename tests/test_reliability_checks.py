@@ -120,6 +120,31 @@ def test_nneqm2_stresses_outside_the_yield_surface_fail_the_check():
     assert not negative.ok and negative.yield_violation == np.inf
 
 
+@pytest.mark.parametrize("corruption", ["no plastic strain", "plastic strain turned", "p not advanced"])
+def test_plastic_strain_that_does_not_match_the_flow_fails_the_check(corruption):
+    """Issue 26's state (the hardening absorbed the overstress, no plastic strain applied) and its
+    kin: ε_p,n+1 − ε_p,n ≠ Δγ N, or p_n+1 ≠ p_n + Δγ, at the points that yielded, each named."""
+    problem = _box(tractions=(Traction(2, (3e8, 2e7, 0.0)),))  # beyond first yield
+    solver = make_solver("nneqm2", problem)
+    report = solver.solve_increment(1.0)
+    good = check_state(problem, report, solver.options)
+    gpv = report.gauss_point_values
+    yielded = gpv.dp > 0
+    assert np.count_nonzero(yielded) > 0 and gpv.deps_p is not None
+    deps_p = np.asarray(gpv.deps_p).reshape(-1, 3, 3)
+    if corruption == "no plastic strain":
+        bad = replace(gpv, deps_p=np.zeros_like(deps_p))
+    elif corruption == "plastic strain turned":  # the same size, another deviatoric direction
+        turned = deps_p[:, [1, 2, 0]][:, :, [1, 2, 0]]
+        bad = replace(gpv, deps_p=turned)
+    else:
+        bad = replace(gpv, dp=np.where(yielded, 0.0, gpv.dp))
+    report.gauss_point_values = bad
+    result = check_state(problem, report, solver.options)
+    print(f"\n  {corruption}: ok {result.ok}; {result.reason[:160]}")
+    assert good.ok and not result.ok and "constitutive law" in result.reason
+
+
 def test_broken_pair_forces_fail_the_contact_check():
     from dolfinx_nnqem.cases.two_beams import two_beams_problem
 
