@@ -19,6 +19,9 @@
 # mortar, with the finer side (the punch) as the slave. The punch's top is pushed down 2 mm
 # with friction μ_f = 0.3 at the interface.
 #
+# With `--order 2` gmsh makes a **second-order mesh** (10-node tetrahedra) and the run uses
+# quadratic elements (section "Second-order meshes" below).
+#
 # Writes, in `--out` (default `results/own_gmsh_mesh`): `punch.msh`, `punch.toml` and the run's
 # results folder `results/` with its pictures.
 
@@ -35,6 +38,8 @@ from dolfinx_nnqem.cli import main
 parser = argparse.ArgumentParser(description="A gmsh mesh of your own: a punch on a block")
 parser.add_argument("--out", default="results/own_gmsh_mesh")
 parser.add_argument("--size", type=float, default=0.25, help="element size of the block (the punch: 0.8 x)")
+parser.add_argument("--order", type=int, choices=(1, 2), default=1,
+                    help="2: a second-order mesh (10-node tetrahedra) and quadratic elements")
 args, _ = parser.parse_known_args()
 out = Path(args.out)
 out.mkdir(parents=True, exist_ok=True)
@@ -74,8 +79,26 @@ if MPI.COMM_WORLD.rank == 0:  # gmsh builds the mesh on one process; the run dis
         points = gmsh.model.getBoundary([(3, volume)], combined=False, oriented=False, recursive=True)
         gmsh.model.mesh.setSize(points, size)
     gmsh.model.mesh.generate(3)
+    if args.order == 2:
+        gmsh.model.mesh.setOrder(2)  # 10-node tetrahedra, the new nodes on the geometry
     gmsh.write(str(out / "punch.msh"))
     gmsh.finalize()
+
+# %% [markdown]
+# ## Second-order meshes
+#
+# `gmsh.model.mesh.setOrder(2)` (or `Mesh.ElementOrder = 2` in a `.geo` file, or *Mesh > Set
+# order 2* in the GUI) turns the mesh into 10-node tetrahedra (27-node hexahedra for a
+# recombined, transfinite mesh), whose edge nodes lie on the geometry: a curved face stays curved.
+# `dolfinx-nnqem` reads such a file as it is and solves with **quadratic elements** (P2; Q2 on
+# hexahedra) unless `[mesh] degree = 1` says otherwise. Every node of a contact face, vertex or
+# edge node, is then a slave node. Dual mortar takes linear facets only, so non-matching faces
+# need `discretisation = "node-to-surface"` (the run refuses mortar before solving and says so);
+# matching faces keep node-to-node. 20-node (serendipity) hexahedra, which DOLFINx has no element
+# for, are refused with the reason: keep gmsh's default `Mesh.SecondOrderIncomplete = 0`.
+#
+# Besides `fields.xdmf`, a quadratic run writes `fields_p2.pvd`: the displacement at every node of
+# the quadratic elements, which ParaView draws on curved (Lagrange) cells.
 
 # %% [markdown]
 # ## The problem file
@@ -100,6 +123,7 @@ nu = 0.3
 surface1 = {FACETS["block top"]}
 surface2 = {FACETS["punch bottom"]}
 mu_f = 0.3
+discretisation = "{"auto" if args.order == 1 else "node-to-surface"}"
 
 [[dirichlet]]
 tag = {FACETS["block bottom"]}
@@ -119,7 +143,8 @@ MPI.COMM_WORLD.barrier()
 # ## The run
 #
 # The same as `dolfinx-nnqem run punch.toml --out results --overwrite` on the command line. The
-# run prints the interface it built (mortar, its slave side) and draws its pictures into
+# run prints the interface it built (mortar, its slave side; node-to-surface with `--order 2`) and
+# draws its pictures into
 # `results/pictures`: the deformed shape with the pair states, the pair pressures, the load
 # curve and the Newton residuals.
 
@@ -130,3 +155,5 @@ if code != 0:
 pictures = out / "results" / "pictures"
 if MPI.COMM_WORLD.rank == 0:
     print(f"pictures: {pictures / 'deformed.png'}, {pictures / 'pair_pressure.png'}")
+    if args.order == 2:
+        print(f"quadratic displacement for ParaView: {out / 'results' / 'fields_p2.pvd'}")

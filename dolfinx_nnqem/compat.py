@@ -129,6 +129,16 @@ def geometry_dofmap(mesh) -> np.ndarray:
     return mesh.geometry.dofmap
 
 
+def coordinate_element(mesh):
+    """The coordinate element of a single-cell-type mesh (its ``degree``, ``create_dof_layout()``).
+
+    ``geometry.cmap`` in 0.9; deprecated in favour of the list ``geometry.cmaps[0]`` after.
+    """
+    if _NEW:
+        return mesh.geometry.cmaps[0]
+    return mesh.geometry.cmap
+
+
 def entities_to_geometry(mesh, dim: int, entities: np.ndarray) -> np.ndarray:
     """Geometry nodes of the given mesh entities, ``(len(entities), nodes per entity)``.
 

@@ -4,6 +4,8 @@ A problem file names a mesh with physical tags and everything :class:`ContactPro
 
     [mesh]
     file = "../meshes/two_beams.msh"      # gmsh .msh, or .xdmf (see below); relative to this file
+    # degree = 2                          # the displacement's degree; default: the mesh's (2 for a
+                                          # second-order mesh: 10-node tetrahedra, 27-node hexahedra)
 
     [materials.1]                         # cell tag → material
     E = 2.0e10
@@ -107,7 +109,7 @@ class ProblemFileError(ValueError):
 
 OBSTACLE_KEYS = {"plane": {"point", "normal"}, "sphere": {"centre", "radius"}, "cylinder": {"point", "axis", "radius"}}
 KEYS: dict[str, frozenset[str]] = {
-    "mesh": frozenset({"file", "mesh_name", "cell_tags", "facet_tags"}),
+    "mesh": frozenset({"file", "mesh_name", "cell_tags", "facet_tags", "degree"}),
     "materials.TAG": frozenset({"E", "nu", "sigma_y0", "H", "density"}),
     "contact": frozenset({"surface1", "surface2", "obstacle", "mu_f", "law", "r", "tolerance", "search_distance",
                           "name", "discretisation", "slave"}),
@@ -263,6 +265,11 @@ def _mesh_section(mesh: dict, folder: Path, where: str) -> dict:
     mesh.setdefault("mesh_name", "mesh")
     mesh.setdefault("cell_tags", "cell_tags")
     mesh.setdefault("facet_tags", "facet_tags")
+    if "degree" in mesh:
+        mesh["degree"] = int(_number(mesh["degree"], f"{where}: mesh.degree", integer=True))
+        if mesh["degree"] not in (1, 2):
+            raise ProblemFileError(f"{where}: mesh.degree = {mesh['degree']}: the displacement is Lagrange of "
+                                   "degree 1 or 2")
     return mesh
 
 
@@ -560,7 +567,7 @@ def _read_msh(file: Path, comm):
 
     from dolfinx_nnqem import chatter, compat
     from dolfinx_nnqem.collective import on_rank0
-    from dolfinx_nnqem.problem.meshing import restore_signal_handlers
+    from dolfinx_nnqem.problem.meshing import restore_signal_handlers, unsupported_gmsh_cells
 
     started = [False]
     previous_options: dict = {}
@@ -581,6 +588,9 @@ def _read_msh(file: Path, comm):
             dims = sorted({d for d, _ in gmsh.model.getEntities() if len(gmsh.model.mesh.getElementTypes(d))})
             raise ProblemFileError(f"{file}: a {max(dims, default=0)}D mesh (no 3D cells; elements of dimension "
                                    f"{dims}); dolfinx_nnqem solves 3D solids: mesh the volumes")
+        problem = unsupported_gmsh_cells(types)
+        if problem is not None:
+            raise ProblemFileError(f"{file}: {problem}")
         if len(types) > 1:
             names = [gmsh.model.mesh.getElementProperties(t)[0] for t in types]
             raise ProblemFileError(f"{file}: the volumes mix cell types {names}; use one (all tetrahedra or all "
@@ -650,7 +660,7 @@ def build_problem(spec: ProblemSpec, comm):
         mesh, cell_tags, facet_tags, materials=spec.materials,
         dirichlet=[Dirichlet(e["tag"], e.get("value", 0.0), e.get("components"), e.get("amplitude"))
                    for e in spec.dirichlet],
-        tractions=loads, body_forces=body, contact=contact or None,
+        tractions=loads, body_forces=body, contact=contact or None, degree=spec.mesh.get("degree"),
     )
 
 

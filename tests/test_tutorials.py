@@ -1,5 +1,6 @@
 """The tutorials: pages up to date with the demos, every figure there, the path in order, and the
-new demo (a gmsh mesh of one's own) runs and draws its pictures."""
+new demo (a gmsh mesh of one's own) runs and draws its pictures, with a first- and a second-order
+mesh."""
 
 import json
 import os
@@ -42,4 +43,26 @@ def test_own_gmsh_mesh_demo_runs(tmp_path):
     summary = json.loads((tmp_path / "results" / "summary.json").read_text())
     assert summary["converged"] and summary["equilibrium_residual"] < 1e-8
     assert "mortar" in run.stdout  # non-matching faces: auto chose mortar
+    assert (tmp_path / "results" / "pictures" / "deformed.png").is_file()
+
+
+def test_own_gmsh_mesh_demo_runs_with_a_second_order_mesh(tmp_path):
+    """``--order 2``: 10-node tetrahedra, quadratic elements, node-to-surface pairs, ``fields_p2.pvd``."""
+    env = {k: v for k, v in os.environ.items() if k != "DOLFINX_NNQEM_PICTURES"}
+    env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
+    run = subprocess.run([sys.executable, str(ROOT / "demos" / "own_gmsh_mesh.py"), "--out", str(tmp_path),
+                          "--order", "2"], capture_output=True, text=True, env=env, timeout=600, cwd=tmp_path)
+    print("\n" + run.stdout + run.stderr[-2000:])
+    assert run.returncode == 0
+    from mpi4py import MPI
+
+    from dolfinx_nnqem import compat
+    from dolfinx_nnqem.problem.meshing import read_msh
+
+    mesh = read_msh(tmp_path / "punch.msh", MPI.COMM_SELF).mesh
+    assert compat.coordinate_element(mesh).degree == 2 and compat.geometry_dofmap(mesh).shape[1] == 10
+    summary = json.loads((tmp_path / "results" / "summary.json").read_text())
+    assert summary["converged"] and summary["equilibrium_residual"] < 1e-8
+    assert "node-to-surface" in run.stdout
+    assert (tmp_path / "results" / "fields_p2.pvd").is_file()
     assert (tmp_path / "results" / "pictures" / "deformed.png").is_file()

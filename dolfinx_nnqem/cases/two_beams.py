@@ -50,12 +50,13 @@ Cartesian law (robust, fewer iterations). Both give the same solution (V10)."""
 
 def two_beams_problem(comm: MPI.Comm = MPI.COMM_WORLD, *, law: str = "alart-curnier",
                       refine: int = 1, r: float | None = None, refine2: int | None = None,
-                      discretisation: str = "auto") -> ContactProblem:
+                      discretisation: str = "auto", degree: int = 1) -> ContactProblem:
     """The benchmark as a :class:`ContactProblem` (mesh built with gmsh).
 
     ``refine2`` meshes beam 2 at edge 0.2 / ``refine2`` m (a non-matching interface, see
     :func:`~dolfinx_nnqem.problem.meshing.build_two_beams`); ``discretisation`` is the contact's (see
-    :class:`~dolfinx_nnqem.problem.contact_problem.Contact`).
+    :class:`~dolfinx_nnqem.problem.contact_problem.Contact`). ``degree = 2``: triquadratic (27-node)
+    hexahedra; a non-matching interface then needs ``discretisation = "node-to-surface"``.
     """
     mesh, cell_tags, facet_tags = build_two_beams(comm, refine=refine, refine2=refine2)
     return ContactProblem(
@@ -65,6 +66,7 @@ def two_beams_problem(comm: MPI.Comm = MPI.COMM_WORLD, *, law: str = "alart-curn
         tractions=[Traction(T.LOAD, TRACTION)],
         body_forces=[Gravity(GRAVITY)],
         contact=Contact(T.CONTACT1, T.CONTACT2, mu_f=MU_F, law=law, r=r, discretisation=discretisation),
+        degree=degree,
     )
 
 

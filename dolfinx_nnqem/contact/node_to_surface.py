@@ -14,13 +14,30 @@ its edge) get no pair. Node-to-surface is cheap and familiar (CalculiX's default
 pass the contact patch test on non-matching meshes: a uniform pressure is transmitted as
 slave nodal forces that the master's shape functions spread unevenly (``docs/contact.md``
 shows the error); use :mod:`~dolfinx_nnqem.contact.mortar` where stresses at the interface matter.
+
+Quadratic facets (degree-2 displacements, ``formulation.md`` §2c): every node of the slave
+surface, vertex, edge or face node, is a slave node, projected onto the 6-node triangles or 9-node
+quadrilaterals of the master (curved on a second-order mesh;
+:mod:`~dolfinx_nnqem.contact.quadratic_projection`) with their quadratic N_k. On a tri6 slave
+surface the pairs act on the transformed nodal displacements d̂ = T⁻ᵀ d
+(:mod:`~dolfinx_nnqem.contact.quadratic_facets`), whose weights ∫N̂_j dA are positive at every
+node: pair j is
+
+    w_j = R_j Σ_i t_ji (u_i − Σ_k N_k(ξ_i) u_k),   g0_j = Σ_i t_ji g0_i,
+
+the transformed nodal values of the gap vector (for a vertex t_ji = δ_ji: the plain pair; for an
+edge node its edge's vertices enter with −α/(1 − 2α)). On matching meshes this is dual mortar's
+constraint (M_jk / D_jj = (T⁻ᵀ)_jk there), and a slave node's pair needs every node of its row
+projected inside the master.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from dolfinx_nnqem.contact.projection import project_points
+from dolfinx_nnqem.contact.projection import Projection, project_points
+from dolfinx_nnqem.contact.facet_layout import NodeCombination
+from dolfinx_nnqem.contact.quadratic_projection import project_points_quadratic
 from dolfinx_nnqem.contact.surface_pairs import SurfacePairs, facet_size, surface_pairs
 from dolfinx_nnqem.contact.surfaces import ContactPairError, GatheredSurfaces, first_by_position, format_point
 
@@ -34,7 +51,7 @@ def node_to_surface_pairs(V, surfaces: GatheredSurfaces, *, tolerance: float, se
     Parameters
     ----------
     V
-        The displacement space (vector P1).
+        The displacement space (vector P1 or P2).
     surfaces
         The master and slave surfaces, in that order (:func:`~dolfinx_nnqem.contact.surfaces.gather_surfaces`).
     tolerance
@@ -61,7 +78,8 @@ def node_to_surface_pairs(V, surfaces: GatheredSurfaces, *, tolerance: float, se
     master_size = facet_size(master)
     if search_distance is None:
         search_distance = 2.0 * max(master_size, facet_size(slave))
-    p = project_points(nodes.x, master.x, master.area, max_distance=search_distance)
+    project = project_points_quadratic if master.degree == 2 else project_points
+    p = project(nodes.x, master.x, master.area, max_distance=search_distance)
     found = p.facet >= 0
     inside = found & (p.tangential_offset <= tolerance)
     if not np.any(inside):
@@ -76,10 +94,42 @@ def node_to_surface_pairs(V, surfaces: GatheredSurfaces, *, tolerance: float, se
             f"the contact surfaces do not face each other: the slave node at {format_point(nodes.x[inside][j])} "
             f"(surface {tags[1]}, outward normal {format_point(nodes.normal[inside][j])}) projects onto surface "
             f"{tags[0]} where its outward normal is {format_point(p.normal[inside][j])}")
-    keep = np.flatnonzero(inside)
     k = master.nodes.shape[1]
+    combination = nodes.combination
+    if len(combination.columns) == len(nodes.index):  # linear or quad9 slave facets: the node alone
+        keep = np.flatnonzero(inside)
+        return surface_pairs(
+            V, "node-to-surface", tags, nodes.index[keep], nodes.x[keep], nodes.area[keep], p.normal[keep],
+            p.g0[keep], np.arange(0, k * len(keep) + 1, k), master.nodes[p.facet[keep]].ravel(), p.N[keep].ravel(),
+            master.x[p.facet[keep]].reshape(-1, 3), master_size=master_size, tolerance=tolerance,
+            num_slave_nodes=len(nodes.index), note=note, supported=supported)
+    # tri6 slave facets: pair j acts on d̂_j = Σ_i t_ji d_i, so its master side is Σ_i t_ji u_m(ξ_i)
+    every = np.minimum.reduceat(inside[combination.columns].astype(np.int8), combination.indptr[:-1]) > 0
+    keep = np.flatnonzero(every)
+    rows = combination.take(keep)
+    master_indptr, master_index, weights, X_master_nodes = _combined_master_side(rows, p, master.nodes, master.x)
+    g0 = rows.apply(np.where(inside, p.g0, 0.0))  # the transformed nodal gaps Σ_i t_ji g0_i
     return surface_pairs(
-        V, "node-to-surface", tags, nodes.index[keep], nodes.x[keep], nodes.area[keep], p.normal[keep], p.g0[keep],
-        np.arange(0, k * len(keep) + 1, k), master.nodes[p.facet[keep]].ravel(), p.N[keep].ravel(),
-        master.x[p.facet[keep]].reshape(-1, 3), master_size=master_size, tolerance=tolerance,
-        num_slave_nodes=len(nodes.index), note=note, supported=supported)
+        V, "node-to-surface", tags, nodes.index[keep], nodes.x[keep], nodes.area[keep], p.normal[keep], g0,
+        master_indptr, master_index, weights, X_master_nodes, master_size=master_size, tolerance=tolerance,
+        num_slave_nodes=len(nodes.index), note=note, supported=supported,
+        slave_rows=(rows.indptr, nodes.index[rows.columns], rows.coefficients))
+
+
+def _combined_master_side(rows: NodeCombination, p: Projection, master_nodes: np.ndarray,
+                          master_x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The master nodes k and weights c_jk = Σ_i t_ji N_k(ξ_i) of each row j (CSR, a node once per
+    row), with the nodes' coordinates: the master side of the transformed slave displacement."""
+    k = master_nodes.shape[1]
+    row = np.repeat(np.arange(len(rows.indptr) - 1), np.diff(rows.indptr))
+    facet = p.facet[rows.columns]  # (entries,) the facet under each slave node of each row
+    node = master_nodes[facet].ravel()
+    weight = (rows.coefficients[:, None] * p.N[rows.columns]).ravel()
+    pair = np.repeat(row, k)
+    x = master_x[facet].reshape(-1, 3)
+    order = np.lexsort((node, pair))
+    pair, node, weight, x = pair[order], node[order], weight[order], x[order]
+    first = np.flatnonzero(np.concatenate([[True], (pair[1:] != pair[:-1]) | (node[1:] != node[:-1])]))
+    counts = np.bincount(pair[first], minlength=len(rows.indptr) - 1)
+    indptr = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    return indptr, node[first], np.add.reduceat(weight, first), x[first]

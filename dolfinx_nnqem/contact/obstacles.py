@@ -12,6 +12,11 @@ the reference configuration (the obstacle translates; it does not rotate).
 
 The obstacle's reaction is the opposite of the slave forces: −Σ_s R_sᵀ λ_s (it appears in the
 global equilibrium check next to the support reactions).
+
+Quadratic facets (degree-2 displacements): every node of the surface, vertex, edge or face node,
+gets a pair. On a tri6 surface pair s acts on the transformed nodal displacement
+d̂_s = Σ_i t_si u_i and its gap is Σ_i t_si g0_i, the transformed nodal distances
+(:mod:`~dolfinx_nnqem.contact.quadratic_facets`: every weight ∫N̂_s dA positive).
 """
 
 from __future__ import annotations
@@ -257,15 +262,30 @@ def obstacle_pairs(V: dolfinx.fem.FunctionSpace, facet_tags: dolfinx.mesh.MeshTa
             f"surface {surface} faces away from the {obstacle.describe()} at the node {format_point(x[i])} "
             f"(outward normal {format_point(slave_normal[i])}, obstacle normal {format_point(n[i])}): "
             "tag the side of the body that faces the obstacle")
-    g0 = np.where(np.abs(g0) <= tolerance, 0.0, g0)  # touching within the tolerance: no gap
     R = local_frames(n)
     mine, offset, num_global = owned_by_slave(comm, V.dofmap.index_map, index)
-    columns = 3 * index[mine, None] + np.arange(3)
+    combination = nodes.combination
+    if len(combination.columns) == len(nodes.index):  # linear or quad9 facets: the node alone
+        g0 = np.where(np.abs(g0) <= tolerance, 0.0, g0)  # touching within the tolerance: no gap
+        rows = PairRows.from_blocks(3 * index[mine, None] + np.arange(3), R[mine])
+    else:  # tri6 facets: pair j acts on d̂_j = Σ_i t_ji u_i (quadratic_facets), its gap is Σ_i t_ji g0_i
+        combined = combination.take(order)  # rows in this order; columns: positions in `nodes`
+        g0 = combined.apply(_in_node_order(g0, order))
+        g0 = np.where(np.abs(g0) <= tolerance, 0.0, g0)
+        local = combined.take(mine)
+        rows = PairRows.from_weighted_nodes(R[mine], local.indptr, nodes.index[local.columns], local.coefficients)
     return ObstaclePairs(
         comm=comm, obstacle=obstacle, surface=int(surface), num_local=len(mine), num_global=num_global,
         offset=offset, slave_blocks=index[mine], X_slave=x[mine], X_master=p[mine], R=R[mine], g0=g0[mine],
-        area=area[mine], rows=PairRows.from_blocks(columns, R[mine]),
+        area=area[mine], rows=rows,
     )
+
+
+def _in_node_order(values: np.ndarray, order: np.ndarray) -> np.ndarray:
+    """Values given in the order ``order`` of the surface's nodes, back in the nodes' own order."""
+    out = np.empty_like(values)
+    out[order] = values
+    return out
 
 
 def obstacle_reaction(R: npt.ArrayLike, lam: npt.ArrayLike) -> np.ndarray:

@@ -333,6 +333,24 @@ def node_to_node_rows(dofs_a: np.ndarray, dofs_b: np.ndarray, R: np.ndarray) -> 
     return PairRows.from_blocks(columns, np.concatenate([R, -R], axis=2))
 
 
+def _transformed_rows(combination, order2: np.ndarray, index_a: np.ndarray, index_b: np.ndarray, R: np.ndarray,
+                      g0: np.ndarray, mine: np.ndarray) -> tuple[PairRows, np.ndarray]:
+    """B's rows and the gaps of node-to-node pairs on a tri6 slave surface: each pair (in the
+    coordinate order ``order2`` of body 2's nodes) combines the physical pairs of the slave nodes of
+    its row of d̂ = T⁻ᵀ d, with its own frame; the local pairs ``mine``."""
+    pair_of = np.empty(len(order2), dtype=np.int64)
+    pair_of[order2] = np.arange(len(order2))  # body-2 node position -> its physical pair
+    rows = combination.take(order2)
+    g0 = rows.apply(g0[pair_of])
+    local = rows.take(mine)
+    pairs = pair_of[local.columns]
+    counts = 2 * np.diff(local.indptr)
+    indptr = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    nodes = np.column_stack([index_b[pairs], index_a[pairs]]).ravel()
+    coefficients = np.column_stack([local.coefficients, -local.coefficients]).ravel()
+    return PairRows.from_weighted_nodes(R[mine], indptr, nodes, coefficients), g0
+
+
 def _check_search(V, tags: tuple[int, int], tolerance: float | None, search_distance: float | None) -> float:
     """Refuse equal tags and non-positive distances; the tolerance (default: the mesh's)."""
     if tags[0] == tags[1]:
@@ -386,8 +404,10 @@ def find_pairs(
     Parameters
     ----------
     V
-        Vector P1 space (continuous Lagrange, degree 1, block size 3) on a 3D mesh holding
-        both bodies, which share no nodes.
+        Vector P1 or P2 space (continuous Lagrange, block size 3) on a 3D mesh holding both
+        bodies, which share no nodes. With P2 every surface node (vertices and edge nodes) gets
+        a pair; on tetrahedra the pairs act on the transformed nodal displacements of
+        :mod:`~dolfinx_nnqem.contact.quadratic_facets` (the mortar constraint of matching meshes).
     facet_tags
         Facet tags holding ``surface1`` and ``surface2``.
     surface1, surface2
@@ -437,7 +457,11 @@ def find_pairs(
     # --- ownership: the rank owning b_i's dof block; global order by owner, then coordinates
     mine, offset, num_global = owned_by_slave(comm, V.dofmap.index_map, index_b)
     dofs_a, dofs_b = index_a[mine], index_b[mine]
-    rows = node_to_node_rows(dofs_a, dofs_b, R[mine])
+    combination = body2.combination
+    if len(combination.columns) == len(body2.index):  # linear or quad9 facets: the two nodes alone
+        rows = node_to_node_rows(dofs_a, dofs_b, R[mine])
+    else:  # tri6: pair j acts on Σ_i t_ji (u(b_i) − u(a_i)) (quadratic_facets), gap Σ_i t_ji g0_i
+        rows, g0 = _transformed_rows(combination, order2, index_a, index_b, R, g0, mine)
     return ContactPairs(
         comm=comm,
         surface1=tags[0],

@@ -122,11 +122,33 @@ def _check_gaps(g0: np.ndarray, x: np.ndarray, master_size: float, tags: tuple[i
             "overlapping, or are the surfaces swapped?")
 
 
+def _joined_rows(slave_rows: tuple[np.ndarray, np.ndarray, np.ndarray], local: np.ndarray, indptr: np.ndarray,
+                 masters: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each kept pair's nodes: its slave nodes (``slave_rows`` of the rows ``local``), then its
+    master nodes (CSR ``indptr``, ``masters``, weights ``c``) with −c, as one CSR."""
+    s_indptr, s_nodes, s_coefficients = slave_rows
+    s_counts = np.diff(s_indptr)[local]
+    m_counts = np.diff(indptr)
+    nodes_indptr = np.concatenate([[0], np.cumsum(s_counts + m_counts)]).astype(np.int64)
+    pair_s = np.repeat(np.arange(len(local)), s_counts)
+    pair_m = np.repeat(np.arange(len(local)), m_counts)
+    s_take = np.repeat(s_indptr[local] - np.concatenate([[0], np.cumsum(s_counts)])[:-1], s_counts) \
+        + np.arange(int(s_counts.sum()))
+    at_s = nodes_indptr[pair_s] + (np.arange(len(pair_s)) - np.concatenate([[0], np.cumsum(s_counts)])[pair_s])
+    at_m = nodes_indptr[pair_m] + s_counts[pair_m] + (np.arange(len(pair_m)) - indptr[pair_m])
+    nodes = np.empty(int(nodes_indptr[-1]), dtype=np.int64)
+    coefficients = np.empty(len(nodes))
+    nodes[at_s], coefficients[at_s] = s_nodes[s_take], s_coefficients[s_take]
+    nodes[at_m], coefficients[at_m] = masters, -c
+    return nodes_indptr, nodes, coefficients
+
+
 def surface_pairs(V, kind: str, tags: tuple[int, int], slave_index: np.ndarray, X_slave: np.ndarray,
                   area: np.ndarray, normal: np.ndarray, g0: np.ndarray, master_indptr: np.ndarray,
                   master_index: np.ndarray, weights: np.ndarray, X_master_nodes: np.ndarray, *,
                   master_size: float, tolerance: float, num_slave_nodes: int, note: str = "",
-                  supported: np.ndarray | None = None) -> SurfacePairs:
+                  supported: np.ndarray | None = None,
+                  slave_rows: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> SurfacePairs:
     """Assemble the pair set from per-slave-node data given identically on every rank (collective).
 
     Parameters
@@ -156,6 +178,10 @@ def surface_pairs(V, kind: str, tags: tuple[int, int], slave_index: np.ndarray, 
         Laid out like V's local dofs, non-zero at prescribed ones: the normals of slave nodes on
         symmetry planes are moved into the plane (:func:`~dolfinx_nnqem.contact.surfaces.symmetry_normals`).
         None: the normals as given.
+    slave_rows
+        The slave side of each pair's row as CSR over the p slave nodes (indptr, global dof blocks,
+        coefficients summing to 1): d̂_j = Σ_i t_ji u_i of a quadratic slave surface
+        (:func:`~dolfinx_nnqem.contact.quadratic_facets.node_combination`). None: u_j alone.
     """
     _check_gaps(g0, X_slave, master_size, tags)
     g0 = np.where(np.abs(g0) <= tolerance, 0.0, g0)  # touching within the tolerance: no gap (round-off)
@@ -175,14 +201,17 @@ def surface_pairs(V, kind: str, tags: tuple[int, int], slave_index: np.ndarray, 
     if supported is not None:
         normal = symmetry_normals(normal, owned_supports(V, supported, slave_index[local]))
     R = local_frames(normal) if len(local) else np.zeros((0, 3, 3))
-    # the pair's nodes: the slave node with coefficient 1, then the master nodes with −c_jk
-    nodes_indptr = indptr + np.arange(len(local) + 1)
-    nodes = np.empty(len(take) + len(local), dtype=np.int64)
-    coefficients = np.empty(len(nodes))
-    slave_at = nodes_indptr[:-1]
-    nodes[slave_at], coefficients[slave_at] = slave_index[local], 1.0
-    rest = np.setdiff1d(np.arange(len(nodes)), slave_at)
-    nodes[rest], coefficients[rest] = masters, -c
+    if slave_rows is None:
+        # the pair's nodes: the slave node with coefficient 1, then the master nodes with −c_jk
+        nodes_indptr = indptr + np.arange(len(local) + 1)
+        nodes = np.empty(len(take) + len(local), dtype=np.int64)
+        coefficients = np.empty(len(nodes))
+        slave_at = nodes_indptr[:-1]
+        nodes[slave_at], coefficients[slave_at] = slave_index[local], 1.0
+        rest = np.setdiff1d(np.arange(len(nodes)), slave_at)
+        nodes[rest], coefficients[rest] = masters, -c
+    else:
+        nodes_indptr, nodes, coefficients = _joined_rows(slave_rows, local, indptr, masters, c)
     return SurfacePairs(
         comm=V.mesh.comm, kind=kind, master=int(tags[0]), slave=int(tags[1]), num_local=len(local),
         num_global=num_global, offset=offset, slave_blocks=slave_index[local], master_indptr=indptr,

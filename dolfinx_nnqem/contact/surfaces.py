@@ -16,10 +16,14 @@ from dataclasses import dataclass
 
 from dolfinx_nnqem import compat  # noqa: I001  (first: loads MPI/PETSc for the PyPI wheel)
 
+import basix
 import dolfinx
 import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
+
+from dolfinx_nnqem.contact import facet_layout
+from dolfinx_nnqem.contact.facet_layout import NodeCombination
 
 __all__ = ["ContactPairError", "Facets", "GatheredSurfaces", "SurfaceNodes", "check_contact_space", "check_no_shared_nodes",
            "first_by_position",
@@ -167,9 +171,25 @@ class Facets:
     def take(self, index: np.ndarray) -> Facets:
         return Facets(*(getattr(self, f)[index] for f in self.__dataclass_fields__))
 
+    @property
+    def num_vertices(self) -> int:
+        """Vertices per facet (the first nodes of each row)."""
+        return facet_layout.NUM_VERTICES[self.nodes.shape[1]]
+
+    @property
+    def degree(self) -> int:
+        """1 for linear facets (tri3, quad4), 2 for quadratic ones (tri6, quad9)."""
+        return 2 if facet_layout.is_quadratic(self.nodes.shape[1]) else 1
+
+
+def space_degree(V: dolfinx.fem.FunctionSpace) -> int:
+    """The Lagrange degree of the displacement space V (1 or 2; see :func:`_check_space`)."""
+    layout = V.dofmap.dof_layout
+    return 2 if len(layout.entity_dofs(1, 0)) else 1
+
 
 def _check_space(V: dolfinx.fem.FunctionSpace) -> str | None:
-    """Why ``V`` is not a vector P1 (continuous Lagrange, degree 1, block size 3) space, or None."""
+    """Why ``V`` is not a vector P1/P2 (continuous Lagrange, degree 1 or 2, block size 3) space, or None."""
     mesh = V.mesh
     if mesh.geometry.dim != 3 or mesh.topology.dim != 3:
         return f"the mesh must be 3D (gdim = {mesh.geometry.dim}, tdim = {mesh.topology.dim})"
@@ -177,15 +197,71 @@ def _check_space(V: dolfinx.fem.FunctionSpace) -> str | None:
     if bs != 3 or V.dofmap.bs != 3:
         return f"V must be a vector space with block size 3, got block size {bs}"
     layout = V.dofmap.dof_layout
-    num_vertices = dolfinx.cpp.mesh.cell_num_vertices(mesh.topology.cell_type)
-    vertex_dofs = [len(layout.entity_dofs(0, v)) for v in range(num_vertices)]
-    # exactly one dof (block) per vertex and none elsewhere: continuous P1/Q1 Lagrange
-    if layout.num_dofs != num_vertices or vertex_dofs != [1] * num_vertices:
+    cell_type = mesh.topology.cell_type
+    counts = [[len(layout.entity_dofs(d, i)) for i in range(dolfinx.cpp.mesh.cell_num_entities(cell_type, d))]
+              for d in range(3)]
+    quadrilateral_faces = cell_type == dolfinx.mesh.CellType.hexahedron
+    # one dof (block) per vertex and none elsewhere: P1/Q1; plus one per edge (and per quadrilateral
+    # face) and any number inside the cell: P2/Q2
+    linear = counts == [[1] * len(counts[0]), [0] * len(counts[1]), [0] * len(counts[2])]
+    quadratic = counts == [[1] * len(counts[0]), [1] * len(counts[1]), [int(quadrilateral_faces)] * len(counts[2])]
+    if not (linear and layout.num_dofs == len(counts[0]) or quadratic):
         return (
-            "V must be continuous Lagrange of degree 1 (one dof block per vertex); its cells "
-            f"have {layout.num_dofs} dof blocks for {num_vertices} vertices"
+            "V must be continuous Lagrange of degree 1 or 2 (one dof block per vertex, and per edge for degree 2); "
+            f"its cells have {layout.num_dofs} dof blocks for {len(counts[0])} vertices"
         )
     return None
+
+
+def _facet_node_closures(layout, cell_type, degree: int) -> np.ndarray:
+    """(facets of the cell, k) local dofs of each facet of the reference cell in the order of
+    :mod:`~dolfinx_nnqem.contact.quadratic_facets` (degree 2: vertices, edges by their vertex pairs,
+    the quadrilateral's centre); degree 1: the vertices as ``entity_closure_dofs`` lists them."""
+    fdim = 2
+    num_cell_facets = dolfinx.cpp.mesh.cell_num_entities(cell_type, fdim)
+    if degree == 1:
+        return np.array([layout.entity_closure_dofs(fdim, j) for j in range(num_cell_facets)])
+    sub = basix.cell.sub_entity_connectivity(getattr(basix.CellType, cell_type.name))
+    edges = [tuple(sorted(e[0])) for e in sub[1]]
+    rows = []
+    for j in range(num_cell_facets):
+        vertices = sub[fdim][j][0]
+        k = 6 if len(vertices) == 3 else 9
+        row = [layout.entity_dofs(0, v)[0] for v in vertices]
+        row += [layout.entity_dofs(1, edges.index(tuple(sorted((vertices[a], vertices[b])))))[0]
+                for a, b in facet_layout.EDGES[k]]
+        if k == 9:
+            row.append(layout.entity_dofs(fdim, j)[0])
+        rows.append(row)
+    return np.array(rows)
+
+
+def _facet_coordinates(mesh, cells: np.ndarray, local_facet: np.ndarray, closure: np.ndarray) -> np.ndarray:
+    """(m, k, 3) coordinates of the nodes of the facets ``local_facet`` of ``cells`` (``closure``:
+    :func:`_facet_node_closures` of the displacement space).
+
+    Vertices are geometry nodes (a Lagrange dof layout numbers vertex v's dof v, as the geometry
+    does). The other nodes of a quadratic facet are geometry nodes too on a second-order mesh,
+    whose curved facets this keeps; on a straight-sided mesh they are the edge midpoints and the
+    quadrilateral's centre (the map of a bilinear facet at its centre is its vertex mean).
+    """
+    k = closure.shape[1]
+    nv = facet_layout.NUM_VERTICES[k]
+    cell_nodes = compat.geometry_dofmap(mesh)[cells]
+    x = mesh.geometry.x[np.take_along_axis(cell_nodes, closure[local_facet, :nv], axis=1)]
+    if nv == k:
+        return x
+    cmap = compat.coordinate_element(mesh)
+    if cmap.degree == 2:
+        geometry = _facet_node_closures(cmap.create_dof_layout(), mesh.topology.cell_type, 2)
+        return mesh.geometry.x[np.take_along_axis(cell_nodes, geometry[local_facet], axis=1)]
+    if cmap.degree > 2:
+        raise ContactPairError(f"contact surfaces on a mesh of geometry degree {cmap.degree}: quadratic contact "
+                               "facets need a straight-sided or a second-order mesh")
+    extra = [0.5 * (x[:, a] + x[:, b]) for a, b in facet_layout.EDGES[k]]
+    if k == 9:
+        extra.append(x.mean(axis=1))
+    return np.concatenate([x, np.stack(extra, axis=1)], axis=1)
 
 
 def _outward_area_vectors(x: np.ndarray, cell_centroid: np.ndarray) -> np.ndarray:
@@ -221,11 +297,10 @@ def _local_facets(
     mesh.topology.create_connectivity(tdim, fdim)
     f2c = mesh.topology.connectivity(fdim, tdim)
     c2f = mesh.topology.connectivity(tdim, fdim)
-    layout = V.dofmap.dof_layout
     cell_type = mesh.topology.cell_type
     num_cell_facets = dolfinx.cpp.mesh.cell_num_entities(cell_type, fdim)
     # local dof blocks of each local facet of the reference cell
-    closure = np.array([layout.entity_closure_dofs(fdim, j) for j in range(num_cell_facets)])
+    closure = _facet_node_closures(V.dofmap.dof_layout, cell_type, space_degree(V))
     k = closure.shape[1]
 
     facets = np.asarray(facet_tags.indices[facet_tags.values == tag], dtype=np.int32)
@@ -242,14 +317,13 @@ def _local_facets(
     cell_dofs = V.dofmap.list[cells]
     facet_dofs = np.take_along_axis(cell_dofs, closure[local_facet], axis=1)
 
-    # Vertex coordinates straight from the mesh geometry, whose cell nodes start with the
-    # vertices in the same local order as P1's dofs (V.tabulate_dof_coordinates() would
-    # push reference points forward and add round-off).
+    # Node coordinates straight from the mesh geometry, whose cell nodes start with the vertices
+    # in the same local order as the dofs (V.tabulate_dof_coordinates() would push reference
+    # points forward and add round-off, different on ranks that see a node through other cells).
     num_vertices = dolfinx.cpp.mesh.cell_num_vertices(cell_type)
-    cell_nodes = compat.geometry_dofmap(mesh)[cells][:, :num_vertices]
-    facet_nodes = np.take_along_axis(cell_nodes, closure[local_facet], axis=1)
-    x = mesh.geometry.x[facet_nodes]
-    area = _outward_area_vectors(x, mesh.geometry.x[cell_nodes].mean(axis=1))
+    x = _facet_coordinates(mesh, cells, local_facet, closure)
+    cell_vertices = compat.geometry_dofmap(mesh)[cells][:, :num_vertices]
+    area = _outward_area_vectors(x[:, :facet_layout.NUM_VERTICES[k]], mesh.geometry.x[cell_vertices].mean(axis=1))
     nodes = V.dofmap.index_map.local_to_global(facet_dofs.ravel().astype(np.int32)).reshape(m, k)
     return Facets(np.full(m, surface, np.int8), nodes.astype(np.int64), x, area, num_cells)
 
@@ -272,7 +346,7 @@ def _unique_facets(facets: Facets, tags: Sequence[int]) -> tuple[Facets, str | N
         i = first_by_position(facets.x.mean(axis=1), interior)
         return facets, (
             f"a facet tagged {tags[facets.surface[i] - 1]} is inside a body, not on its boundary "
-            f"(vertices {', '.join(format_point(p) for p in facets.x[i])})"
+            f"(vertices {', '.join(format_point(p) for p in facets.x[i, :facets.num_vertices])})"
         )
     unique = facets.take(first)
     # deterministic order for any number of ranks: by surface, then facet centroid
@@ -283,12 +357,17 @@ def _unique_facets(facets: Facets, tags: Sequence[int]) -> tuple[Facets, str | N
 
 @dataclass
 class SurfaceNodes:
-    """The nodes of one contact surface with their outward unit normals (identical on every rank)."""
+    """The nodes of one contact surface with their outward unit normals (identical on every rank).
+
+    Every node of the surface's facets: the vertices, and for quadratic facets (degree-2
+    displacements) the edge and face nodes too.
+    """
 
     index: np.ndarray  # (p,) global dof-block indices (sorted)
     x: np.ndarray  # (p, 3)
     normal: np.ndarray  # (p, 3) area-weighted mean of the adjacent facets' outward normals
-    area: np.ndarray  # (p,) tributary area ∫ N_j dA: each facet's area shared equally by its vertices
+    area: np.ndarray  # (p,) tributary area ∫ N̂_j dA (linear facets: each facet's area shared equally by its vertices)
+    combination: NodeCombination  # the pair rows' slave nodes: d̂ = T⁻ᵀ d (quadratic_facets; identity if linear)
 
 
 def _surface_nodes(facets: Facets, surface: int, tag: int) -> tuple[SurfaceNodes, str | None]:
@@ -296,23 +375,38 @@ def _surface_nodes(facets: Facets, surface: int, tag: int) -> tuple[SurfaceNodes
     nodes, x, area = facets.nodes[sel], facets.x[sel], facets.area[sel]
     k = nodes.shape[1]
     index, first, inverse = np.unique(nodes.ravel(), return_index=True, return_inverse=True)
-    # sum of the adjacent facets' area vectors = area-weighted sum of their unit normals
-    normal = np.zeros((len(index), 3))
-    np.add.at(normal, inverse.ravel(), np.repeat(area, k, axis=0))
-    length = np.linalg.norm(normal, axis=1)
     xs = x.reshape(-1, 3)[first]
-    # ∫ N_j dA over a triangle or a parallelogram is its area / (number of vertices)
-    tributary = np.bincount(inverse.ravel(), np.repeat(np.linalg.norm(area, axis=1) / k, k), minlength=len(index))
+    if facet_layout.is_quadratic(k):
+        # each node's share ∫ N̂_j dA of its facets and its normal ∫ N̂_j n dA; imported here, as
+        # its numba kernels are needed only where quadratic facets are (facet_layout)
+        from dolfinx_nnqem.contact import quadratic_facets
+
+        weights, moments = quadratic_facets.nodal_integrals(x, area)
+        tributary = np.bincount(inverse.ravel(), weights.ravel(), minlength=len(index))
+        normal = np.zeros((len(index), 3))
+        np.add.at(normal, inverse.ravel(), moments.reshape(-1, 3))
+        combination = facet_layout.node_combination(nodes, index)
+    else:
+        # sum of the adjacent facets' area vectors = area-weighted sum of their unit normals
+        normal = np.zeros((len(index), 3))
+        np.add.at(normal, inverse.ravel(), np.repeat(area, k, axis=0))
+        # ∫ N_j dA over a triangle or a parallelogram is its area / (number of vertices)
+        tributary = np.bincount(inverse.ravel(), np.repeat(np.linalg.norm(area, axis=1) / k, k), minlength=len(index))
+        combination = NodeCombination.identity(len(index))
+    length = np.linalg.norm(normal, axis=1)
     scale = np.repeat(np.linalg.norm(area, axis=1), k).max(initial=0.0)
     degenerate = length <= 1e-12 * max(scale, np.finfo(float).tiny)
     if np.any(degenerate):
         i = first_by_position(xs, degenerate)
-        return SurfaceNodes(index, xs, normal, tributary), (
+        return SurfaceNodes(index, xs, normal, tributary, combination), (
             f"the facets tagged {tag} around the node at {format_point(xs[i])} have normals that cancel"
         )
-    return SurfaceNodes(index, xs, normal / length[:, None], tributary), None
-
-
+    if np.any(tributary <= 0.0):  # a quadratic facet so distorted that a node's share is not positive
+        i = first_by_position(xs, tributary <= 0.0)
+        return SurfaceNodes(index, xs, normal, tributary, combination), (
+            f"the node at {format_point(xs[i])} of the facets tagged {tag} has a tributary area "
+            f"∫ N_j dA = {tributary[i]:.3g} <= 0: its quadratic facets are too distorted for contact")
+    return SurfaceNodes(index, xs, normal / length[:, None], tributary, combination), None
 
 
 # --------------------------------------------------------------------------------------------
@@ -352,7 +446,7 @@ class GatheredSurfaces:
 
 
 def check_contact_space(V: dolfinx.fem.FunctionSpace, facet_tags) -> None:
-    """Raise :class:`ContactPairError` unless V is vector P1 on a 3D mesh and ``facet_tags`` tags facets."""
+    """Raise :class:`ContactPairError` unless V is vector P1 or P2 on a 3D mesh and ``facet_tags`` tags facets."""
     problem = _check_space(V)
     if problem is not None:
         raise ContactPairError(problem)
@@ -382,7 +476,7 @@ def gather_surfaces(V: dolfinx.fem.FunctionSpace, facet_tags: dolfinx.mesh.MeshT
     Parameters
     ----------
     V
-        Vector P1 space on a 3D mesh.
+        Vector P1 or P2 space on a 3D mesh.
     facet_tags
         Facet tags holding every tag of ``tags``.
     tags
@@ -393,7 +487,7 @@ def gather_surfaces(V: dolfinx.fem.FunctionSpace, facet_tags: dolfinx.mesh.MeshT
     Raises
     ------
     ContactPairError
-        On every rank, if V is not vector P1, a tag has no facet on any rank, a facet is inside
+        On every rank, if V is not vector P1 or P2, a tag has no facet on any rank, a facet is inside
         a body, or the normals around a node cancel.
     """
     comm = V.mesh.comm

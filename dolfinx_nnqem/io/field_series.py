@@ -98,10 +98,11 @@ class FieldSeriesWriter:
         self.steps: list[tuple[int, float]] = []  # (increment, load factor) in the index
         self._means = CellMeans(problem)
         mesh = problem.mesh
-        # XDMF stores fields of the mesh's degree: a quadratic displacement is written at the
-        # vertices (interpolated to P1)
-        if problem.V.ufl_element().embedded_superdegree > 1:
-            self.u_out = fem.Function(fem.functionspace(mesh, ("Lagrange", 1, (3,))), name="u")
+        # XDMF stores fields of the mesh's geometry degree: a quadratic displacement on a first-order
+        # mesh is written at the vertices (interpolated to P1; io/quadratic_fields.py writes it whole)
+        degree = compat.coordinate_element(mesh).degree
+        if problem.V.ufl_element().embedded_superdegree != degree:
+            self.u_out = fem.Function(fem.functionspace(mesh, ("Lagrange", degree, (3,))), name="u")
         else:
             self.u_out = None
         on_rank0(self.comm, lambda: (self.folder / FOLDER).mkdir(parents=True, exist_ok=True))

@@ -23,7 +23,7 @@ from pathlib import Path
 __all__ = ["LOCK_NAME", "OUTPUT_NAMES", "FolderInUse", "OutputLock", "clear_outputs", "previous_outputs"]
 
 LOCK_NAME = ".nnqem.lock"
-OUTPUT_NAMES = ("summary.json", "fields.xdmf", "fields.h5", "fields", "pairs.pvd", "pairs", "checkpoints",
+OUTPUT_NAMES = ("summary.json", "fields.xdmf", "fields.h5", "fields", "fields_p2.pvd", "pairs.pvd", "pairs", "checkpoints",
                 "pictures")
 """What a run writes into its folder (files and folders); cleared by ``--overwrite``."""
 

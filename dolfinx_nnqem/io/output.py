@@ -9,6 +9,8 @@ after every increment, so a run that dies at increment k leaves increments 1..k 
   plastic strain ``p`` and the fraction of Gauss points that yielded in the increment
   ``plastic`` (cell means of the Gauss-point values); one closed file per increment and an
   atomically replaced index (:mod:`dolfinx_nnqem.io.field_series`: survives a kill).
+- ``fields_p2.pvd`` + ``fields/u_p2_XXXX*.pvtu``/``.vtu`` (degree 2): the quadratic displacement at
+  its own nodes, on VTK Lagrange cells (:mod:`dolfinx_nnqem.io.quadratic_fields`).
 - ``pairs.pvd`` + ``pairs/pairs_XXXX.vtp``: the contact pairs as a point cloud with p_n,
   friction force, state, gap and slip (ParaView).
 - ``pairs/pairs_XXXX.csv``: the pair table of each increment (with its load factor).
@@ -40,6 +42,7 @@ from dolfinx_nnqem.collective import on_rank0
 from dolfinx_nnqem.contact.laws import STATE_NAMES
 from dolfinx_nnqem.io.field_series import FieldSeriesWriter
 from dolfinx_nnqem.io.locking import OutputLock, clear_outputs, previous_outputs
+from dolfinx_nnqem.io.quadratic_fields import QuadraticFieldWriter, writes_quadratic_fields
 from dolfinx_nnqem.io.run_pictures import draw_live_pictures, pictures_enabled
 from dolfinx_nnqem.io.safe_io import StagedFiles, atomic_write, atomic_write_text, commit, remove_stale_temporaries
 from dolfinx_nnqem.io.vtk_xml import point_cloud_text
@@ -403,10 +406,15 @@ class ResultsWriter:
         on_rank0(problem.comm, prepare)
         self.staged = StagedFiles()  #: the index files of the increment, renamed at its commit point
         self.checkpoint_every = 0  #: set by a Checkpointer of this writer: it commits those increments
-        self.writers: list[FieldSeriesWriter | PairWriter | SummaryWriter] = []
+        self.writers: list[FieldSeriesWriter | QuadraticFieldWriter | PairWriter | SummaryWriter] = []
         self.fields = FieldSeriesWriter(problem, self.folder, self.staged) if fields else None
         if self.fields is not None:
             self.writers.append(self.fields)
+        # degree 2: the displacement at its own nodes too (fields.xdmf holds the mesh's nodes only)
+        quadratic = fields and writes_quadratic_fields(problem)
+        self.quadratic = QuadraticFieldWriter(problem, self.folder) if quadratic else None
+        if self.quadratic is not None:
+            self.writers.append(self.quadratic)
         self.pairs = PairWriter(problem, self.folder, self.staged) if problem.has_contact else None
         if self.pairs is not None:
             on_rank0(problem.comm, lambda: (self.folder / "pairs").mkdir(parents=True, exist_ok=True))
@@ -481,12 +489,15 @@ class ResultsWriter:
     def state(self) -> dict:
         """The writers' state for a checkpoint (JSON)."""
         return {"fields": self.fields.state() if self.fields else None,
+                "quadratic": self.quadratic.state() if self.quadratic else None,
                 "pairs": self.pairs.state() if self.pairs else None, "summary": self.summary.state()}
 
     def resume(self, state: dict) -> None:
         """Continue from a checkpoint's writer state (drops the files of later increments)."""
         if self.fields is not None and state.get("fields"):
             self.fields.resume(state["fields"])
+        if self.quadratic is not None:
+            self.quadratic.resume(state.get("quadratic") or {})
         if self.pairs is not None and state.get("pairs"):
             self.pairs.resume(state["pairs"])
         self.summary.resume(state["summary"])

@@ -116,8 +116,10 @@ class ContactProblem:
     contact
         A :class:`Contact`, a list of them (several interfaces, rigid obstacles), or None.
     degree
-        Lagrange degree of the displacement: 1 (default; contact needs it) or 2 (quadratic
-        elements do not lock in isochoric plastic flow; trilinear hexahedra do).
+        Lagrange degree of the displacement: 1 or 2 (P2 tetrahedra, Q2 hexahedra: no locking in
+        isochoric plastic flow, far better in bending; every node of a contact surface, vertex,
+        edge or face node, gets a pair, see ``docs/theory.md``, "Quadratic facets"). Default: the
+        mesh's geometry degree (1 for a first-order mesh, 2 for a second-order one).
     quadrature_degree
         Degree of the Gauss rule; default 2·degree (2×2×2 points per Q1 hexahedron, 3×3×3
         per Q2).
@@ -143,18 +145,18 @@ class ContactProblem:
         tractions: Sequence[Traction | Pressure] = (),
         body_forces: Sequence[BodyForce | Gravity] = (),
         contact: Contact | Sequence[Contact] | None = None,
-        degree: int = 1,
+        degree: int | None = None,
         quadrature_degree: int | None = None,
     ):
         check_mesh(mesh)  # a 3D mesh of 3D cells, one cell type
+        if degree is None:  # a second-order mesh (10-node tetrahedra, 27-node hexahedra): quadratic elements
+            degree = 2 if compat.coordinate_element(mesh).degree >= 2 else 1
         if degree not in (1, 2):
             raise ValueError(f"degree = {degree!r}: the displacement is Lagrange of degree 1 or 2")
         contacts = [] if contact is None else ([contact] if isinstance(contact, Contact) else list(contact))
         for c in contacts:
             if not isinstance(c, Contact):
                 raise TypeError(f"contact: {c!r} is not a Contact")
-        if contacts and degree != 1:
-            raise ValueError(f"degree = {degree}: contact needs degree 1 (pairs are mesh vertices)")
         if quadrature_degree is None:
             quadrature_degree = 2 * degree  # 2×2×2 Gauss points for Q1, 3×3×3 for Q2
         self.mesh, self.cell_tags, self.facet_tags = mesh, cell_tags, facet_tags

@@ -14,6 +14,12 @@ The tag numbers of each model are the class attributes of :class:`TwoBeamsTags`,
 :func:`build_sphere_on_block` is the exception to the hexahedra: a sphere is meshed with
 unstructured tetrahedra (and so is its block, a DOLFINx mesh holding one cell type), for the
 non-matching (mortar) interfaces.
+
+Second order: the builders that take ``order = 2`` raise the mesh with gmsh to complete
+second-order elements (27-node hexahedra, 10-node tetrahedra) whose new nodes lie on the
+geometry (a sphere's facets are curved); ``ContactProblem`` then takes degree 2 by default.
+:func:`read_msh` reads a user's ``.msh`` of first or second order; other gmsh volume elements
+(20-node hexahedra, third-order ones) are refused with the reason (:func:`unsupported_gmsh_cells`).
 """
 
 from __future__ import annotations
@@ -45,6 +51,8 @@ __all__ = [
     "build_stacked_blocks",
     "build_thick_cylinder",
     "build_two_beams",
+    "read_msh",
+    "unsupported_gmsh_cells",
 ]
 
 
@@ -223,23 +231,92 @@ def restore_signal_handlers() -> None:
             signal.signal(signum, handler)
 
 
+GMSH_CELLS = {4: "4-node tetrahedra", 11: "10-node tetrahedra", 5: "8-node hexahedra", 12: "27-node hexahedra"}
+"""The gmsh volume elements a mesh may have (by gmsh element type): first- and second-order Lagrange
+tetrahedra and hexahedra, the cells DOLFINx reads."""
+
+
+def unsupported_gmsh_cells(types: Sequence[int]) -> str | None:
+    """Why gmsh volume elements of the element ``types`` cannot make the mesh, or None.
+
+    The 20-node (serendipity) hexahedron is not a DOLFINx element: DOLFINx's hexahedra are
+    Lagrange (tensor-product) elements of 8 or 27 nodes, and a serendipity geometry has no face
+    or cell nodes to give the 27-node one. gmsh meshes of second order are complete when
+    ``Mesh.SecondOrderIncomplete = 0`` (the default).
+    """
+    for t in types:
+        if int(t) == 17:
+            return ("20-node (serendipity) hexahedra are not a DOLFINx element (its hexahedra are Lagrange "
+                    "elements of 8 or 27 nodes): mesh with 27-node hexahedra (gmsh: Mesh.ElementOrder = 2 "
+                    "with Mesh.SecondOrderIncomplete = 0) or with 8-node ones")
+        if int(t) not in GMSH_CELLS:
+            name = gmsh.model.mesh.getElementProperties(int(t))[0] if gmsh.isInitialized() else f"type {t}"
+            return (f"gmsh elements {name!r} are not supported; the volumes must be "
+                    f"{', '.join(GMSH_CELLS.values())}")
+    return None
+
+
+def _check_order(order: int) -> None:
+    """Refuse a mesh order other than 1 and 2 (a ValueError naming it)."""
+    if order not in (1, 2):
+        raise ValueError(f"order = {order!r}: a mesh of first (1) or second (2) order")
+
+
+def _second_order() -> dict[str, float]:
+    """Raise the current model's mesh to second order: complete elements (10-node tetrahedra, 27-node
+    hexahedra), the new nodes placed on the geometry (curved surfaces stay curved); node
+    coordinates rounded again, so that straight edges keep exact midpoints. Returns the option it
+    changed with its previous value (the caller's gmsh session gets it back)."""
+    previous = {"Mesh.SecondOrderIncomplete": gmsh.option.getNumber("Mesh.SecondOrderIncomplete")}
+    gmsh.option.setNumber("Mesh.SecondOrderIncomplete", 0)
+    gmsh.model.mesh.setOrder(2)
+    _round_node_coordinates()
+    return previous
+
+
+def read_msh(file: str | os.PathLike, comm: MPI.Comm = MPI.COMM_WORLD) -> MeshAndTags:
+    """A gmsh ``.msh`` file (first or second order: 4- or 10-node tetrahedra, 8- or 27-node
+    hexahedra), read on rank 0 and distributed, with its physical groups as cell and facet tags.
+
+    A second-order mesh keeps its curved geometry: ``ContactProblem`` takes degree 2 on it by
+    default. Other elements (20-node hexahedra among them) are refused with the reason, on every
+    rank, before the collective distribution.
+    """
+    def check() -> None:
+        gmsh.merge(os.fspath(file))
+        problem = unsupported_gmsh_cells(gmsh.model.mesh.getElementTypes(3))
+        if problem is not None:
+            raise ValueError(f"{file}: {problem}")
+        if len(gmsh.model.mesh.getElementTypes(3)) > 1:
+            raise ValueError(f"{file}: the volumes mix cell types; use one (all tetrahedra or all hexahedra)")
+
+    return _mesh_from_gmsh(comm, "read_msh", check, None, reading=True)
+
+
 def _mesh_from_gmsh(
     comm: MPI.Comm,
     name: str,
     build: Callable[[], None],
     msh_file: str | os.PathLike | None,
+    order: int = 1,
+    reading: bool = False,
 ) -> MeshAndTags:
     """Run ``build`` (geometry, physical groups, meshing) on rank 0 and distribute the mesh.
+
+    ``order = 2`` raises the mesh to second order after ``build`` (:func:`_second_order`).
+    ``reading``: ``build`` reads a file; its errors are raised as ValueError with their own words.
 
     gmsh is initialised if needed and finalised again only if this call initialised it; a
     gmsh session opened by the caller keeps its current model (ours is added and removed).
     An exception on rank 0 is broadcast and raised on every rank, so that no rank is left
     waiting in the collective mesh creation.
     """
+    _check_order(order)  # an argument: every rank refuses it alike
+    failure = ValueError if reading else RuntimeError
     if comm.rank != 0:
         error = comm.bcast(None, root=0)
         if error is not None:
-            raise RuntimeError(error)
+            raise failure(error)
         mesh, cell_tags, facet_tags = compat.model_to_mesh(None, comm, 0, gdim=3)
         return MeshAndTags(mesh, cell_tags, facet_tags)
 
@@ -261,13 +338,15 @@ def _mesh_from_gmsh(
             gmsh.model.add(name)
             added_model = name
             build()
+            if order == 2:
+                previous_options = {**_second_order(), **(previous_options or {})}
             if msh_file is not None:
                 gmsh.write(os.fspath(msh_file))
         except Exception as exc:  # reported on every rank, below
-            error = f"building the gmsh model {name!r} failed: {type(exc).__name__}: {exc}"
+            error = str(exc) if reading else f"building the gmsh model {name!r} failed: {type(exc).__name__}: {exc}"
         comm.bcast(error, root=0)
         if error is not None:
-            raise RuntimeError(error)
+            raise failure(error)
         mesh, cell_tags, facet_tags = compat.model_to_mesh(gmsh.model, comm, 0, gdim=3)
     finally:
         if initialised_here:
@@ -341,13 +420,15 @@ def _box_curve_counts(volumes: list[int], count: Callable[[np.ndarray], int]) ->
     return counts
 
 
-def _structured_hexahedra(curve_counts: dict[int, int]) -> None:
-    """Transfinite curves (``n`` elements each), surfaces and volumes, recombined: hexahedra."""
+def _structured_hexahedra(curve_counts: dict[int, int], recombine: bool = True) -> None:
+    """Transfinite curves (``n`` elements each), surfaces and volumes, recombined: hexahedra
+    (not recombined: tetrahedra, each face's triangles with the same diagonals)."""
     for c, n in curve_counts.items():
         gmsh.model.mesh.setTransfiniteCurve(c, n + 1)
     for _, s in gmsh.model.getEntities(2):
         gmsh.model.mesh.setTransfiniteSurface(s)
-        gmsh.model.mesh.setRecombine(2, s)
+        if recombine:
+            gmsh.model.mesh.setRecombine(2, s)
     for _, v in gmsh.model.getEntities(3):
         gmsh.model.mesh.setTransfiniteVolume(v)
 
@@ -393,6 +474,7 @@ def build_two_beams(
     msh_file: str | os.PathLike | None = None,
     *,
     refine2: int | None = None,
+    order: int = 1,
 ) -> MeshAndTags:
     """The seed benchmark's two overlapping cantilever beams (``benchmark-two-beams.md``).
 
@@ -415,6 +497,8 @@ def build_two_beams(
     refine2
         Positive integer dividing beam 2's element edge 0.2 m; default ``refine`` (matching
         interface meshes).
+    order
+        2: 27-node hexahedra (for quadratic elements, ``ContactProblem``'s default on them).
 
     Returns
     -------
@@ -464,7 +548,7 @@ def build_two_beams(
         gmsh.model.mesh.generate(3)
         _round_node_coordinates()
 
-    return _mesh_from_gmsh(comm, "two_beams", build, msh_file)
+    return _mesh_from_gmsh(comm, "two_beams", build, msh_file, order)
 
 
 # --------------------------------------------------------------------------------------------
@@ -499,6 +583,7 @@ def build_stacked_blocks(
     nx2: int | None = None,
     nz2: int | None = None,
     msh_file: str | os.PathLike | None = None,
+    order: int = 1,
 ) -> MeshAndTags:
     """Body 1, a block below the plane y = ``y_interface``; body 2, a block on top of it.
 
@@ -528,6 +613,8 @@ def build_stacked_blocks(
         interface meshes).
     msh_file
         If given, the gmsh model is also written to this ``.msh`` file (by rank 0).
+    order
+        2: 27-node hexahedra.
 
     Returns
     -------
@@ -580,7 +667,7 @@ def build_stacked_blocks(
         gmsh.model.mesh.generate(3)
         _round_node_coordinates()
 
-    return _mesh_from_gmsh(comm, "stacked_blocks", build, msh_file)
+    return _mesh_from_gmsh(comm, "stacked_blocks", build, msh_file, order)
 
 
 def build_block_stack(
@@ -593,7 +680,9 @@ def build_block_stack(
     y0: float = 0.0,
     centred: bool = False,
     cell_type: str = "hexahedron",
+    structured: bool = False,
     msh_file: str | os.PathLike | None = None,
+    order: int = 1,
 ) -> MeshAndTags:
     """Blocks stacked along y, each meshed on its own (no shared nodes): several contact interfaces.
 
@@ -603,7 +692,10 @@ def build_block_stack(
     and nz have coincident interface nodes; different ones make non-matching interfaces. With
     ``cell_type="tetrahedron"`` the blocks are meshed with unstructured tetrahedra whose edges
     divide the block's edges into nx, ny, nz parts (the faces are meshed on their own, so even
-    equal divisions give non-matching interfaces).
+    equal divisions give non-matching interfaces); with ``structured`` as well, with tetrahedra
+    from transfinite volumes, whose faces are all triangulated alike: equal nx and nz then give
+    matching interfaces (coincident nodes and triangles). ``order = 2``: a second-order mesh
+    (27-node hexahedra, 10-node tetrahedra).
 
     Returns
     -------
@@ -624,12 +716,13 @@ def build_block_stack(
         raise ValueError(f"cell_type must be 'hexahedron' or 'tetrahedron', got {cell_type!r}")
     return _mesh_from_gmsh(
         comm, "block_stack",
-        lambda: _build_block_stack_model(Lx, Lz, heights, divisions, y0, centred, cell_type), msh_file)
+        lambda: _build_block_stack_model(Lx, Lz, heights, divisions, y0, centred, cell_type, structured), msh_file,
+        order)
 
 
 def _build_block_stack_model(Lx: float, Lz: float, heights: Sequence[float],
                              divisions: Sequence[tuple[int, int, int]], y0: float = 0.0,
-                             centred: bool = False, cell_type: str = "hexahedron") -> None:
+                             centred: bool = False, cell_type: str = "hexahedron", structured: bool = False) -> None:
     """The gmsh model of :func:`build_block_stack` (current model, rank 0): geometry, groups, mesh."""
     x0 = -Lx / 2 if centred else 0.0
     z0 = -Lz / 2 if centred else 0.0
@@ -642,6 +735,8 @@ def _build_block_stack_model(Lx: float, Lz: float, heights: Sequence[float],
         counts |= _box_curve_counts(body, lambda d: (n_x, n_y, n_z)[int(np.argmax(d))])
     if cell_type == "hexahedron":
         _structured_hexahedra(counts)
+    elif structured:  # transfinite, not recombined: every face's triangles alike (matching interfaces)
+        _structured_hexahedra(counts, recombine=False)
     else:  # the edges' divisions only: unstructured triangles on the faces, tetrahedra inside
         for c, n in counts.items():
             gmsh.model.mesh.setTransfiniteCurve(c, n + 1)
@@ -875,6 +970,7 @@ def build_sphere_on_block(
     h_max: float | None = None,
     contact_radius: float = 2.0,
     msh_file: str | os.PathLike | None = None,
+    order: int = 1,
 ) -> MeshAndTags:
     """A quarter of an elastic hemisphere resting on a quarter block, each meshed on its own.
 
@@ -906,6 +1002,8 @@ def build_sphere_on_block(
         exceed the expected contact radius, and be below ``block`` and ``R``.
     msh_file
         If given, the gmsh model is also written to this ``.msh`` file (by rank 0).
+    order
+        2: 10-node tetrahedra whose new nodes lie on the geometry (the sphere's facets curved).
 
     Returns
     -------
@@ -924,7 +1022,7 @@ def build_sphere_on_block(
     return _mesh_from_gmsh(
         comm, "sphere_on_block",
         lambda: _build_sphere_on_block_model(R, block, depth, h_contact, fine_radius, growth, h_max,
-                                             contact_radius), msh_file)
+                                             contact_radius), msh_file, order)
 
 
 def _quarter_hemisphere(R: float, contact_radius: float) -> tuple[int, int]:
