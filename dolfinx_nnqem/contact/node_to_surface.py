@@ -20,15 +20,17 @@ from __future__ import annotations
 
 import numpy as np
 
-from dolfinx_nnqem.contact.projection import project_points
+from dolfinx_nnqem.contact.projection import Projection, project_points
 from dolfinx_nnqem.contact.surface_pairs import SurfacePairs, facet_size, surface_pairs
-from dolfinx_nnqem.contact.surfaces import ContactPairError, GatheredSurfaces, first_by_position, format_point
+from dolfinx_nnqem.contact.surfaces import ContactPairError, Facets, GatheredSurfaces, first_by_position, format_point
 
-__all__ = ["node_to_surface_pairs"]
+__all__ = ["keep_preferred", "node_to_surface_pairs"]
 
 
 def node_to_surface_pairs(V, surfaces: GatheredSurfaces, *, tolerance: float, search_distance: float | None = None,
-                          note: str = "", supported: np.ndarray | None = None) -> SurfacePairs:
+                          note: str = "", supported: np.ndarray | None = None,
+                          edge_allowance: float | None = None, preferred: np.ndarray | None = None
+                          ) -> SurfacePairs:
     """Node-to-surface pairs of the second gathered surface (slave) on the first (master).
 
     Parameters
@@ -48,6 +50,15 @@ def node_to_surface_pairs(V, surfaces: GatheredSurfaces, *, tolerance: float, se
     supported
         Laid out like V's local dofs, non-zero at prescribed ones (None: no support is known): the
         normals of slave nodes on symmetry planes lie in the plane (:func:`surface_pairs`).
+    edge_allowance
+        Slave nodes whose closest point lies up to this far beyond the master's boundary still get
+        a pair (default: ``tolerance``). The current geometry allows a fraction of the facet size,
+        so that a slave node on the master's edge, which the Poisson effect moves back and forth
+        across it, keeps its pair (:mod:`~dolfinx_nnqem.contact.current_geometry`).
+    preferred
+        (slave nodes,) a master facet per slave node (−1: none), kept where the slave node still
+        projects onto it within ``edge_allowance`` (:func:`keep_preferred`): the current geometry's
+        hysteresis against a slave node on a shared edge jumping between two facets.
 
     Raises
     ------
@@ -62,8 +73,10 @@ def node_to_surface_pairs(V, surfaces: GatheredSurfaces, *, tolerance: float, se
     if search_distance is None:
         search_distance = 2.0 * max(master_size, facet_size(slave))
     p = project_points(nodes.x, master.x, master.area, max_distance=search_distance)
+    if preferred is not None:
+        p = keep_preferred(p, nodes.x, master, preferred, 0.0 if edge_allowance is None else edge_allowance)
     found = p.facet >= 0
-    inside = found & (p.tangential_offset <= tolerance)
+    inside = found & (p.tangential_offset <= (tolerance if edge_allowance is None else edge_allowance))
     if not np.any(inside):
         raise ContactPairError(
             f"no node of the slave surface {tags[1]} projects onto the master surface {tags[0]} within the search "
@@ -82,4 +95,28 @@ def node_to_surface_pairs(V, surfaces: GatheredSurfaces, *, tolerance: float, se
         V, "node-to-surface", tags, nodes.index[keep], nodes.x[keep], nodes.area[keep], p.normal[keep], p.g0[keep],
         np.arange(0, k * len(keep) + 1, k), master.nodes[p.facet[keep]].ravel(), p.N[keep].ravel(),
         master.x[p.facet[keep]].reshape(-1, 3), master_size=master_size, tolerance=tolerance,
-        num_slave_nodes=len(nodes.index), note=note, supported=supported)
+        num_slave_nodes=len(nodes.index), note=note, supported=supported, facet=p.facet[keep])
+
+
+def keep_preferred(p: Projection, x: np.ndarray, master: Facets, preferred: np.ndarray, allowance: float) -> Projection:
+    """``p`` with the rows of slave points moved back to their ``preferred`` master facet where the
+    point's closest point on it is within ``allowance`` of the facet (tangentially) and of the best
+    distance.
+
+    Two facets that share an edge have different normals once the master deforms; a slave node
+    on that edge would otherwise take either, by round-off, from one evaluation to the next.
+    """
+    changed = np.flatnonzero((preferred >= 0) & (p.facet != preferred))
+    if len(changed) == 0:
+        return p
+    out = Projection(*(np.array(a, copy=True) for a in (p.facet, p.xi, p.N, p.point, p.normal, p.g0, p.distance,
+                                                          p.tangential_offset)))
+    for i in changed:
+        f = int(preferred[i])
+        q = project_points(x[i:i + 1], master.x[f:f + 1], master.area[f:f + 1])
+        best = p.distance[i] if p.facet[i] >= 0 else np.inf
+        if q.tangential_offset[0] <= allowance and q.distance[0] <= best + allowance:
+            for name in ("xi", "N", "point", "normal", "g0", "distance", "tangential_offset"):
+                getattr(out, name)[i] = getattr(q, name)[0]
+            out.facet[i] = f
+    return out

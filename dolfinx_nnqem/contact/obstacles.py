@@ -78,7 +78,7 @@ class RigidObstacle(ABC):
         a(ℓ) for a vector ``motion``.
     """
 
-    motion: Sequence[float] | Callable[[float], Sequence[float]] = (0.0, 0.0, 0.0)
+    motion: Sequence[float] | Callable[[float], Sequence[float] | np.ndarray] = (0.0, 0.0, 0.0)
     amplitude: Callable[[float], float] | None = None
 
     def __post_init__(self):

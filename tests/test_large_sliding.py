@@ -1,0 +1,112 @@
+"""Large sliding: contact geometry in the current configuration (issue 27, first part).
+
+* symmetric press: a frictionless rigid sphere pressed into an elastic block at x = 0.3 and slid to
+  x = 0.7 ends with the force of a press made in place at 0.7 (and, by the mesh's mirror symmetry,
+  with the mirror image of the force at 0.3), monolithic and NNEQM1, both laws;
+* the issue's set-up (R = 0.6, 0.01 into a unit cube, x from 0.3 to 0.7) on 8³ hexahedra instead of
+  16³ (test time): reference geometry stops and now names the stale geometry as the likely cause;
+  current geometry runs through;
+* a block slid 1.6 master facets over another (node-to-surface, pairs change their master facet
+  and a third of them go): the force of a press made in place there;
+* what is refused, before solving, with the reason: NNEQM2, mortar and node-to-node with
+  ``geometry = "current"``.
+"""
+
+import logging
+
+import numpy as np
+import pytest
+
+from dolfinx_nnqem.cases.large_sliding import obstacle_force, slave_force, sliding_blocks, sliding_sphere
+from dolfinx_nnqem.problem import Contact
+from dolfinx_nnqem.solvers import ConvergenceError, SolverOptions, make_solver, solve_load_steps
+
+CASES = [("monolithic", "alart-curnier"), ("monolithic", "polar"), ("nneqm1", "alart-curnier"),
+         ("nneqm1", "polar")]
+OPTIONS = SolverOptions(rtol=1e-10, max_iterations=40)
+
+
+def _run(problem, method, increments):
+    with make_solver(method, problem, OPTIONS) as solver:
+        results = solve_load_steps(problem, solver, increments)
+    return results
+
+
+@pytest.mark.parametrize("method, law", CASES)
+def test_symmetric_press(method, law):
+    slid = sliding_sphere(6, start=0.3, end=0.7, law=law)
+    results = _run(slid, method, 16)
+    in_place = sliding_sphere(6, start=0.7, end=0.7, law=law)
+    reference = _run(in_place, method, 4)
+    f_slid, f_place = obstacle_force(slid), obstacle_force(in_place)
+    error = np.linalg.norm(f_slid - f_place) / np.linalg.norm(f_place)
+    iterations = [r.iterations for r in results]
+    passes = [r.report.geometry_passes for r in results]
+    print(f"\n  {method}/{law}: slid 0.3 -> 0.7: F = {f_slid}, pressed in place at 0.7: F = {f_place}; "
+          f"|ΔF|/|F| = {error:.2e} (tolerance 1e-6); Newton iterations per increment {iterations} "
+          f"(total {sum(iterations)}), solves per increment {passes}")
+    assert error < 1e-6
+    assert slid.num_pairs == 49  # every node of the top face (a rigid obstacle pairs them all)
+
+
+def test_issue_sliding_sphere_reference_geometry_names_the_cause(caplog):
+    problem = sliding_sphere(8, geometry="reference")
+    with caplog.at_level(logging.WARNING, logger="dolfinx_nnqem"):
+        with pytest.raises(ConvergenceError) as error:
+            _run(problem, "monolithic", 20)
+    message = str(error.value)
+    print(f"\n  reference geometry: {message}")
+    assert "likely cause: contact sphere-201 (rigid obstacle, reference geometry)" in message
+    assert "use geometry = 'current'" in message
+
+
+def test_issue_sliding_sphere_current_geometry():
+    problem = sliding_sphere(8)
+    forces = []
+    with make_solver("monolithic", problem, OPTIONS) as solver:
+        results = solve_load_steps(problem, solver, 20, callbacks=[lambda r: forces.append(obstacle_force(problem))])
+    f = np.array(forces)
+    print(f"\n  current geometry, 8³: {len(results)} increments, {sum(r.iterations for r in results)} Newton "
+          f"iterations, {sum(r.report.geometry_passes for r in results)} solves; normal force after the press "
+          f"{f[4, 1]:.6g}, over the slide {f[4:, 1].min():.6g} .. {f[4:, 1].max():.6g}")
+    assert results[-1].load_factor == 1.0
+    assert np.all(f[4:, 1] < 0.8 * f[4, 1])  # still pressed all the way (y points up: the force is < 0)
+
+
+@pytest.mark.parametrize("method, law", CASES)
+def test_block_slid_over_several_facets(method, law):
+    slid = sliding_blocks(slide=0.4, law=law)
+    assert slid.contact is not None
+    tracker = slid.contact.trackers[0]
+    facets_before = tracker.facets.copy()
+    pairs_before = slid.num_pairs
+    results = _run(slid, method, 12)
+    moved = np.count_nonzero((tracker.facets != facets_before) & (tracker.facets >= 0))
+    in_place = sliding_blocks(slide=0.0, offset=0.4, law=law)
+    _run(in_place, method, 4)
+    f_slid, f_place = slave_force(slid), slave_force(in_place)
+    error = abs(f_slid[1] - f_place[1]) / abs(f_place[1])
+    error_total = np.linalg.norm(f_slid - f_place) / np.linalg.norm(f_place)
+    iterations = [r.iterations for r in results]
+    print(f"\n  {method}/{law}: slid 0.4 (1.6 master facets): pairs {pairs_before} -> {slid.num_pairs}, "
+          f"{moved} slave nodes on another master facet; normal force {f_slid[1]:.9g}, in place {f_place[1]:.9g}: "
+          f"{error:.1e} (tolerance 1e-6); |ΔF|/|F| = {error_total:.1e}; iterations {iterations}")
+    assert pairs_before == 49 and slid.num_pairs == in_place.num_pairs == 28
+    assert moved > 10
+    assert error < 1e-6
+    assert error_total < 1e-3  # the lateral part: which facet a node on a shared edge keeps (theory.md)
+
+
+def test_nneqm2_refuses_current_geometry():
+    problem = sliding_sphere(3)
+    with pytest.raises(ValueError, match="nneqm2: contact sphere-201 has geometry = 'current'"):
+        make_solver("nneqm2", problem, OPTIONS)
+
+
+@pytest.mark.parametrize("discretisation, why", [("mortar", "not available for mortar yet"),
+                                                 ("node-to-node", "does not apply to node-to-node")])
+def test_current_geometry_refused_where_not_implemented(discretisation, why):
+    with pytest.raises(ValueError, match=why):
+        Contact(21, 22, mu_f=0.0, discretisation=discretisation, geometry="current")
+    with pytest.raises(ValueError, match="geometry = 'deformed'; expected one of reference, current"):
+        Contact(21, 22, mu_f=0.0, geometry="deformed")
