@@ -110,3 +110,25 @@ def test_current_geometry_refused_where_not_implemented(discretisation, why):
         Contact(21, 22, mu_f=0.0, discretisation=discretisation, geometry="current")
     with pytest.raises(ValueError, match="geometry = 'deformed'; expected one of reference, current"):
         Contact(21, 22, mu_f=0.0, geometry="deformed")
+
+
+@pytest.mark.parametrize("method, law", CASES)
+def test_frictional_block_slides_on_the_cone(method, law):
+    """μ_f = 0.3: once the block slides, every closed pair is on the Coulomb cone (the slip measured
+    as the relative displacement increment in the current frame, theory.md) and friction opposes the slide."""
+    from dolfinx_nnqem.io import pair_table
+
+    mu_f = 0.3
+    problem = sliding_blocks(slide=0.4, law=law, mu_f=mu_f)
+    results = _run(problem, method, 12)
+    t = pair_table(problem)
+    local = -t["force_local_body1"]  # on the slave block: (p_n, q1, q2)
+    closed = local[:, 0] > 0
+    cone = np.abs(np.hypot(local[closed, 1], local[closed, 2]) - mu_f * local[closed, 0]).max() / (mu_f * local[:, 0].max())
+    f = slave_force(problem)
+    print(f"\n  {method}/{law}: {np.count_nonzero(closed)} closed pairs, states "
+          f"{dict(zip(*np.unique(t['state_name'], return_counts=True)))}; max ||q| − μ_f p_n| / (μ_f max p_n) = "
+          f"{cone:.1e} (tolerance 1e-8); F = {f}, |F_x| / F_y = {abs(f[0]) / f[1]:.6f}; iterations "
+          f"{[r.iterations for r in results]}")
+    assert np.all(t["state_name"][closed] == "slip") and cone < 1e-8
+    assert f[0] < 0 and 0.28 < abs(f[0]) / f[1] <= mu_f  # < μ_f: the Poisson effect adds a transverse slip
