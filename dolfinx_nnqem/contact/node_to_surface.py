@@ -7,7 +7,8 @@ facets (triangles, or bilinear quadrilaterals by a local Newton; edges and corne
     w_j = R_j (u_j − Σ_k N_k(ξ_j) u_k),   g0_j = n_j · (X_j − x(ξ_j)),
 
 over the nodes k of the master facet holding ξ_j. Small deformation: ξ_j, n_j and g0_j are
-computed once, in the reference configuration.
+computed once, in the reference configuration, unless the interface follows the bodies
+(:mod:`~dolfinx_nnqem.contact.current_geometry`, which calls this on the moved surfaces).
 
 Slave nodes whose closest point is clamped to the master surface's boundary (they lie beyond
 its edge) get no pair. Node-to-surface is cheap and familiar (CalculiX's default) but does not
