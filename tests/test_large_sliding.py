@@ -8,6 +8,9 @@
   current geometry runs through;
 * a block slid 1.6 master facets over another (node-to-surface, pairs change their master facet
   and a third of them go): the force of a press made in place there;
+* a cylinder slid like the sphere; a plane pressed and slid with friction gives the reference
+  geometry's results (its geometry is exact in both);
+* μ_f = 0.3: the slid block's pairs on the Coulomb cone; the same run from a problem file;
 * what is refused, before solving, with the reason: NNEQM2, mortar and node-to-node with
   ``geometry = "current"``.
 """
@@ -47,6 +50,47 @@ def test_symmetric_press(method, law):
           f"(total {sum(iterations)}), solves per increment {passes}")
     assert error < 1e-6
     assert slid.num_pairs == 49  # every node of the top face (a rigid obstacle pairs them all)
+
+
+@pytest.mark.parametrize("method", ["monolithic", "nneqm1"])
+def test_symmetric_press_cylinder(method):
+    """A cylinder (axis along z) slid over the block: the same as a press in place, 1e-6."""
+    slid = sliding_sphere(6, shape="cylinder")
+    _run(slid, method, 16)
+    in_place = sliding_sphere(6, start=0.7, end=0.7, shape="cylinder")
+    _run(in_place, method, 4)
+    f_slid, f_place = obstacle_force(slid), obstacle_force(in_place)
+    error = np.linalg.norm(f_slid - f_place) / np.linalg.norm(f_place)
+    print(f"\n  {method}: cylinder slid 0.3 -> 0.7: F = {f_slid}, in place: F = {f_place}; |ΔF|/|F| = {error:.2e}")
+    assert error < 1e-6 and f_place[1] < 0
+
+
+@pytest.mark.parametrize("method, law", CASES)
+def test_plane_current_geometry_equals_reference(method, law):
+    """A plane pressed, then slid with friction: its normals and gaps are exact in either geometry, so
+    the current geometry (w_n measured again at every evaluation) gives the reference's results."""
+    from mpi4py import MPI
+
+    from dolfinx_nnqem.contact.obstacles import Plane
+    from dolfinx_nnqem.material import VonMises
+    from dolfinx_nnqem.problem import ContactProblem, Dirichlet, PiecewiseLinearPath
+    from dolfinx_nnqem.problem.meshing import BlockStackTags as T
+    from dolfinx_nnqem.problem.meshing import build_block_stack
+
+    def solve(geometry):
+        mesh, ct, ft = build_block_stack(MPI.COMM_WORLD, 1.0, 1.0, [0.5], [(3, 2, 3)])
+        path = PiecewiseLinearPath([[0.0, 0.0, 0.0, 0.0], [0.5, 0.0, -1e-3, 0.0], [1.0, 5e-3, -1e-3, 0.0]])
+        plane = Plane(point=(0.0, 0.5, 0.0), normal=(0.0, -1.0, 0.0), motion=path)
+        problem = ContactProblem(mesh, ct, ft, materials=VonMises(E=1.0e9, nu=0.3), dirichlet=[Dirichlet(T.bottom(1))],
+                                 contact=Contact(plane, T.top(1), mu_f=0.3, law=law, geometry=geometry))
+        results = _run(problem, method, 8)
+        return obstacle_force(problem), [r.iterations for r in results]
+
+    (f_ref, it_ref), (f_cur, it_cur) = solve("reference"), solve("current")
+    error = np.linalg.norm(f_cur - f_ref) / np.linalg.norm(f_ref)
+    print(f"\n  {method}/{law}: plane press then slide: reference F = {f_ref} ({it_ref} iterations), current "
+          f"F = {f_cur} ({it_cur}); |ΔF|/|F| = {error:.1e} (tolerance 1e-8)")
+    assert error < 1e-8
 
 
 def test_issue_sliding_sphere_reference_geometry_names_the_cause(caplog):
@@ -132,3 +176,66 @@ def test_frictional_block_slides_on_the_cone(method, law):
           f"{[r.iterations for r in results]}")
     assert np.all(t["state_name"][closed] == "slip") and cone < 1e-8
     assert f[0] < 0 and 0.28 < abs(f[0]) / f[1] <= mu_f  # < μ_f: the Poisson effect adds a transverse slip
+
+
+BLOCKS_FILE = """
+[mesh]
+file = "MESH"
+[materials.1]
+E = 1.0e3
+nu = 0.3
+[materials.2]
+E = 1.0e3
+nu = 0.3
+[contact]
+surface1 = 201
+surface2 = 102
+mu_f = 0.3
+law = "LAW"
+discretisation = "node-to-surface"
+geometry = "current"
+[[dirichlet]]
+tag = 101
+[[dirichlet]]
+tag = 202
+components = [1]
+value = -0.01
+amplitude = [[0.0, 0.0], [0.25, 1.0], [1.0, 1.0]]
+[[dirichlet]]
+tag = 202
+components = [0]
+value = 0.4
+amplitude = [[0.0, 0.0], [0.25, 0.0], [1.0, 1.0]]
+[[dirichlet]]
+tag = 202
+components = [2]
+[solver]
+method = "METHOD"
+increments = 12
+"""
+
+
+@pytest.mark.parametrize("method, law", [("monolithic", "alart-curnier"), ("nneqm1", "polar")])
+def test_problem_file_block_slid_in_current_geometry(tmp_path, method, law):
+    """The frictional block slide from a problem file (``geometry = "current"``), through the CLI and its
+    writers, while a third of the pairs go: the Python run's force."""
+    import json
+
+    from mpi4py import MPI
+
+    from dolfinx_nnqem.cli import EXIT_OK, main
+    from dolfinx_nnqem.problem.meshing import build_block_stack
+
+    if MPI.COMM_WORLD.size > 1:
+        pytest.skip("the CLI test runs serially")
+    build_block_stack(MPI.COMM_SELF, 1.0, 1.0, [0.5, 0.5], [(4, 2, 4), (6, 2, 6)], msh_file=tmp_path / "blocks.msh")
+    path = tmp_path / "slide.toml"
+    path.write_text(BLOCKS_FILE.replace("MESH", (tmp_path / "blocks.msh").as_posix()).replace("METHOD", method)
+                    .replace("LAW", law))
+    assert main(["-q", "run", str(path), "--out", str(tmp_path / "out")]) == EXIT_OK
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    python = [r.iterations for r in _run(sliding_blocks(slide=0.4, law=law, mu_f=0.3), method, 12)]
+    print(f"\n  {method}/{law}: converged {summary['converged']}, iterations {summary['iterations']} (the Python "
+          f"run's: {python}), global equilibrium {summary['equilibrium_residual']:.1e}")
+    assert summary["converged"] and summary["iterations"] == python
+    assert summary["equilibrium_residual"] < 1e-8

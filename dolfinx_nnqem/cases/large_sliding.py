@@ -19,7 +19,7 @@ from dolfinx_nnqem import compat  # noqa: I001  (first: loads MPI/PETSc for the 
 import numpy as np
 from mpi4py import MPI
 
-from dolfinx_nnqem.contact.obstacles import Sphere
+from dolfinx_nnqem.contact.obstacles import Cylinder, RigidObstacle, Sphere
 from dolfinx_nnqem.material import VonMises
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, PiecewiseLinearPath
 from dolfinx_nnqem.problem.meshing import BlockStackTags as T
@@ -34,13 +34,20 @@ MATERIAL = VonMises(E=1.0e3, nu=0.3)
 
 
 def sliding_sphere(n: int, *, start: float = 0.3, end: float = 0.7, geometry: str = "current",
-                   law: str = "alart-curnier", mu_f: float = 0.0, comm: MPI.Comm = MPI.COMM_WORLD) -> ContactProblem:
-    """The issue's sliding sphere on an n³ unit cube (module docstring)."""
+                   law: str = "alart-curnier", mu_f: float = 0.0, comm: MPI.Comm = MPI.COMM_WORLD,
+                   shape: str = "sphere") -> ContactProblem:
+    """The issue's sliding sphere on an n³ unit cube (module docstring); ``shape="cylinder"``: a
+    cylinder of the same radius with its axis along z instead."""
     mesh, ct, ft = build_block_stack(comm, 1.0, 1.0, [1.0], [(n, n, n)])
     path = PiecewiseLinearPath([[0.0, 0.0, 0.0, 0.0], [PRESSED_AT, 0.0, -DEPTH, 0.0], [1.0, end - start, -DEPTH, 0.0]])
-    sphere = Sphere(centre=(start, 1.0 + RADIUS, 0.5), radius=RADIUS, motion=path)
+    centre = (start, 1.0 + RADIUS, 0.5)
+    obstacle: RigidObstacle
+    if shape == "sphere":
+        obstacle = Sphere(centre=centre, radius=RADIUS, motion=path)
+    else:
+        obstacle = Cylinder(point=centre, axis=(0.0, 0.0, 1.0), radius=RADIUS, motion=path)
     return ContactProblem(mesh, ct, ft, materials=MATERIAL, dirichlet=[Dirichlet(T.bottom(1))],
-                          contact=Contact(sphere, T.top(1), mu_f=mu_f, law=law, geometry=geometry))
+                          contact=Contact(obstacle, T.top(1), mu_f=mu_f, law=law, geometry=geometry))
 
 
 def _press(load_factor: float) -> float:
