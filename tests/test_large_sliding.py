@@ -239,3 +239,41 @@ def test_problem_file_block_slid_in_current_geometry(tmp_path, method, law):
           f"run's: {python}), global equilibrium {summary['equilibrium_residual']:.1e}")
     assert summary["converged"] and summary["iterations"] == python
     assert summary["equilibrium_residual"] < 1e-8
+
+
+@pytest.mark.parametrize("method", ["monolithic", "nneqm1"])
+def test_restart_in_current_geometry(tmp_path, method):
+    """The frictional block slide interrupted after increment 5 (pairs 49 -> 42 by then) and resumed
+    in a fresh problem equals the uninterrupted run to 1e-12: the checkpoint's pairs are evaluated
+    again from its displacement, with its master facets."""
+    from dolfinx_nnqem.io import checkpoint
+
+    def build():
+        return sliding_blocks(slide=0.4, mu_f=0.3)
+
+    n = 12
+    reference = build()
+    _run(reference, method, n)
+    out = tmp_path / "run"
+    first = build()
+    checkpointer = checkpoint.Checkpointer(out)
+
+    def checkpoint_then_stop_after_5(problem, stepper_state, result):
+        checkpointer(problem, stepper_state, result)
+        if result.index == 5:
+            raise KeyboardInterrupt  # as Ctrl-C would, after increment 5's checkpoint
+
+    with pytest.raises(KeyboardInterrupt):
+        with make_solver(method, first, OPTIONS) as solver:
+            solve_load_steps(first, solver, n, checkpoint=checkpoint_then_stop_after_5)
+    pairs_at_stop = first.num_pairs
+    second = build()
+    state, _ = checkpoint.restore(second, out)
+    with make_solver(method, second, OPTIONS) as solver:
+        results = solve_load_steps(second, solver, n, resume=state)
+    du = np.abs(second.u.x.array - reference.u.x.array).max() / np.abs(reference.u.x.array).max()
+    df = np.linalg.norm(slave_force(second) - slave_force(reference)) / np.linalg.norm(slave_force(reference))
+    print(f"\n  {method}: stopped after increment 5 with {pairs_at_stop} pairs, resumed for {len(results)} increments: "
+          f"u {du:.1e}, force {df:.1e} (tolerance 1e-12)")
+    assert pairs_at_stop == 42 and [r.index for r in results] == list(range(6, n + 1))
+    assert du < 1e-12 and df < 1e-12

@@ -790,6 +790,17 @@ class ContactModel:
         self.geometry_version += 1
         return remap
 
+    def geometry_state(self) -> list[np.ndarray | None]:
+        """Per interface, what its next evaluation depends on besides u (for checkpoints): the master
+        facet of every slave node (node-to-surface in current geometry), or None."""
+        return [t.facets if isinstance(t, SurfaceTracker) else None for t in self.trackers]
+
+    def set_geometry_state(self, state: Sequence[np.ndarray | None]) -> None:
+        """Restore :meth:`geometry_state`."""
+        for tracker, facets in zip(self.trackers, state):
+            if isinstance(tracker, SurfaceTracker) and facets is not None:
+                tracker.facets = np.asarray(facets, dtype=np.int64).copy()
+
     def check_slip(self, w: np.ndarray) -> list[str]:
         """Reference-geometry interfaces whose slip exceeds :data:`SLIP_LIMIT` × the facet size (collective).
 
