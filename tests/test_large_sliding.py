@@ -40,7 +40,7 @@ def test_symmetric_press(method, law):
     slid = sliding_sphere(6, start=0.3, end=0.7, law=law)
     results = _run(slid, method, 16)
     in_place = sliding_sphere(6, start=0.7, end=0.7, law=law)
-    reference = _run(in_place, method, 4)
+    _run(in_place, method, 4)
     f_slid, f_place = obstacle_force(slid), obstacle_force(in_place)
     error = np.linalg.norm(f_slid - f_place) / np.linalg.norm(f_place)
     iterations = [r.iterations for r in results]

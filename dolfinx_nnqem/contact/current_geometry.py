@@ -27,6 +27,7 @@ summed over the ranks, so a slave node finds a master facet held by another rank
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -40,7 +41,7 @@ from dolfinx_nnqem.contact.pairset import PairRows, rows_matrix
 from dolfinx_nnqem.contact.surface_pairs import SurfacePairs, facet_size
 from dolfinx_nnqem.contact.surfaces import GatheredSurfaces, check_no_shared_nodes, gather_surfaces, local_frames
 
-__all__ = ["GEOMETRIES", "ObstacleTracker", "SurfaceTracker", "displacement_at", "match_pairs", "moved_surfaces",
+__all__ = ["GEOMETRIES", "ObstacleTracker", "SurfaceTracker", "displacement_at", "match_pairs", "moved_surfaces", "remapper",
            "surface_tracker"]
 
 GEOMETRIES = ("reference", "current")
@@ -100,6 +101,19 @@ def match_pairs(old_keys: np.ndarray, new_keys: np.ndarray) -> tuple[np.ndarray,
     order = np.argsort(old_keys, kind="stable")
     at = np.minimum(np.searchsorted(old_keys[order], new_keys), len(old_keys) - 1)
     return old_keys[order][at] == new_keys, order[at]
+
+
+def remapper(old_keys: np.ndarray, new_keys: np.ndarray) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+    """``remap(old, fill)``: the rows of ``old`` (one per old pair) for the new pairs, by key, and those
+    of ``fill`` (one row, or an array laid out like the new pairs) for new pairs."""
+    found, source = match_pairs(old_keys, new_keys)
+
+    def remap(old: np.ndarray, fill: np.ndarray) -> np.ndarray:
+        out = np.broadcast_to(np.asarray(fill, dtype=old.dtype), (len(new_keys),) + old.shape[1:]).copy()
+        out[found] = old[source[found]]
+        return out
+
+    return remap
 
 
 @dataclass(frozen=True)

@@ -40,8 +40,9 @@ from dolfinx_nnqem.contact.laws import (NO_FORCE, SLIP, ContactLaw, LawEvaluatio
 from dolfinx_nnqem.contact.obstacles import RigidObstacle, obstacle_pairs
 from dolfinx_nnqem.contact.discretisation import DISCRETISATIONS, OBSTACLE_DISCRETISATIONS, discretise
 from dolfinx_nnqem.contact.pairset import PairRows, PairSet, rows_matrix
+from dolfinx_nnqem.contact.slip_check import stale_interfaces
 from dolfinx_nnqem.contact.surfaces import ContactPairError, mesh_tolerance, owned_supports
-from dolfinx_nnqem.contact.current_geometry import (GEOMETRIES, ObstacleTracker, SurfaceTracker, match_pairs,
+from dolfinx_nnqem.contact.current_geometry import (GEOMETRIES, ObstacleTracker, SurfaceTracker, remapper,
                                                     surface_tracker)
 from dolfinx_nnqem.numerics.ranges import check_magnitude
 
@@ -240,28 +241,6 @@ def zero_displacement(V):
     import dolfinx
 
     return dolfinx.fem.Function(V)
-
-
-SLIP_LIMIT = 0.25
-"""A reference-geometry interface whose relative tangential displacement exceeds this fraction of its
-facet size is reported (:meth:`ContactModel.check_slip`)."""
-
-
-def facet_size_of(comm: MPI.Comm, area: np.ndarray) -> float:
-    """The facet size of a slave surface: the square root of its median tributary area (collective)."""
-    areas = np.concatenate(comm.allgather(np.asarray(area, dtype=np.float64)))
-    return float(np.sqrt(np.median(areas))) if len(areas) else 0.0
-
-
-def slip_message(interface: Interface, slip: float, size: float) -> str:
-    """The warning of :meth:`ContactModel.check_slip` for ``interface``."""
-    kind = interface.pairs.kind
-    advice = ("use discretisation = 'node-to-surface' with geometry = 'current'" if kind == "node-to-node"
-              else "use geometry = 'current'")
-    return (f"contact {interface.contact.label} ({kind}, reference geometry): the surfaces slid {slip:.4g} "
-            f"relative to each other, {slip / size:.3g} × the facet size {size:.4g} (more than {SLIP_LIMIT:g}): "
-            f"the pairs, normals and gaps found in the reference configuration no longer describe the "
-            f"surfaces; {advice} for large sliding")
 
 
 @dataclass(frozen=True, eq=False)
@@ -774,14 +753,7 @@ class ContactModel:
         for obj in (self.B, self._w):
             obj.destroy()
         self._assemble(interfaces)
-        new_keys = self.pair_keys()
-        found, source = match_pairs(old_keys, new_keys)
-
-        def remap(old: np.ndarray, fill: np.ndarray) -> np.ndarray:
-            out = np.broadcast_to(np.asarray(fill, dtype=old.dtype), (len(new_keys),) + old.shape[1:]).copy()
-            out[found] = old[source[found]]
-            return out
-
+        remap = remapper(old_keys, self.pair_keys())
         fresh = self.laws.initial_unknowns()
         self.z, self.z_n = remap(self.z, fresh), remap(self.z_n, fresh)
         self.state_n = remap(self.state_n, np.zeros((), dtype=np.int8))
@@ -802,24 +774,12 @@ class ContactModel:
                 tracker.facets = np.asarray(facets, dtype=np.int64).copy()
 
     def check_slip(self, w: np.ndarray) -> list[str]:
-        """Reference-geometry interfaces whose slip exceeds :data:`SLIP_LIMIT` × the facet size (collective).
-
-        Their pairs were found in the reference configuration; past that slip the frozen closest
-        points and normals no longer describe the surfaces. Each interface is reported once, with
-        a warning that names it; the lines are returned.
-        """
-        lines = []
-        for k, interface in enumerate(self.interfaces):
-            label = interface.contact.label
-            if self.trackers[k] is not None or label in self._slip_warned:
-                continue
-            w_t = w[interface.local, 1:]
-            slip = self.comm.allreduce(float(np.hypot(w_t[:, 0], w_t[:, 1]).max(initial=0.0)), op=MPI.MAX)
-            size = facet_size_of(self.comm, interface.pairs.area)
-            if slip > SLIP_LIMIT * size:
-                self._slip_warned.add(label)
-                lines.append(slip_message(interface, slip, size))
-                logger.warning(lines[-1])
+        """Reference-geometry interfaces that slid past :data:`~dolfinx_nnqem.contact.slip_check.SLIP_LIMIT`
+        × their facet size, each reported once with a warning (collective; see
+        :func:`~dolfinx_nnqem.contact.slip_check.stale_interfaces`); the lines are returned."""
+        lines = stale_interfaces(self.comm, self.interfaces, self.trackers, w, self._slip_warned)
+        for line in lines:
+            logger.warning(line)
         return lines
 
     # -- reporting ----------------------------------------------------------------------------------
