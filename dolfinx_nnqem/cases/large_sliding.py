@@ -9,6 +9,10 @@
   ``slide`` (0.4: 1.6 master facets; part of the upper block then overhangs and its pairs go);
   ``offset`` moves the upper block's mesh along x before anything is solved (a press in place).
 
+* :func:`ironing`: a rigid cylinder (R = 0.5, axis along z) pressed ``depth`` into an elastoplastic
+  strip (2 × 0.5 × 0.25, nx × nx/4 × 2 hexahedra, bottom clamped, u_z = 0 on the z faces) over
+  ℓ ≤ 0.2, then dragged 1.0 along x (8 facets at nx = 16) with friction: an ironing-type problem.
+
 :func:`obstacle_force` and :func:`slave_force` give the resultant contact force on the block.
 """
 
@@ -25,7 +29,7 @@ from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, PiecewiseL
 from dolfinx_nnqem.problem.meshing import BlockStackTags as T
 from dolfinx_nnqem.problem.meshing import build_block_stack
 
-__all__ = ["obstacle_force", "slave_force", "sliding_blocks", "sliding_sphere"]
+__all__ = ["ironing", "obstacle_force", "slave_force", "sliding_blocks", "sliding_sphere"]
 
 RADIUS = 0.6
 DEPTH = 0.01
@@ -70,6 +74,22 @@ def sliding_blocks(*, slide: float = 0.4, offset: float = 0.0, geometry: str = "
     return ContactProblem(mesh, ct, ft, materials=MATERIAL, dirichlet=dirichlet,
                           contact=Contact(T.top(1), T.bottom(2), mu_f=mu_f, law=law, discretisation="node-to-surface",
                                           geometry=geometry))
+
+
+IRONING_MATERIAL = VonMises(E=1.0e3, nu=0.3, sigma_y0=5.0, H=500.0)
+IRONING_PRESSED_AT = 0.2
+
+
+def ironing(nx: int = 16, *, law: str = "alart-curnier", mu_f: float = 0.1, depth: float = 0.005,
+            comm: MPI.Comm = MPI.COMM_WORLD) -> ContactProblem:
+    """A cylinder pressed into an elastoplastic strip and dragged along it (module docstring)."""
+    mesh, ct, ft = build_block_stack(comm, 2.0, 0.25, [0.5], [(nx, max(nx // 4, 1), 2)])
+    path = PiecewiseLinearPath([[0.0, 0.0, 0.0, 0.0], [IRONING_PRESSED_AT, 0.0, -depth, 0.0], [1.0, 1.0, -depth, 0.0]])
+    radius = 0.5
+    punch = Cylinder(point=(0.5, 0.5 + radius, 0.0), axis=(0.0, 0.0, 1.0), radius=radius, motion=path)
+    dirichlet = [Dirichlet(T.bottom(1)), Dirichlet(T.zmin(1), 0.0, [2]), Dirichlet(T.zmax(1), 0.0, [2])]
+    return ContactProblem(mesh, ct, ft, materials=IRONING_MATERIAL, dirichlet=dirichlet,
+                          contact=Contact(punch, T.top(1), mu_f=mu_f, law=law, geometry="current"))
 
 
 def obstacle_force(problem: ContactProblem) -> np.ndarray:

@@ -2,8 +2,9 @@
 
     mpiexec -n N python large_sliding.py OUT.npz
 
-The frictionless sphere slid over the block (6³, rigid obstacle) and the frictional block slid 1.6
-master facets over another (node-to-surface, μ_f = 0.3), current geometry, monolithic and NNEQM1
+The frictionless sphere slid over the block (6³, rigid obstacle), the frictional block slid 1.6
+master facets over another (node-to-surface, μ_f = 0.3) and the ironing of an elastoplastic strip
+by a cylinder dragged 8 facets (μ_f = 0.1), current geometry, monolithic and NNEQM1
 (:mod:`dolfinx_nnqem.cases.large_sliding`). Rank 0 writes, per ``CASE/METHOD/``, the pair table's
 slave positions and forces on the master side in global pair order, the resultant force, the
 Newton iterations per increment, the pairs each rank owns and how many pairs have a master node
@@ -19,7 +20,8 @@ import dolfinx_nnqem  # noqa: F401, E402  (first: the PyPI wheel loads MPI/PETSc
 import numpy as np  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 
-from dolfinx_nnqem.cases.large_sliding import obstacle_force, slave_force, sliding_blocks, sliding_sphere  # noqa: E402
+from dolfinx_nnqem.cases.large_sliding import (ironing, obstacle_force, slave_force, sliding_blocks,  # noqa: E402
+                                               sliding_sphere)
 from dolfinx_nnqem.io.results import pair_table  # noqa: E402
 from dolfinx_nnqem.solvers import SolverOptions, make_solver, solve_load_steps  # noqa: E402
 
@@ -27,6 +29,7 @@ METHODS = ("monolithic", "nneqm1")
 CASES = {
     "sphere": (lambda comm: sliding_sphere(6, comm=comm), obstacle_force, 16),
     "blocks": (lambda comm: sliding_blocks(slide=0.4, mu_f=0.3, comm=comm), slave_force, 12),
+    "ironing": (lambda comm: ironing(16, comm=comm), obstacle_force, 40),
 }
 
 
