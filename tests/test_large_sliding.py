@@ -303,3 +303,35 @@ def test_ironing_monolithic_and_nneqm1_agree(law):
           f"{du:.1e} (tolerance 1e-6); {plastic} Gauss points plastic; |F_x|/|F_y| = {abs(f_m[0] / f_m[1]):.4f}")
     assert df < 1e-6 and du < 1e-6
     assert plastic > 50 and f_m[0] > 0 and 0.05 < abs(f_m[0] / f_m[1]) < 0.3  # dragged along +x, ploughing
+
+
+@pytest.mark.parametrize("method, law", [("monolithic", "alart-curnier"), ("nneqm1", "polar")])
+def test_block_slid_four_times_its_length(method, law):
+    """A short block slid four times its own length (eight master facets) over a long one, μ_f = 0.3:
+    in steady sliding Σ|q| / Σ p_n = μ_f (every pair on the cone); the resultant's F_x / F_y and the
+    normal force, measured, vary with the master facets the block crosses."""
+    from dolfinx_nnqem.cases.large_sliding import LONG_SLIDE_PRESSED_AT, long_slide
+    from dolfinx_nnqem.io import pair_table
+
+    mu_f = 0.3
+    problem = long_slide(law=law, mu_f=mu_f)
+    rows = []
+
+    def record(result):
+        local = -pair_table(problem)["force_local_body1"]
+        rows.append([result.load_factor, *slave_force(problem),
+                     np.hypot(local[:, 1], local[:, 2]).sum() / local[:, 0].sum()])
+
+    with make_solver(method, problem, OPTIONS) as solver:
+        results = solve_load_steps(problem, solver, 20, callbacks=[record])
+    h = np.array(rows)
+    steady = h[:, 0] > LONG_SLIDE_PRESSED_AT + 1e-12
+    cone = np.abs(h[steady, 4] - mu_f).max()
+    ratio = -h[steady, 1] / h[steady, 2]
+    normal = h[steady, 2]
+    spread = (normal.max() - normal.min()) / normal.mean()
+    print(f"\n  {method}/{law}: {problem.num_pairs} pairs, steady sliding over {np.count_nonzero(steady)} increments: "
+          f"max |Σ|q|/Σp_n − μ_f| = {cone:.1e}; F_x/F_y from {ratio.min():.5f} to {ratio.max():.5f}; normal force "
+          f"{normal.mean():.6g} ± {100 * spread / 2:.2f} %; iterations {[r.iterations for r in results]}")
+    assert cone < 1e-10
+    assert np.abs(ratio - mu_f).max() < 0.01 * mu_f and spread < 0.03

@@ -9,6 +9,9 @@
   ``slide`` (0.4: 1.6 master facets; part of the upper block then overhangs and its pairs go);
   ``offset`` moves the upper block's mesh along x before anything is solved (a press in place).
 
+* :func:`long_slide`: a short block (0.25 long, 40 × 4 × 3 hexahedra, the slave) pressed 0.002
+  onto a long one (2 long, 16 × 2 × 2, the master, bottom clamped) by its top over ℓ ≤ 0.1, then
+  slid 1.0 along x: four times its own length, eight master facets; u_z = 0 on the z faces.
 * :func:`ironing`: a rigid cylinder (R = 0.5, axis along z) pressed ``depth`` into an elastoplastic
   strip (2 × 0.5 × 0.25, nx × nx/4 × 2 hexahedra, bottom clamped, u_z = 0 on the z faces) over
   ℓ ≤ 0.2, then dragged 1.0 along x (8 facets at nx = 16) with friction: an ironing-type problem.
@@ -29,7 +32,7 @@ from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, PiecewiseL
 from dolfinx_nnqem.problem.meshing import BlockStackTags as T
 from dolfinx_nnqem.problem.meshing import build_block_stack
 
-__all__ = ["ironing", "obstacle_force", "slave_force", "sliding_blocks", "sliding_sphere"]
+__all__ = ["ironing", "long_slide", "obstacle_force", "slave_force", "sliding_blocks", "sliding_sphere"]
 
 RADIUS = 0.6
 DEPTH = 0.01
@@ -74,6 +77,29 @@ def sliding_blocks(*, slide: float = 0.4, offset: float = 0.0, geometry: str = "
     return ContactProblem(mesh, ct, ft, materials=MATERIAL, dirichlet=dirichlet,
                           contact=Contact(T.top(1), T.bottom(2), mu_f=mu_f, law=law, discretisation="node-to-surface",
                                           geometry=geometry))
+
+
+LONG_SLIDE_PRESSED_AT = 0.1
+
+
+def long_slide(*, law: str = "alart-curnier", mu_f: float = 0.3, comm: MPI.Comm = MPI.COMM_WORLD) -> ContactProblem:
+    """A short block slid four times its length over a long one, node-to-surface (module docstring)."""
+    mesh, ct, ft = build_block_stack(comm, 2.0, 0.25, [0.25, 0.25], [(16, 2, 2), (40, 4, 3)])
+    nodes = np.unique(compat.geometry_dofmap(mesh)[ct.indices[ct.values == T.body(2)]])
+    mesh.geometry.x[nodes, 0] = 0.25 + 0.125 * mesh.geometry.x[nodes, 0]  # the short block: x in [0.25, 0.5]
+
+    def press(load_factor: float) -> float:
+        return min(1.0, load_factor / LONG_SLIDE_PRESSED_AT)
+
+    def slide(load_factor: float) -> float:
+        return max(0.0, (load_factor - LONG_SLIDE_PRESSED_AT) / (1.0 - LONG_SLIDE_PRESSED_AT))
+
+    dirichlet = [Dirichlet(T.bottom(1)), Dirichlet(T.top(2), -0.002, [1], amplitude=press),
+                 Dirichlet(T.top(2), 1.0, [0], amplitude=slide)]
+    dirichlet += [Dirichlet(face(k), 0.0, [2]) for k in (1, 2) for face in (T.zmin, T.zmax)]
+    return ContactProblem(mesh, ct, ft, materials=MATERIAL, dirichlet=dirichlet,
+                          contact=Contact(T.top(1), T.bottom(2), mu_f=mu_f, law=law, discretisation="node-to-surface",
+                                          geometry="current"))
 
 
 IRONING_MATERIAL = VonMises(E=1.0e3, nu=0.3, sigma_y0=5.0, H=500.0)
