@@ -351,3 +351,30 @@ def test_iterative_linear_solver_in_current_geometry():
     error = np.linalg.norm(forces[1] - forces[0]) / np.linalg.norm(forces[0])
     print(f"\n  direct F = {forces[0]}, iterative F = {forces[1]}: {error:.1e} (tolerance 1e-8)")
     assert error < 1e-8
+
+
+def test_node_to_node_slip_check_names_the_interface(caplog):
+    """Matching blocks (node-to-node pairs, reference geometry) dragged 0.4 facet sizes: a warning
+    names the interface and suggests node-to-surface with the current geometry; results unchanged."""
+    from mpi4py import MPI
+
+    from dolfinx_nnqem.problem import ContactProblem, Dirichlet
+    from dolfinx_nnqem.problem.meshing import BlockStackTags as T
+    from dolfinx_nnqem.problem.meshing import build_block_stack
+    from dolfinx_nnqem.cases.large_sliding import MATERIAL
+
+    mesh, ct, ft = build_block_stack(MPI.COMM_WORLD, 1.0, 1.0, [0.5, 0.5], [(4, 2, 4), (4, 2, 4)])
+    drag = 0.1  # 0.4 × the facet size 0.25
+    problem = ContactProblem(
+        mesh, ct, ft, materials=MATERIAL,
+        dirichlet=[Dirichlet(T.bottom(1)), Dirichlet(T.top(2), -0.01, [1], amplitude=lambda l: min(1.0, 2 * l)),
+                   Dirichlet(T.top(2), drag, [0], amplitude=lambda l: max(0.0, 2 * l - 1.0)),
+                   Dirichlet(T.top(2), 0.0, [2])],
+        contact=Contact(T.top(1), T.bottom(2), mu_f=0.0))
+    with caplog.at_level(logging.WARNING, logger="dolfinx_nnqem"):
+        _run(problem, "monolithic", 8)
+    warnings = [r.getMessage() for r in caplog.records if "reference geometry" in r.getMessage()]
+    print(f"\n  {problem.contact.interfaces[0].pairs.kind}: {warnings}; problem.slip_warnings {len(problem.slip_warnings)}")
+    assert len(warnings) == 1 and problem.slip_warnings == warnings
+    assert warnings[0].startswith("contact 201-102 (node-to-node, reference geometry)")
+    assert "use discretisation = 'node-to-surface' with geometry = 'current'" in warnings[0]

@@ -281,8 +281,9 @@ def _commit(problem, solver, report: SolveReport, target: float, *, index: int, 
         wall_time_s=time.perf_counter() - t0, cutbacks=cutbacks,
         commit_time_s=time.perf_counter() - t_commit, check=verdict,
     )
+    solves = f" ({report.geometry_passes} solves in the current contact geometry)" if report.geometry_passes > 1 else ""
     logger.info(f"[{solver.name}] increment {index}: load factor {target:.6g} converged in "
-                f"{report.iterations} iterations, {result.plastic_points} plastic Gauss points")
+                f"{report.iterations} iterations{solves}, {result.plastic_points} plastic Gauss points")
     t_out = time.perf_counter()
     for callback in callbacks:
         callback(result)
