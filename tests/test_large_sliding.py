@@ -378,3 +378,14 @@ def test_node_to_node_slip_check_names_the_interface(caplog):
     assert len(warnings) == 1 and problem.slip_warnings == warnings
     assert warnings[0].startswith("contact 201-102 (node-to-node, reference geometry)")
     assert "use discretisation = 'node-to-surface' with geometry = 'current'" in warnings[0]
+
+
+def test_problem_file_refuses_an_unknown_geometry(tmp_path):
+    from dolfinx_nnqem.problem_file import ProblemFileError, load_problem_file
+
+    (tmp_path / "m.msh").write_text("")
+    text = BLOCKS_FILE.replace("MESH", (tmp_path / "m.msh").as_posix()).replace("METHOD", "monolithic").replace(
+        "LAW", "polar").replace('geometry = "current"', 'geometry = "deformed"')
+    (tmp_path / "p.toml").write_text(text)
+    with pytest.raises(ProblemFileError, match=r"\[contact\]\.geometry = 'deformed': expected one of reference, current"):
+        load_problem_file(tmp_path / "p.toml")
