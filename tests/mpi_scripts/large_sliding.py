@@ -1,6 +1,6 @@
 """MPI helper of tests/test_large_sliding_mpi.py: large-sliding cases on any number of ranks.
 
-    mpiexec -n N python large_sliding.py OUT.npz
+    mpiexec -n N python large_sliding.py OUT.npz [CASE ...]
 
 The frictionless sphere slid over the block (6³, rigid obstacle), the frictional block slid 1.6
 master facets over another (node-to-surface, μ_f = 0.3) and the ironing of an elastoplastic strip
@@ -59,8 +59,8 @@ def foreign_masters(problem) -> int:
 
 
 if __name__ == "__main__":
-    out = sys.argv[1]
-    data = {f"{case}/{method}/{key}": value for case in CASES for method in METHODS
+    out, cases = sys.argv[1], sys.argv[2:] or list(CASES)
+    data = {f"{case}/{method}/{key}": value for case in cases for method in METHODS
             for key, value in solve(case, method).items()}
     if MPI.COMM_WORLD.rank == 0:
         np.savez(out, **data)
