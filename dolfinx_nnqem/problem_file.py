@@ -24,6 +24,8 @@ A problem file names a mesh with physical tags and everything :class:`ContactPro
                                           # (auto: node-to-node if the nodes coincide, else mortar)
     # slave = 22                          # optional: the slave side (default: surface2 for
                                           # node-to-node, the finer side otherwise)
+    # geometry = "reference"             # or "current": pairs re-evaluated at X + u (large
+                                          # sliding; node-to-surface and obstacles only)
 
     [[contact]]                           # a rigid obstacle as the master side
     surface2 = 5
@@ -112,7 +114,7 @@ KEYS: dict[str, frozenset[str]] = {
     "mesh": frozenset({"file", "mesh_name", "cell_tags", "facet_tags", "degree"}),
     "materials.TAG": frozenset({"E", "nu", "sigma_y0", "H", "density"}),
     "contact": frozenset({"surface1", "surface2", "obstacle", "mu_f", "law", "r", "tolerance", "search_distance",
-                          "name", "discretisation", "slave"}),
+                          "name", "discretisation", "slave", "geometry"}),
     "contact.obstacle": frozenset({"type", "motion", "amplitude"}.union(*OBSTACLE_KEYS.values())),
     "dirichlet": frozenset({"tag", "value", "components", "amplitude"}),
     "traction": frozenset({"tag", "value", "amplitude"}),
@@ -344,6 +346,10 @@ def _contact_section(contact: dict, w: str) -> dict:
             contact[key] = float(_number(contact[key], f"{w}.{key}", positive=True, physical=True))
     if "name" in contact and not isinstance(contact["name"], str):
         raise ProblemFileError(f"{w}.name = {contact['name']!r}: expected a string")
+    from dolfinx_nnqem.contact.current_geometry import GEOMETRIES
+
+    if contact.get("geometry", "reference") not in GEOMETRIES:
+        raise ProblemFileError(f"{w}.geometry = {contact['geometry']!r}: expected one of {', '.join(GEOMETRIES)}")
     return contact
 
 

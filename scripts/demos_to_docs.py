@@ -36,6 +36,8 @@ TUTORIALS = [
     ("plasticity", "rigid_indenter.py",
      {"hertz_pressure.png": "rigid_sphere_pressure.png", "plastic_zone.png": "indentation_plastic_zone.png",
       "slide_forces.png": "indenter_slide_forces.png"}),
+    ("plasticity", "ironing.py",
+     {"forces.png": "ironing_forces.png", "plastic_zone.png": "ironing_plastic_zone.png"}),
     ("your own gmsh mesh", "own_gmsh_mesh.py",
      {"deformed.png": "own_mesh_deformed.png", "pair_pressure.png": "own_mesh_pair_pressure.png"}),
 ]

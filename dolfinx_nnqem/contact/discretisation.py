@@ -105,7 +105,11 @@ def discretise(V, facet_tags, surface1: int, surface2: int, discretisation: str 
         surfaces = surfaces.swapped()  # the builders take (master, slave)
     # imported here: their numba kernels (and numba) are not needed for matching meshes
     if discretisation == "node-to-surface":
-        from dolfinx_nnqem.contact.node_to_surface import node_to_surface_pairs as build
-    else:
-        from dolfinx_nnqem.contact.mortar import mortar_pairs as build
-    return build(V, surfaces, tolerance=tolerance, search_distance=search_distance, note=note, supported=supported)
+        from dolfinx_nnqem.contact.node_to_surface import node_to_surface_pairs
+
+        return node_to_surface_pairs(V, surfaces, tolerance=tolerance, search_distance=search_distance, note=note,
+                                     supported=supported)
+    from dolfinx_nnqem.contact.mortar import mortar_pairs
+
+    return mortar_pairs(V, surfaces, tolerance=tolerance, search_distance=search_distance, note=note,
+                        supported=supported)

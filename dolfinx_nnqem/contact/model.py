@@ -22,10 +22,11 @@ interface, the pair set's own global order).
 
 from __future__ import annotations
 
+import logging
 import math
 import numbers
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from dolfinx_nnqem import compat  # noqa: F401, I001  (first: loads MPI/PETSc for the PyPI wheel)
 
@@ -39,10 +40,17 @@ from dolfinx_nnqem.contact.laws import (NO_FORCE, SLIP, ContactLaw, LawEvaluatio
 from dolfinx_nnqem.contact.obstacles import RigidObstacle, obstacle_pairs
 from dolfinx_nnqem.contact.discretisation import DISCRETISATIONS, OBSTACLE_DISCRETISATIONS, discretise
 from dolfinx_nnqem.contact.pairset import PairRows, PairSet, rows_matrix
-from dolfinx_nnqem.contact.surfaces import ContactPairError, owned_supports
+from dolfinx_nnqem.contact.slip_check import stale_interfaces
+from dolfinx_nnqem.contact.surfaces import ContactPairError, mesh_tolerance, owned_supports, space_degree
+from dolfinx_nnqem.contact.current_geometry import (GEOMETRIES, ObstacleTracker, SurfaceTracker, remapper,
+                                                    surface_tracker)
 from dolfinx_nnqem.numerics.ranges import check_magnitude
 
+logger = logging.getLogger("dolfinx_nnqem")
+
 __all__ = ["Contact", "ContactModel", "Interface", "PairLaws"]
+
+GeometryTracker = ObstacleTracker | SurfaceTracker
 
 PREDICTED_PRESSURE = 1e-12
 """Starting active set: touching pairs start with p_n = this × r h (see :meth:`ContactModel.predict`)."""
@@ -126,6 +134,12 @@ class Contact:
         The slave surface's tag, ``surface1`` or ``surface2``. Default: ``surface2`` for
         node-to-node; the finer side for node-to-surface and mortar. The pair table's body 1 is
         always the master side.
+    geometry
+        ``"reference"`` (the default: closest points, normals and gaps computed once, in the
+        reference configuration) or ``"current"`` (re-evaluated at X + u as the bodies move:
+        large sliding, :mod:`~dolfinx_nnqem.contact.current_geometry`). ``"current"`` takes a rigid
+        obstacle or node-to-surface pairs (``"auto"`` then means node-to-surface); node-to-node
+        pairs and mortar are refused.
     """
 
     surface1: int | RigidObstacle
@@ -139,6 +153,7 @@ class Contact:
     name: str | None = None
     discretisation: str = "auto"
     slave: int | None = None
+    geometry: str = "reference"
 
     def __post_init__(self):
         _real("mu_f", self.mu_f)
@@ -170,6 +185,22 @@ class Contact:
         if self.initial_gap is not None and self.discretisation not in ("auto", "node-to-node"):
             raise ValueError(f"Contact: initial_gap applies to node-to-node contact, not to "
                              f"discretisation = {self.discretisation!r}")
+        self._check_geometry()
+
+    def _check_geometry(self) -> None:
+        """Refuse ``geometry = "current"`` where this version does not re-evaluate the pairs."""
+        if self.geometry not in GEOMETRIES:
+            raise ValueError(f"Contact: geometry = {self.geometry!r}; expected one of {', '.join(GEOMETRIES)}")
+        if self.geometry == "reference" or self.obstacle is not None:
+            return
+        if self.discretisation == "node-to-node" or self.initial_gap is not None:
+            raise ValueError("Contact: geometry = 'current' does not apply to node-to-node pairs: they join nodes "
+                             "that face each other in a matching mesh and stay reference geometry; use "
+                             "discretisation = 'node-to-surface' for large sliding")
+        if self.discretisation == "mortar":
+            raise ValueError("Contact: geometry = 'current' is not available for mortar yet (its segments and "
+                             "integrals are computed once, in the reference configuration); use discretisation "
+                             "= 'node-to-surface' for large sliding, or geometry = 'reference'")
 
     @property
     def obstacle(self) -> RigidObstacle | None:
@@ -186,11 +217,30 @@ class Contact:
     def pair_set(self, V, facet_tags, supported: np.ndarray | None = None) -> PairSet:
         """The discretised interface (collective); ``supported``: see
         :func:`~dolfinx_nnqem.contact.discretisation.discretise`."""
+        if self.geometry == "current":
+            return self.tracker(V, facet_tags, supported).pairs_at(zero_displacement(V), 0.0)
         if isinstance(self.surface1, RigidObstacle):  # self.obstacle, narrowed for the type checker
             return obstacle_pairs(V, facet_tags, int(self.surface2), self.surface1, tolerance=self.tolerance)
         return discretise(V, facet_tags, int(self.surface1), int(self.surface2), self.discretisation,
                           slave=self.slave, tolerance=self.tolerance, search_distance=self.search_distance,
                           initial_gap=self.initial_gap, supported=supported)
+
+
+    def tracker(self, V, facet_tags, supported: np.ndarray | None = None) -> GeometryTracker:
+        """What re-evaluates the pairs of a ``geometry = "current"`` interface (collective)."""
+        tolerance = mesh_tolerance(V.mesh) if self.tolerance is None else float(self.tolerance)
+        if isinstance(self.surface1, RigidObstacle):
+            return ObstacleTracker(obstacle_pairs(V, facet_tags, int(self.surface2), self.surface1,
+                                                  tolerance=tolerance))
+        return surface_tracker(V, facet_tags, (int(self.surface1), int(self.surface2)), slave=self.slave,
+                               tolerance=tolerance, search_distance=self.search_distance, supported=supported)
+
+
+def zero_displacement(V):
+    """A zero displacement on V (the reference configuration)."""
+    import dolfinx
+
+    return dolfinx.fem.Function(V)
 
 
 @dataclass(frozen=True, eq=False)
@@ -397,34 +447,31 @@ class ContactModel:
         labels = [c.label for c in contacts]
         if len(set(labels)) != len(labels):
             raise ValueError(f"contact interfaces need distinct names, got {labels}")
-        interfaces, start = [], 0
+        self.trackers: list[GeometryTracker | None] = []  #: per interface: re-evaluates current-geometry pairs
+        # kept for re-pinning the pairs of a new geometry (the caller may free its vector)
+        self._constrained_dofs = constrained_dofs.copy()
+        self.geometry_version = 0  #: counts :meth:`update_geometry` calls (solvers rebuild what uses B)
+        self._slip_warned: set[str] = set()  # interfaces whose slip beyond the facet size was reported
+        interfaces = []
         for contact in contacts:
             r = float(default_r(E, h)) if contact.r is None else _checked_r(contact, E, h)
+            tracker: GeometryTracker | None = None
+            if contact.geometry == "current" and space_degree(V) != 1:
+                raise ValueError(f"contact {contact.label}: geometry = 'current' takes degree-1 displacements in "
+                                 f"this version (its closest points and pair rows are those of linear facets); "
+                                 f"the displacements here have degree {space_degree(V)}: use geometry = "
+                                 f"'reference', or degree 1")
             with constrained_dofs.localForm() as c:
-                pairs = contact.pair_set(V, facet_tags, supported=c.array.copy())
+                if contact.geometry == "current":
+                    tracker = contact.tracker(V, facet_tags, supported=c.array.copy())
+                    pairs: PairSet = tracker.pairs_at(zero_displacement(V), 0.0)
+                else:
+                    pairs = contact.pair_set(V, facet_tags, supported=c.array.copy())
             if pairs.num_global == 0:
                 raise ContactPairError(f"contact {contact.label}: no pairs found")
-            interfaces.append(Interface(contact, pairs, get_law(contact.law), r,
-                                        slice(start, start + pairs.num_local)))
-            start += pairs.num_local
-        self.interfaces: list[Interface] = interfaces
-        self.num_local = start
-        counts = self.comm.allgather(self.num_local)
-        self.num_global = int(sum(counts))
-        self.offset = int(sum(counts[: self.comm.rank]))
-
-        self.rows = PairRows.concatenate([i.pairs.rows for i in interfaces])
-        self.B = rows_matrix(self.comm, self.rows, self.num_global, V.dofmap.index_map)
-        self.R = np.concatenate([i.pairs.R for i in interfaces]).reshape(-1, 3, 3)
-        self.g0 = np.concatenate([i.pairs.g0 for i in interfaces])
-        self.area = np.concatenate([i.pairs.area for i in interfaces])  #: slave nodes' tributary areas
-        self.interface_index = np.concatenate([np.full(i.pairs.num_local, k, dtype=np.int32)
-                                               for k, i in enumerate(interfaces)])
-        mu_f = np.concatenate([np.full(i.pairs.num_local, float(i.contact.mu_f)) for i in interfaces])
-        self.laws = PairLaws(self._groups(self.interface_index), self.g0, mu_f,
-                             self._constrained_directions(constrained_dofs))
-        self._gathered_laws: PairLaws | None = None  # gathered_laws(), at its first call
-        self._w = self.B.createVecLeft()
+            interfaces.append(Interface(contact, pairs, get_law(contact.law), r, slice(0, 0)))
+            self.trackers.append(tracker)
+        self._assemble(interfaces)
 
         n = self.num_local
         self.z = self.laws.initial_unknowns()
@@ -432,6 +479,32 @@ class ContactModel:
         self.w_n = np.zeros((n, 3))
         self.state_n = np.zeros(n, dtype=np.int8)
         self.slip_n = np.zeros((n, 2))
+
+    def _assemble(self, interfaces: list[Interface]) -> None:
+        """B, the frames, gaps, areas and laws of the concatenated pairs of ``interfaces``."""
+        start, placed = 0, []
+        for interface in interfaces:
+            placed.append(replace(interface, local=slice(start, start + interface.pairs.num_local)))
+            start += interface.pairs.num_local
+        self.interfaces: list[Interface] = placed
+        interfaces = placed
+        self.num_local = start
+        counts = self.comm.allgather(self.num_local)
+        self.num_global = int(sum(counts))
+        self.offset = int(sum(counts[: self.comm.rank]))
+
+        self.rows = PairRows.concatenate([i.pairs.rows for i in interfaces])
+        self.B = rows_matrix(self.comm, self.rows, self.num_global, self.V.dofmap.index_map)
+        self.R = np.concatenate([i.pairs.R for i in interfaces]).reshape(-1, 3, 3)
+        self.g0 = np.concatenate([i.pairs.g0 for i in interfaces])
+        self.area = np.concatenate([i.pairs.area for i in interfaces])  #: slave nodes' tributary areas
+        self.interface_index = np.concatenate([np.full(i.pairs.num_local, k, dtype=np.int32)
+                                               for k, i in enumerate(interfaces)])
+        mu_f = np.concatenate([np.full(i.pairs.num_local, float(i.contact.mu_f)) for i in interfaces])
+        self.laws = PairLaws(self._groups(self.interface_index), self.g0, mu_f,
+                             self._constrained_directions(self._constrained_dofs))
+        self._gathered_laws: PairLaws | None = None  # gathered_laws(), at its first call
+        self._w = self.B.createVecLeft()
 
     def _groups(self, interface_index: np.ndarray) -> tuple[LawGroup, ...]:
         return tuple(LawGroup(i.law, i.r, i.r * self.h, np.flatnonzero(interface_index == k))
@@ -647,6 +720,73 @@ class ContactModel:
         """Back to the last converged increment's unknowns."""
         self.z = self.z_n.copy()
 
+    # -- current geometry (issue 27) -----------------------------------------------------------------
+    @property
+    def current_geometry(self) -> bool:
+        """True if some interface re-evaluates its pairs in the current configuration."""
+        return any(t is not None for t in self.trackers)
+
+    def pair_keys(self) -> np.ndarray:
+        """(num_local,) what names a local pair across geometry updates: interface and slave node."""
+        blocks = np.concatenate([i.pairs.slave_blocks for i in self.interfaces]).astype(np.int64)
+        return self.interface_index.astype(np.int64) * (self.V.dofmap.index_map.size_global + 1) + blocks
+
+    def update_geometry(self, u, load_factor: float, u_n, load_factor_n: float) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+        """Re-evaluate the current-geometry interfaces at (u, ℓ) (collective).
+
+        The pair unknowns z, z_n and the states follow their slave node; new pairs start
+        force-free. w_n is measured again with the new rows, w_n = B u_n + m(ℓ_n): the slip of an
+        increment is the relative displacement increment of the slave node and the master point
+        now under it, in the current tangent plane (``docs/theory.md``).
+
+        Parameters
+        ----------
+        u, u_n
+            DOLFINx functions: where the geometry is evaluated, and the last converged displacement.
+        load_factor, load_factor_n
+            ℓ of the obstacles' position, and of the last converged increment.
+
+        Returns
+        -------
+        The remap of per-pair arrays: ``remap(old, fill)`` gives the rows of ``old`` (laid out like
+        the pairs before the update) in the new layout, and for new pairs those of ``fill`` (one
+        row, or an array in the new layout).
+        """
+        old_keys = self.pair_keys()
+        interfaces = [i if t is None else replace(i, pairs=t.pairs_at(u, load_factor))
+                      for i, t in zip(self.interfaces, self.trackers)]
+        for obj in (self.B, self._w):
+            obj.destroy()
+        self._assemble(interfaces)
+        remap = remapper(old_keys, self.pair_keys())
+        fresh = self.laws.initial_unknowns()
+        self.z, self.z_n = remap(self.z, fresh), remap(self.z_n, fresh)
+        self.state_n = remap(self.state_n, np.zeros((), dtype=np.int8))
+        self.slip_n = remap(self.slip_n, np.zeros(2))
+        self.w_n = self.relative_displacement(u_n.x.petsc_vec, load_factor_n)
+        self.geometry_version += 1
+        return remap
+
+    def geometry_state(self) -> list[np.ndarray | None]:
+        """Per interface, what its next evaluation depends on besides u (for checkpoints): the master
+        facet of every slave node (node-to-surface in current geometry), or None."""
+        return [t.facets if isinstance(t, SurfaceTracker) else None for t in self.trackers]
+
+    def set_geometry_state(self, state: Sequence[np.ndarray | None]) -> None:
+        """Restore :meth:`geometry_state`."""
+        for tracker, facets in zip(self.trackers, state):
+            if isinstance(tracker, SurfaceTracker) and facets is not None:
+                tracker.facets = np.asarray(facets, dtype=np.int64).copy()
+
+    def check_slip(self, w: np.ndarray) -> list[str]:
+        """Reference-geometry interfaces that slid past :data:`~dolfinx_nnqem.contact.slip_check.SLIP_LIMIT`
+        × their facet size, each reported once with a warning (collective; see
+        :func:`~dolfinx_nnqem.contact.slip_check.stale_interfaces`); the lines are returned."""
+        lines = stale_interfaces(self.comm, self.interfaces, self.trackers, w, self._slip_warned)
+        for line in lines:
+            logger.warning(line)
+        return lines
+
     # -- reporting ----------------------------------------------------------------------------------
     def obstacle_reactions(self, lam: np.ndarray | None = None) -> dict[str, np.ndarray]:
         """Force of each rigid obstacle on the body, Σ R_sᵀ λ_s (global frame), over all ranks."""
@@ -667,6 +807,7 @@ class ContactModel:
     def destroy(self) -> None:
         """Free the PETSc objects of the model and of its pair sets."""
         self.B.destroy()
+        self._constrained_dofs.destroy()
         self._w.destroy()
         for interface in self.interfaces:
             B = getattr(interface.pairs, "B", None)

@@ -7,7 +7,8 @@ facets (triangles, or bilinear quadrilaterals by a local Newton; edges and corne
     w_j = R_j (u_j − Σ_k N_k(ξ_j) u_k),   g0_j = n_j · (X_j − x(ξ_j)),
 
 over the nodes k of the master facet holding ξ_j. Small deformation: ξ_j, n_j and g0_j are
-computed once, in the reference configuration.
+computed once, in the reference configuration, unless the interface follows the bodies
+(:mod:`~dolfinx_nnqem.contact.current_geometry`, which calls this on the moved surfaces).
 
 Slave nodes whose closest point is clamped to the master surface's boundary (they lie beyond
 its edge) get no pair. Node-to-surface is cheap and familiar (CalculiX's default) but does not
@@ -39,13 +40,15 @@ from dolfinx_nnqem.contact.projection import Projection, project_points
 from dolfinx_nnqem.contact.facet_layout import NodeCombination
 from dolfinx_nnqem.contact.quadratic_projection import project_points_quadratic
 from dolfinx_nnqem.contact.surface_pairs import SurfacePairs, facet_size, surface_pairs
-from dolfinx_nnqem.contact.surfaces import ContactPairError, GatheredSurfaces, first_by_position, format_point
+from dolfinx_nnqem.contact.surfaces import ContactPairError, Facets, GatheredSurfaces, first_by_position, format_point
 
-__all__ = ["node_to_surface_pairs"]
+__all__ = ["keep_preferred", "node_to_surface_pairs"]
 
 
 def node_to_surface_pairs(V, surfaces: GatheredSurfaces, *, tolerance: float, search_distance: float | None = None,
-                          note: str = "", supported: np.ndarray | None = None) -> SurfacePairs:
+                          note: str = "", supported: np.ndarray | None = None,
+                          edge_allowance: float | None = None, preferred: np.ndarray | None = None
+                          ) -> SurfacePairs:
     """Node-to-surface pairs of the second gathered surface (slave) on the first (master).
 
     Parameters
@@ -65,6 +68,15 @@ def node_to_surface_pairs(V, surfaces: GatheredSurfaces, *, tolerance: float, se
     supported
         Laid out like V's local dofs, non-zero at prescribed ones (None: no support is known): the
         normals of slave nodes on symmetry planes lie in the plane (:func:`surface_pairs`).
+    edge_allowance
+        Slave nodes whose closest point lies up to this far beyond the master's boundary still get
+        a pair (default: ``tolerance``). The current geometry allows a fraction of the facet size,
+        so that a slave node on the master's edge, which the Poisson effect moves back and forth
+        across it, keeps its pair (:mod:`~dolfinx_nnqem.contact.current_geometry`).
+    preferred
+        (slave nodes,) a master facet per slave node (−1: none), kept where the slave node still
+        projects onto it within ``edge_allowance`` (:func:`keep_preferred`): the current geometry's
+        hysteresis against a slave node on a shared edge jumping between two facets.
 
     Raises
     ------
@@ -80,8 +92,10 @@ def node_to_surface_pairs(V, surfaces: GatheredSurfaces, *, tolerance: float, se
         search_distance = 2.0 * max(master_size, facet_size(slave))
     project = project_points_quadratic if master.degree == 2 else project_points
     p = project(nodes.x, master.x, master.area, max_distance=search_distance)
+    if preferred is not None:  # current geometry (linear facets only: refused with degree 2 before solving)
+        p = keep_preferred(p, nodes.x, master, preferred, 0.0 if edge_allowance is None else edge_allowance)
     found = p.facet >= 0
-    inside = found & (p.tangential_offset <= tolerance)
+    inside = found & (p.tangential_offset <= (tolerance if edge_allowance is None else edge_allowance))
     if not np.any(inside):
         raise ContactPairError(
             f"no node of the slave surface {tags[1]} projects onto the master surface {tags[0]} within the search "
@@ -102,7 +116,7 @@ def node_to_surface_pairs(V, surfaces: GatheredSurfaces, *, tolerance: float, se
             V, "node-to-surface", tags, nodes.index[keep], nodes.x[keep], nodes.area[keep], p.normal[keep],
             p.g0[keep], np.arange(0, k * len(keep) + 1, k), master.nodes[p.facet[keep]].ravel(), p.N[keep].ravel(),
             master.x[p.facet[keep]].reshape(-1, 3), master_size=master_size, tolerance=tolerance,
-            num_slave_nodes=len(nodes.index), note=note, supported=supported)
+            num_slave_nodes=len(nodes.index), note=note, supported=supported, facet=p.facet[keep])
     # tri6 slave facets: pair j acts on d̂_j = Σ_i t_ji d_i, so its master side is Σ_i t_ji u_m(ξ_i)
     every = np.minimum.reduceat(inside[combination.columns].astype(np.int8), combination.indptr[:-1]) > 0
     keep = np.flatnonzero(every)
@@ -112,7 +126,7 @@ def node_to_surface_pairs(V, surfaces: GatheredSurfaces, *, tolerance: float, se
     return surface_pairs(
         V, "node-to-surface", tags, nodes.index[keep], nodes.x[keep], nodes.area[keep], p.normal[keep], g0,
         master_indptr, master_index, weights, X_master_nodes, master_size=master_size, tolerance=tolerance,
-        num_slave_nodes=len(nodes.index), note=note, supported=supported,
+        num_slave_nodes=len(nodes.index), note=note, supported=supported, facet=p.facet[keep],
         slave_rows=(rows.indptr, nodes.index[rows.columns], rows.coefficients))
 
 
@@ -133,3 +147,27 @@ def _combined_master_side(rows: NodeCombination, p: Projection, master_nodes: np
     counts = np.bincount(pair[first], minlength=len(rows.indptr) - 1)
     indptr = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
     return indptr, node[first], np.add.reduceat(weight, first), x[first]
+
+
+def keep_preferred(p: Projection, x: np.ndarray, master: Facets, preferred: np.ndarray, allowance: float) -> Projection:
+    """``p`` with the rows of slave points moved back to their ``preferred`` master facet where the
+    point's closest point on it is within ``allowance`` of the facet (tangentially) and of the best
+    distance.
+
+    Two facets that share an edge have different normals once the master deforms; a slave node
+    on that edge would otherwise take either, by round-off, from one evaluation to the next.
+    """
+    changed = np.flatnonzero((preferred >= 0) & (p.facet != preferred))
+    if len(changed) == 0:
+        return p
+    out = Projection(*(np.array(a, copy=True) for a in (p.facet, p.xi, p.N, p.point, p.normal, p.g0, p.distance,
+                                                          p.tangential_offset)))
+    for i in changed:
+        f = int(preferred[i])
+        q = project_points(x[i:i + 1], master.x[f:f + 1], master.area[f:f + 1])
+        best = p.distance[i] if p.facet[i] >= 0 else np.inf
+        if q.tangential_offset[0] <= allowance and q.distance[0] <= best + allowance:
+            for name in ("xi", "N", "point", "normal", "g0", "distance", "tangential_offset"):
+                getattr(out, name)[i] = getattr(q, name)[0]
+            out.facet[i] = f
+    return out

@@ -8,7 +8,8 @@ n_s (the first row of R_s) the obstacle's outward unit normal at the point close
 has only the slave node's columns, and the obstacle's prescribed motion d(ℓ) enters w as the
 known part m_s(ℓ) = −R_s d(ℓ): it moves the gap and the slip like a displacement of the
 master side. Small displacements: the closest points, normals and gaps are computed once, in
-the reference configuration (the obstacle translates; it does not rotate).
+the reference configuration (the obstacle translates; it does not rotate), unless the interface
+follows the bodies (:mod:`~dolfinx_nnqem.contact.current_geometry`).
 
 The obstacle's reaction is the opposite of the slave forces: −Σ_s R_sᵀ λ_s (it appears in the
 global equilibrium check next to the support reactions).
@@ -83,7 +84,7 @@ class RigidObstacle(ABC):
         a(ℓ) for a vector ``motion``.
     """
 
-    motion: Sequence[float] | Callable[[float], Sequence[float]] = (0.0, 0.0, 0.0)
+    motion: Sequence[float] | Callable[[float], Sequence[float] | np.ndarray] = (0.0, 0.0, 0.0)
     amplitude: Callable[[float], float] | None = None
 
     def __post_init__(self):

@@ -91,6 +91,7 @@ class SurfacePairs:
     num_slave_nodes: int
     note: str = ""
     pins_supported_slave_tangents: bool = True  #: see ContactModel._supported_slave_tangents
+    master_facet: np.ndarray | None = None  #: node-to-surface: (num_local,) the gathered master facet of each pair
 
     def motion(self, load_factor: float) -> np.ndarray:
         """Zero: both sides are deformable, their motion is in u."""
@@ -148,7 +149,8 @@ def surface_pairs(V, kind: str, tags: tuple[int, int], slave_index: np.ndarray, 
                   master_index: np.ndarray, weights: np.ndarray, X_master_nodes: np.ndarray, *,
                   master_size: float, tolerance: float, num_slave_nodes: int, note: str = "",
                   supported: np.ndarray | None = None,
-                  slave_rows: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> SurfacePairs:
+                  slave_rows: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+                  facet: np.ndarray | None = None) -> SurfacePairs:
     """Assemble the pair set from per-slave-node data given identically on every rank (collective).
 
     Parameters
@@ -182,6 +184,8 @@ def surface_pairs(V, kind: str, tags: tuple[int, int], slave_index: np.ndarray, 
         The slave side of each pair's row as CSR over the p slave nodes (indptr, global dof blocks,
         coefficients summing to 1): d̂_j = Σ_i t_ji u_i of a quadratic slave surface
         (:func:`~dolfinx_nnqem.contact.quadratic_facets.node_combination`). None: u_j alone.
+    facet
+        (p,) node-to-surface: the master facet of each slave node (kept as ``master_facet``).
     """
     _check_gaps(g0, X_slave, master_size, tags)
     g0 = np.where(np.abs(g0) <= tolerance, 0.0, g0)  # touching within the tolerance: no gap (round-off)
@@ -217,5 +221,5 @@ def surface_pairs(V, kind: str, tags: tuple[int, int], slave_index: np.ndarray, 
         num_global=num_global, offset=offset, slave_blocks=slave_index[local], master_indptr=indptr,
         master_blocks=masters, weights=c, X_slave=X_slave[local], X_master=X_master, R=R, g0=g0[local],
         area=area[local], rows=PairRows.from_weighted_nodes(R, nodes_indptr, nodes, coefficients),
-        num_slave_nodes=int(num_slave_nodes), note=note,
+        num_slave_nodes=int(num_slave_nodes), note=note, master_facet=None if facet is None else facet[local],
     )

@@ -63,13 +63,19 @@ def _fingerprint(problem) -> dict:
         "local_range": [int(v) for v in imap.local_range], "global_nodes": int(imap.size_global),
         "node_coordinates": digest,
         "gauss_points": int(problem.state.W_scalar.dofmap.index_map.size_local),
-        "pairs": int(problem.contact.num_local) if problem.has_contact else 0,
+        "pairs": _pairs_fixed(problem, int(problem.contact.num_local) if problem.has_contact else 0),
     }
+
+
+def _pairs_fixed(problem, pairs: int) -> int:
+    """``pairs``, or −1 where the contact geometry follows the bodies (the pairs then depend on u and
+    are evaluated again when the checkpoint is read, :func:`_read_contact`)."""
+    return -1 if problem.has_contact and problem.contact.current_geometry else pairs
 
 
 def _global_fingerprint(problem) -> dict:
     return {"ranks": int(problem.comm.size), "nodes": int(problem.V.dofmap.index_map.size_global),
-            "gauss_points": int(problem.state.num_gauss_points()), "pairs": int(problem.num_pairs)}
+            "gauss_points": int(problem.state.num_gauss_points()), "pairs": _pairs_fixed(problem, int(problem.num_pairs))}
 
 
 def latest_checkpoint(folder: str | os.PathLike) -> dict | None:
@@ -173,6 +179,9 @@ def _write_rank(tmp: Path, problem) -> None:
         c = problem.contact
         for name in ("z", "z_n", "w_n", "state_n", "slip_n"):
             arrays[f"contact_{name}"] = getattr(c, name)
+        for k, facets in enumerate(c.geometry_state()):
+            if facets is not None:
+                arrays[f"contact_facets_{k}"] = facets
     history = problem.predictor_history
     if history is not None:
         ell, u_prev, z_prev = history
@@ -233,6 +242,21 @@ def restore(problem, folder: str | os.PathLike, expected_meta: dict | None = Non
     return StepperState(float(s["start"]), float(s["step"]), int(s["cutbacks"]), int(s["index"])), meta
 
 
+def _read_contact(data, path: Path, problem) -> None:
+    """The pair unknowns; where the geometry follows the bodies, the pairs are first evaluated where
+    the checkpoint's last increment ended (u, ℓ_n), with the master facets it had (collective)."""
+    c = problem.contact
+    if c.current_geometry:
+        c.set_geometry_state([data[f"contact_facets_{k}"] if f"contact_facets_{k}" in data else None
+                              for k in range(len(c.interfaces))])
+        c.update_geometry(problem.u, problem.load_factor_n, problem.state.u_n, problem.load_factor_n)
+    if len(data["contact_z"]) != c.num_local:
+        raise CheckpointError(f"{path}: {len(data['contact_z'])} pairs saved, {c.num_local} evaluated from the "
+                              "saved displacement")
+    for name in ("z", "z_n", "w_n", "state_n", "slip_n"):
+        setattr(c, name, np.array(data[f"contact_{name}"], dtype=getattr(c, name).dtype))
+
+
 def _read_rank(path: Path, problem) -> None:
     st = problem.state
     try:
@@ -255,9 +279,7 @@ def _read_rank(path: Path, problem) -> None:
         problem.load_factor_n = float(info["load_factor_n"])
         problem.load_factor = float(info["load_factor"])
         if problem.has_contact:
-            c = problem.contact
-            for name in ("z", "z_n", "w_n", "state_n", "slip_n"):
-                setattr(c, name, np.array(data[f"contact_{name}"], dtype=getattr(c, name).dtype))
+            _read_contact(data, path, problem)
         if "previous_u" in data:
             problem.set_predictor_history((info["previous_load_factor"], data["previous_u"],
                                            data["previous_z"] if "previous_z" in data else None))

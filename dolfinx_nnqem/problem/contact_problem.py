@@ -179,6 +179,10 @@ class ContactProblem:
         self.load_factor_n = 0.0  # ℓ of the last converged increment
         # (ℓ, u, z) of the increment before the last: the secant predictor
         self._previous: tuple[float, np.ndarray, np.ndarray | None] | None = None
+        self.warm_start = False
+        """Start the next solve from the current iterate, not the secant predictor (set while an
+        increment is solved again in a new contact geometry, :meth:`update_contact_geometry`)."""
+        self.slip_warnings: list[str] = []  #: reference-geometry interfaces that slid past the facet size
         self.contact: ContactModel | None = None
         E_max = self.comm.allreduce(float(np.max(self.state.E.x.array, initial=0.0)), op=MPI.MAX)
         self.force_floor = FORCE_FLOOR_STRAIN * E_max * self.characteristic_length() ** 2
@@ -498,7 +502,7 @@ class ContactProblem:
         instead of from the last one (constrained dofs are set afterwards by
         :meth:`apply_prescribed_displacements`).
         """
-        beta = self.extrapolation_factor(load_factor)
+        beta = None if self.warm_start else self.extrapolation_factor(load_factor)
         if beta is None:
             return False
         assert self._previous is not None  # beta needs it
@@ -531,6 +535,17 @@ class ContactProblem:
             history = (float(ell), u, z)
         self._previous = history
 
+    def update_contact_geometry(self, load_factor: float) -> None:
+        """Re-evaluate the current-geometry contact interfaces at u and ℓ (collective; see
+        :meth:`ContactModel.update_geometry`); the secant predictor's pair unknowns follow the pairs."""
+        if self.contact is None or not self.contact.current_geometry:
+            return
+        remap = self.contact.update_geometry(self.u, load_factor, self.state.u_n, self.load_factor_n)
+        if self._previous is not None:
+            ell, u_prev, z_prev = self._previous
+            if z_prev is not None:  # a new pair: no change to extrapolate
+                self._previous = (ell, u_prev, remap(z_prev, self.contact.z_n))
+
     def predict_contact(self) -> None:
         """Starting active set (see :meth:`ContactModel.predict`)."""
         if self.contact is not None:
@@ -553,7 +568,9 @@ class ContactProblem:
             self.state.commit(self.u)
         self.load_factor_n = self.load_factor
         if self.contact is not None:
-            self.contact.commit(self.relative_displacement())
+            w = self.relative_displacement()
+            self.contact.commit(w)
+            self.slip_warnings += self.contact.check_slip(w)
 
     def restore(self) -> None:
         """Return to the last converged increment (after a failed attempt)."""

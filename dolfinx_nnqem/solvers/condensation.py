@@ -255,6 +255,14 @@ class Condensation:
         self._tick("flexibility", t0)
         return self._X.getDenseArray().copy(), C
 
+    def pairs_changed(self) -> None:
+        """Forget what was built on B (after the contact geometry changed): Bᵀ, X, C's rows, B N."""
+        for obj in (self._Bt_dense, self._X, self._C_rows):
+            if obj is not None:
+                obj.destroy()
+        self._Bt_dense = self._X = self._C_rows = None
+        self._BN = None
+
     def mode_coupling(self) -> np.ndarray:
         """B N gathered on every rank, (3NC, n_r): how each free rigid mode moves the pairs."""
         if self._BN is None:

@@ -48,6 +48,7 @@ class SolveReport:
     message: str = ""
     system_order: int = 0  #: order of the (non)smooth system solved per iteration
     gauss_point_values: GaussPointValues | None = None  #: the solver's own state update (NNEQM2), or None
+    geometry_passes: int = 1  #: solves of the increment, each in the contact geometry of the last (current geometry)
 
     @property
     def final(self) -> IterationRecord | None:

@@ -118,6 +118,7 @@ class DirectSolver:
             self._set_up_once = True
 
     def destroy(self) -> None:
+        self._clear_options()  # a solver never set up (made again when the contact geometry changed) leaves none
         self.ksp.destroy()
 
 
@@ -290,6 +291,9 @@ class IterativeSolver:
         return self.ksp.getConvergedReason() <= 0  # type: ignore[operator]  # as in DirectSolver.solve
 
     def destroy(self) -> None:
+        if not self._set_up_once:  # never set up (made again when the contact geometry changed): its options go
+            clear_options(self.prefix, self._options)
+            self._set_up_once = True
         self.ksp.destroy()
         for obj in self._keep:
             obj.destroy()

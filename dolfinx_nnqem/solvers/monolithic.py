@@ -80,18 +80,12 @@ class MonolithicSolver(ReleasesPETSc):
         self.settings = monolithic or MonolithicOptions()
         self.prefix = f"nnqem_monolithic_{id(self)}_"
         self.iterative = self._use_iterative()
-        if self.iterative:
-            self.linear: IterativeSolver | DirectSolver = IterativeSolver(problem.V, self.prefix, self.options.petsc_options, self.options.rtol,
-                                          problem.num_pairs, self.settings.lag_preconditioner)
-        else:
-            self.linear = DirectSolver(problem.comm, self.prefix, self.options.petsc_options)
+        self.linear: IterativeSolver | DirectSolver = self._linear_solver()
         self._K: PETSc.Mat | None = None
         self._mask = free_mask(problem) if problem.has_contact else None
         self._matrix: MonolithicMatrix | None = None  # the direct Newton matrix (also the LM fallback's)
-        self._augmented: AugmentedSystem | None = None
-        if self.iterative and problem.contact is not None and self._mask is not None:  # the mask: with contact
-            r = max(i.r for i in problem.contact.interfaces)
-            self._augmented = AugmentedSystem(problem.contact, self._mask, r, self.settings.augmentation)
+        self._augmented: AugmentedSystem | None = self._augmented_system_of_pairs()
+        self._geometry_version = problem.contact.geometry_version if problem.contact is not None else 0
         self._timings: dict[str, float] = {}
         # the vectors of every iteration, created once and refilled (as DOLFINx's NonlinearProblem
         # does); only the free residual of an evaluation is new, since the watchdog keeps evaluations
@@ -112,6 +106,37 @@ class MonolithicSolver(ReleasesPETSc):
         """AMG hierarchies built (iterative solver with contact)."""
         return self.linear.amg_setups
 
+    def _linear_solver(self) -> IterativeSolver | DirectSolver:
+        p = self.problem
+        if self.iterative:
+            return IterativeSolver(p.V, self.prefix, self.options.petsc_options, self.options.rtol, p.num_pairs,
+                                   self.settings.lag_preconditioner)
+        return DirectSolver(p.comm, self.prefix, self.options.petsc_options)
+
+    def _augmented_system_of_pairs(self) -> AugmentedSystem | None:
+        """The iterative solver's augmented system (None for the direct one, or without contact)."""
+        model = self.problem.contact
+        if not self.iterative or model is None or self._mask is None:  # the mask: with contact
+            return None
+        return AugmentedSystem(model, self._mask, max(i.r for i in model.interfaces), self.settings.augmentation)
+
+    def _follow_geometry(self) -> None:
+        """After the contact geometry changed (B's rows, the number of pairs): the pieces built on
+        B made again (the Newton matrix's pattern, the linear solver's operator layout)."""
+        model = self.problem.contact
+        if model is None or model.geometry_version == self._geometry_version:
+            return
+        self._geometry_version = model.geometry_version
+        for old in (self._matrix, self._augmented, self.linear):
+            if old is not None:
+                old.destroy()
+        for vector in self._work.values():  # some have J's layout (3 rows per pair)
+            vector.destroy()
+        self._work.clear()
+        self._matrix = None
+        self.linear = self._linear_solver()
+        self._augmented = self._augmented_system_of_pairs()
+
     def _use_iterative(self) -> bool:
         choice = self.settings.linear_solver
         if choice == "auto":
@@ -122,6 +147,7 @@ class MonolithicSolver(ReleasesPETSc):
     def solve_increment(self, load_factor: float) -> SolveReport:
         """Solve for the load factor ``load_factor`` from the last converged state."""
         p = self.problem
+        self._follow_geometry()
         report = SolveReport(converged=False, iterations=0,
                              system_order=p.V.dofmap.index_map.size_global * 3 + 3 * p.num_pairs)
         outcome = self._attempt(load_factor, report, align_sliding=False)

@@ -57,6 +57,19 @@ __all__ = ["NNEQM2Solver"]
 _SQRT23 = math.sqrt(2.0 / 3.0)
 
 
+def refuse_current_geometry(problem: ContactProblem) -> None:
+    """NNEQM2 takes contact geometry computed once (``geometry = "reference"``); raise otherwise."""
+    model = problem.contact
+    if model is None or not model.current_geometry:
+        return
+    labels = [i.contact.label for i, t in zip(model.interfaces, model.trackers) if t is not None]
+    raise ValueError(
+        f"nneqm2: contact {', '.join(labels)} has geometry = 'current', which NNEQM2 does not take yet: it condenses "
+        "every increment through the elastic stiffness factorised once per run and its pair flexibility, and "
+        "rebuilding them in a geometry that moves within the increment is not implemented; use "
+        "the monolithic solver or NNEQM1 for large sliding, or geometry = 'reference'")
+
+
 class NNEQM2Solver(ReleasesPETSc):
     """One nonsmooth system in the pair unknowns and the plastic flow of all Gauss points that can yield.
 
@@ -82,6 +95,7 @@ class NNEQM2Solver(ReleasesPETSc):
 
     def __init__(self, problem: ContactProblem, options: SolverOptions | None = None,
                  nneqm2: NNEQM2Options | None = None):
+        refuse_current_geometry(problem)
         self.problem = problem
         self.options = options or SolverOptions()
         self.settings = nneqm2 or NNEQM2Options()

@@ -218,7 +218,7 @@ def _solve_and_check(problem, solver, target: float, check: CheckOptions | None,
                      max_displacement: float | None = None) -> tuple[SolveReport, StateCheck | None]:
     """Solve the increment to ``target``; a solver's "converged" stands only if the independent
     check confirms it and the displacement stays below ``max_displacement``."""
-    report = solver.solve_increment(float(target))
+    report = _solve(problem, solver, float(target))
     verdict = None
     if report.converged:
         verdict = check_state(problem, report, getattr(solver, "options", None), check)
@@ -234,6 +234,42 @@ def _solve_and_check(problem, solver, target: float, check: CheckOptions | None,
     return report, verdict
 
 
+GEOMETRY_PASSES = 30
+"""Solves of one increment at most, each in the contact geometry of the last one's solution."""
+
+
+def _solve(problem, solver, target: float) -> SolveReport:
+    """Solve the increment; with current-geometry contact, until the geometry settles.
+
+    The geometry is evaluated where the increment starts (u_n, the obstacles at ℓ) and the
+    increment solved with it frozen; then it is evaluated again at the solution and the increment
+    solved again from there, until a solve starts converged: the solution then satisfies the
+    equations in the geometry of its own configuration (``docs/theory.md``, "Large sliding").
+    The report counts the Newton iterations of every pass.
+    """
+    model = problem.contact
+    if model is None or not model.current_geometry:
+        return solver.solve_increment(target)
+    problem.update_contact_geometry(target)
+    report = solver.solve_increment(target)
+    iterations, passes = report.iterations, 1
+    while report.converged and report.iterations > 0:
+        if passes == GEOMETRY_PASSES:
+            report.converged = False
+            report.message = (f"the contact geometry did not settle in {GEOMETRY_PASSES} solves of the increment "
+                              "(each re-evaluated at the last solution)")
+            break
+        problem.update_contact_geometry(target)
+        problem.warm_start = True
+        try:
+            report = solver.solve_increment(target)
+        finally:
+            problem.warm_start = False
+        iterations, passes = iterations + report.iterations, passes + 1
+    report.iterations, report.geometry_passes = iterations, passes
+    return report
+
+
 def _commit(problem, solver, report: SolveReport, target: float, *, index: int, cutbacks: int,
             verdict: StateCheck | None, t0: float, callbacks) -> IncrementResult:
     """Commit a converged increment and hand it to the callbacks (the writers)."""
@@ -245,8 +281,9 @@ def _commit(problem, solver, report: SolveReport, target: float, *, index: int, 
         wall_time_s=time.perf_counter() - t0, cutbacks=cutbacks,
         commit_time_s=time.perf_counter() - t_commit, check=verdict,
     )
+    solves = f" ({report.geometry_passes} solves in the current contact geometry)" if report.geometry_passes > 1 else ""
     logger.info(f"[{solver.name}] increment {index}: load factor {target:.6g} converged in "
-                f"{report.iterations} iterations, {result.plastic_points} plastic Gauss points")
+                f"{report.iterations} iterations{solves}, {result.plastic_points} plastic Gauss points")
     t_out = time.perf_counter()
     for callback in callbacks:
         callback(result)
@@ -291,7 +328,18 @@ def _failure_message(solver, target: float, report: SolveReport, cutbacks: int, 
         lines.append(f"  last iterate: |R|/F = {last.equilibrium:.3e}, |H|/F = {last.contact:.3e}, "
                      f"open/stick/slip = {last.states}, plastic Gauss points = {last.plastic_points}")
     lines += _sliding_bodies(problem, report)
+    lines += _stale_geometry(problem)
     return "\n".join(lines)
+
+
+def _stale_geometry(problem) -> list[str]:
+    """The likely cause when a reference-geometry interface slid past its facet size (at the failed
+    iterate or before): its pairs no longer describe the surfaces (collective)."""
+    model = getattr(problem, "contact", None)
+    if model is None:
+        return []
+    reasons = list(problem.slip_warnings) + model.check_slip(problem.relative_displacement())
+    return [f"  likely cause: {reason}" for reason in reasons]
 
 
 def _sliding_bodies(problem, report: SolveReport) -> list[str]:

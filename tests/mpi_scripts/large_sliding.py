@@ -1,0 +1,66 @@
+"""MPI helper of tests/test_large_sliding_mpi.py: large-sliding cases on any number of ranks.
+
+    mpiexec -n N python large_sliding.py OUT.npz [CASE ...]
+
+The frictionless sphere slid over the block (6³, rigid obstacle), the frictional block slid 1.6
+master facets over another (node-to-surface, μ_f = 0.3) and the ironing of an elastoplastic strip
+by a cylinder dragged 8 facets (μ_f = 0.1), current geometry, monolithic and NNEQM1
+(:mod:`dolfinx_nnqem.cases.large_sliding`). Rank 0 writes, per ``CASE/METHOD/``, the pair table's
+slave positions and forces on the master side in global pair order, the resultant force, the
+Newton iterations per increment, the pairs each rank owns and how many pairs have a master node
+owned by another rank than their slave node.
+"""
+
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # this checkout's package, not an installed one
+
+import dolfinx_nnqem  # noqa: F401, E402  (first: the PyPI wheel loads MPI/PETSc before dolfinx)
+import numpy as np  # noqa: E402
+from mpi4py import MPI  # noqa: E402
+
+from dolfinx_nnqem.cases.large_sliding import (ironing, obstacle_force, slave_force, sliding_blocks,  # noqa: E402
+                                               sliding_sphere)
+from dolfinx_nnqem.io.results import pair_table  # noqa: E402
+from dolfinx_nnqem.solvers import SolverOptions, make_solver, solve_load_steps  # noqa: E402
+
+METHODS = ("monolithic", "nneqm1")
+CASES = {
+    "sphere": (lambda comm: sliding_sphere(6, comm=comm), obstacle_force, 16),
+    "blocks": (lambda comm: sliding_blocks(slide=0.4, mu_f=0.3, comm=comm), slave_force, 12),
+    "ironing": (lambda comm: ironing(16, comm=comm), obstacle_force, 40),
+}
+
+
+def solve(case: str, method: str, comm=MPI.COMM_WORLD) -> dict[str, np.ndarray]:
+    """Solve ``case`` with ``method``; the gathered results (the same on every rank)."""
+    build, force, increments = CASES[case]
+    problem = build(comm)
+    with make_solver(method, problem, SolverOptions(rtol=1e-12, max_iterations=40)) as solver:
+        results = solve_load_steps(problem, solver, increments)
+    t = pair_table(problem)
+    assert problem.contact is not None
+    return {"position": t["position_b"], "force": t["force_on_body1"], "total": force(problem),
+            "iterations": np.array([r.iterations for r in results]),
+            "pairs_per_rank": np.array(comm.allgather(problem.contact.num_local)),
+            "foreign_masters": np.array(comm.allreduce(foreign_masters(problem), op=MPI.SUM))}
+
+
+def foreign_masters(problem) -> int:
+    """This rank's pairs with a master node that another rank owns (node-to-surface; 0 otherwise)."""
+    pairs = problem.contact.interfaces[0].pairs
+    if not hasattr(pairs, "master_blocks"):
+        return 0
+    start, end = problem.V.dofmap.index_map.local_range
+    other = (pairs.master_blocks < start) | (pairs.master_blocks >= end)
+    pair = np.repeat(np.arange(pairs.num_local), np.diff(pairs.master_indptr))
+    return int(np.count_nonzero(np.bincount(pair, other, minlength=pairs.num_local)))
+
+
+if __name__ == "__main__":
+    out, cases = sys.argv[1], sys.argv[2:] or list(CASES)
+    data = {f"{case}/{method}/{key}": value for case in cases for method in METHODS
+            for key, value in solve(case, method).items()}
+    if MPI.COMM_WORLD.rank == 0:
+        np.savez(out, **data)
