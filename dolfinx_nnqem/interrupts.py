@@ -80,13 +80,24 @@ def held() -> Iterator[None]:
         return
     pending: list[int] = []
     signums = (signal.SIGINT, signal.SIGTERM)
-    previous = {signum: signal.getsignal(signum) for signum in signums}
+    previous = {int(signum): signal.getsignal(signum) for signum in signums}
     for signum in signums:
-        signal.signal(signum, lambda signum, frame: pending.append(signum))
+        signal.signal(signum, lambda number, frame: pending.append(number))
     try:
         yield
     finally:
-        for signum, handler in previous.items():
-            signal.signal(signum, handler)
+        for number, handler in previous.items():
+            signal.signal(number, handler)
         if pending:
-            signal.raise_signal(pending[0])
+            _deliver(pending[0], previous[pending[0]])
+
+
+def _deliver(signum: int, handler) -> None:
+    """Act on a held signal as ``handler`` would have, here and now: a Python handler is called
+    directly, so that its exception rises at this point of the program (``signal.raise_signal``
+    would run it at the next bytecode, which may be inside a finaliser, where Python only prints
+    the exception and the run goes on)."""
+    if callable(handler):
+        handler(signum, None)
+    elif handler == signal.SIG_DFL:
+        signal.raise_signal(signum)
