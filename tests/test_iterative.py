@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from petsc4py import PETSc
 from mpi4py import MPI
 
 from dolfinx_nnqem import compat
@@ -102,6 +103,10 @@ def test_iterative_solver_on_two_ranks_matches_serial(direct, tmp_path):
 
 
 @pytest.mark.mpi
+@pytest.mark.xfail(not PETSc.Sys.hasExternalPackage("metis"), strict=False,
+                   reason="a PETSc without METIS (Debian 13's): MUMPS's automatic ordering and SuperLU_dist both return "
+                          "solutions with residuals of 5 to 12 (or inf) for this matrix on 2 ranks; the residual check "
+                          "turns them into failed solves, and the run ends with a ConvergenceError instead of an answer")
 def test_direct_solver_on_two_ranks_matches_serial_on_a_saddle_point_matrix_mumps_failed(tmp_path):
     """Level 1 on 2 ranks: under MUMPS's automatic ordering the first Newton matrix (65 zero
     diagonal entries of 525, condition 2.8e10) came back with solutions whose residuals ranged

@@ -408,7 +408,13 @@ def test_second_order_gmsh_mesh_in_contact_written_and_read_back(tmp_path, cell)
         print(f"  read back: {len(x)} P2 nodes, max |u_file − u|/max|u| = {err_u:.1e}")
         assert grids[-1].n_points == len(x) and distance.max() < 1e-12 and err_u < 1e-12
         assert np.abs(grids[0].point_data["u"] - 0.5 * u[node]).max() < 1e-12 * np.abs(u).max()  # linear: half
-        # fields.xdmf: the mesh's own nodes, here the P2 ones too (quadratic VTK cells from XDMF)
+        # fields.xdmf: the mesh's own nodes, here the P2 ones too (quadratic VTK cells from XDMF),
+        # where VTK has its XDMF reader (Debian 13's VTK 9.3 is built without vtkIOXdmf2)
+        import importlib.util
+
+        if importlib.util.find_spec("vtkmodules.vtkIOXdmf2") is None:
+            print("  (this VTK has no XDMF reader: fields.xdmf not read back)")
+            return
         import pyvista
 
         reader = pyvista.get_reader(str(out / "fields.xdmf"))

@@ -69,15 +69,16 @@ needs a centralised matrix, and PETSc passes a distributed one. Measured on the 
 level 1, 2 ranks: with the automatic ordering 5 of 11 runs failed every increment (solutions
 with ‖J x − b‖/‖b‖ up to 96, differing from run to run) and a pivot threshold of 0.5 did not
 help; with METIS 5 of 5 took the serial iterations; SuperLU_dist 6 of 6. One rank keeps MUMPS's
-own choice (its results unchanged)."""
+own choice (its results unchanged). Used where PETSc has METIS (Debian 13's has not: there the
+case still fails on 2 ranks, docs/theory.md)."""
 
 
 def direct_options(petsc_options: dict | None, ranks: int = 1) -> dict:
     """:data:`DIRECT_SOLVER_OPTIONS` (with :data:`PARALLEL_MUMPS_OPTIONS` on more than one rank)
     updated by the user's ``petsc_options``."""
     options = {**DIRECT_SOLVER_OPTIONS, **(petsc_options or {})}
-    if ranks > 1 and options.get("pc_factor_mat_solver_type") == "mumps":
-        options = {**PARALLEL_MUMPS_OPTIONS, **options}
+    if ranks > 1 and options.get("pc_factor_mat_solver_type") == "mumps" and PETSc.Sys.hasExternalPackage("metis"):
+        options = {**PARALLEL_MUMPS_OPTIONS, **options}  # (Debian's PETSc has no METIS)
     return options
 
 
