@@ -642,32 +642,37 @@ def build_stacked_blocks(
         _structured_hexahedra(counts_for(body1, nx, ny1, nz) | counts_for(body2, nx2, ny2, nz2))
 
         size = float(np.linalg.norm([Lx, Ly1 + Ly2 + abs(gap), Lz]))
-        x1, z1 = x0 + Lx, z0 + Lz
-        T = StackedBlocksTags
-        _add_group(3, body1, T.BODY1, "body1")
-        _add_group(3, body2, T.BODY2, "body2")
-        faces = [
-            (body1, (x0, y_i - Ly1, z0), (x1, y_i - Ly1, z1), T.BOTTOM, "bottom"),
-            (body2, (x0, y2 + Ly2, z0), (x1, y2 + Ly2, z1), T.TOP, "top"),
-            (body1, (x0, y_i, z0), (x1, y_i, z1), T.CONTACT1, "contact1"),
-            (body2, (x0, y2, z0), (x1, y2, z1), T.CONTACT2, "contact2"),
-        ]
-        for body, lo_y, hi_y, base, label in (
-            (body1, y_i - Ly1, y_i, T.BODY1_XMIN, "body1"),
-            (body2, y2, y2 + Ly2, T.BODY2_XMIN, "body2"),
-        ):
-            faces += [
-                (body, (x0, lo_y, z0), (x0, hi_y, z1), base, f"{label}_xmin"),
-                (body, (x1, lo_y, z0), (x1, hi_y, z1), base + 1, f"{label}_xmax"),
-                (body, (x0, lo_y, z0), (x1, hi_y, z0), base + 2, f"{label}_zmin"),
-                (body, (x0, lo_y, z1), (x1, hi_y, z1), base + 3, f"{label}_zmax"),
-            ]
-        for body, lower, upper, tag, label in faces:
+        _add_group(3, body1, StackedBlocksTags.BODY1, "body1")
+        _add_group(3, body2, StackedBlocksTags.BODY2, "body2")
+        for body, lower, upper, tag, label in _stacked_block_faces(body1, body2, (x0, x0 + Lx), (z0, z0 + Lz),
+                                                                   (y_i - Ly1, y_i), (y2, y2 + Ly2)):
             _add_group(2, _surfaces_in_box(lower, upper, body, size), tag, label)
         gmsh.model.mesh.generate(3)
         _round_node_coordinates()
 
     return _mesh_from_gmsh(comm, "stacked_blocks", build, msh_file, order)
+
+
+def _stacked_block_faces(body1: list[int], body2: list[int], xs: tuple[float, float], zs: tuple[float, float],
+                         ys1: tuple[float, float], ys2: tuple[float, float]) -> list[tuple]:
+    """(body, box corner low, box corner high, tag, name) of every tagged face of the stacked
+    blocks (:class:`StackedBlocksTags`): bottom, top, the two contact faces and the sides."""
+    (x0, x1), (z0, z1) = xs, zs
+    T = StackedBlocksTags
+    faces = [
+        (body1, (x0, ys1[0], z0), (x1, ys1[0], z1), T.BOTTOM, "bottom"),
+        (body2, (x0, ys2[1], z0), (x1, ys2[1], z1), T.TOP, "top"),
+        (body1, (x0, ys1[1], z0), (x1, ys1[1], z1), T.CONTACT1, "contact1"),
+        (body2, (x0, ys2[0], z0), (x1, ys2[0], z1), T.CONTACT2, "contact2"),
+    ]
+    for body, (lo_y, hi_y), base, label in ((body1, ys1, T.BODY1_XMIN, "body1"), (body2, ys2, T.BODY2_XMIN, "body2")):
+        faces += [
+            (body, (x0, lo_y, z0), (x0, hi_y, z1), base, f"{label}_xmin"),
+            (body, (x1, lo_y, z0), (x1, hi_y, z1), base + 1, f"{label}_xmax"),
+            (body, (x0, lo_y, z0), (x1, hi_y, z0), base + 2, f"{label}_zmin"),
+            (body, (x0, lo_y, z1), (x1, hi_y, z1), base + 3, f"{label}_zmax"),
+        ]
+    return faces
 
 
 def build_block_stack(
