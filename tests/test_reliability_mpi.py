@@ -131,6 +131,12 @@ def test_ctrl_c_on_two_ranks(tmp_path):
         # (collective.abort_unless_ended) with the interrupt's code; the summary could not be told
         assert job.returncode == EXIT_INTERRUPTED and summary["status"] == "running"
         return
+    if "Timeout (0:" in err:
+        # the last resort: one rank held Python's lock inside a collective library call the other
+        # rank, interrupted, never made (seen: DOLFINx's collective HDF5 write of a field step, on
+        # OpenMPI, in 2 of about 20 runs); faulthandler ended it 35 s later (exit 1, its traceback)
+        assert job.returncode != 0 and wall < LIMIT_S and summary["status"] == "running", err[-4000:]
+        return
     assert summary["status"] == "interrupted", err[-4000:]
     if open_mpi:
         return  # OpenMPI's mpirun ends a job whose ranks exited with an error with its own code (1)
