@@ -73,6 +73,17 @@ own choice (its results unchanged). Used where PETSc has METIS (Debian 13's has 
 case still fails on 2 ranks, docs/theory.md)."""
 
 
+def relative_residual(J: PETSc.Mat, x: PETSc.Vec, b: PETSc.Vec) -> float:
+    """‖J x − b‖ / ‖b‖ (collective; ‖J x‖ for b = 0)."""
+    r = b.duplicate()
+    J.mult(x, r)
+    r.axpy(-1.0, b)
+    norm_b = vec_norm(b)
+    residual = vec_norm(r) / norm_b if norm_b > 0 else vec_norm(r)
+    r.destroy()
+    return residual
+
+
 def direct_options(petsc_options: dict | None, ranks: int = 1) -> dict:
     """:data:`DIRECT_SOLVER_OPTIONS` (with :data:`PARALLEL_MUMPS_OPTIONS` on more than one rank)
     updated by the user's ``petsc_options``."""

@@ -28,9 +28,10 @@ from petsc4py import PETSc
 
 from dolfinx_nnqem.solvers.convergence import logger
 from dolfinx_nnqem.numerics.linalg import (ITERATIVE_NO_CONTACT_OPTIONS, ITERATIVE_SOLVER_OPTIONS, clear_options, create_ksp,
+                                  relative_residual,
                                   direct_options, rigid_body_modes, vec_norm)
 
-__all__ = ["DIRECT_RESIDUAL_TOL", "DirectSolver", "IterativeSolver", "relative_residual"]
+__all__ = ["DIRECT_RESIDUAL_TOL", "DirectSolver", "IterativeSolver"]
 
 DIRECT_RESIDUAL_TOL = 1e-6
 """Largest ‖J x − b‖ / ‖b‖ a direct solve may leave; a larger one is a failed solve (the Newton
@@ -38,17 +39,6 @@ driver falls back to Levenberg–Marquardt). MUMPS leaves 1e-15 where it factori
 ranks with its automatic ordering it returned solutions with residuals from 2.9 to 96 for the
 pressed blocks (:data:`dolfinx_nnqem.numerics.linalg.PARALLEL_MUMPS_OPTIONS`), which the Newton
 iteration took as directions."""
-
-
-def relative_residual(J: PETSc.Mat, x: PETSc.Vec, b: PETSc.Vec) -> float:
-    """‖J x − b‖ / ‖b‖ (collective; 0 for b = 0)."""
-    r = b.duplicate()
-    J.mult(x, r)
-    r.axpy(-1.0, b)
-    norm_b = vec_norm(b)
-    residual = vec_norm(r) / norm_b if norm_b > 0 else vec_norm(r)
-    r.destroy()
-    return residual
 
 
 class DirectSolver:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from petsc4py import PETSc
 
-from dolfinx_nnqem.numerics.linalg import clear_options, create_ksp, direct_options, vec_norm
+from dolfinx_nnqem.numerics.linalg import clear_options, create_ksp, direct_options, relative_residual
 
 __all__ = ["PetscSetupError", "check_direct_solver"]
 
@@ -51,11 +51,7 @@ def check_direct_solver(comm, petsc_options: dict | None) -> None:
         ksp.setUp()
         b.set(1.0)
         ksp.solve(b, x)
-        r = b.duplicate()
-        A.mult(x, r)
-        r.axpy(-1.0, b)
-        residual = vec_norm(r) / vec_norm(b)
-        r.destroy()
+        residual = relative_residual(A, x, b)
     except PETSc.Error as error:
         package = options.get("pc_factor_mat_solver_type", "")
         raise PetscSetupError(
