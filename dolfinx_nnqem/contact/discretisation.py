@@ -22,8 +22,8 @@ the master surface: node-to-surface onto the exact surface).
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import cKDTree
 
+from dolfinx_nnqem.contact.nearest import nearest
 from dolfinx_nnqem.contact.pairs import find_pairs
 from dolfinx_nnqem.contact.pairset import PairSet
 from dolfinx_nnqem.contact.facet_layout import QUADRATIC
@@ -42,8 +42,8 @@ def nodes_coincide(surfaces: GatheredSurfaces, tolerance: float) -> bool:
     first, second = surfaces.nodes
     if len(first.x) != len(second.x):
         return False
-    return bool(np.all(cKDTree(first.x).query(second.x)[0] <= tolerance)
-                and np.all(cKDTree(second.x).query(first.x)[0] <= tolerance))
+    return bool(np.all(nearest(first.x, second.x)[0] <= tolerance)
+                and np.all(nearest(second.x, first.x)[0] <= tolerance))
 
 
 def slave_side(surfaces: GatheredSurfaces, slave: int | None) -> tuple[int, str]:

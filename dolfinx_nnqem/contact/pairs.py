@@ -28,8 +28,8 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 from petsc4py import PETSc
-from scipy.spatial import cKDTree
 
+from dolfinx_nnqem.contact.nearest import nearest
 from dolfinx_nnqem.contact.pairset import PairRows, rows_matrix
 from dolfinx_nnqem.contact.surfaces import (ContactPairError, SurfaceNodes, check_no_shared_nodes, format_point,
                                             gather_surfaces, local_frames, mesh_tolerance)
@@ -61,13 +61,14 @@ def _match(
     order2 = np.lexsort((body2.x[:, 2], body2.x[:, 1], body2.x[:, 0], key[:, 2], key[:, 1], key[:, 0]))
     x2 = body2.x[order2]
 
-    tree = cKDTree(body1.x)
-    dist, nearest = tree.query(x2, k=1)
-    partner = np.where(dist <= tolerance, nearest, -1)
+    dist, closest = nearest(body1.x, x2)
+    partner = np.where(dist <= tolerance, closest, -1)
 
     unmatched = np.flatnonzero(partner < 0)
     if len(unmatched) and search_distance is not None:
-        candidates = tree.query_ball_point(x2[unmatched], r=search_distance)
+        from scipy.spatial import cKDTree  # non-coincident pairs only: SciPy's import is not paid otherwise
+
+        candidates = cKDTree(body1.x).query_ball_point(x2[unmatched], r=search_distance)
         for k, found in zip(unmatched, candidates):
             if not found:
                 continue

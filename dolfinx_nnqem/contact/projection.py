@@ -35,7 +35,6 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 import numpy.typing as npt
-from scipy.spatial import cKDTree
 
 from dolfinx_nnqem.chatter import apply_numba_options
 
@@ -460,6 +459,8 @@ def _candidates(points: np.ndarray, centroid: np.ndarray, radius: np.ndarray,
     δ + tie only if |X_s − c_f| ≤ δ + r_max + tie. Points with δ − r_max > max_distance are
     farther than max_distance from every facet and get no candidate.
     """
+    from scipy.spatial import cKDTree  # imported when a projection is made, not by every run (0.18 s)
+
     tree = cKDTree(centroid)
     delta, _ = tree.query(points)
     r_max = float(radius.max())

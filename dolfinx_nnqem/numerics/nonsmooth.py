@@ -30,8 +30,6 @@ from typing import NamedTuple
 
 import numpy as np
 import numpy.typing as npt
-import scipy.linalg
-from scipy.linalg.lapack import dgecon
 
 from dolfinx_nnqem.numerics.newton import Globalisation, Merit, solve
 
@@ -175,6 +173,9 @@ class DenseSystem:
 
     def newton_direction(self, merit: Merit) -> str | None:
         """Solve A d = −F by LU; no direction when A is singular or too ill-conditioned."""
+        import scipy.linalg  # by the dense methods only: a monolithic run does not pay its import (0.1 s)
+        from scipy.linalg.lapack import dgecon
+
         A, F = self._A0, self._F0
         with warnings.catch_warnings():
             # lu_factor warns on an exactly zero pivot; the pivots are checked below instead.
@@ -195,6 +196,8 @@ class DenseSystem:
         tenfold until the factorisation succeeds: the direction then leans towards steepest
         descent, which is still a descent direction for Ψ.
         """
+        import scipy.linalg  # as in newton_direction
+
         A, F = self._A0, self._F0
         gradient = A.T @ F
         if not np.any(gradient):

@@ -22,13 +22,11 @@ from dolfinx_nnqem import compat  # noqa: I001  (first: loads MPI/PETSc for the 
 
 import dolfinx
 import numpy as np
-import scipy.linalg
-import scipy.sparse
 from mpi4py import MPI
 from petsc4py import PETSc
-from scipy.sparse.csgraph import connected_components
 
 from dolfinx_nnqem.contact.laws import STICK
+from dolfinx_nnqem.numerics.graphs import connected_components
 
 __all__ = ["Bodies", "FrictionHeld", "RigidModes", "check_rigid_modes", "find_bodies", "free_rigid_modes",
            "friction_held_motions"]
@@ -75,8 +73,7 @@ def _local_components(V) -> tuple[int, np.ndarray]:
     k = dofs.shape[1]
     rows = dofs[:, :-1].reshape(-1) if k > 1 else np.zeros(0, dtype=np.int32)
     cols = dofs[:, 1:].reshape(-1) if k > 1 else np.zeros(0, dtype=np.int32)
-    graph = scipy.sparse.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n))
-    return connected_components(graph, directed=False)
+    return connected_components(n, rows, cols)
 
 
 def _lexicographically_smaller(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -111,8 +108,7 @@ def find_bodies(V: dolfinx.fem.FunctionSpace, cell_tags=None) -> Bodies:
     ghost_edges = np.column_stack([code[n_owned:], owner_code.array[n_owned:].astype(np.int64)])
     edges = np.unique(np.concatenate(comm.allgather(np.unique(ghost_edges, axis=0).reshape(-1, 2))), axis=0)
     total = int(first[-1])
-    merge = scipy.sparse.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(total, total))
-    _, root = connected_components(merge, directed=False)
+    _, root = connected_components(total, edges[:, 0], edges[:, 1])
     # number the bodies by their lexicographically smallest node (the same for any partition)
     x = V.tabulate_dof_coordinates()[:n_owned]
     local = np.full((total, 3), np.inf)

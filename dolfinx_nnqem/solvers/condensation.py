@@ -29,7 +29,6 @@ import time
 
 import dolfinx.fem as fem
 import numpy as np
-import scipy.linalg
 from mpi4py import MPI
 from petsc4py import PETSc
 
@@ -155,6 +154,8 @@ class Condensation:
         DirichletBCs (value 0) that fix them in K̃."""
         if self.modes.count == 0:
             return np.zeros(0, dtype=np.int64), []
+        import scipy.linalg  # floating bodies only: other runs do not pay its import (0.1 s)
+
         p = self.problem
         comm, V = p.comm, p.V
         imap = V.dofmap.index_map
