@@ -12,6 +12,7 @@ With MPI every rank ends with the same code and rank 0 prints the message once.
 from __future__ import annotations
 
 import argparse
+import gc
 import json
 import logging
 import math
@@ -520,6 +521,12 @@ def _start_up() -> None:
     0.1–0.2 s of CPU, a fifth of a small run. numba is imported where a pair-law kernel is
     compiled (:mod:`dolfinx_nnqem.contact.laws`), which a small run never needs. A caller that
     has DOLFINx already (a test calling :func:`main`) keeps its modules as they are.
+
+    The command line's process makes these imports with Python's cyclic garbage collector off,
+    then freezes what they made (:func:`gc.freeze`: never scanned again) and turns it back on.
+    They create hundreds of thousands of long-lived objects and no garbage, and collecting while
+    they grow scanned them again and again: 0.04–0.06 s of a 0.8 s run, 0.004–0.012 s this way
+    (docs/performance.md). A user's program calling :func:`main` keeps its collector as it is.
     """
     if "dolfinx" in sys.modules:
         return
@@ -527,11 +534,17 @@ def _start_up() -> None:
     keep_out = "numba" not in sys.modules
     if keep_out:
         sys.modules["numba"] = None  # type: ignore[assignment]  # None: importing it raises ImportError
+    collecting = gc.isenabled() and interrupts.is_command_line()
+    if collecting:
+        gc.disable()
     try:
         import dolfinx_nnqem.compat  # noqa: F401
     finally:
         if keep_out and "numba" in sys.modules and sys.modules["numba"] is None:
             del sys.modules["numba"]
+        if collecting:
+            gc.freeze()
+            gc.enable()
 
 
 def _hold_signals() -> None:
