@@ -73,6 +73,10 @@ class MaterialState(Protocol):
         """UFL: the update from the converged state for the displacement ``u`` (σ, Δp, Δε_p, ...)."""
         ...
 
+    def return_map_expressions(self, u) -> tuple[Any, Any, Any]:
+        """The return map's σ, Δp and Δε_p at ``u``, compiled for the Gauss points (once per ``u``)."""
+        ...
+
     def elastic_stress(self, eps) -> Any:
         """UFL: C : ε."""
         ...

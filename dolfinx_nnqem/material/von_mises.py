@@ -207,10 +207,10 @@ class PlasticState:
         self.u_n = fem.Function(V, name="u_converged")  # converged displacement
         self._points = compat.interpolation_points(W_scalar)
         # compiled at the first commit and count_trial_plastic_points, for the u they are given
-        self._commit_expressions: tuple[fem.Expression, fem.Expression, fem.Expression] | None = None
+        self._return_map_expressions: tuple[fem.Expression, fem.Expression, fem.Expression] | None = None
+        self._return_map_u: fem.Function | None = None
         self._commit_u: fem.Function | None = None
-        self._trial_dp: tuple[fem.Expression, fem.Function] | None = None
-        self._trial_u: fem.Function | None = None
+        self._trial_dp: fem.Function | None = None
 
     # -- the return map -------------------------------------------------------------------
     def elastic_stress(self, eps) -> ufl.core.expr.Expr:
@@ -261,21 +261,30 @@ class PlasticState:
         return ufl.inner(self.elastic_stress(strain(du)), strain(v)) * self.dx
 
     # -- state update -----------------------------------------------------------------------
+    def return_map_expressions(self, u: fem.Function) -> tuple[fem.Expression, fem.Expression, fem.Expression]:
+        """The radial return's σ, Δp and Δε_p at ``u``, compiled for the Gauss points.
+
+        Compiled once per ``u`` (they refer to it symbolically, and to the state's functions)
+        and shared by :meth:`commit`, :meth:`count_trial_plastic_points` and the solvers'
+        independent check, which evaluate the same return map: each compile costs a form
+        signature and a kernel load (4-10 ms).
+        """
+        if self._return_map_expressions is None or u is not self._return_map_u:
+            rm = self.return_map(u)
+            self._return_map_u = u
+            self._return_map_expressions = (jit.expression(rm.sigma, self._points),
+                                            jit.expression(rm.dp, self._points),
+                                            jit.expression(rm.deps_p, self._points))
+        return self._return_map_expressions
+
     def commit(self, u: fem.Function) -> None:
         """Accept ``u`` as converged: update σ_n, p_n, Δp_n, Δε_p,n and u_n at every Gauss point
         by the radial return."""
-        if self._commit_expressions is None:
-            # Built once: the expressions refer to ``u`` (the problem's unknown) symbolically.
-            rm = self.return_map(u)
+        if self._commit_u is None:
             self._commit_u = u
-            self._commit_expressions = (
-                jit.expression(rm.sigma, self._points),
-                jit.expression(rm.dp, self._points),
-                jit.expression(rm.deps_p, self._points),
-            )
         elif u is not self._commit_u:
             raise ValueError("PlasticState.commit must always be given the same displacement Function")
-        e_sigma, e_dp, e_deps_p = self._commit_expressions
+        e_sigma, e_dp, e_deps_p = self.return_map_expressions(u)
         sigma_new = fem.Function(self.W_tensor)
         sigma_new.interpolate(e_sigma)
         self.dp_n.interpolate(e_dp)
@@ -344,11 +353,10 @@ class PlasticState:
 
     def count_trial_plastic_points(self, u: fem.Function) -> int:
         """Number of Gauss points (over all ranks) where the return map at ``u`` is plastic."""
-        if self._trial_dp is None or self._trial_u is not u:
-            self._trial_u = u
-            self._trial_dp = (jit.expression(self.return_map(u).dp, self._points), fem.Function(self.W_scalar))
-        expression, dp = self._trial_dp
-        dp.interpolate(expression)
+        if self._trial_dp is None:
+            self._trial_dp = fem.Function(self.W_scalar)
+        dp = self._trial_dp
+        dp.interpolate(self.return_map_expressions(u)[1])
         n_local = self.W_scalar.dofmap.index_map.size_local * self.W_scalar.dofmap.index_map_bs
         return self.mesh.comm.allreduce(int(np.count_nonzero(dp.x.array[:n_local] > 0.0)), op=MPI.SUM)
 

@@ -152,12 +152,9 @@ class _Forms:
         solver's own values stores."""
         st = self._state
         if self._return_map is None:
-            rm = st.return_map(p.u)
-            points = compat.interpolation_points(st.W_tensor)
-            self._return_map = (jit.expression(rm.sigma, points), jit.expression(rm.dp, points),
-                                jit.expression(rm.deps_p, points), self.sigma, fem.Function(st.W_scalar),
-                                self.grad)
-        e_sigma, e_dp, e_deps, sigma, dp, deps = self._return_map
+            self._return_map = (self.sigma, fem.Function(st.W_scalar), self.grad)
+        sigma, dp, deps = self._return_map
+        e_sigma, e_dp, e_deps = st.return_map_expressions(p.u)
         for f, e in ((sigma, e_sigma), (dp, e_dp), (deps, e_deps)):
             f.interpolate(e)
         n = st.W_scalar.dofmap.index_map.size_local

@@ -38,7 +38,6 @@ import dolfinx.fem as fem
 import numpy as np
 from mpi4py import MPI
 
-from dolfinx_nnqem import compat, jit
 from dolfinx_nnqem.material.von_mises import GaussPointValues, deviator_coordinates, deviator_tensors, elastic_stress
 from dolfinx_nnqem.numerics.linalg import vec_norm
 from dolfinx_nnqem.numerics.newton import solve
@@ -119,8 +118,7 @@ class NNEQM2Solver(ReleasesPETSc):
                                                              self.options.petsc_options)
         self._frozen = (FrozenDirections(problem, self.gp, self.elastic, self.settings.inner_globalisations,
                                          self.settings.inner_max_iterations) if self.frozen else None)
-        self._return_map = jit.expression(problem.state.return_map(problem.u).sigma,
-                                          compat.interpolation_points(problem.state.W_tensor))
+        self._return_map = problem.state.return_map_expressions(problem.u)[0]  # σ (shared with the commit)
         self._sigma_rm = fem.Function(problem.state.W_tensor)
         self._factorised = False
         self._timings = {"setup": time.perf_counter() - t0}
