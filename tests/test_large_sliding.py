@@ -11,8 +11,8 @@
 * a cylinder slid like the sphere; a plane pressed and slid with friction gives the reference
   geometry's results (its geometry is exact in both);
 * μ_f = 0.3: the slid block's pairs on the Coulomb cone; the same run from a problem file;
-* what is refused, before solving, with the reason: NNEQM2, mortar and node-to-node with
-  ``geometry = "current"``.
+* what is refused, before solving, with the reason: NNEQM2 and node-to-node with
+  ``geometry = "current"`` (mortar: tests/test_large_sliding_mortar.py).
 """
 
 import logging
@@ -147,8 +147,7 @@ def test_nneqm2_refuses_current_geometry():
         make_solver("nneqm2", problem, OPTIONS)
 
 
-@pytest.mark.parametrize("discretisation, why", [("mortar", "not available for mortar yet"),
-                                                 ("node-to-node", "does not apply to node-to-node")])
+@pytest.mark.parametrize("discretisation, why", [("node-to-node", "does not apply to node-to-node")])
 def test_current_geometry_refused_where_not_implemented(discretisation, why):
     with pytest.raises(ValueError, match=why):
         Contact(21, 22, mu_f=0.0, discretisation=discretisation, geometry="current")

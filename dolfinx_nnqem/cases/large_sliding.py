@@ -9,6 +9,8 @@
   ``slide`` (0.4: 1.6 master facets; part of the upper block then overhangs and its pairs go);
   ``offset`` moves the upper block's mesh along x before anything is solved (a press in place).
 
+* :func:`sliding_patch`: the contact patch test after a slide: a block under a uniform pressure
+  slid 2.4 facets along a much stiffer one, dual mortar in the current geometry, frictionless.
 * :func:`long_slide`: a short block (0.25 long, 40 × 4 × 3 hexahedra, the slave) pressed 0.002
   onto a long one (2 long, 16 × 2 × 2, the master, bottom clamped) by its top over ℓ ≤ 0.1, then
   slid 1.0 along x: four times its own length, eight master facets; u_z = 0 on the z faces.
@@ -28,11 +30,11 @@ from mpi4py import MPI
 
 from dolfinx_nnqem.contact.obstacles import Cylinder, RigidObstacle, Sphere
 from dolfinx_nnqem.material import VonMises
-from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, PiecewiseLinearPath
+from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, PiecewiseLinearPath, Pressure
 from dolfinx_nnqem.problem.meshing import BlockStackTags as T
 from dolfinx_nnqem.problem.meshing import build_block_stack
 
-__all__ = ["ironing", "long_slide", "obstacle_force", "slave_force", "sliding_blocks", "sliding_sphere"]
+__all__ = ["ironing", "long_slide", "obstacle_force", "slave_force", "sliding_blocks", "sliding_patch", "sliding_sphere"]
 
 RADIUS = 0.6
 DEPTH = 0.01
@@ -66,8 +68,9 @@ def _slide(load_factor: float) -> float:
 
 
 def sliding_blocks(*, slide: float = 0.4, offset: float = 0.0, geometry: str = "current", law: str = "alart-curnier",
-                   mu_f: float = 0.0, comm: MPI.Comm = MPI.COMM_WORLD) -> ContactProblem:
-    """The upper block pressed and slid over the lower one, node-to-surface (module docstring)."""
+                   mu_f: float = 0.0, discretisation: str = "node-to-surface",
+                   comm: MPI.Comm = MPI.COMM_WORLD) -> ContactProblem:
+    """The upper block pressed and slid over the lower one, node-to-surface or mortar (module docstring)."""
     mesh, ct, ft = build_block_stack(comm, 1.0, 1.0, [0.5, 0.5], [(4, 2, 4), (6, 2, 6)])
     if offset:
         nodes = np.unique(compat.geometry_dofmap(mesh)[ct.indices[ct.values == T.body(2)]])
@@ -75,8 +78,42 @@ def sliding_blocks(*, slide: float = 0.4, offset: float = 0.0, geometry: str = "
     dirichlet = [Dirichlet(T.bottom(1)), Dirichlet(T.top(2), -DEPTH, [1], amplitude=_press),
                  Dirichlet(T.top(2), slide, [0], amplitude=_slide), Dirichlet(T.top(2), 0.0, [2])]
     return ContactProblem(mesh, ct, ft, materials=MATERIAL, dirichlet=dirichlet,
-                          contact=Contact(T.top(1), T.bottom(2), mu_f=mu_f, law=law, discretisation="node-to-surface",
+                          contact=Contact(T.top(1), T.bottom(2), mu_f=mu_f, law=law, discretisation=discretisation,
                                           geometry=geometry))
+
+
+PATCH_PRESSURE = 1.0
+STRUCTURED = False
+PATCH_UPPER = VonMises(E=1.0e3, nu=0.0)
+PATCH_LOWER = VonMises(E=1.0e12, nu=0.0)
+PATCH_R = 2.0e5
+"""r near the smallest supported value (10⁻⁶ E h, E the larger modulus): the default E h of the
+stiff block multiplies the gaps' rounding (10⁻¹⁶ of the 0.6 slide) into residuals of 10⁻⁷ of the
+forces, where Newton stalls; the upper block's own E h (250) is below the supported range."""
+
+
+def sliding_patch(*, slide: float = 0.6, cell_type: str = "hexahedron", law: str = "alart-curnier",
+                  geometry: str = "current", comm: MPI.Comm = MPI.COMM_WORLD) -> ContactProblem:
+    """The patch test after a slide (module docstring): dual mortar, frictionless.
+
+    A block (x in [0.25, 0.75], 6 × 2 × 3 divisions, the mortar slave) under a uniform pressure
+    p is slid by ``slide`` along a long block (x in [0, 2], 8 × 1 × 1, facets 0.25 long: 0.6 is 2.4
+    facets), ν = 0 in both, the long block 10⁹ times stiffer and clamped at its bottom. The upper
+    block is held by contact in y, by its top's prescribed x-displacement in x and by its z = 0
+    face in z; with ν = 0 none of these disturbs the uniform state σ = −p e_y⊗e_y, which an exact
+    discretisation transmits at every position: p at every slave node. The lower block, loaded on
+    part of its top, deflects by about p/E_lower × its size, 10⁻⁹ of the upper block's strain.
+    """
+    mesh, ct, ft = build_block_stack(comm, 2.0, 0.25, [0.25, 0.25], [(8, 1, 1), (6, 2, 3)], cell_type=cell_type,
+                                   structured=STRUCTURED)
+    nodes = np.unique(compat.geometry_dofmap(mesh)[ct.indices[ct.values == T.body(2)]])
+    mesh.geometry.x[nodes, 0] = 0.25 + 0.25 * mesh.geometry.x[nodes, 0]  # x in [0.25, 0.75]
+    dirichlet = [Dirichlet(T.bottom(1)), Dirichlet(T.top(2), slide, [0], amplitude=_slide),
+                 Dirichlet(T.zmin(2), 0.0, [2])]
+    return ContactProblem(mesh, ct, ft, materials={1: PATCH_LOWER, 2: PATCH_UPPER}, dirichlet=dirichlet,
+                          tractions=[Pressure(T.top(2), PATCH_PRESSURE, amplitude=_press)],
+                          contact=Contact(T.top(1), T.bottom(2), mu_f=0.0, law=law, discretisation="mortar",
+                                          geometry=geometry, r=PATCH_R))
 
 
 LONG_SLIDE_PRESSED_AT = 0.1

@@ -42,15 +42,15 @@ from dolfinx_nnqem.contact.discretisation import DISCRETISATIONS, OBSTACLE_DISCR
 from dolfinx_nnqem.contact.pairset import PairRows, PairSet, rows_matrix
 from dolfinx_nnqem.contact.slip_check import stale_interfaces
 from dolfinx_nnqem.contact.surfaces import ContactPairError, mesh_tolerance, owned_supports, space_degree
-from dolfinx_nnqem.contact.current_geometry import (GEOMETRIES, ObstacleTracker, SurfaceTracker, remapper,
-                                                    surface_tracker)
+from dolfinx_nnqem.contact.current_geometry import (GEOMETRIES, MortarTracker, ObstacleTracker, SurfaceTracker,
+                                                    remapper, surface_tracker)
 from dolfinx_nnqem.numerics.ranges import check_magnitude
 
 logger = logging.getLogger("dolfinx_nnqem")
 
 __all__ = ["Contact", "ContactModel", "Interface", "PairLaws"]
 
-GeometryTracker = ObstacleTracker | SurfaceTracker
+GeometryTracker = ObstacleTracker | SurfaceTracker | MortarTracker
 
 PREDICTED_PRESSURE = 1e-12
 """Starting active set: touching pairs start with p_n = this × r h (see :meth:`ContactModel.predict`)."""
@@ -138,8 +138,8 @@ class Contact:
         ``"reference"`` (the default: closest points, normals and gaps computed once, in the
         reference configuration) or ``"current"`` (re-evaluated at X + u as the bodies move:
         large sliding, :mod:`~dolfinx_nnqem.contact.current_geometry`). ``"current"`` takes a rigid
-        obstacle or node-to-surface pairs (``"auto"`` then means node-to-surface); node-to-node
-        pairs and mortar are refused.
+        obstacle, node-to-surface or mortar pairs (``"auto"`` then means node-to-surface);
+        node-to-node pairs are refused.
     """
 
     surface1: int | RigidObstacle
@@ -197,10 +197,6 @@ class Contact:
             raise ValueError("Contact: geometry = 'current' does not apply to node-to-node pairs: they join nodes "
                              "that face each other in a matching mesh and stay reference geometry; use "
                              "discretisation = 'node-to-surface' for large sliding")
-        if self.discretisation == "mortar":
-            raise ValueError("Contact: geometry = 'current' is not available for mortar yet (its segments and "
-                             "integrals are computed once, in the reference configuration); use discretisation "
-                             "= 'node-to-surface' for large sliding, or geometry = 'reference'")
 
     @property
     def obstacle(self) -> RigidObstacle | None:
@@ -228,12 +224,14 @@ class Contact:
 
     def tracker(self, V, facet_tags, supported: np.ndarray | None = None) -> GeometryTracker:
         """What re-evaluates the pairs of a ``geometry = "current"`` interface (collective)."""
-        tolerance = mesh_tolerance(V.mesh) if self.tolerance is None else float(self.tolerance)
         if isinstance(self.surface1, RigidObstacle):
+            tolerance = mesh_tolerance(V.mesh) if self.tolerance is None else float(self.tolerance)
             return ObstacleTracker(obstacle_pairs(V, facet_tags, int(self.surface2), self.surface1,
                                                   tolerance=tolerance))
+        discretisation = "mortar" if self.discretisation == "mortar" else "node-to-surface"  # auto: node-to-surface
         return surface_tracker(V, facet_tags, (int(self.surface1), int(self.surface2)), slave=self.slave,
-                               tolerance=tolerance, search_distance=self.search_distance, supported=supported)
+                               search_distance=self.search_distance, supported=supported,
+                               discretisation=discretisation)
 
 
 def zero_displacement(V):

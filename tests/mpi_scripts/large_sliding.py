@@ -3,7 +3,7 @@
     mpiexec -n N python large_sliding.py OUT.npz [CASE ...]
 
 The frictionless sphere slid over the block (6³, rigid obstacle), the frictional block slid 1.6
-master facets over another (node-to-surface, μ_f = 0.3) and the ironing of an elastoplastic strip
+master facets over another (node-to-surface, μ_f = 0.3; the same with dual mortar) and the ironing of an elastoplastic strip
 by a cylinder dragged 8 facets (μ_f = 0.1), current geometry, monolithic and NNEQM1
 (:mod:`dolfinx_nnqem.cases.large_sliding`). Rank 0 writes, per ``CASE/METHOD/``, the pair table's
 slave positions and forces on the master side in global pair order, the resultant force, the
@@ -29,6 +29,7 @@ METHODS = ("monolithic", "nneqm1")
 CASES = {
     "sphere": (lambda comm: sliding_sphere(6, comm=comm), obstacle_force, 16),
     "blocks": (lambda comm: sliding_blocks(slide=0.4, mu_f=0.3, comm=comm), slave_force, 12),
+    "mortar": (lambda comm: sliding_blocks(slide=0.4, mu_f=0.3, discretisation="mortar", comm=comm), slave_force, 12),
     "ironing": (lambda comm: ironing(16, comm=comm), obstacle_force, 40),
 }
 
