@@ -1,7 +1,7 @@
 """Large sliding on 2 and 3 ranks: the serial answer (issue 27).
 
 The cases of tests/mpi_scripts/large_sliding.py (a sphere slid over a block; a frictional block slid
-1.6 master facets over another, node-to-surface; a cylinder ironing an elastoplastic strip). Every rank evaluates the node-to-surface pairs
+1.6 master facets over another, node-to-surface and dual mortar; a cylinder ironing an elastoplastic strip). Every rank evaluates the node-to-surface pairs
 from the gathered surfaces, with the displacements of their nodes summed over the ranks, so a
 slave node finds its master facet on whichever rank holds it. Pairs are owned by the rank of their
 slave node, so they are compared after sorting by the slave node's position.
