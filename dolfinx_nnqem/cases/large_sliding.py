@@ -119,8 +119,10 @@ def sliding_patch(*, slide: float = 0.6, cell_type: str = "hexahedron", law: str
 LONG_SLIDE_PRESSED_AT = 0.1
 
 
-def long_slide(*, law: str = "alart-curnier", mu_f: float = 0.3, comm: MPI.Comm = MPI.COMM_WORLD) -> ContactProblem:
-    """A short block slid four times its length over a long one, node-to-surface (module docstring)."""
+def long_slide(*, law: str = "alart-curnier", mu_f: float = 0.3, discretisation: str = "node-to-surface",
+               master: VonMises | None = None, comm: MPI.Comm = MPI.COMM_WORLD) -> ContactProblem:
+    """A short block slid four times its length over a long one (module docstring); ``master``:
+    the long block's material (default the short block's)."""
     mesh, ct, ft = build_block_stack(comm, 2.0, 0.25, [0.25, 0.25], [(16, 2, 2), (40, 4, 3)])
     nodes = np.unique(compat.geometry_dofmap(mesh)[ct.indices[ct.values == T.body(2)]])
     mesh.geometry.x[nodes, 0] = 0.25 + 0.125 * mesh.geometry.x[nodes, 0]  # the short block: x in [0.25, 0.5]
@@ -134,8 +136,8 @@ def long_slide(*, law: str = "alart-curnier", mu_f: float = 0.3, comm: MPI.Comm 
     dirichlet = [Dirichlet(T.bottom(1)), Dirichlet(T.top(2), -0.002, [1], amplitude=press),
                  Dirichlet(T.top(2), 1.0, [0], amplitude=slide)]
     dirichlet += [Dirichlet(face(k), 0.0, [2]) for k in (1, 2) for face in (T.zmin, T.zmax)]
-    return ContactProblem(mesh, ct, ft, materials=MATERIAL, dirichlet=dirichlet,
-                          contact=Contact(T.top(1), T.bottom(2), mu_f=mu_f, law=law, discretisation="node-to-surface",
+    return ContactProblem(mesh, ct, ft, materials={1: master or MATERIAL, 2: MATERIAL}, dirichlet=dirichlet,
+                          contact=Contact(T.top(1), T.bottom(2), mu_f=mu_f, law=law, discretisation=discretisation,
                                           geometry="current"))
 
 

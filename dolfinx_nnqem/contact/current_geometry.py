@@ -42,7 +42,8 @@ from mpi4py import MPI
 from dolfinx_nnqem.contact.obstacles import ObstaclePairs
 from dolfinx_nnqem.contact.pairset import PairRows, rows_matrix
 from dolfinx_nnqem.contact.surface_pairs import SurfacePairs, facet_size
-from dolfinx_nnqem.contact.surfaces import GatheredSurfaces, check_no_shared_nodes, gather_surfaces, local_frames
+from dolfinx_nnqem.contact.surfaces import (GatheredSurfaces, check_no_shared_nodes, gather_surfaces, local_frames,
+                                            mesh_tolerance)
 
 __all__ = ["GEOMETRIES", "MortarTracker", "ObstacleTracker", "SurfaceTracker", "displacement_at", "match_pairs",
            "moved_surfaces", "remapper", "surface_tracker"]
@@ -59,12 +60,15 @@ node on the master's edge, which the Poisson effect moves across the edge, gains
 pair from one solve of the increment to the next and the geometry never settles."""
 
 
-CURRENT_GAP_ROUNDING = 0.0
-"""Gaps below which the builders' gaps become zero, in the current geometry: none. The reference
-geometry rounds |g0| ≤ the mesh tolerance (1e-8 × the mesh's size) to zero, the mesh generator's
-round-off on touching surfaces; gaps measured in the current configuration are where the solver
-put the surfaces, and rounding them would accept a state up to that tolerance off the master
-(mortar patch test after a slide, unstructured tetrahedra: pressures 6.4e-6 off uniform)."""
+GAP_ROUNDING = 2e-15
+"""In the current geometry a gap |g*| ≤ this × the mesh's bounding-box diagonal is zero: the
+round-off of x = X + u and of the projection (a few ulps of the coordinates), which r turns into
+contact residuals that no solve removes (a master 10⁶ times stiffer than the slave: without it the
+geometry did not settle in the first increment). The reference geometry rounds far more, |g0| ≤
+10⁻⁸ × the diagonal (``Contact.tolerance``: the mesh generator's round-off on touching surfaces);
+in the current configuration that accepted states up to 10⁻⁸ × the diagonal off the master (mortar
+patch test after a slide, unstructured tetrahedra: pressures 6.4e-6 off uniform; 2.4e-9 with this
+rounding, as with none, 5.9e-9 with 10⁻¹⁴ and 2.5e-8 with 10⁻¹³)."""
 
 
 def displacement_at(u, blocks: np.ndarray) -> np.ndarray:
@@ -183,6 +187,7 @@ class SurfaceTracker:
 
     V: Any  #: the displacement space
     surfaces: GatheredSurfaces
+    gap_rounding: float  #: gaps within it are zero (:data:`GAP_ROUNDING`)
     search_distance: float | None
     note: str
     supported: np.ndarray | None
@@ -193,7 +198,7 @@ class SurfaceTracker:
         from dolfinx_nnqem.contact.node_to_surface import node_to_surface_pairs  # numba: only when used
 
         master_size = facet_size(self.surfaces.facets_of(0))
-        pairs = node_to_surface_pairs(self.V, moved_surfaces(self.surfaces, u), tolerance=CURRENT_GAP_ROUNDING,
+        pairs = node_to_surface_pairs(self.V, moved_surfaces(self.surfaces, u), tolerance=self.gap_rounding,
                                       search_distance=self.search_distance, note=self.note,
                                       supported=self.supported, edge_allowance=EDGE_ALLOWANCE * master_size,
                                       preferred=self.facets)
@@ -223,6 +228,7 @@ class MortarTracker:
 
     V: Any  #: the displacement space
     surfaces: GatheredSurfaces
+    gap_rounding: float  #: gaps within it are zero (:data:`GAP_ROUNDING`)
     search_distance: float | None
     note: str
     supported: np.ndarray | None
@@ -232,7 +238,7 @@ class MortarTracker:
         from dolfinx_nnqem.contact.mortar import mortar_pairs
 
         moved = with_moved_normals(moved_surfaces(self.surfaces, u))
-        pairs = mortar_pairs(self.V, moved, tolerance=CURRENT_GAP_ROUNDING, search_distance=self.search_distance,
+        pairs = mortar_pairs(self.V, moved, tolerance=self.gap_rounding, search_distance=self.search_distance,
                              note=self.note, supported=self.supported)
         return rebased(pairs, self.V, u)
 
@@ -249,6 +255,7 @@ def surface_tracker(V, facet_tags, tags: tuple[int, int], *, slave: int | None,
     slave, note = slave_side(surfaces, slave)
     if slave == tags[0]:
         surfaces = surfaces.swapped()  # the builders take (master, slave)
+    gap_rounding = mesh_tolerance(V.mesh, GAP_ROUNDING)
     if discretisation == "mortar":
-        return MortarTracker(V, surfaces, search_distance, note + ", current geometry", supported)
-    return SurfaceTracker(V, surfaces, search_distance, note + ", current geometry", supported)
+        return MortarTracker(V, surfaces, gap_rounding, search_distance, note + ", current geometry", supported)
+    return SurfaceTracker(V, surfaces, gap_rounding, search_distance, note + ", current geometry", supported)
