@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from dolfinx_nnqem.contact.facet_layout import node_combination
 from dolfinx_nnqem.contact.mortar_geometry import mortar_integrals
 from dolfinx_nnqem.contact.surface_pairs import SurfacePairs, facet_size, surface_pairs
 from dolfinx_nnqem.contact.surfaces import ContactPairError, GatheredSurfaces, first_by_position, format_point
@@ -84,8 +85,14 @@ def mortar_pairs(V, surfaces: GatheredSurfaces, *, tolerance: float, search_dist
     master_size = facet_size(master)
     if search_distance is None:
         search_distance = 2.0 * max(master_size, facet_size(slave))
-    mi = mortar_integrals(slave.nodes, slave.x, slave.area, master.nodes, master.x, master.area,
-                          search_distance=search_distance)
+    if slave.degree == 2:  # imported here: its numba kernels are compiled only where quadratic facets are
+        from dolfinx_nnqem.contact.dual_quadratic import quadratic_mortar_integrals
+
+        mi = quadratic_mortar_integrals(slave.nodes, slave.x, slave.area, master.nodes, master.x, master.area,
+                                        search_distance=search_distance)
+    else:
+        mi = mortar_integrals(slave.nodes, slave.x, slave.area, master.nodes, master.x, master.area,
+                              search_distance=search_distance)
     if mi.num_failed_points:
         raise ContactPairError(
             f"mortar integration between surfaces {tags[1]} (slave) and {tags[0]} (master) failed at "
@@ -107,8 +114,13 @@ def mortar_pairs(V, surfaces: GatheredSurfaces, *, tolerance: float, search_dist
     weights = M.data / np.repeat(m[keep], np.diff(M.indptr))
     master_x = np.zeros((len(mi.master_index), 3))
     master_x[np.searchsorted(mi.master_index, master.nodes.ravel())] = master.x.reshape(-1, 3)
+    slave_rows = None
+    if slave.degree == 2:  # quadratic: pair j acts on the transformed slave displacement d̂_j = Σ_i t_ji u_i
+        rows = node_combination(slave.nodes, mi.slave_index).take(keep)
+        if len(rows.columns) > len(keep):  # tri6 (quad9: the identity, the node alone)
+            slave_rows = (rows.indptr, mi.slave_index[rows.columns], rows.coefficients)
     return surface_pairs(
         V, "mortar", tags, mi.slave_index[keep], mi.x[keep], mi.D[keep], -mi.normal[keep],
         mi.weighted_gap[keep] / m[keep], M.indptr, mi.master_index[M.indices], weights, master_x[M.indices],
         master_size=master_size, tolerance=tolerance, num_slave_nodes=len(mi.slave_index), note=note,
-        supported=supported)
+        supported=supported, slave_rows=slave_rows)
