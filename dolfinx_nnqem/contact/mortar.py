@@ -44,10 +44,14 @@ from dolfinx_nnqem.contact.mortar_geometry import mortar_integrals
 from dolfinx_nnqem.contact.surface_pairs import SurfacePairs, facet_size, surface_pairs
 from dolfinx_nnqem.contact.surfaces import ContactPairError, GatheredSurfaces, first_by_position, format_point
 
-__all__ = ["MAX_COVERAGE", "MIN_COVERED", "mortar_pairs"]
+__all__ = ["MAX_COVERAGE", "MIN_COVERED", "ROUND_OFF", "mortar_pairs"]
 
 MIN_COVERED = 0.5
 """A slave node keeps its pair if Σ_k M_jk ≥ this × D_jj."""
+
+ROUND_OFF = 1e-12
+"""Quadratic facets: entries |M_jk| ≤ this × D_jj are dropped (round-off of zero: the dual functions
+change sign, so a master node whose functions barely meet slave node j's support gets M_jk ≈ 1e-17)."""
 
 MAX_COVERAGE = 1.0 + 1e-6
 """Coverage above this means master facets overlap in projection (refused)."""
@@ -103,6 +107,8 @@ def mortar_pairs(V, surfaces: GatheredSurfaces, *, tolerance: float, search_dist
         raise ContactPairError(
             f"the master surface {tags[0]} overlaps itself as seen from the slave node at {format_point(mi.x[j])} "
             f"(coverage {mi.coverage[j]:.6g} > 1): a folded or two-sided master surface")
+    if slave.degree == 2:
+        _drop_round_off(mi)
     m = np.asarray(mi.M.sum(axis=1)).ravel()
     keep = np.flatnonzero(m >= MIN_COVERED * mi.D)
     if len(keep) == 0:
@@ -124,3 +130,10 @@ def mortar_pairs(V, surfaces: GatheredSurfaces, *, tolerance: float, search_dist
         mi.weighted_gap[keep] / m[keep], M.indptr, mi.master_index[M.indices], weights, master_x[M.indices],
         master_size=master_size, tolerance=tolerance, num_slave_nodes=len(mi.slave_index), note=note,
         supported=supported, slave_rows=slave_rows)
+
+
+def _drop_round_off(mi) -> None:
+    """Remove the entries |M_jk| ≤ :data:`ROUND_OFF` × D_jj of ``mi.M`` in place."""
+    row = np.repeat(np.arange(mi.M.shape[0]), np.diff(mi.M.indptr))
+    mi.M.data[np.abs(mi.M.data) <= ROUND_OFF * mi.D[row]] = 0.0
+    mi.M.eliminate_zeros()
