@@ -6,6 +6,7 @@
   node covered has Σ_k M_jk = D_jj, and a quadratic field f, which both sides represent exactly,
   gives Σ_k M_jk f(X_k) = D_jj f̂_j (f̂ = T⁻ᵀ f its transformed nodal values) to round-off: M is
   exact, not only its row sums.
+* Partial cover: the covered area and the coverage of covered and uncovered nodes.
 * Curved facets: two non-matching meshes of one paraboloid (which quadratic facets represent
   exactly): the nodal gaps, zero exactly, come out at O(h³) (linear mortar on the vertices: O(h²)),
   and Σ_k M_jk = D_jj holds to the quadrature error.
@@ -102,6 +103,27 @@ def test_flat_non_matching_surfaces_are_integrated_exactly(slave_k, master_k):
     assert np.all(np.abs(mi.coverage - 1) < 1e-12)
     assert row_sums < 1e-12 and reproduction < 1e-13 and gap < 1e-14
     assert np.all(mi.D > 0) and np.allclose(mi.normal, [0.0, 0.0, 1.0], atol=1e-14)
+
+
+@pytest.mark.parametrize("k", [6, 9])
+def test_partial_cover(k):
+    """The master covers x >= 0.3 of the slave [0, 1]² (4 × 4 facets): covered area 0.7 = Σ_jk M_jk
+    (Σ_j Φ_j = 1); nodes whose facets lie in x >= 0.5 are covered fully (Σ_k M_jk = D_jj), those whose
+    facets lie in x <= 0.25 not at all, and no partly covered node reports a coverage above 1 (the
+    folded-master test: ∫_covered N̂_j dA / D_jj reaches 1.044 there, quad9 functions change sign)."""
+    s_nodes, s_x, s_area = quadratic_grid(4, k, 0.0, 1.0)
+    m_nodes, m_x, m_area = quadratic_grid(3, k, -0.1, 1.1, offset=10_000, lift=lambda xy: np.full(len(xy), 0.02),
+                                          up=False)
+    m_x[..., 0] += 0.4  # x in [0.3, 1.5]
+    mi = quadratic_mortar_integrals(s_nodes, s_x, s_area, m_nodes, m_x, m_area, search_distance=0.5)
+    m = np.asarray(mi.M.sum(axis=1)).ravel()
+    covered = float(m.sum())
+    full, none = mi.x[:, 0] > 0.5 + 1e-12, mi.x[:, 0] < 0.25 - 1e-12
+    print(f"\n  k = {k}: covered area {covered:.15f} (0.7), coverage of the partly covered nodes "
+          f"{np.round(np.sort(mi.coverage[~full & ~none]), 4).tolist()}")
+    assert abs(covered - 0.7) < 1e-13 and mi.coverage.max() <= 1.0 + 1e-13
+    assert np.allclose(mi.coverage[full], 1.0, atol=1e-13) and np.allclose(m[full], mi.D[full], rtol=1e-12)
+    assert np.all(mi.coverage[none] == 0.0) and np.all(m[none] == 0.0)
 
 
 def paraboloid_caps(n_slave, n_master, k, curvature=0.5):

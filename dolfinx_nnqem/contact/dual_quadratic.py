@@ -391,6 +391,23 @@ def _integrate_quadratic_couples(ci, cj, xs, sign_s, T, A, xm, sign_m, sub_s, su
 # --------------------------------------------------------------------------------------------
 
 
+def _area_coverage(s_pos: np.ndarray, facet_area: np.ndarray, covered_area: np.ndarray) -> np.ndarray:
+    """(p,) the covered fraction of the area of each slave node's facets: 1 where master facets cover
+    them (to the quadrature error), 0 where none does, above 1 where master facets overlap in projection.
+
+    Parameters
+    ----------
+    s_pos
+        (m, k) each slave facet's nodes as rows of the result.
+    facet_area, covered_area
+        (m,) each slave facet's area and its area covered by master facets.
+    """
+    p = int(s_pos.max()) + 1
+    k = s_pos.shape[1]
+    return (np.bincount(s_pos.ravel(), np.repeat(covered_area, k), minlength=p)
+            / np.bincount(s_pos.ravel(), np.repeat(facet_area, k), minlength=p))
+
+
 def quadratic_mortar_integrals(slave_nodes: npt.ArrayLike, slave_x: npt.ArrayLike, slave_area: npt.ArrayLike,
                                master_nodes: npt.ArrayLike, master_x: npt.ArrayLike, master_area: npt.ArrayLike,
                                search_distance: float, relative_tolerance: float = RELATIVE_TOLERANCE,
@@ -414,9 +431,11 @@ def quadratic_mortar_integrals(slave_nodes: npt.ArrayLike, slave_x: npt.ArrayLik
     Returns
     -------
     MortarIntegrals
-        As for linear facets, with D_jj = ∫ N̂_j dA, M_jk = ∫ Φ_j (N_k ∘ π) dA, the coverage
-        ∫_covered N̂_j dA / D_jj, and the normals ∫ N̂_j n dA normalised (those of
-        :class:`~dolfinx_nnqem.contact.surfaces.SurfaceNodes`). Row j is the TRANSFORMED slave
+        As for linear facets, with D_jj = ∫ N̂_j dA, M_jk = ∫ Φ_j (N_k ∘ π) dA and the normals
+        ∫ N̂_j n dA normalised (those of :class:`~dolfinx_nnqem.contact.surfaces.SurfaceNodes`). The
+        coverage is the covered fraction of the area of node j's facets, not ∫_covered N̂_j dA / D_jj:
+        the quadratic functions change sign, so that ratio exceeds 1 at partly covered nodes (1.044
+        at a quad9 vertex whose facets are 30 % covered) and could not tell a folded master. Row j is the TRANSFORMED slave
         node j: its pair acts on d̂_j (:func:`~dolfinx_nnqem.contact.facet_layout.node_combination`).
     """
     slave_nodes = np.asarray(slave_nodes, dtype=np.int64)
@@ -433,12 +452,12 @@ def quadratic_mortar_integrals(slave_nodes: npt.ArrayLike, slave_x: npt.ArrayLik
     vm, _ = _cyclic(xm[:, :NUM_VERTICES[km]], master_area)
     ci, cj = candidate_couples(vs, vm, float(search_distance))
     qb, qw = segment_rule()
-    Mc, gc, covc, area, failed = _integrate_quadratic_couples(
+    Mc, gc, _, area, failed = _integrate_quadratic_couples(
         ci, cj, xs, outward_signs(xs, slave_area), transformation(ks), A, xm, outward_signs(xm, master_area),
         SUB_FACETS[ks], SUB_FACETS[km], reference_nodes(ks), reference_nodes(km), qb, qw, relative_tolerance,
         min_facing_cosine)
     used = area > 0.0
-    ci, cj, Mc, gc, covc = ci[used], cj[used], Mc[used], gc[used], covc[used]
+    ci, cj, Mc, gc = ci[used], cj[used], Mc[used], gc[used]
 
     slave_index, first, s_pos = np.unique(slave_nodes.ravel(), return_index=True, return_inverse=True)
     s_pos = s_pos.reshape(slave_nodes.shape)
@@ -452,7 +471,7 @@ def quadratic_mortar_integrals(slave_nodes: npt.ArrayLike, slave_x: npt.ArrayLik
     M.sum_duplicates()
     M.sort_indices()
     weighted_gap = np.bincount(s_pos[ci].ravel(), gc.ravel(), minlength=p)
-    coverage = np.bincount(s_pos[ci].ravel(), covc.ravel(), minlength=p) / D
+    coverage = _area_coverage(s_pos, De.sum(axis=1), np.bincount(ci, area[used], minlength=len(xs)))
     _, moments = nodal_integrals(xs, slave_area)
     normal = np.zeros((p, 3))
     np.add.at(normal, s_pos.ravel(), moments.reshape(-1, 3))
