@@ -285,6 +285,24 @@ def test_solver_variants_take_degree_2(cell, method, variant):
     print(f"\n  {cell}, {method} {variant}: force error {err:.1e}, {results[0].iterations} iterations")
     assert err < 1e-8
 
+@pytest.mark.parametrize("method, variant", [("nneqm1", {"modified": True}), ("nneqm2", {"flow_directions": "frozen"}),
+                                             ("monolithic", {"linear_solver": "iterative"})],
+                         ids=["nneqm1 modified", "nneqm2 frozen", "monolithic iterative"])
+@pytest.mark.parametrize("mesh_name", ["hex 4x4 / 3x3", "tet 4x4 / 3x3"])
+def test_solver_variants_take_quadratic_mortar(mesh_name, method, variant):
+    """The same variants on the non-matching mortar patch with shear: exact."""
+    from dolfinx_nnqem.solvers.options import MonolithicOptions, NNEQM1Options, NNEQM2Options
+
+    options = {"nneqm1": NNEQM1Options, "nneqm2": NNEQM2Options, "monolithic": MonolithicOptions}[method](**variant)
+    problem = two_blocks(mesh_name, "mortar", drag=True)
+    results = solve_load_steps(problem, make_solver(method, problem, SolverOptions(rtol=1e-12), **{method: options}), 1)
+    _, err_p, err_t, err_sigma = patch_errors(problem, True)
+    print(f"\n  {mesh_name}, {method} {variant}: {results[0].iterations} iterations, max |pressure − p|/p {err_p:.1e}, "
+          f"max |σ − σ_exact|/p {err_sigma:.1e}")
+    assert problem.contact.interfaces[0].pairs.kind == "mortar"
+    assert err_p < 1e-8 and err_t < 1e-8 and err_sigma < 1e-8
+
+
 # -- problem files and MPI ---------------------------------------------------------------------------
 PATCH_FILE = """
 [mesh]
