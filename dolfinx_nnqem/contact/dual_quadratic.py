@@ -72,6 +72,10 @@ from dolfinx_nnqem.contact.surfaces import ContactPairError, format_point
 __all__ = ["SEGMENT_RULE_POINTS", "SUB_FACETS", "quadratic_dual_coefficients", "quadratic_mortar_integrals",
            "segment_rule"]
 
+# numba's on-disk cache invalidates a kernel when ITS file changes, not a callee's: after editing
+# mortar_geometry's _clip / _inverse_map / _polygon_area, projection._shape or
+# quadratic_facets.shape_at, clear __pycache__/dual_quadratic*.nbi / *.nbc.
+
 SUB_FACETS = {6: np.array([[0, 5, 4], [5, 1, 3], [4, 3, 2], [3, 4, 5]], dtype=np.int64),
               9: np.array([[0, 4, 8, 5], [4, 1, 6, 8], [5, 8, 7, 2], [8, 6, 3, 7]], dtype=np.int64)}
 """The four linear sub-facets of a tri6 and a quad9 (node positions, counter-clockwise in the
