@@ -17,6 +17,13 @@ node j (pressure × D_jj); master node k receives −(M_jk / m_j) R_jᵀλ_j, so
 and a rigid translation of both bodies leaves w unchanged. On a fully covered node m_j = D_jj
 and this is the textbook dual mortar condition divided by D_jj.
 
+Quadratic facets (degree-2 displacements, tri6 and quad9): the dual functions are built on the
+transformed slave basis N̂ = T N and the integrals computed on the quadratic facets
+(:mod:`~dolfinx_nnqem.contact.dual_quadratic`); D_jj = ∫ N̂_j dA, and pair j acts on the
+transformed nodal displacement d̂_j = Σ_i t_ji u_i (:func:`~dolfinx_nnqem.contact.facet_layout.node_combination`)
+instead of u_j, as node-to-surface does on tri6 slaves. Entries |M_jk| ≤ :data:`ROUND_OFF` × D_jj
+are dropped there.
+
 Documented choices:
 
 * Small deformation: D, M, normals and gaps are computed once in the reference configuration
