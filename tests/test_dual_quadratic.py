@@ -76,6 +76,19 @@ def test_dual_basis_is_biorthogonal_to_the_transformed_basis():
     assert np.allclose(plain[:3], 0.0, atol=1e-15) and np.all(plain[3:] > 0)
 
 
+def test_a_facet_too_distorted_for_a_dual_basis_is_refused():
+    """A quad9 whose centre node is moved 0.33 of its side towards a corner: that corner's weight
+    ∫N_j dA turns negative (−1.8e-4 of the area), the dual basis would be meaningless: refused, named."""
+    from dolfinx_nnqem.contact.surfaces import ContactPairError
+
+    _, x, _ = quadratic_grid(1, 9)
+    x[0, 8, :2] += 0.30
+    assert np.all(quadratic_dual_coefficients(x)[1] > 0)
+    x[0, 8, :2] += 0.03
+    with pytest.raises(ContactPairError, match=r"vertices \(-0.5, -0.5, 0\).*not positive: too distorted for dual mortar"):
+        quadratic_dual_coefficients(x)
+
+
 def quadratic_field(x):
     return 1.0 + 0.3 * x[..., 0] - 0.7 * x[..., 1] + 0.5 * x[..., 0] ** 2 - 0.4 * x[..., 0] * x[..., 1] \
         + 0.2 * x[..., 1] ** 2
