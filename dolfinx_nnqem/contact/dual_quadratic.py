@@ -395,6 +395,14 @@ def _integrate_quadratic_couples(ci, cj, xs, sign_s, T, A, xm, sign_m, sub_s, su
 # --------------------------------------------------------------------------------------------
 
 
+def _reach_beyond_vertices(x: np.ndarray, nv: int) -> float:
+    """The largest distance by which a facet's nodes lie farther from its vertex mean than its
+    farthest vertex (a curved facet's bulging edges; 0 for straight-sided facets)."""
+    centre = x[:, :nv].mean(axis=1, keepdims=True)
+    d = np.linalg.norm(x - centre, axis=2)
+    return float(max((d.max(axis=1) - d[:, :nv].max(axis=1)).max(), 0.0))
+
+
 def _area_coverage(s_pos: np.ndarray, facet_area: np.ndarray, covered_area: np.ndarray) -> np.ndarray:
     """(p,) the covered fraction of the area of each slave node's facets: 1 where master facets cover
     them (to the quadrature error), 0 where none does, above 1 where master facets overlap in projection.
@@ -450,11 +458,12 @@ def quadratic_mortar_integrals(slave_nodes: npt.ArrayLike, slave_x: npt.ArrayLik
     master_area = np.asarray(master_area, dtype=np.float64)
     ks, km = xs.shape[1], xm.shape[1]
     A, De = quadratic_dual_coefficients(xs)
-    # candidate couples from the vertices (cyclic): a curved facet bulges mostly along its normal,
-    # which the search's normal reach (search distance + radii) covers
+    # candidate couples from the vertices (cyclic), their reach widened by how far curved facets'
+    # nodes lie beyond them (0 for straight-sided facets)
     vs, _ = _cyclic(xs[:, :NUM_VERTICES[ks]], slave_area)
     vm, _ = _cyclic(xm[:, :NUM_VERTICES[km]], master_area)
-    ci, cj = candidate_couples(vs, vm, float(search_distance))
+    margin = 2.0 * max(_reach_beyond_vertices(xs, NUM_VERTICES[ks]), _reach_beyond_vertices(xm, NUM_VERTICES[km]))
+    ci, cj = candidate_couples(vs, vm, float(search_distance), margin)
     qb, qw = segment_rule()
     Mc, gc, _, area, failed = _integrate_quadratic_couples(
         ci, cj, xs, outward_signs(xs, slave_area), transformation(ks), A, xm, outward_signs(xm, master_area),
