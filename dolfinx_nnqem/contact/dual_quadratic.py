@@ -249,10 +249,10 @@ def _to_parent(poly, r, y0, y1, zeta, xi):
 
 
 @numba.njit(cache=True)
-def _integrate_segment(poly, n, Ss, rs, Pm, rm, xs, xm, T, A, n0, qb, qw, M, g, cov):
-    """Integrate Φ_j N_k, Φ_j g0 and N̂_j over the overlap polygon poly[:n] of the slave sub-facet
+def _integrate_segment(poly, n, Ss, rs, Pm, rm, xs, xm, T, A, n0, qb, qw, M, g):
+    """Integrate Φ_j N_k and Φ_j g0 over the overlap polygon poly[:n] of the slave sub-facet
     (Ss, rs) and the master sub-facet (Pm, rm) (module docstring, steps 3 and 4); add them to
-    M, g, cov. Returns the slave area integrated and the Gauss points whose inverse map failed."""
+    M and g. Returns the slave area integrated and the Gauss points whose inverse map failed."""
     ks = xs.shape[0]
     km = xm.shape[0]
     c0 = 0.0
@@ -316,14 +316,13 @@ def _integrate_segment(poly, n, Ss, rs, Pm, rm, xs, xm, T, A, n0, qb, qw, M, g, 
                 for b in range(km):
                     M[a, b] += w * phi[a] * Nm[b]
                 g[a] += w * phi[a] * gap
-                cov[a] += w * Nhat[a]
     return total, failed
 
 
 @numba.njit(cache=True)
 def _quadratic_couple(xs, sign_s, T, A, xm, sign_m, sub_s, sub_m, ref_s, ref_m, qb, qw, relative_tolerance,
-                      min_cos, M, g, cov):
-    """Add one couple's integrals to M (ks, km), g (ks,), cov (ks,); return the slave area of the
+                      min_cos, M, g):
+    """Add one couple's integrals to M (ks, km) and g (ks,); return the slave area of the
     overlap (0: the couple does not count) and the Gauss points whose inverse map failed."""
     ks = xs.shape[0]
     km = xm.shape[0]
@@ -365,7 +364,7 @@ def _quadratic_couple(xs, sign_s, T, A, xm, sign_m, sub_s, sub_m, ref_s, ref_m, 
             n = _clip(subject, Pm.shape[0], Ss, Ss.shape[0], tol, poly)
             if n < 3 or _polygon_area(poly, n) <= relative_tolerance * sub_area:
                 continue
-            area, bad = _integrate_segment(poly, n, Ss, rs, Pm, rm, xs, xm, T, A, n0, qb, qw, M, g, cov)
+            area, bad = _integrate_segment(poly, n, Ss, rs, Pm, rm, xs, xm, T, A, n0, qb, qw, M, g)
             total += area
             failed += bad
     return total, failed
@@ -380,14 +379,13 @@ def _integrate_quadratic_couples(ci, cj, xs, sign_s, T, A, xm, sign_m, sub_s, su
     km = xm.shape[1]
     M = np.zeros((nc, ks, km))
     g = np.zeros((nc, ks))
-    cov = np.zeros((nc, ks))
     area = np.zeros(nc)
     failed = np.zeros(nc, np.int64)
     for c in range(nc):
         area[c], failed[c] = _quadratic_couple(xs[ci[c]], sign_s[ci[c]], T, A[ci[c]], xm[cj[c]], sign_m[cj[c]],
                                                sub_s, sub_m, ref_s, ref_m, qb, qw, relative_tolerance, min_cos,
-                                               M[c], g[c], cov[c])
-    return M, g, cov, area, failed
+                                               M[c], g[c])
+    return M, g, area, failed
 
 
 # --------------------------------------------------------------------------------------------
@@ -447,8 +445,9 @@ def quadratic_mortar_integrals(slave_nodes: npt.ArrayLike, slave_x: npt.ArrayLik
         ∫ N̂_j n dA normalised (those of :class:`~dolfinx_nnqem.contact.surfaces.SurfaceNodes`). The
         coverage is the covered fraction of the area of node j's facets, not ∫_covered N̂_j dA / D_jj:
         the quadratic functions change sign, so that ratio exceeds 1 at partly covered nodes (1.044
-        at a quad9 vertex whose facets are 30 % covered) and could not tell a folded master. Row j is the TRANSFORMED slave
-        node j: its pair acts on d̂_j (:func:`~dolfinx_nnqem.contact.facet_layout.node_combination`).
+        at quad9 nodes whose facets are 90 % covered) and could not tell a folded master. Row j is
+        the TRANSFORMED slave node j: its pair acts on d̂_j
+        (:func:`~dolfinx_nnqem.contact.facet_layout.node_combination`).
     """
     slave_nodes = np.asarray(slave_nodes, dtype=np.int64)
     master_nodes = np.asarray(master_nodes, dtype=np.int64)
@@ -465,7 +464,7 @@ def quadratic_mortar_integrals(slave_nodes: npt.ArrayLike, slave_x: npt.ArrayLik
     margin = 2.0 * max(_reach_beyond_vertices(xs, NUM_VERTICES[ks]), _reach_beyond_vertices(xm, NUM_VERTICES[km]))
     ci, cj = candidate_couples(vs, vm, float(search_distance), margin)
     qb, qw = segment_rule()
-    Mc, gc, _, area, failed = _integrate_quadratic_couples(
+    Mc, gc, area, failed = _integrate_quadratic_couples(
         ci, cj, xs, outward_signs(xs, slave_area), transformation(ks), A, xm, outward_signs(xm, master_area),
         SUB_FACETS[ks], SUB_FACETS[km], reference_nodes(ks), reference_nodes(km), qb, qw, relative_tolerance,
         min_facing_cosine)
