@@ -219,15 +219,18 @@ def test_quadratic_mortar_equals_node_to_surface_on_nested_meshes(quadratic_mort
 
 
 @pytest.mark.slow
-def test_quadratic_beams_converge_between_two_meshes(quadratic_matching):
+def test_quadratic_beams_converge_between_two_meshes(quadratic_matching, quadratic_mortar):
     """The free-end corners of the degree-2 beams on the 0.2 m and the 0.1 m matching meshes (the
     trilinear ones move by 12.2 % there, 3.4 % from 0.1 m to 0.05 m), and the trilinear 0.05 m mesh of
     as many dofs as the finer. Measured: 1.14 % (3150 → 19926 dofs), so the issue's 1 % between two
-    meshes is missed narrowly at 0.2 m → 0.1 m; the bound below is the measured figure's."""
+    meshes is missed narrowly at 0.2 m → 0.1 m; the bound below is the measured figure's. The
+    non-matching 0.2 | 0.1 m mortar answer of degree 2 lies within 2 % of the finer matching one."""
     fine = solve_beams(refine=2, degree=2)
     linear = solve_beams(refine=4)
     report(f"matching 0.2 m, degree 2 ({quadratic_matching['dofs']} dofs)", quadratic_matching)
     d = report(f"matching 0.1 m, degree 2 ({fine['dofs']} dofs)", fine, quadratic_matching,
                "the 0.2 m answer of degree 2")
     d1 = report(f"matching 0.05 m, degree 1 ({linear['dofs']} dofs)", linear, fine, "the 0.1 m answer of degree 2")
-    assert d["corners"] < 0.0125 and d1["corners"] < 0.02
+    dm = report(f"beam 2 at 0.1 m, degree 2, mortar ({quadratic_mortar['dofs']} dofs)", quadratic_mortar, fine,
+                "the 0.1 m answer of degree 2")  # measured: corners 0.79 %, contact force 0.38 %
+    assert d["corners"] < 0.0125 and d1["corners"] < 0.02 and max(dm.values()) < TOLERANCE
