@@ -92,9 +92,9 @@ if MPI.COMM_WORLD.rank == 0:  # gmsh builds the mesh on one process; the run dis
 # recombined, transfinite mesh), whose edge nodes lie on the geometry: a curved face stays curved.
 # `dolfinx-nnqem` reads such a file as it is and solves with **quadratic elements** (P2; Q2 on
 # hexahedra) unless `[mesh] degree = 1` says otherwise. Every node of a contact face, vertex or
-# edge node, is then a slave node. Dual mortar takes linear facets only, so non-matching faces
-# need `discretisation = "node-to-surface"` (the run refuses mortar before solving and says so);
-# matching faces keep node-to-node. 20-node (serendipity) hexahedra, which DOLFINx has no element
+# edge node, is then a slave node. Non-matching faces get dual mortar on the quadratic facets
+# (curved ones included; `discretisation = "node-to-surface"` is the alternative); matching faces
+# keep node-to-node. 20-node (serendipity) hexahedra, which DOLFINx has no element
 # for, are refused with the reason: keep gmsh's default `Mesh.SecondOrderIncomplete = 0`.
 #
 # Besides `fields.xdmf`, a quadratic run writes `fields_p2.pvd`: the displacement at every node of
@@ -123,7 +123,7 @@ nu = 0.3
 surface1 = {FACETS["block top"]}
 surface2 = {FACETS["punch bottom"]}
 mu_f = 0.3
-discretisation = "{"auto" if args.order == 1 else "node-to-surface"}"
+discretisation = "auto"
 
 [[dirichlet]]
 tag = {FACETS["block bottom"]}

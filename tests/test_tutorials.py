@@ -47,7 +47,7 @@ def test_own_gmsh_mesh_demo_runs(tmp_path):
 
 
 def test_own_gmsh_mesh_demo_runs_with_a_second_order_mesh(tmp_path):
-    """``--order 2``: 10-node tetrahedra, quadratic elements, node-to-surface pairs, ``fields_p2.pvd``."""
+    """``--order 2``: 10-node tetrahedra, quadratic elements, dual mortar pairs (auto), ``fields_p2.pvd``."""
     env = {k: v for k, v in os.environ.items() if k != "DOLFINX_NNQEM_PICTURES"}
     env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
     run = subprocess.run([sys.executable, str(ROOT / "demos" / "own_gmsh_mesh.py"), "--out", str(tmp_path),
@@ -63,6 +63,6 @@ def test_own_gmsh_mesh_demo_runs_with_a_second_order_mesh(tmp_path):
     assert compat.coordinate_element(mesh).degree == 2 and compat.geometry_dofmap(mesh).shape[1] == 10
     summary = json.loads((tmp_path / "results" / "summary.json").read_text())
     assert summary["converged"] and summary["equilibrium_residual"] < 1e-8
-    assert "node-to-surface" in run.stdout
+    assert "mortar" in run.stdout  # non-matching quadratic faces: auto chose mortar
     assert (tmp_path / "results" / "fields_p2.pvd").is_file()
     assert (tmp_path / "results" / "pictures" / "deformed.png").is_file()

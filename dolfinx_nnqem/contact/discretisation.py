@@ -26,9 +26,8 @@ import numpy as np
 from dolfinx_nnqem.contact.nearest import nearest
 from dolfinx_nnqem.contact.pairs import find_pairs
 from dolfinx_nnqem.contact.pairset import PairSet
-from dolfinx_nnqem.contact.facet_layout import QUADRATIC
 from dolfinx_nnqem.contact.surface_pairs import facet_size
-from dolfinx_nnqem.contact.surfaces import (ContactPairError, GatheredSurfaces, check_no_shared_nodes, gather_surfaces,
+from dolfinx_nnqem.contact.surfaces import (GatheredSurfaces, check_no_shared_nodes, gather_surfaces,
                                             mesh_tolerance)
 
 __all__ = ["DISCRETISATIONS", "OBSTACLE_DISCRETISATIONS", "discretise", "nodes_coincide", "slave_side"]
@@ -94,13 +93,6 @@ def discretise(V, facet_tags, surface1: int, surface2: int, discretisation: str 
         master, slave = (tags[1], tags[0]) if slave == tags[0] else tags
         return find_pairs(V, facet_tags, master, slave, tolerance=tolerance, search_distance=search_distance)
     slave, note = slave_side(surfaces, slave)
-    if discretisation in ("auto", "mortar") and surfaces.facets.nodes.shape[1] in QUADRATIC:
-        why = " and do not match node to node (auto would take mortar)" if discretisation == "auto" else ""
-        raise ContactPairError(
-            f"contact {tags[0]}-{tags[1]}: dual mortar supports degree 1 only (linear facets); these surfaces have "
-            f"quadratic facets (degree-2 displacements){why}. Use "
-            "discretisation = \"node-to-surface\" (every surface node a slave, projected onto the quadratic master "
-            "facets), or degree 1")
     if slave == tags[0]:
         surfaces = surfaces.swapped()  # the builders take (master, slave)
     # imported here: their numba kernels (and numba) are not needed for matching meshes

@@ -17,6 +17,13 @@ node j (pressure × D_jj); master node k receives −(M_jk / m_j) R_jᵀλ_j, so
 and a rigid translation of both bodies leaves w unchanged. On a fully covered node m_j = D_jj
 and this is the textbook dual mortar condition divided by D_jj.
 
+Quadratic facets (degree-2 displacements, tri6 and quad9): the dual functions are built on the
+transformed slave basis N̂ = T N and the integrals computed on the quadratic facets
+(:mod:`~dolfinx_nnqem.contact.dual_quadratic`); D_jj = ∫ N̂_j dA, and pair j acts on the
+transformed nodal displacement d̂_j = Σ_i t_ji u_i (:func:`~dolfinx_nnqem.contact.facet_layout.node_combination`)
+instead of u_j, as node-to-surface does on tri6 slaves. Entries |M_jk| ≤ :data:`ROUND_OFF` × D_jj
+are dropped there.
+
 Documented choices:
 
 * Small deformation: D, M, normals and gaps are computed once in the reference configuration
@@ -39,14 +46,19 @@ from __future__ import annotations
 
 import numpy as np
 
+from dolfinx_nnqem.contact.facet_layout import node_combination
 from dolfinx_nnqem.contact.mortar_geometry import mortar_integrals
 from dolfinx_nnqem.contact.surface_pairs import SurfacePairs, facet_size, surface_pairs
 from dolfinx_nnqem.contact.surfaces import ContactPairError, GatheredSurfaces, first_by_position, format_point
 
-__all__ = ["MAX_COVERAGE", "MIN_COVERED", "mortar_pairs"]
+__all__ = ["MAX_COVERAGE", "MIN_COVERED", "ROUND_OFF", "mortar_pairs"]
 
 MIN_COVERED = 0.5
 """A slave node keeps its pair if Σ_k M_jk ≥ this × D_jj."""
+
+ROUND_OFF = 1e-12
+"""Quadratic facets: entries |M_jk| ≤ this × D_jj are dropped (round-off of zero: the dual functions
+change sign, so a master node whose functions barely meet slave node j's support gets M_jk ≈ 1e-17)."""
 
 MAX_COVERAGE = 1.0 + 1e-6
 """Coverage above this means master facets overlap in projection (refused)."""
@@ -84,8 +96,14 @@ def mortar_pairs(V, surfaces: GatheredSurfaces, *, tolerance: float, search_dist
     master_size = facet_size(master)
     if search_distance is None:
         search_distance = 2.0 * max(master_size, facet_size(slave))
-    mi = mortar_integrals(slave.nodes, slave.x, slave.area, master.nodes, master.x, master.area,
-                          search_distance=search_distance)
+    if slave.degree == 2:  # imported here: its numba kernels are compiled only where quadratic facets are
+        from dolfinx_nnqem.contact.dual_quadratic import quadratic_mortar_integrals
+
+        mi = quadratic_mortar_integrals(slave.nodes, slave.x, slave.area, master.nodes, master.x, master.area,
+                                        search_distance=search_distance)
+    else:
+        mi = mortar_integrals(slave.nodes, slave.x, slave.area, master.nodes, master.x, master.area,
+                              search_distance=search_distance)
     if mi.num_failed_points:
         raise ContactPairError(
             f"mortar integration between surfaces {tags[1]} (slave) and {tags[0]} (master) failed at "
@@ -96,6 +114,8 @@ def mortar_pairs(V, surfaces: GatheredSurfaces, *, tolerance: float, search_dist
         raise ContactPairError(
             f"the master surface {tags[0]} overlaps itself as seen from the slave node at {format_point(mi.x[j])} "
             f"(coverage {mi.coverage[j]:.6g} > 1): a folded or two-sided master surface")
+    if slave.degree == 2:
+        _drop_round_off(mi)
     m = np.asarray(mi.M.sum(axis=1)).ravel()
     keep = np.flatnonzero(m >= MIN_COVERED * mi.D)
     if len(keep) == 0:
@@ -107,8 +127,20 @@ def mortar_pairs(V, surfaces: GatheredSurfaces, *, tolerance: float, search_dist
     weights = M.data / np.repeat(m[keep], np.diff(M.indptr))
     master_x = np.zeros((len(mi.master_index), 3))
     master_x[np.searchsorted(mi.master_index, master.nodes.ravel())] = master.x.reshape(-1, 3)
+    slave_rows = None
+    if slave.degree == 2:  # quadratic: pair j acts on the transformed slave displacement d̂_j = Σ_i t_ji u_i
+        rows = node_combination(slave.nodes, mi.slave_index).take(keep)
+        if len(rows.columns) > len(keep):  # tri6 (quad9: the identity, the node alone)
+            slave_rows = (rows.indptr, mi.slave_index[rows.columns], rows.coefficients)
     return surface_pairs(
         V, "mortar", tags, mi.slave_index[keep], mi.x[keep], mi.D[keep], -mi.normal[keep],
         mi.weighted_gap[keep] / m[keep], M.indptr, mi.master_index[M.indices], weights, master_x[M.indices],
         master_size=master_size, tolerance=tolerance, num_slave_nodes=len(mi.slave_index), note=note,
-        supported=supported)
+        supported=supported, slave_rows=slave_rows)
+
+
+def _drop_round_off(mi) -> None:
+    """Remove the entries |M_jk| ≤ :data:`ROUND_OFF` × D_jj of ``mi.M`` in place."""
+    row = np.repeat(np.arange(mi.M.shape[0]), np.diff(mi.M.indptr))
+    mi.M.data[np.abs(mi.M.data) <= ROUND_OFF * mi.D[row]] = 0.0
+    mi.M.eliminate_zeros()

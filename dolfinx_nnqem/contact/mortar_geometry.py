@@ -613,17 +613,19 @@ def _radii(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return centroid, np.linalg.norm(x - centroid[:, None, :], axis=2).max(axis=1)
 
 
-def candidate_couples(xs_cyclic: np.ndarray, xm_cyclic: np.ndarray,
-                      search_distance: float) -> tuple[np.ndarray, np.ndarray]:
+def candidate_couples(xs_cyclic: np.ndarray, xm_cyclic: np.ndarray, search_distance: float,
+                      margin: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """(slave, master) facet couples whose projections may overlap, sorted by slave then master.
 
     A KD-tree gives master facets whose centroid lies within r_s,max + r_m,max + search_distance
-    of the slave centroid (r: largest centroid-to-vertex distance); kept are those whose
-    centroid is within r_s + r_m of the slave centroid in the slave's plane and within
-    search_distance + r_s + r_m along its normal.
+    of the slave centroid (r: largest centroid-to-vertex distance, plus ``margin`` / 2: curved
+    quadratic facets reach beyond their vertices); kept are those whose centroid is within
+    r_s + r_m of the slave centroid in the slave's plane and within search_distance + r_s + r_m
+    along its normal.
     """
     cs, rs = _radii(xs_cyclic)
     cm, rm = _radii(xm_cyclic)
+    rs, rm = rs + 0.5 * margin, rm + 0.5 * margin
     reach = float(rs.max() + rm.max() + search_distance)
     found = cKDTree(cs).sparse_distance_matrix(cKDTree(cm), reach, output_type="ndarray")
     ci, cj = found["i"].astype(np.int64), found["j"].astype(np.int64)
