@@ -186,11 +186,10 @@ def test_no_pairs_left_is_a_failed_solve(caplog):
     allowance) no slave node projects onto the master; the increment is cut back, and when the
     cutbacks are exhausted the error names the interface."""
     problem = sliding_blocks(slide=1.5)
-    with caplog.at_level(logging.WARNING, logger="dolfinx_nnqem"):
-        with make_solver("monolithic", problem, OPTIONS) as solver:
-            with pytest.raises(ConvergenceError, match=r"after 2 cutbacks: contact 201-102: no pairs in the "
-                                                       r"current geometry at load factor"):
-                solve_load_steps(problem, solver, 12, max_cutbacks=2)
+    with caplog.at_level(logging.WARNING, logger="dolfinx_nnqem"), make_solver("monolithic", problem, OPTIONS) as solver, \
+            pytest.raises(ConvergenceError, match=r"after 2 cutbacks: contact 201-102: no pairs in the "
+                                                  r"current geometry at load factor"):
+        solve_load_steps(problem, solver, 12, max_cutbacks=2)
     cutbacks = [r.message for r in caplog.records if "cutback" in r.message]
     print(f"\n  {problem.load_factor_n:.4g} reached; {cutbacks}")
     assert len(cutbacks) == 2 and all("no pairs in the current geometry" in m for m in cutbacks)
