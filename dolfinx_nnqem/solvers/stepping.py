@@ -244,8 +244,10 @@ def _solve(problem, solver, target: float) -> SolveReport:
 
     The geometry is evaluated where the increment starts (u_n, the obstacles at ℓ) and the
     increment solved with it frozen; then it is evaluated again at the solution and the increment
-    solved again from there, until a solve starts converged: the solution then satisfies the
-    equations in the geometry of its own configuration (``docs/theory.md``, "Large sliding").
+    solved again from there, until a solve starts converged (the first solve's start is the
+    predictor, not u_n, so it always gets a second): the solution then satisfies the equations in
+    the geometry of its own configuration (``docs/theory.md``, "Large sliding"). A solver that
+    re-evaluates the geometry at every iterate (``report.geometry_consistent``) needs one solve.
     The report counts the Newton iterations of every pass.
     """
     model = problem.contact
@@ -256,7 +258,9 @@ def _solve(problem, solver, target: float) -> SolveReport:
         return lost
     report = solver.solve_increment(target)
     iterations, passes = report.iterations, 1
-    while report.converged and report.iterations > 0 and not report.geometry_consistent:
+    # The first solve starts from the predictor (the secant extrapolation), not from where the geometry
+    # was evaluated (u_n): even with no Newton iteration its solution is not yet in its own geometry.
+    while report.converged and (report.iterations > 0 or passes == 1) and not report.geometry_consistent:
         if passes == GEOMETRY_PASSES:
             report.converged = False
             report.message = (f"the contact geometry did not settle in {GEOMETRY_PASSES} solves of the increment "
