@@ -1,52 +1,116 @@
 """What the current contact geometry costs (issue 27): Newton iterations, solves and seconds.
 
-A sphere pressed in place (``cases.large_sliding.sliding_sphere`` with start = end, n³ hexahedra,
-``increments`` increments over the press) solved with the reference and with the current
-geometry, and the issue's slide (0.3 -> 0.7) with the current geometry, which the reference one
-cannot finish. Prints figures; asserts nothing::
+The cases (``dolfinx_nnqem.cases.large_sliding``):
 
-    python benchmarks/large_sliding.py [n] [increments]
+* ``press``: the sphere pressed in place (``sliding_sphere`` with start = end, n³ hexahedra,
+  ``increments`` increments), reference and current geometry;
+* ``slide``: the issue's slide (0.3 -> 0.7, 5 × ``increments`` increments), current geometry (the
+  reference one cannot finish it);
+* ``blocks``, ``blocks-friction``: the upper block slid 1.6 master facets over the lower one
+  (node-to-surface, 12 increments), μ_f = 0 and 0.3;
+* ``ironing``: the cylinder dragged 8 facets over the elastoplastic strip (nx = 16, 40 increments,
+  μ_f = 0.1).
+
+Prints Newton iterations, solves and seconds per case; asserts nothing. With ``--save DIR`` every
+case's displacements, pair forces and contact force go to ``DIR/<method>-<case>-<geometry>.npz``,
+and ``--compare DIR`` prints the largest differences from such a saved run (before/after a change
+of the solver: the converged states must agree to the solver's tolerance)::
+
+    python benchmarks/large_sliding.py [--n 8] [--increments 4] [--methods monolithic,nneqm1]
+                                       [--cases press,slide,blocks,blocks-friction,ironing]
+                                       [--rtol 1e-10] [--frozen] [--save DIR] [--compare DIR]
 """
 
 from __future__ import annotations
 
-import sys
+import argparse
+import pathlib
 import time
+from collections.abc import Callable
 
 import numpy as np
 
-from dolfinx_nnqem.cases.large_sliding import PRESSED_AT, obstacle_force, sliding_sphere
-from dolfinx_nnqem.solvers import ConvergenceError, SolverOptions, make_solver, solve_load_steps
+from dolfinx_nnqem.cases.large_sliding import (PRESSED_AT, ironing, obstacle_force, slave_force, sliding_blocks,
+                                               sliding_sphere)
+from dolfinx_nnqem.solvers import ConvergenceError, MonolithicOptions, SolverOptions, make_solver, solve_load_steps
+
+CASES = ("press", "slide", "blocks", "blocks-friction", "ironing")
 
 
-def run(n: int, increments: int, geometry: str, method: str, end: float, final: float) -> str:
-    problem = sliding_sphere(n, start=0.3, end=end, geometry=geometry)
+def _cases(n: int, increments: int) -> dict[str, tuple[Callable[[str], object], int, Callable]]:
+    """Per case: (problem of a geometry, increments, the resultant contact force on the body)."""
+    return {
+        "press": (lambda g: sliding_sphere(n, start=0.3, end=0.3, geometry=g), increments, obstacle_force),
+        "slide": (lambda g: sliding_sphere(n, start=0.3, end=0.7, geometry=g), 5 * increments, obstacle_force),
+        "blocks": (lambda g: sliding_blocks(slide=0.4, geometry=g), 12, slave_force),
+        "blocks-friction": (lambda g: sliding_blocks(slide=0.4, mu_f=0.3, geometry=g), 12, slave_force),
+        "ironing": (lambda g: ironing(16), 40, obstacle_force),
+    }
+
+
+def run(case: str, n: int, increments: int, geometry: str, method: str, save: pathlib.Path | None,
+        compare: pathlib.Path | None, rtol: float = 1e-10, consistent: bool = True) -> str:
+    """One case solved; its figures as a line (and its state saved or compared)."""
+    make, steps, force_of = _cases(n, increments)[case]
+    problem = make(geometry)
+    final = PRESSED_AT if case == "press" else 1.0
     t0 = time.perf_counter()
     try:
-        with make_solver(method, problem, SolverOptions(rtol=1e-10, max_iterations=40)) as solver:
-            results = solve_load_steps(problem, solver, increments, final_load_factor=final)
+        settings = {"monolithic": MonolithicOptions(consistent_geometry=consistent)} if method == "monolithic" else {}
+        with make_solver(method, problem, SolverOptions(rtol=rtol, max_iterations=40), **settings) as solver:
+            results = solve_load_steps(problem, solver, steps, final_load_factor=final)
     except ConvergenceError as error:
         return f"failed: {str(error).splitlines()[0][:90]}... ({time.perf_counter() - t0:.2f} s)"
     seconds = time.perf_counter() - t0
     model = problem.contact
     assert model is not None
-    iterations = sum(r.iterations for r in results)
-    solves = sum(r.report.geometry_passes for r in results)
-    force = obstacle_force(problem)
-    return (f"{len(results)} increments, {iterations} Newton iterations, {solves} solves, {seconds:.2f} s; "
-            f"F_y = {force[1]:.9g}")
+    iterations = [r.iterations for r in results]
+    solves = [r.report.geometry_passes for r in results]
+    force = force_of(problem)
+    line = (f"{len(results)} increments, {sum(iterations)} Newton iterations, {sum(solves)} solves, "
+            f"{seconds:.2f} s; F = {np.array2string(force, precision=9)}; per increment {iterations}")
+    state = {"u": problem.u.x.array.copy(), "lam": model.force(), "force": force,
+             "load_factors": np.array([r.load_factor for r in results])}
+    name = f"{method}-{case}-{geometry}.npz"
+    if save is not None:
+        save.mkdir(parents=True, exist_ok=True)
+        np.savez(save / name, **state)
+    if compare is not None and (compare / name).exists():
+        line += "; " + _differences(state, dict(np.load(compare / name)))
+    return line
+
+
+def _differences(state: dict, before: dict) -> str:
+    """The largest differences from a saved run, relative to the largest values."""
+    if before["load_factors"].shape != state["load_factors"].shape or not np.allclose(
+            before["load_factors"], state["load_factors"], rtol=0, atol=1e-14):
+        return "another load path than the saved run"
+    du = np.abs(state["u"] - before["u"]).max() / np.abs(before["u"]).max()
+    df = np.linalg.norm(state["force"] - before["force"]) / np.linalg.norm(before["force"])
+    dlam = (np.abs(state["lam"] - before["lam"]).max() / np.abs(before["lam"]).max()
+            if state["lam"].shape == before["lam"].shape else float("nan"))
+    return f"vs saved: max|Δu|/max|u| = {du:.1e}, |ΔF|/|F| = {df:.1e}, max|Δλ|/max|λ| = {dlam:.1e}"
 
 
 def main() -> None:
-    n = int(sys.argv[1]) if len(sys.argv) > 1 else 8
-    increments = int(sys.argv[2]) if len(sys.argv) > 2 else 4
-    for method in ("monolithic", "nneqm1"):
-        for geometry in ("reference", "current"):
-            print(f"{method:10s} press in place, {geometry:9s} geometry, {n}³: "
-                  f"{run(n, increments, geometry, method, 0.3, PRESSED_AT)}", flush=True)
-        for geometry in ("reference", "current"):
-            print(f"{method:10s} slide 0.3 -> 0.7, {geometry:9s} geometry, {n}³: "
-                  f"{run(n, 5 * increments, geometry, method, 0.7, 1.0)}", flush=True)
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--n", type=int, default=8)
+    parser.add_argument("--increments", type=int, default=4)
+    parser.add_argument("--methods", default="monolithic,nneqm1")
+    parser.add_argument("--cases", default=",".join(CASES))
+    parser.add_argument("--rtol", type=float, default=1e-10)
+    parser.add_argument("--frozen", action="store_true",
+                        help="monolithic: the geometry frozen within a solve (consistent_geometry=False)")
+    parser.add_argument("--save", type=pathlib.Path)
+    parser.add_argument("--compare", type=pathlib.Path)
+    args = parser.parse_args()
+    for method in args.methods.split(","):
+        for case in args.cases.split(","):
+            geometries = ("reference", "current") if case == "press" else ("current",)
+            for geometry in geometries:
+                print(f"{method:10s} {case:16s} {geometry:9s}: "
+                      f"{run(case, args.n, args.increments, geometry, method, args.save, args.compare, args.rtol, not args.frozen)}",
+                      flush=True)
 
 
 if __name__ == "__main__":

@@ -37,20 +37,26 @@ from petsc4py import PETSc
 
 from dolfinx_nnqem.contact.laws import (NO_FORCE, SLIP, ContactLaw, LawEvaluation, Linearisation, default_r,
                                          get_law)
-from dolfinx_nnqem.contact.obstacles import RigidObstacle, obstacle_pairs
+from dolfinx_nnqem.contact.obstacles import ObstaclePairs, RigidObstacle, obstacle_pairs
+from dolfinx_nnqem.contact.geometric_stiffness import GeometricTerms, no_terms, obstacle_terms
 from dolfinx_nnqem.contact.discretisation import DISCRETISATIONS, OBSTACLE_DISCRETISATIONS, discretise
 from dolfinx_nnqem.contact.pairset import PairRows, PairSet, rows_matrix
 from dolfinx_nnqem.contact.slip_check import stale_interfaces
-from dolfinx_nnqem.contact.surfaces import ContactPairError, mesh_tolerance, owned_supports, space_degree
+from dolfinx_nnqem.contact.surfaces import ContactPairError, NoPairsError, mesh_tolerance, owned_supports, space_degree
 from dolfinx_nnqem.contact.current_geometry import (GEOMETRIES, MortarTracker, ObstacleTracker, SurfaceTracker,
                                                     remapper, surface_tracker)
 from dolfinx_nnqem.numerics.ranges import check_magnitude
 
 logger = logging.getLogger("dolfinx_nnqem")
 
-__all__ = ["Contact", "ContactModel", "Interface", "PairLaws"]
+__all__ = ["Contact", "ContactModel", "Interface", "LostContactError", "PairLaws"]
 
 GeometryTracker = ObstacleTracker | SurfaceTracker | MortarTracker
+
+class LostContactError(ContactPairError):
+    """A re-evaluation of the current geometry found no pair on an interface (the slave nodes left the
+    master surface): load stepping takes it as a failed solve and cuts the increment back."""
+
 
 PREDICTED_PRESSURE = 1e-12
 """Starting active set: touching pairs start with p_n = this × r h (see :meth:`ContactModel.predict`)."""
@@ -449,6 +455,7 @@ class ContactModel:
         # kept for re-pinning the pairs of a new geometry (the caller may free its vector)
         self._constrained_dofs = constrained_dofs.copy()
         self.geometry_version = 0  #: counts :meth:`update_geometry` calls (solvers rebuild what uses B)
+        self._refreshed_at: np.ndarray | None = None  # where refresh_obstacle_geometry last evaluated
         self._slip_warned: set[str] = set()  # interfaces whose slip beyond the facet size was reported
         interfaces = []
         for contact in contacts:
@@ -636,9 +643,10 @@ class ContactModel:
         self.B.multTranspose(self._w, out)
         return out
 
-    def scaled_B(self, D: np.ndarray, out: PETSc.Mat | None = None) -> PETSc.Mat:
-        """blockdiag(D_i) B in B's sparsity: a new matrix, or ``out`` (made by this method) refilled."""
-        values = self.rows.scaled(D)
+    def scaled_B(self, D: np.ndarray, out: PETSc.Mat | None = None, values: np.ndarray | None = None) -> PETSc.Mat:
+        """blockdiag(D_i) B in B's sparsity: a new matrix, or ``out`` (made by this method) refilled;
+        ``values``: another matrix's in B's layout instead of B's (B + W: a consistent linearisation)."""
+        values = self.rows.scaled(D, values)
         if out is None:
             return rows_matrix(self.comm, self.rows, self.num_global, self.V.dofmap.index_map, values)
         out.setValuesCSR(self.rows.indptr, self.rows.columns, values)  # type: ignore[arg-type]  # petsc4py's stub asks Sequence; arrays are what it takes
@@ -751,8 +759,10 @@ class ContactModel:
         row, or an array in the new layout).
         """
         old_keys = self.pair_keys()
-        interfaces = [i if t is None else replace(i, pairs=t.pairs_at(u, load_factor))
+        # every interface evaluated before anything changes: if one has lost its pairs, the model stays
+        interfaces = [i if t is None else replace(i, pairs=self._pairs_or_lost(i, t, u, load_factor))
                       for i, t in zip(self.interfaces, self.trackers)]
+        self._refreshed_at = None
         for obj in (self.B, self._w):
             obj.destroy()
         self._assemble(interfaces)
@@ -764,6 +774,99 @@ class ContactModel:
         self.w_n = self.relative_displacement(u_n.x.petsc_vec, load_factor_n)
         self.geometry_version += 1
         return remap
+
+    @staticmethod
+    def _pairs_or_lost(interface: Interface, tracker: GeometryTracker, u, load_factor: float) -> PairSet:
+        """The tracker's pairs at (u, ℓ); :class:`LostContactError` naming the interface if there are none."""
+        try:
+            pairs: PairSet = tracker.pairs_at(u, load_factor)
+        except NoPairsError as error:
+            raise LostContactError(f"contact {interface.contact.label}: no pairs in the current geometry at load "
+                                   f"factor {load_factor:.6g}: no slave node projects onto the master surface any "
+                                   "more (the bodies slid apart)") from error
+        if pairs.num_global == 0:
+            raise LostContactError(f"contact {interface.contact.label}: no pairs in the current geometry at load "
+                                   f"factor {load_factor:.6g}")
+        return pairs
+
+    @property
+    def obstacle_geometry(self) -> bool:
+        """True if some interface is a rigid obstacle in the current geometry (whose pairs
+        :meth:`refresh_obstacle_geometry` re-evaluates in place)."""
+        return any(isinstance(t, ObstacleTracker) for t in self.trackers)
+
+    @property
+    def surface_geometry(self) -> bool:
+        """True if some interface is node-to-surface or mortar in the current geometry (its pairs may
+        change; it is re-evaluated between solves, not within one)."""
+        return any(isinstance(t, (SurfaceTracker, MortarTracker)) for t in self.trackers)
+
+    def refresh_obstacle_geometry(self, u, load_factor: float, u_n, load_factor_n: float) -> None:
+        """Re-evaluate the current-geometry obstacle interfaces at (u, ℓ) in place (collective).
+
+        An obstacle keeps one pair per slave node and B keeps its pattern (the slave node's three
+        columns): only the frames R, the gaps g0 (rebased as in :meth:`update_geometry`) and B's
+        values change, and w_n is measured again with the new rows. The pairs, their unknowns and
+        the solvers' matrices stay; this is what the monolithic solver calls at every Newton iterate
+        (:mod:`~dolfinx_nnqem.contact.geometric_stiffness`). Nothing is done when the slave nodes,
+        ℓ and u_n are where the last refresh had them.
+        """
+        key = self._refresh_key(u, load_factor, u_n, load_factor_n)
+        if self._refreshed_at is not None and len(key) == len(self._refreshed_at) and np.array_equal(
+                key, self._refreshed_at):
+            return
+        for k, (interface, tracker) in enumerate(zip(self.interfaces, self.trackers)):
+            if not isinstance(tracker, ObstacleTracker):
+                continue
+            pairs = tracker.pairs_at(u, load_factor)
+            local = interface.local
+            self.interfaces[k] = replace(interface, pairs=pairs)
+            self.R[local] = pairs.R
+            self.g0[local] = pairs.g0  # the laws hold this array
+            start = self.rows.indptr[3 * local.start]
+            self.rows.values[start:start + len(pairs.rows.values)] = pairs.rows.values
+        self.B.setValuesCSR(self.rows.indptr, self.rows.columns, self.rows.values)  # type: ignore[arg-type]  # as in scaled_B
+        self.B.assemble()
+        self.laws = replace(self.laws, constrained=self._constrained_directions(self._constrained_dofs))
+        self._gathered_laws = None
+        self.w_n = self.relative_displacement(u_n.x.petsc_vec, load_factor_n)
+        self._refreshed_at = key
+
+    def _refresh_key(self, u, load_factor: float, u_n, load_factor_n: float) -> np.ndarray:
+        """What an obstacle refresh depends on: the slave nodes' u and u_n, ℓ and ℓ_n."""
+        start = u.function_space.dofmap.index_map.local_range[0]
+        parts = [np.array([load_factor, load_factor_n])]
+        for interface, tracker in zip(self.interfaces, self.trackers):
+            if isinstance(tracker, ObstacleTracker):
+                blocks = interface.pairs.slave_blocks - start
+                parts += [u.x.array.reshape(-1, 3)[blocks].ravel(), u_n.x.array.reshape(-1, 3)[blocks].ravel()]
+        return np.concatenate(parts)
+
+    def geometric_terms(self, u, load_factor: float, u_n, load_factor_n: float,
+                        lam: np.ndarray | None = None) -> GeometricTerms:
+        """The geometric blocks K_s, W_s of the current-geometry obstacle pairs at (u, ℓ) and the forces
+        ``lam`` (default: λ(z)), their geometry refreshed there first
+        (:mod:`~dolfinx_nnqem.contact.geometric_stiffness`)."""
+        lam = self.force() if lam is None else lam
+        start = u.function_space.dofmap.index_map.local_range[0]
+        pairs_, blocks, Ks, Ws = [], [], [], []
+        for interface, tracker in zip(self.interfaces, self.trackers):
+            if not isinstance(tracker, ObstacleTracker):
+                continue
+            pairs = interface.pairs
+            assert isinstance(pairs, ObstaclePairs)  # an obstacle tracker's pairs
+            index = pairs.slave_blocks - start
+            K, W = obstacle_terms(pairs, u.x.array.reshape(-1, 3)[index], u_n.x.array.reshape(-1, 3)[index],
+                                  pairs.obstacle.displacement(load_factor), pairs.obstacle.displacement(load_factor_n),
+                                  lam[interface.local])
+            pairs_.append(np.arange(interface.local.start, interface.local.stop))
+            blocks.append(pairs.slave_blocks)
+            Ks.append(K)
+            Ws.append(W)
+        if not pairs_:
+            return no_terms()
+        return GeometricTerms(np.concatenate(pairs_), np.concatenate(blocks).astype(np.int64), np.concatenate(Ks),
+                              np.concatenate(Ws))
 
     def geometry_state(self) -> list[np.ndarray | None]:
         """Per interface, what its next evaluation depends on besides u (for checkpoints): the master

@@ -40,7 +40,7 @@ from dolfinx_nnqem.contact.projection import Projection, project_points
 from dolfinx_nnqem.contact.facet_layout import NodeCombination
 from dolfinx_nnqem.contact.quadratic_projection import project_points_quadratic
 from dolfinx_nnqem.contact.surface_pairs import SurfacePairs, facet_size, surface_pairs
-from dolfinx_nnqem.contact.surfaces import ContactPairError, Facets, GatheredSurfaces, first_by_position, format_point
+from dolfinx_nnqem.contact.surfaces import ContactPairError, Facets, NoPairsError, GatheredSurfaces, first_by_position, format_point
 
 __all__ = ["keep_preferred", "node_to_surface_pairs"]
 
@@ -97,7 +97,7 @@ def node_to_surface_pairs(V, surfaces: GatheredSurfaces, *, tolerance: float, se
     found = p.facet >= 0
     inside = found & (p.tangential_offset <= (tolerance if edge_allowance is None else edge_allowance))
     if not np.any(inside):
-        raise ContactPairError(
+        raise NoPairsError(
             f"no node of the slave surface {tags[1]} projects onto the master surface {tags[0]} within the search "
             f"distance {search_distance:.6g}: do the surfaces face each other? (pass search_distance for "
             "larger initial gaps)")

@@ -114,6 +114,15 @@ class RigidObstacle(ABC):
         """
 
     @abstractmethod
+    def normal_derivative(self, x: np.ndarray) -> np.ndarray:
+        """∂n/∂x (m, 3, 3) of the outward normal at the closest point, as the point ``x`` (m, 3) moves.
+
+        The curvature of the obstacle's surface: zero for a plane, (I − n nᵀ)/ρ for a sphere seen
+        from a point at the distance ρ from its centre. It is what turns the contact force and the
+        friction frame as a slave node slides (:mod:`~dolfinx_nnqem.contact.geometric_stiffness`).
+        """
+
+    @abstractmethod
     def describe(self) -> str:
         """The obstacle in words, for messages and logs."""
 
@@ -135,6 +144,9 @@ class Plane(RigidObstacle):
         g = (x - np.asarray(self.point, dtype=np.float64)) @ n
         normals = np.broadcast_to(n, x.shape).copy()
         return g, normals, x - g[:, None] * normals
+
+    def normal_derivative(self, x):
+        return np.zeros((len(x), 3, 3))  # a plane's normal does not turn
 
     def describe(self) -> str:
         return f"rigid plane through {format_point(self.point)} with normal {format_point(self.normal)}"
@@ -158,6 +170,12 @@ class Sphere(RigidObstacle):
         _check_off_axis(distance, x, "the centre of the sphere")
         n = d / distance[:, None]
         return distance - float(self.radius), n, np.asarray(self.centre) + float(self.radius) * n
+
+    def normal_derivative(self, x):
+        d = x - np.asarray(self.centre, dtype=np.float64)
+        rho = np.linalg.norm(d, axis=1)
+        n = d / rho[:, None]
+        return (np.eye(3) - n[:, :, None] * n[:, None, :]) / rho[:, None, None]
 
     def describe(self) -> str:
         return f"rigid sphere of radius {self.radius:g} centred at {format_point(self.centre)}"
@@ -185,6 +203,15 @@ class Cylinder(RigidObstacle):
         _check_off_axis(distance, x, "the cylinder's axis")
         n = radial / distance[:, None]
         return distance - float(self.radius), n, x - (distance - float(self.radius))[:, None] * n
+
+    def normal_derivative(self, x):
+        e = _vector3("Cylinder.axis", self.axis, unit=True)
+        d = x - np.asarray(self.point, dtype=np.float64)
+        radial = d - (d @ e)[:, None] * e
+        rho = np.linalg.norm(radial, axis=1)
+        n = radial / rho[:, None]
+        # the normal turns about the axis only: the radial projector I − e eᵀ less n nᵀ
+        return (np.eye(3) - np.outer(e, e) - n[:, :, None] * n[:, None, :]) / rho[:, None, None]
 
     def describe(self) -> str:
         return (f"rigid cylinder of radius {self.radius:g} about the axis through {format_point(self.point)} "

@@ -146,19 +146,27 @@ class PairRows:
         sources = np.stack([self.indptr[3 * pair + l] + q for l in range(3)])
         return pair, r, sources
 
-    def scaled(self, D: np.ndarray) -> np.ndarray:
+    def pair_entries(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """For every entry: its pair p, its row r within the pair, and (3, nnz) the positions of the
+        entries at the same place in the pair's three rows."""
+        return self._sources
+
+    def scaled(self, D: np.ndarray, values: np.ndarray | None = None) -> np.ndarray:
         """Values of blockdiag(D_i) B in this layout (row 3i + r = Σ_l D_i[r, l] · row 3i + l).
 
         Parameters
         ----------
         D
             (n, 3, 3) one matrix per pair.
+        values
+            Another matrix's values in this layout to scale instead of B's (e.g. B + W, the rows of
+            a consistent linearisation: :mod:`~dolfinx_nnqem.contact.geometric_stiffness`).
         """
         D = np.asarray(D, dtype=np.float64)
         if D.shape != (self.num_pairs, 3, 3):
             raise ValueError(f"D must have shape ({self.num_pairs}, 3, 3), got {D.shape}")
         pair, r, s = self._sources
-        v = self.values
+        v = self.values if values is None else values
         return D[pair, r, 0] * v[s[0]] + D[pair, r, 1] * v[s[1]] + D[pair, r, 2] * v[s[2]]
 
 

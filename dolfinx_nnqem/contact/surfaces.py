@@ -25,9 +25,9 @@ from mpi4py import MPI
 from dolfinx_nnqem.contact import facet_layout
 from dolfinx_nnqem.contact.facet_layout import NodeCombination
 
-__all__ = ["ContactPairError", "Facets", "GatheredSurfaces", "SurfaceNodes", "check_contact_space", "check_no_shared_nodes",
+__all__ = ["ContactPairError", "NoPairsError", "Facets", "GatheredSurfaces", "SurfaceNodes", "check_contact_space", "check_no_shared_nodes",
            "first_by_position",
-           "format_point", "gather_surfaces", "local_frames", "owned_supports", "raise_together",
+           "format_point", "gather_surfaces", "local_frames", "local_frames_derivative", "owned_supports", "raise_together",
            "mesh_tolerance", "symmetry_normals"]
 
 TANGENT_AXIS_BOUND = 0.8
@@ -39,6 +39,11 @@ more than ~37 degrees away from ±x, e.g. t1 = +x on all of a curved surface fac
 
 class ContactPairError(ValueError):
     """Contact surfaces (tags, geometry or function space) that do not define valid pairs."""
+
+
+class NoPairsError(ContactPairError):
+    """No slave node projects onto the master surface (at the start: surfaces that do not face each
+    other; in the current geometry: the slave nodes left the master surface)."""
 
 
 def local_frames(normals: npt.ArrayLike) -> np.ndarray:
@@ -64,6 +69,38 @@ def local_frames(normals: npt.ArrayLike) -> np.ndarray:
     t1 /= np.linalg.norm(t1, axis=1)[:, None]
     t2 = np.cross(n, t1)  # t1 x t2 = n: right-handed
     return np.stack([n, t1, t2], axis=1) + 0.0  # + 0.0: no -0.0 entries in printed frames
+
+
+def local_frames_derivative(normals: npt.ArrayLike) -> np.ndarray:
+    """∂R/∂n of :func:`local_frames`: dR[s, i, k, l] = ∂R_ik/∂n_l at the unit normals ``normals`` (m, 3).
+
+    The frame's tangents follow the normal with the same axis e_k as :func:`local_frames` picks
+    (the choice is piecewise constant, so this is the derivative wherever the choice does not
+    switch): t1 = v/|v|, v = e − (e·n) n, t2 = n × t1. The normal row is n itself (∂n/∂n = I; the
+    caller composes with the normal's own derivative, e.g. (I − n nᵀ)/ρ for a sphere).
+    """
+    n = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
+    R = local_frames(n)
+    t1 = R[:, 1]
+    k = np.argmax(np.abs(n) <= TANGENT_AXIS_BOUND, axis=1)
+    e = np.eye(3)[k]
+    e_n = np.sum(e * n, axis=1)
+    v = e - e_n[:, None] * n
+    identity = np.broadcast_to(np.eye(3), (len(n), 3, 3))
+    dv = -e_n[:, None, None] * identity - n[:, :, None] * e[:, None, :]  # ∂v/∂n = −(e·n) I − n eᵀ
+    projector = (identity - t1[:, :, None] * t1[:, None, :]) / np.linalg.norm(v, axis=1)[:, None, None]
+    dt1 = projector @ dv
+    dt2 = -_cross_matrix(t1) + _cross_matrix(n) @ dt1  # ∂(n × t1) = −[t1]× dn + [n]× dt1
+    return np.stack([identity, dt1, dt2], axis=1)
+
+
+def _cross_matrix(a: np.ndarray) -> np.ndarray:
+    """[a]× (m, 3, 3): [a]× b = a × b."""
+    out = np.zeros((len(a), 3, 3))
+    out[:, 0, 1], out[:, 0, 2] = -a[:, 2], a[:, 1]
+    out[:, 1, 0], out[:, 1, 2] = a[:, 2], -a[:, 0]
+    out[:, 2, 0], out[:, 2, 1] = -a[:, 1], a[:, 0]
+    return out
 
 
 SYMMETRY_NORMAL_MIN = 0.5

@@ -21,9 +21,10 @@ from __future__ import annotations
 import numpy as np
 from petsc4py import PETSc
 
+from dolfinx_nnqem.contact.geometric_stiffness import GeometricTerms
 from dolfinx_nnqem.contact.pairset import PairRows, rows_matrix
 
-__all__ = ["AugmentedSystem", "BlockDiagonal", "MonolithicMatrix", "free_rows"]
+__all__ = ["AugmentedSystem", "BlockDiagonal", "MonolithicMatrix", "free_columns", "free_rows"]
 
 
 class BlockDiagonal:
@@ -64,6 +65,19 @@ def free_rows(model, free_mask: PETSc.Vec) -> PairRows:
     return PairRows(model.rows.indptr, model.rows.columns, values)
 
 
+def free_columns(model, free_mask: PETSc.Vec) -> np.ndarray:
+    """Per entry of B's layout: 1 if its column is a free dof, 0 if a constrained one (B's values may
+    be exact zeros, so the mask is that of a matrix of ones with B's pattern)."""
+    ones = PairRows(model.rows.indptr, model.rows.columns, np.ones_like(model.rows.values))
+    M = rows_matrix(model.comm, ones, model.num_global, model.V.dofmap.index_map)
+    M.diagonalScale(R=free_mask)
+    indptr, columns, values = M.getValuesCSR()
+    M.destroy()
+    if not (np.array_equal(indptr, model.rows.indptr) and np.array_equal(columns, model.rows.columns)):
+        raise RuntimeError("B's pattern lost entries when its constrained columns were zeroed")
+    return np.asarray(values, dtype=np.float64)
+
+
 def free_mask(problem) -> PETSc.Vec:
     """A vector laid out like V: 0 at the constrained dofs, 1 elsewhere."""
     mask = problem.contact.B.createVecRight()
@@ -75,20 +89,37 @@ def free_mask(problem) -> PETSc.Vec:
 
 
 class _ContactBlocks:
-    """A01 = B_freeᵀ M (M per pair), A10 = ∂_wH B and A11 = ∂_zH, kept and refilled."""
+    """A01 = B_freeᵀ M (M per pair), A10 = ∂_wH B and A11 = ∂_zH, kept and refilled.
 
-    def __init__(self, model, rows_free: PairRows):
+    B_free's values are taken from the model's B at every fill: B's values change within a solve
+    when the model refreshes an obstacle's geometry at every iterate (its pattern does not).
+    """
+
+    def __init__(self, model, free_mask: PETSc.Vec):
         self.model = model
-        self.rows_free = rows_free
+        self.rows_free = free_rows(model, free_mask)
+        self.column_free = free_columns(model, free_mask)
         # made at the first fill, refilled afterwards
         self._MtB: PETSc.Mat | None = None
         self.A01: PETSc.Mat | None = None
         self.A10: PETSc.Mat | None = None
         self._A11 = BlockDiagonal(model.num_local, model.offset, model.num_global, model.comm)
 
-    def fill(self, M: np.ndarray, dH_dw: np.ndarray, dH_dz: np.ndarray) -> tuple[PETSc.Mat, PETSc.Mat, PETSc.Mat]:
-        """The three blocks for the per-pair matrices M (A01 = B_freeᵀ M), ∂H/∂w and ∂H/∂z."""
+    def refresh_rows(self) -> None:
+        """B_free's values from the model's B (same pattern)."""
+        self.rows_free.values[:] = self.model.rows.values * self.column_free
+
+    def slave_free(self, terms: GeometricTerms) -> np.ndarray:
+        """(k, 3): 1 at the free dofs of the slave nodes of ``terms``' pairs, 0 at constrained ones."""
+        start = self.model.rows.indptr[3 * terms.pairs]
+        return self.column_free[start[:, None] + np.arange(3)]  # row n of the pair: its 3 columns
+
+    def fill(self, M: np.ndarray, dH_dw: np.ndarray, dH_dz: np.ndarray,
+             B_values: np.ndarray | None = None) -> tuple[PETSc.Mat, PETSc.Mat, PETSc.Mat]:
+        """The three blocks for the per-pair matrices M (A01 = B_freeᵀ M), ∂H/∂w and ∂H/∂z;
+        ``B_values``: the values of the rows A10 scales in B's layout (B + W), default B's."""
         model = self.model
+        self.refresh_rows()
         # Bᵀ M = (Mᵀ B)ᵀ, and Mᵀ B has B's sparsity
         values = self.rows_free.scaled(np.ascontiguousarray(np.transpose(M, (0, 2, 1))))
         if self._MtB is None:
@@ -98,7 +129,7 @@ class _ContactBlocks:
             self._MtB.setValuesCSR(self.rows_free.indptr, self.rows_free.columns, values)  # type: ignore[arg-type]  # as in BlockDiagonal.fill
             self._MtB.assemble()
             self._MtB.transpose(self.A01)  # MAT_REUSE_MATRIX
-        self.A10 = model.scaled_B(dH_dw, out=self.A10)
+        self.A10 = model.scaled_B(dH_dw, out=self.A10, values=B_values)
         assert self.A01 is not None  # made with _MtB
         return self.A01, self.A10, self._A11.fill(dH_dz)
 
@@ -121,13 +152,19 @@ class MonolithicMatrix:
     """
 
     def __init__(self, model, free_mask: PETSc.Vec):
-        self._blocks = _ContactBlocks(model, free_rows(model, free_mask))
+        self._blocks = _ContactBlocks(model, free_mask)
         self._nest: PETSc.Mat | None = None  # made at the first assemble, refilled afterwards
         self.J: PETSc.Mat | None = None
 
-    def assemble(self, K: PETSc.Mat, dH_dw: np.ndarray, dH_dz: np.ndarray, dlam_dz: np.ndarray) -> PETSc.Mat:
-        """J at the current law evaluation; ``K`` is the tangent, assembled into the same matrix each time."""
-        A01, A10, A11 = self._blocks.fill(-dlam_dz, dH_dw, dH_dz)
+    def slave_free(self, terms: GeometricTerms) -> np.ndarray:
+        """(k, 3): 1 at the free dofs of the slave nodes of ``terms``' pairs."""
+        return self._blocks.slave_free(terms)
+
+    def assemble(self, K: PETSc.Mat, dH_dw: np.ndarray, dH_dz: np.ndarray, dlam_dz: np.ndarray,
+                 B_values: np.ndarray | None = None) -> PETSc.Mat:
+        """J at the current law evaluation; ``K`` is the tangent, assembled into the same matrix each time
+        (with the geometric blocks already added, if any); ``B_values``: B + W for the pair rows."""
+        A01, A10, A11 = self._blocks.fill(-dlam_dz, dH_dw, dH_dz, B_values)
         if self._nest is None:
             self._nest = PETSc.Mat().createNest([[K, A01], [A10, A11]], comm=K.getComm())
         self._nest.assemble()
@@ -174,7 +211,7 @@ class AugmentedSystem:
         self._mask = free_mask
         rows = free_rows(model, free_mask)
         self.B_free = rows_matrix(model.comm, rows, model.num_global, model.V.dofmap.index_map)
-        self._blocks = _ContactBlocks(model, rows)
+        self._blocks = _ContactBlocks(model, free_mask)
         self._P = BlockDiagonal(model.num_local, model.offset, model.num_global, model.comm)
         # made at the first matrix, refilled afterwards
         self._BtPB: PETSc.Mat | None = None
@@ -207,11 +244,31 @@ class AugmentedSystem:
             K.axpy(1.0, self._BtPB, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)  # type: ignore[arg-type]  # as above
         return K
 
-    def matrix(self, K: PETSc.Mat, dH_dw: np.ndarray, dH_dz: np.ndarray, dlam_dz: np.ndarray) -> PETSc.Mat:
-        """The augmented Newton matrix (MatNest) at the current law evaluation."""
+    def slave_free(self, terms: GeometricTerms) -> np.ndarray:
+        """(k, 3): 1 at the free dofs of the slave nodes of ``terms``' pairs."""
+        return self._blocks.slave_free(terms)
+
+    def augmented_geometric_blocks(self, terms: GeometricTerms, dH_dw: np.ndarray) -> np.ndarray:
+        """(k, 3, 3) c B_fᵀ D_wᵀ D_w W of each pair of ``terms``: the augmentation of the rows' geometric
+        part W (the u block gets c B_freeᵀ D_wᵀ × the pair rows D_w (B + W) du + D_z dz = −H; its
+        c Bᵀ P B part is :meth:`_u_block`'s). On the slave node alone: B_f and W have its columns only."""
+        self._blocks.refresh_rows()
+        start = self.model.rows.indptr[3 * terms.pairs]
+        B_f = self._blocks.rows_free.values[start[:, None] + np.arange(9)].reshape(-1, 3, 3)
+        D = dH_dw[terms.pairs]
+        return self.c * np.einsum("kri,kqr,kqs,ksj->kij", B_f, D, D, terms.W)
+
+    def matrix(self, K: PETSc.Mat, dH_dw: np.ndarray, dH_dz: np.ndarray, dlam_dz: np.ndarray,
+               B_values: np.ndarray | None = None) -> PETSc.Mat:
+        """The augmented Newton matrix (MatNest) at the current law evaluation (``K`` with the
+        geometric blocks already added, if any; ``B_values``: B + W for the pair rows)."""
+        self._blocks.refresh_rows()
+        rows = self._blocks.rows_free
+        self.B_free.setValuesCSR(rows.indptr, rows.columns, rows.values)  # type: ignore[arg-type]  # as in BlockDiagonal.fill
+        self.B_free.assemble()
         A00 = self._u_block(K, dH_dw)
         M = -dlam_dz + self.c * np.einsum("nki,nkj->nij", dH_dw, dH_dz)
-        A01, A10, A11 = self._blocks.fill(M, dH_dw, dH_dz)
+        A01, A10, A11 = self._blocks.fill(M, dH_dw, dH_dz, B_values)
         if self._nest is None:
             self._nest = PETSc.Mat().createNest([[A00, A01], [A10, A11]], comm=K.getComm())
         self._nest.assemble()

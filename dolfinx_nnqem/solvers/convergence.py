@@ -49,6 +49,7 @@ class SolveReport:
     system_order: int = 0  #: order of the (non)smooth system solved per iteration
     gauss_point_values: GaussPointValues | None = None  #: the solver's own state update (NNEQM2), or None
     geometry_passes: int = 1  #: solves of the increment, each in the contact geometry of the last (current geometry)
+    geometry_consistent: bool = False  #: every iterate was evaluated in its own contact geometry (no second solve needed)
 
     @property
     def final(self) -> IterationRecord | None:

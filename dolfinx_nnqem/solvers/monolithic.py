@@ -30,6 +30,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from dolfinx_nnqem import compat
+from dolfinx_nnqem.contact.geometric_stiffness import GeometricTerms
 from dolfinx_nnqem.contact.laws import LawEvaluation, Linearisation
 from dolfinx_nnqem.solvers.block_system import AugmentedSystem, MonolithicMatrix, free_mask
 from dolfinx_nnqem.solvers.contract import ReleasesPETSc
@@ -55,6 +56,7 @@ class _Evaluation:
     norm_R: float
     norm_H: float
     lin: Linearisation | None = None  #: the laws' Linearisation (Newton step coordinates), or None without contact
+    geometric: GeometricTerms | None = None  #: the obstacle pairs' geometric blocks at the iterate (consistent geometry)
 
 
 class MonolithicSolver(ReleasesPETSc):
@@ -86,6 +88,9 @@ class MonolithicSolver(ReleasesPETSc):
         self._matrix: MonolithicMatrix | None = None  # the direct Newton matrix (also the LM fallback's)
         self._augmented: AugmentedSystem | None = self._augmented_system_of_pairs()
         self._geometry_version = problem.contact.geometry_version if problem.contact is not None else 0
+        # current-geometry obstacles re-evaluated at every iterate, their geometric terms in J
+        self.consistent_geometry = (self.settings.consistent_geometry and problem.contact is not None
+                                    and problem.contact.obstacle_geometry)
         self._timings: dict[str, float] = {}
         # the vectors of every iteration, created once and refilled (as DOLFINx's NonlinearProblem
         # does); only the free residual of an evaluation is new, since the watchdog keeps evaluations
@@ -137,6 +142,22 @@ class MonolithicSolver(ReleasesPETSc):
         self.linear = self._linear_solver()
         self._augmented = self._augmented_system_of_pairs()
 
+    def _refresh_geometry(self) -> None:
+        """The current-geometry obstacles' pairs re-evaluated at the iterate (u, ℓ) (collective; nothing
+        to do unless :attr:`consistent_geometry`, or if the iterate has not moved)."""
+        if self.consistent_geometry:
+            p = self.problem
+            assert p.contact is not None  # consistent_geometry: with contact
+            p.contact.refresh_obstacle_geometry(p.u, p.load_factor, p.state.u_n, p.load_factor_n)
+
+    def _geometric_terms(self) -> GeometricTerms | None:
+        """The obstacle pairs' geometric blocks at the iterate, or None (:attr:`consistent_geometry` off)."""
+        if not self.consistent_geometry:
+            return None
+        p = self.problem
+        assert p.contact is not None  # consistent_geometry: with contact
+        return p.contact.geometric_terms(p.u, p.load_factor, p.state.u_n, p.load_factor_n)
+
     def _use_iterative(self) -> bool:
         choice = self.settings.linear_solver
         if choice == "auto":
@@ -165,6 +186,9 @@ class MonolithicSolver(ReleasesPETSc):
             outcome.iterations += tried
         report.iterations = outcome.iterations
         report.converged = outcome.converged
+        # every iterate was evaluated in its own geometry, and no pair can have changed: no second solve
+        report.geometry_consistent = self.consistent_geometry and not (p.contact is not None
+                                                                       and p.contact.surface_geometry)
         final = report.final
         if outcome.converged:
             report.message = "converged"
@@ -194,6 +218,7 @@ class MonolithicSolver(ReleasesPETSc):
         extrapolated = self.settings.extrapolate and p.extrapolate(load_factor)
         u_bc = p.u.x.array[p.bc_dofs].copy()
         p.apply_prescribed_displacements(load_factor)
+        self._refresh_geometry()  # the starting active set sees the predicted configuration's gaps
         p.predict_contact()
         delta_bc = p.u.x.array[p.bc_dofs] - u_bc
         if extrapolated or not p.comm.allreduce(bool(np.any(delta_bc != 0.0)), op=MPI.LOR):
@@ -211,7 +236,9 @@ class MonolithicSolver(ReleasesPETSc):
         laws) evaluated where the solution is, not at a state whose boundary layer alone has been
         moved (which, in a plastic body, yields spuriously and misleads the first step). The
         step is taken in full, without line search (its start is not an admissible state).
-        Returns False if the linear solve failed.
+        Returns False if the linear solve failed. The geometric terms of current-geometry obstacles
+        are left out of the lifted right-hand side (they act on prescribed slave dofs only, rarely
+        moved): the step is a predictor, the Newton iterations that follow use them.
         """
         p = self.problem
         delta = np.zeros_like(p.u.x.array)
@@ -247,6 +274,7 @@ class MonolithicSolver(ReleasesPETSc):
     def evaluate(self) -> _Evaluation:
         """R (free part), H, the law evaluation and the force scale at the current iterate."""
         p = self.problem
+        self._refresh_geometry()
         t0 = time.perf_counter()
         F_int = p.assemble_internal_force(self._vector("F_int", lambda: compat.create_vector(p.V)))
         self._tick("assembly", t0)
@@ -259,15 +287,16 @@ class MonolithicSolver(ReleasesPETSc):
         R = p.residual(F_int=F_int, F_ext=F_ext, contact_force=contact_force,
                        out=self._vector("R", lambda: compat.create_vector(p.V)))
         R_free = p.free_residual(R)
-        law, lin, H = None, None, np.zeros((0, 3))
+        law, lin, H, geometric = None, None, np.zeros((0, 3)), None
         if p.contact is not None:
             t0 = time.perf_counter()
             law = p.contact.evaluate(p.relative_displacement())
             lin = p.contact.linearise(law)
             H = law.H
+            geometric = self._geometric_terms()
             self._tick("contact", t0)
         return _Evaluation(R_free, H, law, p.force_scale(F_int, F_ext, contact_force), vec_norm(R_free),
-                           global_norm(H, p.comm), lin)
+                           global_norm(H, p.comm), lin, geometric)
 
     def _newton_matrix(self, ev: _Evaluation) -> PETSc.Mat:
         """J as one AIJ matrix (the direct system, and the LM fallback's)."""
@@ -281,7 +310,11 @@ class MonolithicSolver(ReleasesPETSc):
         t0 = time.perf_counter()
         if self._matrix is None:
             self._matrix = MonolithicMatrix(p.contact, self._mask)
-        J = self._matrix.assemble(self._K, ev.law.dH_dw, ev.lin.dH_dy, ev.lin.dlam_dy)
+        B_values = None
+        if ev.geometric is not None and len(ev.geometric):
+            ev.geometric.add_to_tangent(self._K, self._matrix.slave_free(ev.geometric))
+            B_values = ev.geometric.rows_values(p.contact.rows)
+        J = self._matrix.assemble(self._K, ev.law.dH_dw, ev.lin.dH_dy, ev.lin.dlam_dy, B_values)
         self._tick("block_matrix", t0)
         return J
 
@@ -292,8 +325,14 @@ class MonolithicSolver(ReleasesPETSc):
         self._K = p.assemble_tangent(self._K)
         self._tick("assembly", t0)
         t0 = time.perf_counter()
-        assert self._augmented is not None and ev.law is not None and ev.lin is not None  # with contact
-        J = self._augmented.matrix(self._K, ev.law.dH_dw, ev.lin.dH_dy, ev.lin.dlam_dy)
+        assert p.contact is not None and self._augmented is not None and ev.law is not None and ev.lin is not None
+        B_values = None
+        if ev.geometric is not None and len(ev.geometric):
+            terms = ev.geometric
+            terms.add_to_tangent(self._K, self._augmented.slave_free(terms),
+                                 self._augmented.augmented_geometric_blocks(terms, ev.law.dH_dw))
+            B_values = terms.rows_values(p.contact.rows)
+        J = self._augmented.matrix(self._K, ev.law.dH_dw, ev.lin.dH_dy, ev.lin.dlam_dy, B_values)
         b = self._augmented.rhs(ev.R_free, ev.H, ev.law.dH_dw)
         self._tick("block_matrix", t0)
         return J, b
@@ -368,6 +407,7 @@ class MonolithicSolver(ReleasesPETSc):
         du, dz = direction[0], direction[1]
         p.u.x.array[:du.shape[0]] = u0 + alpha * du
         p.u.x.scatter_forward()
+        self._refresh_geometry()  # before the slip is followed: w in the iterate's own frames
         if p.contact is not None:
             assert z0 is not None  # the pair unknowns of the start, with contact
             p.contact.z = p.contact.advance(z0, dz, alpha, None if lin is None else lin.cartesian)
@@ -434,6 +474,7 @@ class _NewtonSystem:
         p.u.x.array[:] = u
         if p.contact is not None:
             p.contact.z = z.copy()
+        self.solver._refresh_geometry()  # B and the frames of the restored iterate, as ev has them
         self.current = ev
         return self._merit(ev)
 

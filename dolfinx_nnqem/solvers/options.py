@@ -92,6 +92,11 @@ class MonolithicOptions:
         preconditioner, not the Newton step.
     lag_preconditioner
         Iterative solver with contact: keep the u block's AMG hierarchy while it works.
+    consistent_geometry
+        Current-geometry rigid obstacles: re-evaluate their pairs at every Newton iterate and add
+        the geometric terms (the normal's and the friction frame's rotation) to the Newton matrix
+        (:mod:`~dolfinx_nnqem.contact.geometric_stiffness`); False freezes the geometry within a solve
+        and leaves it to load stepping's repeated solves, as NNEQM1 does (``docs/theory.md``).
     globalisation
         The Newton driver's damping (:class:`~dolfinx_nnqem.numerics.newton.Globalisation`); the LM
         parameter is ν = lm_c · min(ε, 1)^lm_delta · mean diag(JᵀJ), ε the relative residual.
@@ -102,6 +107,7 @@ class MonolithicOptions:
     extrapolate: bool = True
     augmentation: float = 1.0
     lag_preconditioner: bool = True
+    consistent_geometry: bool = True
     globalisation: Globalisation = field(default_factory=lambda: Globalisation(
         min_step=1.0 / 64, watchdog=6, watchdog_progress=0.5, watchdog_restarts=2,
         stall_window=STALL_WINDOW, stagnation=1e-2))

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 from mpi4py import MPI
 
+from dolfinx_nnqem.contact.model import LostContactError
 from dolfinx_nnqem.solvers.checks import CheckOptions, StateCheck, check_state, failure_details
 from dolfinx_nnqem.solvers.convergence import ConvergenceError, SolveReport, logger
 from dolfinx_nnqem.numerics.linalg import free_dropped_objects
@@ -243,23 +244,32 @@ def _solve(problem, solver, target: float) -> SolveReport:
 
     The geometry is evaluated where the increment starts (u_n, the obstacles at ℓ) and the
     increment solved with it frozen; then it is evaluated again at the solution and the increment
-    solved again from there, until a solve starts converged: the solution then satisfies the
-    equations in the geometry of its own configuration (``docs/theory.md``, "Large sliding").
+    solved again from there, until a solve starts converged (the first solve's start is the
+    predictor, not u_n, so it always gets a second): the solution then satisfies the equations in
+    the geometry of its own configuration (``docs/theory.md``, "Large sliding"). A solver that
+    re-evaluates the geometry at every iterate (``report.geometry_consistent``) needs one solve.
     The report counts the Newton iterations of every pass.
     """
     model = problem.contact
     if model is None or not model.current_geometry:
         return solver.solve_increment(target)
-    problem.update_contact_geometry(target)
+    lost = _update_geometry(problem, target)
+    if lost is not None:
+        return lost
     report = solver.solve_increment(target)
     iterations, passes = report.iterations, 1
-    while report.converged and report.iterations > 0:
+    # The first solve starts from the predictor (the secant extrapolation), not from where the geometry
+    # was evaluated (u_n): even with no Newton iteration its solution is not yet in its own geometry.
+    while report.converged and (report.iterations > 0 or passes == 1) and not report.geometry_consistent:
         if passes == GEOMETRY_PASSES:
             report.converged = False
             report.message = (f"the contact geometry did not settle in {GEOMETRY_PASSES} solves of the increment "
                               "(each re-evaluated at the last solution)")
             break
-        problem.update_contact_geometry(target)
+        lost = _update_geometry(problem, target)
+        if lost is not None:
+            lost.iterations += iterations
+            return lost
         problem.warm_start = True
         try:
             report = solver.solve_increment(target)
@@ -268,6 +278,16 @@ def _solve(problem, solver, target: float) -> SolveReport:
         iterations, passes = iterations + report.iterations, passes + 1
     report.iterations, report.geometry_passes = iterations, passes
     return report
+
+
+def _update_geometry(problem, target: float) -> SolveReport | None:
+    """Re-evaluate the current contact geometry; a failed solve's report if an interface lost all its
+    pairs (load stepping then cuts the increment back, and names the interface if it gives up)."""
+    try:
+        problem.update_contact_geometry(target)
+    except LostContactError as error:
+        return SolveReport(converged=False, iterations=0, message=str(error))
+    return None
 
 
 def _commit(problem, solver, report: SolveReport, target: float, *, index: int, cutbacks: int,
