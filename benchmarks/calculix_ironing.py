@@ -27,7 +27,7 @@ CalculiX and compares the punch force histories of the two programs:
 
 With ``--ours`` the package solves its case on the same mesh and increments (monolithic, the
 tutorial's options) and the two histories are printed side by side with the steady-ironing
-means (punch at x ≥ 1), F_t / F_n, the peaks and the differences. ``--penalty`` takes several
+means (punch at 1 ≤ x < 1.5), F_t / F_n, the peaks and the differences. ``--penalty`` takes several
 factors: CalculiX is run once per factor, so the convergence of its answer as the penalty grows
 shows what of the difference the penalty explains; ``--punch-facets`` does the same for the
 faceting of CalculiX's punch, ``--increments`` for the load path's discretisation (both programs
@@ -70,7 +70,7 @@ PUNCH_FACETS = 120  # facets over the sector: 0.5° each, sagitta 9.5e-6 R (1e-3
 PUNCH_THICKNESS = 0.1  # radial depth of the punch's elements, in radii (any value: the body is rigid)
 PUNCH_OVERHANG = 0.05  # the punch's extent beyond each z face of the strip, in strip widths
 P_MAX = 10.0  # the plastic strain at the end of the *PLASTIC table (far beyond any reached)
-STEADY_FROM = 1.0  # steady ironing: punch axis at x ≥ this (the tutorial's measure)
+STEADY_FROM = 1.0  # steady ironing: punch axis at x ≥ this, up to (not at) the end of the drag
 CONTACT_TYPES = {"node-to-surface": "NODE TO SURFACE", "surface-to-surface": "SURFACE TO SURFACE"}
 
 
@@ -272,11 +272,15 @@ def punch_x(history: np.ndarray, punch) -> np.ndarray:
 
 
 def measures(history: np.ndarray, x: np.ndarray) -> dict[str, float]:
-    """Steady-ironing means (punch at x ≥ ``STEADY_FROM``), ratio, pulses and peaks of a history.
+    """Steady-ironing means, ratio, pulses and peaks of a history.
 
-    F_n = −F_y (pressing down), F_t = F_x (dragged along +x).
+    F_n = −F_y (pressing down), F_t = F_x (dragged along +x). The means are over the increments
+    ending with the punch at ``STEADY_FROM`` ≤ x < x_end: the force pulses with the period of
+    one facet as the punch crosses nodes, and this half-open window holds whole periods when
+    its length is a whole number of facets (0.5 = nx/4 facets), where a closed one would count
+    one phase twice (on the coarse mesh it moves the mean by more than the differences sought).
     """
-    steady = x >= STEADY_FROM - 1e-12
+    steady = (x >= STEADY_FROM - 1e-9) & (x < x[-1] - 1e-9)
     fn, ft = -history[:, 2], history[:, 1]
     return {"mean F_n": float(fn[steady].mean()), "mean F_t": float(ft[steady].mean()),
             "F_t / F_n": float(ft[steady].mean() / fn[steady].mean()),
