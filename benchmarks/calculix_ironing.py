@@ -167,31 +167,51 @@ def model_text(problem, nx: int, increments: int, *, penalty_factor: float, cont
     lines += ["*SURFACE, NAME=STRIPTOP, TYPE=ELEMENT"] + [f"{e + 1}, S{f}" for e, f in top]
     lines += ["*SURFACE, NAME=PUNCHFACE, TYPE=ELEMENT"] + [f"{e + 1 + n_el}, S{f}" for e, f in face]
     stiffness = penalty_factor * material.E / h
+    lines += material_lines(material)
+    lines += [f"*RIGID BODY, ELSET=PUNCH, REF NODE={ref}, ROT NODE={rot}"]
+    lines += contact_lines(contact, stiffness, mu_f, material.sigma_y0)
+    lines += amplitudes(punch.motion.points)
+    lines += ["*BOUNDARY", "BOTTOM, 1, 3", "ZFACES, 3, 3", "ROT, 1, 3", f"{ref}, 3, 3"]
+    lines += step_lines(ref, increments)
+    return "\n".join(lines) + "\n"
+
+
+def material_lines(material) -> list[str]:
+    """The strip's von Mises material, and a stiff elastic one for the punch (rigid anyway)."""
+    lines = ["*MATERIAL, NAME=STRIP", "*ELASTIC", f"{material.E:.12e}, {material.nu}", "*PLASTIC"]
+    lines += [f"{s:.12e}, {p:.12e}" for s, p in plastic_table(material.sigma_y0, material.H)]
+    return lines + ["*MATERIAL, NAME=PUNCH", "*ELASTIC", f"{1e3 * material.E:.6e}, 0.3",
+                    "*SOLID SECTION, ELSET=STRIP, MATERIAL=STRIP", "*SOLID SECTION, ELSET=PUNCH, MATERIAL=PUNCH"]
+
+
+def contact_lines(contact: str, stiffness: float, mu_f: float, sigma_y0: float) -> list[str]:
+    """The penalty contact of the strip's top (slave) on the punch's face (master).
+
+    ``stiffness``: the pressure-overclosure slope, and the stick slope of the friction.
+    """
     behaviour = f"{stiffness:.6e}"
     if contact == "node-to-surface":  # its tension at large clearances: a thousandth of σ_y0 (default E/70000)
-        behaviour += f", {1e-3 * material.sigma_y0:.6e}"
-    lines += ["*MATERIAL, NAME=STRIP", "*ELASTIC", f"{material.E:.12e}, {material.nu}", "*PLASTIC"]
-    lines += [f"{s:.12e}, {p:.12e}" for s, p in plastic_table(material.sigma_y0, material.H)]
-    lines += ["*MATERIAL, NAME=PUNCH", "*ELASTIC", f"{1e3 * material.E:.6e}, 0.3",  # rigid anyway: *RIGID BODY
-              "*SOLID SECTION, ELSET=STRIP, MATERIAL=STRIP", "*SOLID SECTION, ELSET=PUNCH, MATERIAL=PUNCH",
-              f"*RIGID BODY, ELSET=PUNCH, REF NODE={ref}, ROT NODE={rot}",
-              "*SURFACE INTERACTION, NAME=IRONING", "*SURFACE BEHAVIOR, PRESSURE-OVERCLOSURE=LINEAR", behaviour,
-              *(["*FRICTION", f"{mu_f}, {stiffness:.6e}"] if mu_f > 0 else []),  # ccx refuses μ = 0
-              f"*CONTACT PAIR, INTERACTION=IRONING, TYPE={CONTACT_TYPES[contact]}", "STRIPTOP, PUNCHFACE"]
-    lines += amplitudes(punch.motion.points)
-    lines += ["*BOUNDARY", "BOTTOM, 1, 3", "ZFACES, 3, 3", "ROT, 1, 3", f"{ref}, 3, 3",
-              "*TIME POINTS, NAME=INCREMENTS"]
+        behaviour += f", {1e-3 * sigma_y0:.6e}"
+    return ["*SURFACE INTERACTION, NAME=IRONING", "*SURFACE BEHAVIOR, PRESSURE-OVERCLOSURE=LINEAR", behaviour,
+            *(["*FRICTION", f"{mu_f}, {stiffness:.6e}"] if mu_f > 0 else []),  # ccx refuses μ = 0
+            f"*CONTACT PAIR, INTERACTION=IRONING, TYPE={CONTACT_TYPES[contact]}", "STRIPTOP, PUNCHFACE"]
+
+
+def step_lines(ref: int, increments: int) -> list[str]:
+    """The step: the reference node on its path, output at the ends of the package's increments.
+
+    Automatic incrementation, never longer than the package's increments and ending on each of
+    them (the time points): with fixed increments the contact of a node crossing a punch facet
+    can cycle between states and ccx stops.
+    """
     ends = [f"{k / increments:.12g}" for k in range(1, increments + 1)]
-    lines += [", ".join(ends[k:k + 8]) for k in range(0, len(ends), 8)]
-    # automatic incrementation, never longer than the package's increments and ending on each of
-    # them (the time points): with fixed increments the contact of a node crossing a punch facet
-    # can cycle between states and ccx stops
+    lines = ["*TIME POINTS, NAME=INCREMENTS"] + [", ".join(ends[k:k + 8]) for k in range(0, len(ends), 8)]
     dt = 1.0 / increments
-    lines += [f"*STEP, INC={100 * increments}", "*STATIC", f"{dt:.12g}, 1.0, {1e-6 * dt:.6g}, {dt:.12g}",
-              "*BOUNDARY, AMPLITUDE=DX", f"{ref}, 1, 1, 1.0", "*BOUNDARY, AMPLITUDE=DY", f"{ref}, 2, 2, 1.0",
-              "*NODE PRINT, NSET=REF, TIME POINTS=INCREMENTS", "RF",
-              "*NODE FILE, TIME POINTS=INCREMENTS", "U", "*EL FILE, TIME POINTS=INCREMENTS", "PEEQ", "*END STEP"]
-    return "\n".join(lines) + "\n"
+    return lines + [f"*STEP, INC={100 * increments}", "*STATIC", f"{dt:.12g}, 1.0, {1e-6 * dt:.6g}, {dt:.12g}",
+                    "*BOUNDARY, AMPLITUDE=DX", f"{ref}, 1, 1, 1.0", "*BOUNDARY, AMPLITUDE=DY", f"{ref}, 2, 2, 1.0",
+                    "*NODE PRINT, NSET=REF, TIME POINTS=INCREMENTS", "RF",
+                    "*NODE FILE, TIME POINTS=INCREMENTS", "U", "*EL FILE, TIME POINTS=INCREMENTS", "PEEQ",
+                    "*END STEP"]
 
 
 def amplitudes(path_points) -> list[str]:
