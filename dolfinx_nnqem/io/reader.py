@@ -23,9 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["read_fields", "read_pairs", "read_results", "read_summary", "start_reading_fields"]
+from dolfinx_nnqem.io.curves import MPI_LAUNCHER_PREFIXES
 
-MPI_LAUNCHER_PREFIXES = ("PMI_", "PMIX_", "HYDRA_", "MPIR_", "MPI_LOCAL", "OMPI_", "PRTE_")
+__all__ = ["read_fields", "read_pairs", "read_results", "read_summary", "start_reading_fields"]
 
 
 def read_summary(folder: str | os.PathLike) -> dict:
