@@ -23,9 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
-from dolfinx_nnqem.io.curves import MPI_LAUNCHER_PREFIXES
-
 __all__ = ["read_fields", "read_pairs", "read_results", "read_summary", "start_reading_fields"]
+
+MPI_LAUNCHER_PREFIXES = ("PMI_", "PMIX_", "HYDRA_", "MPIR_", "MPI_LOCAL", "OMPI_", "PRTE_")
 
 
 def read_summary(folder: str | os.PathLike) -> dict:

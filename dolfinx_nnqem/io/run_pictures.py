@@ -35,9 +35,9 @@ so only :func:`draw_live_pictures` (the end of a run) draws it.
 from __future__ import annotations
 
 import logging
+import math
 import os
 import xml.etree.ElementTree as ET
-from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -46,12 +46,9 @@ import dolfinx_nnqem.io.plots as plots
 from dolfinx_nnqem import compat
 from dolfinx_nnqem.io.live_fields import LINEAR_VTK_CELLS
 from dolfinx_nnqem.io.offscreen import PictureUnavailable, offscreen_plotter
-from dolfinx_nnqem.io.curves import (CurveDrawing, draw_convergence, draw_curves, draw_load_curve,
-                                     draw_pair_pressure, load_curve_series, start_drawing_curves)
-from dolfinx_nnqem.io.reader import read_fields, read_pairs, read_summary
+from dolfinx_nnqem.io.reader import read_pairs, read_summary, start_reading_fields
 
-__all__ = ["PICTURE_FOLDER", "PICTURES", "draw_convergence", "draw_deformed", "draw_live_pictures", "draw_load_curve",
-           "draw_pair_pressure", "draw_run_pictures", "load_curve_series", "pictures_enabled"]
+__all__ = ["PICTURE_FOLDER", "PICTURES", "draw_live_pictures", "draw_run_pictures", "pictures_enabled"]
 
 PICTURE_FOLDER = "pictures"
 PICTURES = ("deformed.png", "pair_pressure.png", "load_curve.png", "convergence.png")
@@ -67,6 +64,15 @@ def pictures_enabled(flag: bool | None = None) -> bool:
     if flag is not None:
         return bool(flag)
     return os.environ.get(ENV_SWITCH, "1").strip().lower() not in ("0", "false", "no", "off")
+
+
+def _matplotlib():
+    import matplotlib
+
+    matplotlib.use("Agg")  # off-screen: no display needed
+    import matplotlib.pyplot as plt
+
+    return plt
 
 
 def _title(summary: dict) -> str:
@@ -214,6 +220,122 @@ def draw_deformed(step: dict, rows: list[dict], path: Path, *, title: str = "", 
     return path
 
 
+# -- curves --------------------------------------------------------------------------------------
+def _rows_by_interface(rows: list[dict]) -> dict[str, list[dict]]:
+    out: dict[str, list[dict]] = {}
+    for row in rows:
+        out.setdefault(row.get("interface", ""), []).append(row)
+    return out
+
+
+def draw_pair_pressure(rows: list[dict], path: Path, *, title: str = "") -> Path:
+    """Pair pressure (Pa) over each contact surface, one panel per interface."""
+    plt = _matplotlib()
+    groups = _rows_by_interface(rows)
+    fig, axes = plt.subplots(1, len(groups), figsize=(5.5 * len(groups), 4.5), squeeze=False)
+    for ax, (name, group) in zip(axes[0], groups.items()):
+        x = np.array([[float(r["slave_x"]), float(r["slave_y"]), float(r["slave_z"])] for r in group])
+        pressure = np.array([float(r["pressure"]) for r in group])
+        # the surface's two longest extents name the axes (a contact plane x-z shows x and z)
+        a, b = sorted(np.argsort(np.ptp(x, axis=0))[-2:])
+        closed = np.array([r["state"] != "open" for r in group])
+        cloud = ax.scatter(x[:, a], x[:, b], c=pressure, cmap="viridis", s=60, edgecolors="k")
+        ax.margins(0.15)  # room for the legend beside the edge pairs
+        if np.any(~closed):
+            ax.scatter(x[~closed, a], x[~closed, b], s=60, facecolors="white", edgecolors="grey",
+                       label="open")
+            ax.legend(loc="best", fontsize=8)
+        fig.colorbar(cloud, ax=ax, label="pressure (Pa)")
+        ax.set_xlabel(f"{'xyz'[a]} (m)")
+        ax.set_ylabel(f"{'xyz'[b]} (m)")
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_title(f"interface {name}: max {pressure.max():.3g} Pa", fontsize=9)
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def _largest_component(history: list[list[float]]) -> tuple[int, np.ndarray]:
+    """(k, values of component k) for the component with the largest last magnitude."""
+    values = np.asarray(history, dtype=float).reshape(len(history), -1)
+    k = int(np.argmax(np.abs(values[-1])))
+    return k, values[:, k]
+
+
+def load_curve_series(summary: dict) -> tuple[list[tuple[str, np.ndarray]], list[tuple[str, np.ndarray]]]:
+    """The load curve's data: ([(label, force per increment, N)], [(label, displacement, m)])."""
+    forces, displacements = [], []
+    for key, what in (("reaction_history", "reaction of tag"), ("obstacle_force_history", "obstacle")):
+        history = summary.get(key, [])
+        for name in (history[-1] if history else {}):
+            k, values = _largest_component([h.get(name, [math.nan] * 3) for h in history])
+            forces.append((f"{what} {name}: F{'xyz'[k]}", values))
+    probes = summary.get("probe_history", [])
+    # the two-beam benchmark renames its probes "free_end_corners"
+    names = [p["name"] for p in summary.get("probes") or summary.get("free_end_corners") or []]
+    for i, name in enumerate(names if probes else []):
+        k, values = _largest_component([h[i] for h in probes])
+        displacements.append((f"{name}: u{'xyz'[k]}", values))
+    return forces, displacements
+
+
+def draw_load_curve(summary: dict, path: Path, *, title: str = "") -> Path:
+    """Load factor against reactions (N) and probe displacements (mm)."""
+    factors = np.asarray(summary.get("load_factors", []), dtype=float)
+    forces, displacements = load_curve_series(summary)
+    panels = [(s, "force (N)", 1.0) for s in [forces] if s] + [(s, "displacement (mm)", 1e3)
+                                                               for s in [displacements] if s]
+    if not panels:
+        raise ValueError("summary.json has no reaction_history or probe_history")
+    plt = _matplotlib()
+    fig, axes = plt.subplots(1, len(panels), figsize=(6 * len(panels), 4.5), squeeze=False)
+    for ax, (series, xlabel, unit) in zip(axes[0], panels):
+        for label, values in series:
+            n = min(len(values), len(factors))
+            ax.plot(unit * values[:n], factors[:n], "o-", ms=4, label=label)
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel("load factor")
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=7, loc="best")
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def draw_convergence(summary: dict, path: Path, *, title: str = "") -> Path:
+    """‖R‖/F and ‖H‖/F per iteration, one line per increment (log scale)."""
+    histories = [np.asarray(h, dtype=float).reshape(-1, 2) for h in summary.get("residual_histories", []) if h]
+    if not histories:
+        raise ValueError("summary.json has no residual_histories")
+    with_contact = any(np.any(h[:, 1] > 0) for h in histories)
+    names = ["equilibrium ‖R‖/F"] + (["contact ‖H‖/F"] if with_contact else [])
+    plt = _matplotlib()
+    from matplotlib import ticker
+
+    fig, axes = plt.subplots(1, len(names), figsize=(6 * len(names), 4.5), squeeze=False)
+    colours = plt.get_cmap("viridis")(np.linspace(0.0, 0.9, len(histories)))
+    for column, (ax, name) in enumerate(zip(axes[0], names)):
+        for k, (h, colour) in enumerate(zip(histories, colours)):
+            ax.semilogy(np.arange(len(h)), np.maximum(h[:, column], 1e-17), "o-", ms=3, color=colour,
+                        label=f"increment {k + 1}" if len(histories) <= 12 else None)
+        # plain "1e−08" labels: the default ones are mathtext, whose parser cost this picture 0.5 s
+        ax.yaxis.set_major_formatter(ticker.LogFormatter())
+        ax.set_xlabel("iteration")
+        ax.set_ylabel(name)
+        ax.grid(True, which="both", alpha=0.3)
+        if len(histories) <= 12:
+            ax.legend(fontsize=7)
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
 # -- the whole set -------------------------------------------------------------------------------
 def draw_run_pictures(folder: str | os.PathLike, *, out: str | os.PathLike | None = None,
                       scale: float | None = None, field: str = "von_mises",
@@ -243,104 +365,79 @@ def draw_run_pictures(folder: str | os.PathLike, *, out: str | os.PathLike | Non
     dict
         Per picture name, its path, or the reason it was not drawn (a string).
     """
-    return _start_run_pictures(folder, out=out, scale=scale, field=field, camera=camera, step=step)()
 
-
-def _start_run_pictures(folder: str | os.PathLike, *, out: str | os.PathLike | None = None,
-                        scale: float | None = None, field: str = "von_mises", camera: str = "iso",
-                        step: dict | None = None, more_to_draw: bool = False) -> Callable[[], dict[str, Path | str]]:
-    """:func:`draw_run_pictures` up to the curves: ``deformed.png`` is drawn, the curves are
-    being drawn by a child process (:func:`~dolfinx_nnqem.io.curves.start_drawing_curves`)
-    where this process has pyvista pictures to draw meanwhile (``deformed.png``, or
-    ``more_to_draw``: the caller's own). Returns the function that waits for the curves and
-    gives every picture's path or reason."""
     folder = Path(folder)
     out = Path(out) if out is not None else folder / PICTURE_FOLDER
     out.mkdir(parents=True, exist_ok=True)
     summary = read_summary(folder)
-    if not summary.get("load_factors"):
-        return lambda: {name: "not drawn: no converged increment" for name in PICTURES}
     title = _title(summary)
     pairs = read_pairs(folder)
     rows = pairs[-1]["rows"] if pairs else []
     done: dict[str, Path | str] = {}
-    has_fields = step is not None or (folder / "fields.xdmf").exists()
-    if has_fields or more_to_draw:
-        curves = start_drawing_curves(summary, rows, out, title)
-    else:  # nothing to draw meanwhile: a child would only add its start-up
-        drawn = draw_curves(summary, rows, out, title)
-        curves = CurveDrawing.finished(drawn)
+
+    def attempt(name, draw, *args, **kwargs):
+        try:
+            done[name] = draw(*args, out / name, **kwargs)
+        except (ValueError, KeyError, OSError, IndexError, PictureUnavailable) as error:  # data missing, no VTK
+            done[name] = f"not drawn: {error}"
+
+    if not summary.get("load_factors"):
+        return {name: "not drawn: no converged increment" for name in PICTURES}
+    fields = None
+    if step is not None:
+        fields = lambda: [step]  # noqa: E731  (from memory: nothing to read)
+    elif (folder / "fields.xdmf").exists():  # the last step is read (by a child process) while the curves are drawn
+        try:
+            fields = start_reading_fields(folder, last_only=True)
+        except OSError as error:
+            done["deformed.png"] = f"not drawn: {error}"
     try:
-        if has_fields:
-            done["deformed.png"] = _draw_deformed_of(folder, out, step, rows, title=title, scale=scale, field=field,
-                                                     camera=camera)
-    except BaseException:
-        curves.cancel()
-        raise
-
-    def finish() -> dict[str, Path | str]:
-        for name, result in curves.result().items():
-            done[name] = result if result.startswith("not drawn") else Path(result)
-        done.setdefault("deformed.png", "not drawn: no fields (the run was made with fields = false)")
-        return {name: done[name] for name in PICTURES}
-
-    return finish
-
-
-def _draw_deformed_of(folder: Path, out: Path, step: dict | None, rows: list[dict], **options) -> Path | str:
-    """``deformed.png`` from ``step`` (from memory), else from the last increment of
-    ``fields.xdmf`` (with the quadratic displacement of ``fields_p2.pvd``); its path, or why not."""
-    try:
-        if step is None:
-            steps = read_fields(folder, last_only=True)
-            if not steps:
-                return "not drawn: fields.xdmf lists no increment"
-            step = _with_quadratic_displacement(folder, steps[-1])
-        return draw_deformed(step, rows, out / "deformed.png", **options)
-    except (ValueError, KeyError, OSError, IndexError, PictureUnavailable) as error:  # data missing, no VTK
-        return f"not drawn: {error}"
+        if rows:
+            attempt("pair_pressure.png", draw_pair_pressure, rows, title=title)
+        else:
+            done["pair_pressure.png"] = "not drawn: no contact pairs"
+        attempt("load_curve.png", draw_load_curve, summary, title=title)
+        attempt("convergence.png", draw_convergence, summary, title=title)
+    finally:  # the reading process is waited for whatever happened
+        try:
+            steps = fields() if fields is not None else []
+        except OSError as error:
+            steps, done["deformed.png"] = [], f"not drawn: {error}"
+    if steps:
+        last = steps[-1] if step is not None else _with_quadratic_displacement(folder, steps[-1])
+        attempt("deformed.png", draw_deformed, last, rows, title=title, scale=scale, field=field, camera=camera)
+    done.setdefault("deformed.png", "not drawn: no fields (the run was made with fields = false)")
+    return {name: done[name] for name in PICTURES}
 
 
 def draw_live_pictures(problem, folder: str | os.PathLike, *, completed: bool,
                        step: dict | None = None) -> dict[str, Path | str]:
     """The end of a run: :func:`draw_run_pictures` on rank 0 (with the run's last ``step`` of
-    the fields, from memory, where it has one), and the live-problem hook.
+    the fields, from memory, where it has one), then the live-problem hook.
 
     Collective. ``contact_pressure.png`` is drawn by ``plots.plot_contact_pressure(problem,
     path)`` when that function exists (it draws on the problem's surfaces, collectively), the
     problem has contact and the run ``completed`` (after a failed increment the problem holds
-    no converged state); otherwise that picture is skipped. It is drawn while the child process
-    of :func:`draw_run_pictures` draws the curves. A picture that cannot be drawn never ends the
-    run: its reason is logged.
+    no converged state); otherwise that picture is skipped. A picture that cannot be drawn
+    never ends the run: its reason is logged.
     """
 
     folder = Path(folder)
     done: dict[str, Path | str] = {}
-    plot_contact_pressure = getattr(plots, "plot_contact_pressure", None)
-    contact = plot_contact_pressure is not None and problem.has_contact and completed
-    finish: Callable[[], dict[str, Path | str]] | None = None
     if problem.comm.rank == 0:
         try:
-            finish = _start_run_pictures(folder, step=step, more_to_draw=contact)
+            done = draw_run_pictures(folder, step=step)
         except Exception as error:  # noqa: BLE001  (the results are written; a picture is a bonus)
             done = {name: f"not drawn: {type(error).__name__}: {error}" for name in PICTURES}
-    contact_done: Path | str | None = None
-    if contact:
+    done = problem.comm.bcast(done, root=0)
+    plot_contact_pressure = getattr(plots, "plot_contact_pressure", None)
+    if plot_contact_pressure is not None and problem.has_contact and completed:
         path = folder / PICTURE_FOLDER / "contact_pressure.png"
         try:  # the gather inside is reached on every rank before anything can fail; rank 0 draws
-            assert plot_contact_pressure is not None
             plot_contact_pressure(problem, path)
-            contact_done = path
+            done["contact_pressure.png"] = path
         except Exception as error:  # noqa: BLE001  (as above: a picture never ends the run)
-            contact_done = f"not drawn: {type(error).__name__}: {error}"
-    if finish is not None:
-        try:
-            done = finish()
-        except Exception as error:  # noqa: BLE001
-            done = {name: f"not drawn: {type(error).__name__}: {error}" for name in PICTURES}
-    done = problem.comm.bcast(done, root=0)
-    if contact_done is not None:
-        done["contact_pressure.png"] = contact_done
+            done["contact_pressure.png"] = f"not drawn: {type(error).__name__}: {error}"
     for name, result in done.items():
         if isinstance(result, str):
             _log.warning(f"picture {name}: {result}")
