@@ -17,6 +17,7 @@ quadratic displacement is drawn on its own Lagrange cells.
 from __future__ import annotations
 
 from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 
@@ -27,7 +28,7 @@ LINEAR_VTK_CELLS = {10: (10, 4), 71: (10, 4), 24: (10, 4), 12: (12, 8), 72: (12,
 Lagrange or quadratic. VTK lists a higher-order cell's corners first, in the first-order order."""
 
 
-def gather_field_step(space, u_values: np.ndarray, cell_fields: Mapping[str, object], time: float, *,
+def gather_field_step(space, u_values: np.ndarray, cell_fields: Mapping[str, Any], time: float, *,
                       whole_cells: bool) -> dict | None:
     """The displacement ``u_values`` of ``space`` and cell fields as one picture step, on rank 0.
 
@@ -69,8 +70,8 @@ def gather_field_step(space, u_values: np.ndarray, cell_fields: Mapping[str, obj
     u = np.asarray(u_values).reshape(-1, 3)[:nodes]
     values = {}
     for name, function in cell_fields.items():
-        dofs = function.function_space.dofmap.list[:owned_cells, 0]  # type: ignore[attr-defined]
-        values[name] = np.asarray(function.x.array[dofs])  # type: ignore[attr-defined]
+        dofs = function.function_space.dofmap.list[:owned_cells, 0]
+        values[name] = np.asarray(function.x.array[dofs])
     parts = mesh.comm.gather((vtk_type, global_nodes[cells], global_nodes, np.asarray(x)[:nodes], u, values), root=0)
     if mesh.comm.rank != 0:
         return None
