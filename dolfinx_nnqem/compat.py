@@ -196,12 +196,12 @@ def extract_outer_surface(dataset):
 def import_pyvista():
     """``import pyvista``, without the mypy plugin pyvista loads where mypy is installed.
 
-    pyvista ≥ 0.45 imports ``mypy.nodes`` for its typing plugin whenever it finds mypy (a
-    development environment, such as this package's ``[dev]`` extra): a tenth of a second of the
-    run's pictures, for a plugin only mypy itself uses. pyvista asks
+    Recent pyvista (0.49 here) imports ``mypy.nodes`` for its typing plugin whenever it finds
+    mypy (a development environment, such as this package's ``[test]`` extra): time of the run's
+    pictures (``docs/performance.md``) for a plugin only mypy itself uses. pyvista asks
     ``importlib.util.find_spec("mypy")``, which answers None for a module set to None in
     ``sys.modules``; that is done for the import only, and only where mypy is not loaded
-    already. pyvista 0.44 (Debian 13) has no such plugin: the same import.
+    already. A pyvista without the plugin (Debian 13's 0.44, as far as known) imports as ever.
     """
     if "pyvista" in sys.modules or "mypy" in sys.modules:
         import pyvista
