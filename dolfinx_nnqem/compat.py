@@ -193,6 +193,32 @@ def extract_outer_surface(dataset):
     return dataset.extract_surface()
 
 
+def import_pyvista():
+    """``import pyvista``, without the mypy plugin pyvista loads where mypy is installed.
+
+    Recent pyvista (0.49 here) imports ``mypy.nodes`` for its typing plugin whenever it finds
+    mypy (a development environment, such as this package's ``[test]`` extra): time of the run's
+    pictures (``docs/performance.md``) for a plugin only mypy itself uses. pyvista asks
+    ``importlib.util.find_spec("mypy")``, which answers None for a module set to None in
+    ``sys.modules``; that is done for the import only, and only where mypy is not loaded
+    already. A pyvista without the plugin (Debian 13's 0.44, as far as known) imports as ever.
+    """
+    if "pyvista" in sys.modules or "mypy" in sys.modules:
+        import pyvista
+
+        return pyvista
+    sys.modules["mypy"] = None  # type: ignore[assignment]
+    try:
+        import pyvista
+    finally:
+        if sys.modules.get("mypy", 0) is None:
+            del sys.modules["mypy"]
+    return pyvista
+
+
+_RENDER_PROBLEM: list[str | None] = []  # the answer of vtk_render_problem, once known
+
+
 def vtk_render_problem() -> str | None:
     """Why VTK cannot draw a picture in this process, or None if it can.
 
@@ -204,12 +230,14 @@ def vtk_render_problem() -> str | None:
     """
     if not sys.platform.startswith("linux") or os.environ.get("DISPLAY"):
         return None
-    import vtkmodules.vtkRenderingOpenGL2  # noqa: F401  (registers the OpenGL render windows)
-    from vtkmodules.vtkRenderingCore import vtkRenderWindow
+    if not _RENDER_PROBLEM:  # a process draws two pictures: the render window is made once to ask
+        import vtkmodules.vtkRenderingOpenGL2  # noqa: F401  (registers the OpenGL render windows)
+        from vtkmodules.vtkRenderingCore import vtkRenderWindow
 
-    window = vtkRenderWindow()
-    name = window.GetClassName()
-    if name == "vtkXOpenGLRenderWindow":
-        return ("this VTK renders through X only and no display is set (DISPLAY is empty): run under "
-                "`xvfb-run -a`, or install a VTK that renders off-screen (pip's vtk >= 9.4)")
-    return None
+        window = vtkRenderWindow()
+        name = window.GetClassName()
+        _RENDER_PROBLEM.append(
+            "this VTK renders through X only and no display is set (DISPLAY is empty): run under "
+            "`xvfb-run -a`, or install a VTK that renders off-screen (pip's vtk >= 9.4)"
+            if name == "vtkXOpenGLRenderWindow" else None)
+    return _RENDER_PROBLEM[0]

@@ -7,6 +7,7 @@ import os
 import re
 import subprocess
 import sys
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
@@ -130,3 +131,50 @@ def test_pictures_can_be_turned_off(tmp_path, monkeypatch):
                                      .replace("../meshes", (ROOT / "meshes").as_posix()))
     with pytest.raises(ProblemFileError, match="pictures"):
         load_problem_file(tmp_path / "p.toml")
+
+
+def _degree_2_problem(tmp_path: Path) -> Path:
+    """The two beams with a quadratic displacement (``degree = 2``) on their first-order mesh."""
+    text = EXAMPLE.read_text().replace('"../meshes/two_beams.msh"',
+                                       f'"{(ROOT / "meshes" / "two_beams.msh").as_posix()}"\ndegree = 2')
+    path = tmp_path / "quadratic.toml"
+    path.write_text(text)
+    return path
+
+
+def _nodes_and_displacements(points, u) -> np.ndarray:
+    """Rows (x, y, z, ux, uy, uz) sorted: the same set of nodal values whatever their order."""
+    rows = np.hstack([np.asarray(points, dtype=float), np.asarray(u, dtype=float).reshape(len(points), 3)])
+    keys = np.round(rows[:, :3], 9) + 0.0  # by position; round-off (and -0.0) must not reorder
+    return rows[np.lexsort(keys.T[::-1])]
+
+
+def test_a_degree_2_run_draws_its_quadratic_displacement(tmp_path, monkeypatch):
+    """deformed.png of a degree-2 run is drawn from u at every P2 node (fields_p2.pvd's values),
+    at the end of the run (from memory) and when redrawn (from fields_p2.pvd), not from the
+    vertex values of fields.xdmf."""
+    import pyvista
+
+    from dolfinx_nnqem.io import run_pictures
+    from dolfinx_nnqem.io.reader import read_fields
+
+    monkeypatch.delenv(ENV_SWITCH, raising=False)
+    drawn: list[dict] = []
+    draw = run_pictures.draw_deformed
+    monkeypatch.setattr(run_pictures, "draw_deformed", lambda step, *a, **k: (drawn.append(step), draw(step, *a, **k))[1])
+    out = tmp_path / "out"
+    assert main(["-q", "run", str(_degree_2_problem(tmp_path)), "--increments", "1", "--out", str(out)]) == EXIT_OK
+    assert main(["-q", "plot", str(out), "--out", str(tmp_path / "redrawn")]) == EXIT_OK
+    assert len(drawn) == 2, "deformed.png drawn at the end of the run and by plot"
+    last = [d.attrib["file"] for d in ET.parse(out / "fields_p2.pvd").iter("DataSet")][-1]
+    quadratic = pyvista.read(str(out / last))
+    vertices = read_fields(out, last_only=True)[-1]["geometry"]
+    expected = _nodes_and_displacements(quadratic.points, quadratic.point_data["u"])
+    for where, step in zip(("end of the run", "plot"), drawn):
+        grid, _ = run_pictures._field_grid(step, 1.0)
+        print(f"\n  {where}: {grid.n_points} nodes, {grid.n_cells} cells of VTK type {grid.celltypes[0]} drawn "
+              f"(fields_p2.pvd: {quadratic.n_points} nodes; fields.xdmf: {len(vertices)} vertices)", end="")
+        assert grid.n_points == quadratic.n_points > len(vertices)
+        assert grid.n_cells == quadratic.n_cells and np.all(grid.celltypes == quadratic.celltypes)
+        np.testing.assert_allclose(_nodes_and_displacements(step["geometry"], step["u"]), expected, rtol=0, atol=1e-12)
+        assert _inked_fraction(out / "pictures" / "deformed.png") > 0.02

@@ -87,10 +87,17 @@ class FieldSeriesWriter:
     staged
         Stage the index here (renamed at the run's commit point, :func:`~dolfinx_nnqem.io.safe_io.commit`)
         instead of replacing it durably at once.
+    keep_last
+        Keep the displacement values of the last increment written (:attr:`last_written`): the
+        run's pictures are drawn from them, not read back from the file.
     """
 
-    def __init__(self, problem, folder: str | os.PathLike, staged: StagedFiles | None = None):
+    def __init__(self, problem, folder: str | os.PathLike, staged: StagedFiles | None = None, *,
+                 keep_last: bool = False):
         self.problem = problem
+        self.keep_last = keep_last
+        self.last_written: tuple[float, fem.FunctionSpace, np.ndarray] | None = None
+        """(load factor, space, local values) of the displacement last written, with ``keep_last``."""
         self.folder = Path(folder)
         self.staged = staged
         self._grids: dict[tuple[int, float], ET.Element] = {}  # a step's grid, read once from its file
@@ -121,9 +128,15 @@ class FieldSeriesWriter:
         # for the step file is refused here, with the figures
         on_rank0(self.comm, check_free_space, path.with_suffix(".h5"), self._bytes_needed())
         self._write_step(path, [u, *self._means.fields], t)
+        if self.keep_last:  # a copy: problem.u moves on in the next increment
+            self.last_written = (t, u.function_space, u.x.array.copy())
         self.steps = [s for s in self.steps if s[0] < result.index] + [(result.index, t)]
         self._grids.pop((result.index, t), None)  # a step file written again (after a restart)
         on_rank0(self.comm, self._write_index)
+
+    def cell_means(self) -> dict[str, fem.Function]:
+        """The cell fields as last written, by name (``von_mises``, ``p``, ``plastic``)."""
+        return {f.name: f for f in self._means.fields}
 
     def _bytes_needed(self) -> int:
         """Room a step file needs: 1.25 × the last one's size (every step holds the same

@@ -25,7 +25,7 @@ def offscreen_plotter(window_size: tuple[int, int]):
     PictureUnavailable
         VTK cannot render in this process.
     """
-    import pyvista
+    pyvista = compat.import_pyvista()
 
     apply_vtk_options()  # VTK's "bad X server connection" (it renders off-screen anyway): only with -v
     reason = compat.vtk_render_problem()

@@ -407,12 +407,13 @@ class ResultsWriter:
         self.staged = StagedFiles()  #: the index files of the increment, renamed at its commit point
         self.checkpoint_every = 0  #: set by a Checkpointer of this writer: it commits those increments
         self.writers: list[FieldSeriesWriter | QuadraticFieldWriter | PairWriter | SummaryWriter] = []
-        self.fields = FieldSeriesWriter(problem, self.folder, self.staged) if fields else None
+        keep = pictures_enabled(pictures)  # the pictures are drawn from the last fields written, in memory
+        self.fields = FieldSeriesWriter(problem, self.folder, self.staged, keep_last=keep) if fields else None
         if self.fields is not None:
             self.writers.append(self.fields)
         # degree 2: the displacement at its own nodes too (fields.xdmf holds the mesh's nodes only)
         quadratic = fields and writes_quadratic_fields(problem)
-        self.quadratic = QuadraticFieldWriter(problem, self.folder) if quadratic else None
+        self.quadratic = QuadraticFieldWriter(problem, self.folder, keep_last=keep) if quadratic else None
         if self.quadratic is not None:
             self.writers.append(self.quadratic)
         self.pairs = PairWriter(problem, self.folder, self.staged) if problem.has_contact else None
@@ -532,7 +533,25 @@ class ResultsWriter:
         if (not pictures_enabled(self.pictures) or status not in ("completed", "not converged")
                 or not self.summary.data.get("load_factors")):
             return
-        self.drawn = draw_live_pictures(self.problem, self.folder, completed=status == "completed")
+        self.drawn = draw_live_pictures(self.problem, self.folder, completed=status == "completed",
+                                        step=self._last_field_step())
+
+    def _last_field_step(self) -> dict | None:
+        """Collective: on rank 0 the fields of the last increment written, as a picture step
+        (:func:`~dolfinx_nnqem.io.live_fields.gather_field_step`); None elsewhere, and where this
+        process wrote none (no fields, or a restart that converged no further increment: the
+        pictures then read ``fields.xdmf``). A degree-2 run gives its quadratic displacement
+        on its Lagrange cells, as ``fields_p2.pvd`` holds it."""
+        if self.fields is None or self.fields.last_written is None:  # the same on every rank
+            return None
+        from dolfinx_nnqem.io.live_fields import gather_field_step
+
+        t, space, values = self.fields.last_written
+        whole = False
+        if self.quadratic is not None and self.quadratic.last_written is not None:
+            t, values = self.quadratic.last_written
+            space, whole = self.problem.V, True
+        return gather_field_step(space, values, self.fields.cell_means(), t, whole_cells=whole)
 
     def _release(self) -> None:
         if self._lock is not None and self.problem.comm.rank == 0:

@@ -118,7 +118,7 @@ def plot_deformed(problem, path: str | os.PathLike, *, field: str = "von_mises",
     table = res.pair_table(problem) if (show_pairs and problem.has_contact) else None
     if problem.comm.rank != 0:
         return
-    import pyvista
+    pyvista = compat.import_pyvista()
 
     plotter = offscreen_plotter((1200, 700))
     topology, cell_types, x, u, values = grid_data
@@ -215,7 +215,7 @@ def plot_contact_pressure(problem_or_table, path: str | os.PathLike, *, problem=
     select = np.ones(len(table["pressure"]), dtype=bool)
     if interface is not None:
         select = table["interface"] == interface
-    import pyvista
+    pyvista = compat.import_pyvista()
 
     plotter = offscreen_plotter((1000, 800))  # two-beams -q without fields printed VTK's X warning (issue 31)
     points = table["position_b"]

@@ -25,6 +25,7 @@ import os
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
+import numpy as np
 from dolfinx.io import VTKFile
 
 from dolfinx_nnqem.collective import on_rank0
@@ -74,10 +75,16 @@ class QuadraticFieldWriter:
         A :class:`~dolfinx_nnqem.problem.contact_problem.ContactProblem` of degree 2.
     folder
         The run's output folder: writes ``fields_p2.pvd`` and ``fields/u_p2_*``.
+    keep_last
+        Keep the values of the last increment written (:attr:`last_written`), for the run's
+        pictures.
     """
 
-    def __init__(self, problem, folder: str | os.PathLike):
+    def __init__(self, problem, folder: str | os.PathLike, *, keep_last: bool = False):
         self.problem = problem
+        self.keep_last = keep_last
+        self.last_written: tuple[float, np.ndarray] | None = None
+        """(load factor, local values of ``problem.u``) last written, with ``keep_last``."""
         self.folder = Path(folder)
         self.comm = problem.mesh.comm
         self.steps: list[tuple[int, float, str]] = []  # (increment, load factor, file) in the index
@@ -87,6 +94,8 @@ class QuadraticFieldWriter:
         t = float(result.load_factor)
         step = self.folder / FOLDER / f"{_step_stem(result.index)}.pvd"
         _write_vtk(step, self.problem.u, t)
+        if self.keep_last:  # a copy: problem.u moves on in the next increment
+            self.last_written = (t, self.problem.u.x.array.copy())
 
         def first_file() -> str:
             name = _pvd_files(step)[0]  # the .pvtu DOLFINx named

@@ -4,7 +4,14 @@ Everything is read back from what the run wrote (:mod:`dolfinx_nnqem.io.reader`)
 increment of ``fields.xdmf``, the pair CSV files and ``summary.json``. So the pictures of a
 finished run, of a run that stopped at an increment that did not converge (its converged
 increments) and the ones ``dolfinx-nnqem plot RESULTS_DIR`` redraws with other options are the
-same pictures, and redrawing needs no solve, no mesh file and no MPI.
+same pictures, and redrawing needs no solve, no mesh file and no MPI. One exception, for speed:
+at the end of a run the fields of that last increment are not read back but taken from memory,
+where the run still holds the values it wrote (:mod:`dolfinx_nnqem.io.live_fields`).
+
+A degree-2 run draws its quadratic displacement: the deformed mesh is made of its Lagrange
+cells (10-node tetrahedra, 27-node hexahedra) with u at every P2 node, from memory at the end of
+the run and from ``fields_p2.pvd`` when redrawn (``fields.xdmf`` holds u at the mesh's vertices
+only; its cell fields colour the cells).
 
 - ``deformed.png``: the deformed mesh (displacements × a scale) coloured by the von Mises
   stress (or the equivalent plastic strain ``p``), the cells where ``p > 0`` outlined (the
@@ -30,12 +37,14 @@ from __future__ import annotations
 import logging
 import math
 import os
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
 
 import dolfinx_nnqem.io.plots as plots
 from dolfinx_nnqem import compat
+from dolfinx_nnqem.io.live_fields import LINEAR_VTK_CELLS
 from dolfinx_nnqem.io.offscreen import PictureUnavailable, offscreen_plotter
 from dolfinx_nnqem.io.reader import read_pairs, read_summary, start_reading_fields
 
@@ -88,17 +97,28 @@ is drawn by its corners (XDMF lists them first)."""
 
 
 def _field_grid(step: dict, scale: float | None):
-    """The pyvista grid of one field step, moved by ``scale`` × u; returns (grid, scale)."""
-    import pyvista
+    """The pyvista grid of one field step, moved by ``scale`` × u; returns (grid, scale).
+
+    A step with ``cell_type`` (from memory, :mod:`dolfinx_nnqem.io.live_fields`, or from
+    ``fields_p2.pvd``) is drawn on those VTK cells whole, a quadratic one with its edge nodes;
+    a step read from ``fields.xdmf`` by the corners of its cells (:data:`VTK_CELLS`).
+    """
+    pyvista = compat.import_pyvista()
 
     topology = np.asarray(step["topology"], dtype=np.int64)
-    if topology.shape[1] not in VTK_CELLS:
+    if "cell_type" in step:
+        cell_type, cells = int(step["cell_type"]), topology
+    elif topology.shape[1] in VTK_CELLS:
+        name, corners = VTK_CELLS[topology.shape[1]]
+        cell_type = {"tetra": pyvista.CellType.TETRA, "hexahedron": pyvista.CellType.HEXAHEDRON}[name]
+        cells = topology[:, :corners]
+    else:
         raise ValueError(f"cells with {topology.shape[1]} nodes: expected one of {sorted(VTK_CELLS)}")
-    name, corners = VTK_CELLS[topology.shape[1]]
-    cell_type = {"tetra": pyvista.CellType.TETRA, "hexahedron": pyvista.CellType.HEXAHEDRON}[name]
     x = np.asarray(step["geometry"], dtype=float).reshape(-1, 3)
     u = np.asarray(step.get("u", np.zeros_like(x)), dtype=float).reshape(len(x), -1)[:, :3]
-    grid = pyvista.UnstructuredGrid({cell_type: topology[:, :corners]}, x.copy())
+    # the flat [n, i0, ..., i(n-1)] layout takes every VTK cell type (Lagrange cells too)
+    flat = np.hstack([np.full((len(cells), 1), cells.shape[1]), cells]).reshape(-1)
+    grid = pyvista.UnstructuredGrid(flat, np.full(len(cells), cell_type, dtype=np.uint8), x.copy())
     if scale is None:
         umax = np.abs(u).max()
         scale = 0.1 * np.ptp(x, axis=0).max() / umax if umax > 0 else 1.0
@@ -107,6 +127,55 @@ def _field_grid(step: dict, scale: float | None):
         if key in step:
             grid.cell_data[key] = np.asarray(step[key], dtype=float).reshape(len(topology), -1)[:, 0]
     return grid, scale
+
+
+def _with_quadratic_displacement(folder: Path, step: dict) -> dict:
+    """A step of ``fields.xdmf`` with the degree-2 displacement of ``fields_p2.pvd`` where the
+    folder has it for the same increment: the grid of its Lagrange cells, u at every P2 node,
+    and the cell fields of ``step`` carried over to those cells (matched by their centres).
+    Otherwise (degree 1, an older folder, cells that do not match) ``step`` itself."""
+    index = folder / "fields_p2.pvd"
+    if not index.exists():
+        return step
+    try:
+        datasets = list(ET.parse(index).iter("DataSet"))
+        if not datasets or float(datasets[-1].attrib["timestep"]) != float(step["time"]):
+            raise ValueError("its last increment is not the last of fields.xdmf")
+        grid = compat.import_pyvista().read(str(folder / datasets[-1].attrib["file"]))
+        cell_type = int(grid.celltypes[0])
+        if cell_type not in LINEAR_VTK_CELLS or np.any(grid.celltypes != cell_type):
+            raise ValueError(f"cells of VTK types {sorted(set(grid.celltypes.tolist()))}")
+        cells = np.asarray(grid.cells).reshape(grid.n_cells, -1)[:, 1:]
+        order = _matching_cells(step, np.asarray(grid.points), cells, LINEAR_VTK_CELLS[cell_type][1])
+    except (OSError, ValueError, KeyError, IndexError, ET.ParseError) as error:
+        _log.warning(f"picture deformed.png: drawn from fields.xdmf, not {index.name} ({error})")
+        return step
+    quadratic = {"time": step["time"], "geometry": np.asarray(grid.points), "topology": cells,
+                 "cell_type": cell_type, "u": np.asarray(grid.point_data["u"])}
+    ncells = len(np.asarray(step["topology"]))
+    for key, values in step.items():
+        values = np.asarray(values)
+        if key not in quadratic and values.ndim and len(values) == ncells:  # a cell field
+            quadratic[key] = values.reshape(ncells, -1)[order]
+    return quadratic
+
+
+def _matching_cells(step: dict, points: np.ndarray, cells: np.ndarray, corners: int) -> np.ndarray:
+    """For each of ``cells`` (rows of ``points``), the row of the same cell in ``step``'s topology,
+    found by the centre of its corners (a ValueError where a cell has no match)."""
+    from scipy.spatial import cKDTree
+
+    x = np.asarray(step["geometry"], dtype=float).reshape(-1, 3)
+    topology = np.asarray(step["topology"], dtype=np.int64)
+    if len(topology) != len(cells):
+        raise ValueError(f"{len(cells)} cells against {len(topology)} in fields.xdmf")
+    # the corner nodes are the first ones in both files' orderings (XDMF's and VTK's Lagrange cells)
+    centres = x[topology[:, :corners]].mean(axis=1)
+    distance, order = cKDTree(centres).query(points[cells[:, :corners]].mean(axis=1))
+    size = max(float(np.ptp(x, axis=0).max()), 1e-300)
+    if np.any(distance > 1e-9 * size) or len(np.unique(order)) != len(order):
+        raise ValueError("its cells are not those of fields.xdmf")
+    return order
 
 
 def _pair_points(rows: list[dict], scale: float) -> tuple[np.ndarray, np.ndarray]:
@@ -270,7 +339,7 @@ def draw_convergence(summary: dict, path: Path, *, title: str = "") -> Path:
 # -- the whole set -------------------------------------------------------------------------------
 def draw_run_pictures(folder: str | os.PathLike, *, out: str | os.PathLike | None = None,
                       scale: float | None = None, field: str = "von_mises",
-                      camera: str = "iso") -> dict[str, Path | str]:
+                      camera: str = "iso", step: dict | None = None) -> dict[str, Path | str]:
     """Draw :data:`PICTURES` from a results folder; not collective (call it on one rank).
 
     Parameters
@@ -286,6 +355,10 @@ def draw_run_pictures(folder: str | os.PathLike, *, out: str | os.PathLike | Non
         Cell field of ``deformed.png``: ``"von_mises"`` or ``"p"``.
     camera
         ``"iso"``, ``"xy"``, ``"xz"`` or ``"yz"``.
+    step
+        The fields of the last increment the folder lists, as the run still holds them
+        (:func:`~dolfinx_nnqem.io.live_fields.gather_field_step`): ``deformed.png`` is drawn
+        from them instead of reading ``fields.xdmf`` (and ``fields_p2.pvd``) back.
 
     Returns
     -------
@@ -311,7 +384,9 @@ def draw_run_pictures(folder: str | os.PathLike, *, out: str | os.PathLike | Non
     if not summary.get("load_factors"):
         return {name: "not drawn: no converged increment" for name in PICTURES}
     fields = None
-    if (folder / "fields.xdmf").exists():  # the last step is read (by a child process) while the curves are drawn
+    if step is not None:
+        fields = lambda: [step]  # noqa: E731  (from memory: nothing to read)
+    elif (folder / "fields.xdmf").exists():  # the last step is read (by a child process) while the curves are drawn
         try:
             fields = start_reading_fields(folder, last_only=True)
         except OSError as error:
@@ -329,14 +404,16 @@ def draw_run_pictures(folder: str | os.PathLike, *, out: str | os.PathLike | Non
         except OSError as error:
             steps, done["deformed.png"] = [], f"not drawn: {error}"
     if steps:
-        attempt("deformed.png", draw_deformed, steps[-1], rows, title=title, scale=scale, field=field,
-                camera=camera)
+        last = steps[-1] if step is not None else _with_quadratic_displacement(folder, steps[-1])
+        attempt("deformed.png", draw_deformed, last, rows, title=title, scale=scale, field=field, camera=camera)
     done.setdefault("deformed.png", "not drawn: no fields (the run was made with fields = false)")
     return {name: done[name] for name in PICTURES}
 
 
-def draw_live_pictures(problem, folder: str | os.PathLike, *, completed: bool) -> dict[str, Path | str]:
-    """The end of a run: :func:`draw_run_pictures` on rank 0, then the live-problem hook.
+def draw_live_pictures(problem, folder: str | os.PathLike, *, completed: bool,
+                       step: dict | None = None) -> dict[str, Path | str]:
+    """The end of a run: :func:`draw_run_pictures` on rank 0 (with the run's last ``step`` of
+    the fields, from memory, where it has one), then the live-problem hook.
 
     Collective. ``contact_pressure.png`` is drawn by ``plots.plot_contact_pressure(problem,
     path)`` when that function exists (it draws on the problem's surfaces, collectively), the
@@ -349,7 +426,7 @@ def draw_live_pictures(problem, folder: str | os.PathLike, *, completed: bool) -
     done: dict[str, Path | str] = {}
     if problem.comm.rank == 0:
         try:
-            done = draw_run_pictures(folder)
+            done = draw_run_pictures(folder, step=step)
         except Exception as error:  # noqa: BLE001  (the results are written; a picture is a bonus)
             done = {name: f"not drawn: {type(error).__name__}: {error}" for name in PICTURES}
     done = problem.comm.bcast(done, root=0)
