@@ -207,7 +207,7 @@ def import_pyvista():
         import pyvista
 
         return pyvista
-    sys.modules["mypy"] = None  # type: ignore[assignment]
+    sys.modules["mypy"] = None  # type: ignore[assignment]  # None: find_spec answers None, importing it raises ImportError
     try:
         import pyvista
     finally:

@@ -812,8 +812,11 @@ class ContactModel:
         ℓ and u_n are where the last refresh had them.
         """
         key = self._refresh_key(u, load_factor, u_n, load_factor_n)
-        if self._refreshed_at is not None and len(key) == len(self._refreshed_at) and np.array_equal(
-                key, self._refreshed_at):
+        same = (self._refreshed_at is not None and len(key) == len(self._refreshed_at)
+                and bool(np.array_equal(key, self._refreshed_at)))
+        # agreed by every rank: a rank whose own slave nodes did not move must still join B's
+        # assembly and the measure of w_n below (collective) when another rank's did
+        if self.comm.allreduce(same, op=MPI.LAND):
             return
         for k, (interface, tracker) in enumerate(zip(self.interfaces, self.trackers)):
             if not isinstance(tracker, ObstacleTracker):

@@ -311,7 +311,7 @@ class MonolithicSolver(ReleasesPETSc):
         if self._matrix is None:
             self._matrix = MonolithicMatrix(p.contact, self._mask)
         B_values = None
-        if ev.geometric is not None and len(ev.geometric):
+        if ev.geometric is not None:  # on every rank, pairs or none: K's assembly in it is collective
             ev.geometric.add_to_tangent(self._K, self._matrix.slave_free(ev.geometric))
             B_values = ev.geometric.rows_values(p.contact.rows)
         J = self._matrix.assemble(self._K, ev.law.dH_dw, ev.lin.dH_dy, ev.lin.dlam_dy, B_values)
@@ -327,7 +327,7 @@ class MonolithicSolver(ReleasesPETSc):
         t0 = time.perf_counter()
         assert p.contact is not None and self._augmented is not None and ev.law is not None and ev.lin is not None
         B_values = None
-        if ev.geometric is not None and len(ev.geometric):
+        if ev.geometric is not None:  # on every rank, pairs or none: K's assembly in it is collective
             terms = ev.geometric
             terms.add_to_tangent(self._K, self._augmented.slave_free(terms),
                                  self._augmented.augmented_geometric_blocks(terms, ev.law.dH_dw))
