@@ -15,6 +15,7 @@ import numpy as np
 
 from dolfinx_nnqem import compat
 import dolfinx_nnqem.io.results as res
+from dolfinx_nnqem.contact.nearest import nearest
 from dolfinx_nnqem.io.offscreen import offscreen_plotter
 from dolfinx_nnqem.material.von_mises import von_mises_stress
 
@@ -165,8 +166,6 @@ def _slave_triangles(problem, table: dict) -> np.ndarray | None:
     out. None as well for a surface of quadrilaterals or pairs without slave facets (node-to-node,
     obstacles): then the points alone are drawn.
     """
-    from scipy.spatial import cKDTree
-
     slave = getattr(problem.contact.interfaces[0].pairs, "slave", None)
     if slave is None:  # node-to-node pairs and obstacles name no slave facets: points are drawn
         return None  # (the same answer on every rank: no collective call is skipped by one)
@@ -183,7 +182,7 @@ def _slave_triangles(problem, table: dict) -> np.ndarray | None:
     if widths != {3} or len(table["position_b"]) == 0:  # quadrilaterals, or nothing to draw
         return None
     corners = np.concatenate([corners for corners, _ in parts])
-    distance, row = cKDTree(table["position_b"]).query(corners)
+    distance, row = nearest(table["position_b"], corners)
     size = max(np.ptp(table["position_b"], axis=0).max(), 1e-300)
     row = np.where(distance <= 1e-9 * size, row, -1).reshape(-1, 3)
     return row[np.all(row >= 0, axis=1)]
