@@ -440,7 +440,13 @@ def _exit(code: int) -> None:
     end of :func:`main` to the process's end: 0.10-0.14 s, 0.02 s this way). Every file of the
     run is closed by now; in-process callers (``main([...])``) are not affected."""
     import os
+    import signal
 
+    try:  # the run has ended with ``code``: a signal now would only turn it into a crash
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # (its handlers use MPI, finalised below)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    except ValueError:  # not the main thread
+        pass
     logging.shutdown()
     if "petsc4py.PETSc" in sys.modules:
         from petsc4py import PETSc

@@ -169,7 +169,9 @@ def abort_unless_ended(code: int, reason: str, timeout: float | None = None) -> 
     GIL; exit code 1, the job's launcher then ends the other ranks).
     """
     global _WATCHDOG
-    if _WATCHDOG is not None or MPI.COMM_WORLD.size == 1:
+    # an interrupt in the start-up can come after mpi4py's import and before MPI_Init (or after
+    # MPI_Finalize): no job to hang then, and asking COMM_WORLD its size would abort the process
+    if _WATCHDOG is not None or not MPI.Is_initialized() or MPI.Is_finalized() or MPI.COMM_WORLD.size == 1:
         return
     timeout = 2 * ABORT_TIMEOUT_S + 5 if timeout is None else timeout
     rank = MPI.COMM_WORLD.rank

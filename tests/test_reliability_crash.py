@@ -240,7 +240,7 @@ def test_an_interrupt_during_start_up(tmp_path, sig, code, words, delay):
     dump (exit 15); now both end by the contract, with one line and no traceback."""
     import time
 
-    p = problem_file(tmp_path, increments=2)
+    p = problem_file(tmp_path, increments=15)  # the run outlasts the largest delay (2 increments ended in 0.4 s)
     job = start(["-q", "run", str(p), "--out", str(tmp_path / "out")])
     time.sleep(delay)
     kill_session(job, sig)
