@@ -13,7 +13,8 @@
   slid 2.4 facets along a much stiffer one, dual mortar in the current geometry, frictionless.
 * :func:`long_slide`: a short block (0.25 long, 40 × 4 × 3 hexahedra, the slave) pressed 0.002
   onto a long one (2 long, 16 × 2 × 2, the master, bottom clamped) by its top over ℓ ≤ 0.1, then
-  slid 1.0 along x: four times its own length, eight master facets; u_z = 0 on the z faces.
+  slid 1.0 along x: four times its own length, eight master facets; u_z = 0 on the z faces;
+  the long block of the slider's material or another (:data:`LONG_SLIDE_STIFF_MASTER`).
 * :func:`ironing`: a rigid cylinder (R = 0.5, axis along z) pressed ``depth`` into an elastoplastic
   strip (2 × 0.5 × 0.25, nx × nx/4 × 2 hexahedra, bottom clamped, u_z = 0 on the z faces) over
   ℓ ≤ 0.2, then dragged 1.0 along x (8 facets at nx = 16) with friction: an ironing-type problem.
@@ -34,7 +35,7 @@ from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, PiecewiseL
 from dolfinx_nnqem.problem.meshing import BlockStackTags as T
 from dolfinx_nnqem.problem.meshing import build_block_stack
 
-__all__ = ["ironing", "long_slide", "obstacle_force", "slave_force", "sliding_blocks", "sliding_patch", "sliding_sphere"]
+__all__ = ["LONG_SLIDE_PRESSED_AT", "LONG_SLIDE_STIFF_MASTER", "ironing", "long_slide", "obstacle_force", "slave_force", "sliding_blocks", "sliding_patch", "sliding_sphere"]
 
 RADIUS = 0.6
 DEPTH = 0.01
@@ -86,10 +87,6 @@ PATCH_PRESSURE = 1.0
 STRUCTURED = False
 PATCH_UPPER = VonMises(E=1.0e3, nu=0.0)
 PATCH_LOWER = VonMises(E=1.0e12, nu=0.0)
-PATCH_R = 2.0e5
-"""r near the smallest supported value (10⁻⁶ E h, E the larger modulus): the default E h of the
-stiff block multiplies the gaps' rounding (10⁻¹⁶ of the 0.6 slide) into residuals of 10⁻⁷ of the
-forces, where Newton stalls; the upper block's own E h (250) is below the supported range."""
 
 
 def sliding_patch(*, slide: float = 0.6, cell_type: str = "hexahedron", law: str = "alart-curnier",
@@ -113,10 +110,14 @@ def sliding_patch(*, slide: float = 0.6, cell_type: str = "hexahedron", law: str
     return ContactProblem(mesh, ct, ft, materials={1: PATCH_LOWER, 2: PATCH_UPPER}, dirichlet=dirichlet,
                           tractions=[Pressure(T.top(2), PATCH_PRESSURE, amplitude=_press)],
                           contact=Contact(T.top(1), T.bottom(2), mu_f=0.0, law=law, discretisation="mortar",
-                                          geometry=geometry, r=PATCH_R))
+                                          geometry=geometry))
 
 
 LONG_SLIDE_PRESSED_AT = 0.1
+LONG_SLIDE_STIFF_MASTER = VonMises(E=1.0e8, nu=0.3)
+"""A long block 10⁵ times stiffer than the slider: its surface stays flat to about 10⁻⁸ of the
+slider's strain, so the resultant of a slip on the Coulomb cone is μ_f times the normal force
+(with the slider's own modulus the deformed master's normals tilt, and the resultant differs)."""
 
 
 def long_slide(*, law: str = "alart-curnier", mu_f: float = 0.3, discretisation: str = "node-to-surface",

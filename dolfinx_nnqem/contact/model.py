@@ -63,8 +63,8 @@ PREDICTED_PRESSURE = 1e-12
 
 
 R_RANGE = (1e-6, 1e3)
-"""Supported r / (E h), E the largest Young's modulus and h the mean cell size (E h is the default
-r). Inside it every method and law converged on the two-beam benchmark; outside it convergence
+"""Supported r / (E h), E the softer Young's modulus at the interface and h the mean cell size (E h
+is the default r). Inside it every method and law converged on the two-beam benchmark; outside it convergence
 became erratic (r/(E h) = 1e-9 and 1e6 failed with every method; 1e-12 and 1e-20 converged
 with the monolithic solver, 1e-50 did not; NNEQM2 failed from 1e4): r = 1e-300 stopped
 "stalled" at a load factor the run used to pass (issue 31)."""
@@ -78,7 +78,8 @@ def _checked_r(contact: Contact, E: float, h: float) -> float:
     low, high = R_RANGE
     if not low <= ratio <= high:
         raise ValueError(f"contact {contact.label}: r = {contact.r:g} is {ratio:.3g} × E h = {reference:.4g} N/m "
-                         f"(E the largest Young's modulus, h the mean cell size); the supported range is "
+                         f"(E the softer body's Young's modulus at the interface, h the mean cell size); "
+                         f"the supported range is "
                          f"[{low:g}, {high:g}] × E h = [{low * reference:.4g}, {high * reference:.4g}] N/m: "
                          "outside it the law mixes forces and displacements of too different sizes and "
                          "the Newton iterations stall (leave r out for E h)")
@@ -208,6 +209,13 @@ class Contact:
     def obstacle(self) -> RigidObstacle | None:
         """The rigid obstacle of the master side, or None for two deformable surfaces."""
         return self.surface1 if isinstance(self.surface1, RigidObstacle) else None
+
+    @property
+    def deformable_surfaces(self) -> tuple[int, ...]:
+        """The facet tags of the interface's deformable sides (one beside a rigid obstacle)."""
+        if isinstance(self.surface1, RigidObstacle):
+            return (int(self.surface2),)
+        return (int(self.surface1), int(self.surface2))
 
     @property
     def label(self) -> str:
@@ -426,7 +434,10 @@ class ContactModel:
     contacts
         The interfaces.
     E, h
-        Young's modulus and element size for the default r = E h.
+        Young's modulus at each interface (one per contact; a single value for all) and element
+        size: the default r = E h and the reference of its supported range (:data:`R_RANGE`).
+        The problem passes the softer body's modulus at each interface
+        (:meth:`~dolfinx_nnqem.problem.ContactProblem.interface_moduli`).
     constrained_dofs
         A vector laid out like V, 1 at constrained dofs and 0 elsewhere: pair directions whose
         every involved dof is constrained are pinned (:meth:`ContactLaw.pin`).
@@ -441,10 +452,13 @@ class ContactModel:
         Pair states and tangential slip of the last converged increment (for reports).
     """
 
-    def __init__(self, V, facet_tags, contacts: Sequence[Contact], *, E: float, h: float,
+    def __init__(self, V, facet_tags, contacts: Sequence[Contact], *, E: float | Sequence[float], h: float,
                  constrained_dofs: PETSc.Vec):
         if not contacts:
             raise ValueError("ContactModel: no contact interface given")
+        moduli = [float(e) for e in E] if isinstance(E, Sequence) else [float(E)] * len(contacts)
+        if len(moduli) != len(contacts):
+            raise ValueError(f"ContactModel: {len(moduli)} moduli E for {len(contacts)} interfaces")
         self.comm = V.mesh.comm
         self.V = V
         self.h = float(h)
@@ -458,8 +472,8 @@ class ContactModel:
         self._refreshed_at: np.ndarray | None = None  # where refresh_obstacle_geometry last evaluated
         self._slip_warned: set[str] = set()  # interfaces whose slip beyond the facet size was reported
         interfaces = []
-        for contact in contacts:
-            r = float(default_r(E, h)) if contact.r is None else _checked_r(contact, E, h)
+        for contact, E_interface in zip(contacts, moduli):
+            r = float(default_r(E_interface, h)) if contact.r is None else _checked_r(contact, E_interface, h)
             tracker: GeometryTracker | None = None
             if contact.geometry == "current" and space_degree(V) != 1:
                 raise ValueError(f"contact {contact.label}: geometry = 'current' takes degree-1 displacements in "

@@ -189,7 +189,8 @@ class ContactProblem:
         """The smallest force scale F (N): what a strain of 1e-6 sets up over one cell face."""
         if contacts:
             try:
-                self.contact = ContactModel(self.V, facet_tags, contacts, E=E_max, h=self.characteristic_length(),
+                self.contact = ContactModel(self.V, facet_tags, contacts, E=self.interface_moduli(contacts, E_max),
+                                            h=self.characteristic_length(),
                                             constrained_dofs=self.constrained_flags())
             except ContactPairError as error:  # the cause may be bodies meshed as one: say so
                 raise self._bodies_meshed_together(contacts) or error
@@ -325,6 +326,32 @@ class ContactProblem:
             local.set(0.0)
             local.array[self.bc_dofs] = 1.0
         return flags
+
+    def interface_moduli(self, contacts: Sequence[Contact], default: float) -> list[float]:
+        """Per interface, the smallest Young's modulus of the cells beside its deformable surfaces:
+        the softer body's (collective). ``default`` where no rank has a tagged facet (the pair
+        search then names the empty surface).
+
+        The default r = E h is the contact stiffness of a surface node; a pair's stiffness is the
+        softer side's, so E is that side's. With the stiffer side's, r overweights the gap in the
+        laws by the stiffness ratio (10⁴ stalled the Newton iterations at the slide onset of a
+        block on a stiffer one, :func:`~dolfinx_nnqem.cases.large_sliding.long_slide`).
+        """
+        if self.facet_tags is None:
+            return [default] * len(contacts)
+        tdim = self.mesh.topology.dim
+        self.mesh.topology.create_connectivity(tdim - 1, tdim)
+        f2c = self.mesh.topology.connectivity(tdim - 1, tdim)
+        E_cells = self.state.E.x.array[self.state.E.function_space.dofmap.list[:, 0]]
+        moduli = []
+        for contact in contacts:
+            local = np.inf
+            for tag in contact.deformable_surfaces:
+                for facet in self.facet_tags.find(tag):
+                    local = min(local, float(np.min(E_cells[f2c.links(facet)])))
+            smallest = self.comm.allreduce(local, op=MPI.MIN)
+            moduli.append(smallest if np.isfinite(smallest) else default)
+        return moduli
 
     def characteristic_length(self) -> float:
         """Mean cell size h (cube root of the mean cell volume), over all ranks."""
