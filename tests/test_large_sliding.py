@@ -522,3 +522,22 @@ def test_current_geometry_with_degree_2_is_refused_before_solving():
     with pytest.raises(ValueError, match="geometry = 'current' takes degree-1"):
         ContactProblem(mesh, ct, ft, materials=MATERIAL, dirichlet=[Dirichlet(T.bottom(1))], degree=2,
                        contact=Contact(sphere, T.top(1), mu_f=0.0, geometry="current"))
+
+
+def test_default_r_is_the_softer_sides(monkeypatch):
+    """r = E h with E the softer body's modulus at the interface: the slider's (10³) beside a long block
+    of 10⁸, the strip's beside a rigid punch; an r given is checked against the same E h (10⁻⁵ E h is
+    accepted, though 10⁻¹⁰ of the stiffer side's; 10⁻⁷ E h is refused, naming the range)."""
+    from dolfinx_nnqem.cases import large_sliding
+    from dolfinx_nnqem.cases.large_sliding import LONG_SLIDE_STIFF_MASTER, ironing, long_slide
+
+    for problem in (long_slide(master=LONG_SLIDE_STIFF_MASTER), ironing(8)):
+        (interface,) = problem.contact.interfaces
+        assert interface.r == pytest.approx(1.0e3 * problem.characteristic_length(), rel=1e-14)
+    Eh = 1.0e3 * long_slide().characteristic_length()
+    original = large_sliding.Contact
+    monkeypatch.setattr(large_sliding, "Contact", lambda *a, **k: original(*a, r=1e-5 * Eh, **k))
+    assert long_slide(master=LONG_SLIDE_STIFF_MASTER).contact.interfaces[0].r == 1e-5 * Eh
+    monkeypatch.setattr(large_sliding, "Contact", lambda *a, **k: original(*a, r=1e-7 * Eh, **k))
+    with pytest.raises(ValueError, match=r"is 1e-07 × E h .*softer body's Young's modulus at the interface"):
+        long_slide(master=LONG_SLIDE_STIFF_MASTER)
