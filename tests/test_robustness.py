@@ -253,3 +253,28 @@ def test_the_dense_methods_refuse_a_condensation_that_does_not_fit_before_solvin
     make_solver("nneqm2", problem, SolverOptions(), nneqm2=NNEQM2Options(max_memory_gb=2 * need / 1e9)).destroy()
     with pytest.raises(ValueError, match="max_memory_gb"):
         NNEQM1Options(max_memory_gb=0.0)
+
+
+@pytest.mark.parametrize("law", ["alart-curnier", "polar"])
+def test_a_stiffness_contrast_converges_without_cutback(law):
+    """Body 1 of the pressed blocks 10⁴ times stiffer than body 2 (μ_f = 0.3, pressure then drag):
+    every method converges in the 6 increments, to the same pair forces (1e-6). The default r takes
+    the softer body's modulus; with r = 999 times that (where the stiffer body's put it before),
+    the monolithic solver and NNEQM2 stalled at the drag onset after 5 cutbacks."""
+    import numpy as np
+
+    from dolfinx_nnqem.cases.pressed_blocks import pressed_blocks_problem
+
+    forces, iterations = {}, {}
+    for method in METHODS:
+        problem = pressed_blocks_problem(2, mu_f=0.3, body1_stiffer=1e4, law=law)
+        with make_solver(method, problem, SolverOptions(rtol=1e-10, max_iterations=40)) as solver:
+            results = solve_load_steps(problem, solver, 6)
+        iterations[method] = [r.iterations for r in results]
+        forces[method] = pair_table(problem)["force_on_body1"]
+    print(f"\n  {law}: iterations {iterations}")
+    reference = forces["monolithic"]
+    scale = np.abs(reference).max()
+    for method in METHODS:
+        assert len(iterations[method]) == 6, method  # no cutback
+        assert np.abs(forces[method] - reference).max() < 1e-6 * scale, method

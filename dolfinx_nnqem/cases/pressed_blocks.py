@@ -18,6 +18,8 @@ n2 ≠ 4k; the contact is then discretised by dual mortar, body 2 the slave when
 
 from __future__ import annotations
 
+import math
+
 from mpi4py import MPI
 
 from dolfinx_nnqem.material.von_mises import VonMises
@@ -46,7 +48,8 @@ def drag_amplitude(load_factor: float) -> float:
 
 
 def pressed_blocks_problem(level: int, comm: MPI.Comm = MPI.COMM_WORLD, mu_f: float = 0.1, *,
-                           n2: int | None = None, discretisation: str = "auto") -> ContactProblem:
+                           n2: int | None = None, discretisation: str = "auto",
+                           body1_stiffer: float = 1.0, law: str = "alart-curnier") -> ContactProblem:
     """The problem of level ``level`` (see the module docstring).
 
     Parameters
@@ -62,16 +65,25 @@ def pressed_blocks_problem(level: int, comm: MPI.Comm = MPI.COMM_WORLD, mu_f: fl
     discretisation
         The contact's discretisation (see :class:`~dolfinx_nnqem.problem.contact_problem.Contact`); ``"auto"``
         takes node-to-node on matching meshes, mortar otherwise.
+    body1_stiffer
+        Body 1's E, σ_y0 and H are this many times body 2's (the same strains, stresses this many
+        times larger): a stiffness contrast across the interface.
+    law
+        The pair law (``"alart-curnier"`` or ``"polar"``).
     """
     if isinstance(level, bool) or not isinstance(level, int) or level < 1:
         raise ValueError(f"level = {level!r}; expected an integer >= 1")
     if n2 is not None and (isinstance(n2, bool) or not isinstance(n2, int) or n2 < 1):
         raise ValueError(f"n2 = {n2!r}; expected an integer >= 1")
+    if not (isinstance(body1_stiffer, (int, float)) and math.isfinite(body1_stiffer) and body1_stiffer > 0):
+        raise ValueError(f"body1_stiffer = {body1_stiffer!r}; expected a positive number")
+    body1 = VonMises(E=MATERIAL.E * body1_stiffer, nu=MATERIAL.nu, sigma_y0=MATERIAL.sigma_y0 * body1_stiffer,
+                     H=MATERIAL.H * body1_stiffer)
     n = 4 * level
     mesh, cell_tags, facet_tags = build_stacked_blocks(comm, 1.0, 0.5, 0.5, 1.0, n, 2 * level, 2 * level, n,
                                                        nx2=n2, nz2=n2)
     return ContactProblem(
-        mesh, cell_tags, facet_tags, materials={T.BODY1: MATERIAL, T.BODY2: MATERIAL},
+        mesh, cell_tags, facet_tags, materials={T.BODY1: body1, T.BODY2: MATERIAL},
         dirichlet=[
             Dirichlet(T.BOTTOM),
             Dirichlet(T.TOP, DRAG, [0], amplitude=drag_amplitude),
@@ -79,5 +91,5 @@ def pressed_blocks_problem(level: int, comm: MPI.Comm = MPI.COMM_WORLD, mu_f: fl
             Dirichlet(T.BODY2_ZMIN, 0.0, [2]), Dirichlet(T.BODY2_ZMAX, 0.0, [2]),
         ],
         tractions=[Pressure(T.TOP, PRESSURE, amplitude=pressure_amplitude)],
-        contact=Contact(T.CONTACT1, T.CONTACT2, mu_f=mu_f, discretisation=discretisation),
+        contact=Contact(T.CONTACT1, T.CONTACT2, mu_f=mu_f, discretisation=discretisation, law=law),
     )
