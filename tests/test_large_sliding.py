@@ -177,11 +177,16 @@ def test_frictional_block_slides_on_the_cone(method, law):
     assert f[0] < 0 and 0.28 < abs(f[0]) / f[1] <= mu_f  # < μ_f: the Poisson effect adds a transverse slip
 
 
-BLOCKS_FILE = """
+def _blocks_file(*, E1: float, press: float, pressed_at: float, slide: float, z_tags: list[int], increments: int) -> str:
+    """A problem file for two blocks (surfaces 201 | 102, body 1 clamped at 101): body 2's top (202)
+    pressed down by ``press`` over ℓ ≤ ``pressed_at``, then slid ``slide`` along x; u_z = 0 on
+    ``z_tags``; MESH, METHOD and LAW to be replaced."""
+    fixed_z = "".join(f"[[dirichlet]]\ntag = {tag}\ncomponents = [2]\n" for tag in z_tags)
+    return f"""
 [mesh]
 file = "MESH"
 [materials.1]
-E = 1.0e3
+E = {E1!r}
 nu = 0.3
 [materials.2]
 E = 1.0e3
@@ -198,20 +203,20 @@ tag = 101
 [[dirichlet]]
 tag = 202
 components = [1]
-value = -0.01
-amplitude = [[0.0, 0.0], [0.25, 1.0], [1.0, 1.0]]
+value = {press!r}
+amplitude = [[0.0, 0.0], [{pressed_at!r}, 1.0], [1.0, 1.0]]
 [[dirichlet]]
 tag = 202
 components = [0]
-value = 0.4
-amplitude = [[0.0, 0.0], [0.25, 0.0], [1.0, 1.0]]
-[[dirichlet]]
-tag = 202
-components = [2]
-[solver]
+value = {slide!r}
+amplitude = [[0.0, 0.0], [{pressed_at!r}, 0.0], [1.0, 1.0]]
+{fixed_z}[solver]
 method = "METHOD"
-increments = 12
+increments = {increments}
 """
+
+
+BLOCKS_FILE = _blocks_file(E1=1.0e3, press=-0.01, pressed_at=0.25, slide=0.4, z_tags=[202], increments=12)
 
 
 @pytest.mark.parametrize("method, law", [("monolithic", "alart-curnier"), ("nneqm1", "polar")])
@@ -367,51 +372,8 @@ def test_block_slid_over_its_own_material():
     assert 1e-4 < np.abs(ratio - mu_f).max() / mu_f < 0.01 and 1e-3 < spread < 0.03
 
 
-LONG_SLIDE_FILE = """
-[mesh]
-file = "MESH"
-[materials.1]
-E = 1.0e8
-nu = 0.3
-[materials.2]
-E = 1.0e3
-nu = 0.3
-[contact]
-surface1 = 201
-surface2 = 102
-mu_f = 0.3
-law = "LAW"
-discretisation = "node-to-surface"
-geometry = "current"
-[[dirichlet]]
-tag = 101
-[[dirichlet]]
-tag = 202
-components = [1]
-value = -0.002
-amplitude = [[0.0, 0.0], [0.1, 1.0], [1.0, 1.0]]
-[[dirichlet]]
-tag = 202
-components = [0]
-value = 1.0
-amplitude = [[0.0, 0.0], [0.1, 0.0], [1.0, 1.0]]
-[[dirichlet]]
-tag = 501
-components = [2]
-[[dirichlet]]
-tag = 601
-components = [2]
-[[dirichlet]]
-tag = 502
-components = [2]
-[[dirichlet]]
-tag = 602
-components = [2]
-[solver]
-method = "METHOD"
-increments = 20
-rtol = 1e-10
-"""
+LONG_SLIDE_FILE = _blocks_file(E1=1.0e8, press=-0.002, pressed_at=0.1, slide=1.0, z_tags=[501, 601, 502, 602],
+                               increments=20) + "rtol = 1e-10\n"
 
 
 @pytest.mark.parametrize("method, law", [("monolithic", "alart-curnier"), ("nneqm1", "polar")])
