@@ -43,7 +43,7 @@ from pathlib import Path
 import numpy as np
 
 import dolfinx_nnqem.io.plots as plots
-from dolfinx_nnqem import compat
+from dolfinx_nnqem import pyvista_compat
 from dolfinx_nnqem.io.live_fields import LINEAR_VTK_CELLS
 from dolfinx_nnqem.io.offscreen import PictureUnavailable, offscreen_plotter
 from dolfinx_nnqem.io.reader import read_pairs, read_summary, start_reading_fields
@@ -103,7 +103,7 @@ def _field_grid(step: dict, scale: float | None):
     ``fields_p2.pvd``) is drawn on those VTK cells whole, a quadratic one with its edge nodes;
     a step read from ``fields.xdmf`` by the corners of its cells (:data:`VTK_CELLS`).
     """
-    pyvista = compat.import_pyvista()
+    pyvista = pyvista_compat.import_pyvista()
 
     topology = np.asarray(step["topology"], dtype=np.int64)
     if "cell_type" in step:
@@ -141,7 +141,7 @@ def _with_quadratic_displacement(folder: Path, step: dict) -> dict:
         datasets = list(ET.parse(index).iter("DataSet"))
         if not datasets or float(datasets[-1].attrib["timestep"]) != float(step["time"]):
             raise ValueError("its last increment is not the last of fields.xdmf")
-        grid = compat.import_pyvista().read(str(folder / datasets[-1].attrib["file"]))
+        grid = pyvista_compat.import_pyvista().read(str(folder / datasets[-1].attrib["file"]))
         cell_type = int(grid.celltypes[0])
         if cell_type not in LINEAR_VTK_CELLS or np.any(grid.celltypes != cell_type):
             raise ValueError(f"cells of VTK types {sorted(set(grid.celltypes.tolist()))}")
@@ -199,7 +199,7 @@ def draw_deformed(step: dict, rows: list[dict], path: Path, *, title: str = "", 
     if "p" in grid.cell_data and np.any(grid.cell_data["p"] > 0):
         plastic = grid.extract_cells(np.flatnonzero(grid.cell_data["p"] > 0))
         # the outline of the plastic zone (not its inner cell faces), drawn over the colours
-        edges = compat.extract_outer_surface(plastic).extract_feature_edges(
+        edges = pyvista_compat.extract_outer_surface(plastic).extract_feature_edges(
             boundary_edges=True, feature_edges=True, manifold_edges=False, non_manifold_edges=False)
         plotter.add_mesh(edges, color="darkorange", line_width=4, label="plastic zone (p > 0)")
     points, states = _pair_points(rows, scale)
