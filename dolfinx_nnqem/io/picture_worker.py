@@ -97,7 +97,7 @@ class _Worker:
             previous = None
         try:
             process = subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.PIPE, close_fds=True)
-        except OSError as error:
+        except (OSError, ValueError, subprocess.SubprocessError) as error:  # no usable interpreter
             _log.info(f"picture worker {role}: not started ({error}); the pictures are drawn in the run")
             return None
         finally:
