@@ -4,8 +4,10 @@ timed stage by stage (wall and CPU seconds).
     python benchmarks/pictures_profile.py [demos/two_beams.toml] [--repeat 3]
 
 Each repeat is a whole run in this process (``cli.main``), so later repeats find the libraries
-imported already: only the first repeat shows the import costs a command-line run pays. For the
-whole-process figure (a run with against one without pictures) time the command line from outside.
+imported already: only the first repeat shows the import costs a command-line run pays. A run
+here draws in this process; the command line has picture workers draw them
+(``dolfinx_nnqem/io/picture_worker.py``). For the whole-process figure (a run with against one
+without pictures) time the command line from outside.
 Prints figures; asserts nothing.
 """
 
@@ -57,7 +59,8 @@ def main() -> None:
     _timed(log, run_pictures, "_field_grid", "deformed: grid (first: pyvista imported)")
     _timed(log, run_pictures, "offscreen_plotter", "deformed: plotter (first: pyvista.plotting, VTK)")
     _timed(log, run_pictures, "draw_deformed", "deformed.png in all")
-    _timed(log, plots, "plot_contact_pressure", "contact_pressure.png")
+    _timed(log, plots, "plot_contact_pressure", "contact_pressure.png")  # (older versions)
+    _timed(log, plots, "draw_contact_pressure", "contact_pressure.png")
     _timed(log, output.ResultsWriter, "_draw_pictures", "picture step in all")
     print(f"{sys.argv[0]}: {args.problem}, Python {sys.version.split()[0]}")
     for repeat in range(args.repeat):

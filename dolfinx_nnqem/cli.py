@@ -188,8 +188,10 @@ def _run(args) -> int:
     spec = agree(comm, load_problem_file, args.problem)
     method = args.method or spec.solver["method"]
     increments = args.increments or spec.solver["increments"]
-    problem = build_problem(spec, comm)
     rank0 = comm.rank == 0
+    if not rank0 or not spec.output["pictures"]:  # (the launcher named no rank, or no pictures after all)
+        _close_picture_workers(args)
+    problem = build_problem(spec, comm)
     if rank0 and not args.quiet:
         _print_header(args.problem, problem, method, increments)
     if args.check:
@@ -238,7 +240,8 @@ def _solve_problem_file(args, spec, problem, solver, method: str, increments):
     pictures = spec.output["pictures"] and not args.no_pictures
     writer = ResultsWriter(problem, method, out, increments, probes=spec.output["probes"] or None,
                            fields=spec.output["fields"], extra={"problem_file": str(args.problem)},
-                           overwrite=args.overwrite, resume=args.restart, pictures=None if pictures else False)
+                           overwrite=args.overwrite, resume=args.restart, pictures=None if pictures else False,
+                           picture_worker=getattr(args, "picture_workers", None))
     solving = False  # summary.json records how a run ended only once it has started solving
     try:
         resume = None
@@ -479,34 +482,38 @@ def _main(argv: list[str] | None) -> int:
     if scale is not None and not (math.isfinite(scale) and 0 < scale <= 1e20):  # nan drew a blank picture
         print(f"dolfinx-nnqem: error: --scale must be a number in (0, 1e20], got {scale}", file=sys.stderr)
         return EXIT_USAGE
-    _start_up()
-    _configure_logging(args.verbose, args.quiet)
-    from mpi4py import MPI
-
-    from dolfinx_nnqem import collective
-
-    collective.init()  # on every rank before any rank acts on an interrupt (it is collective)
-    code, message = EXIT_OK, ""
+    args.picture_workers = _start_picture_workers(args)  # they import their libraries meanwhile
     try:
-        _install_sigterm()
-        _raise_held_signal()
-        if args.command == "two-beams":
-            code = _two_beams(args)
-        elif args.command == "run":
-            code = _run(args)
-        elif args.command == "plot":
-            code = _plot(args)
-        else:
-            code = EXIT_USAGE
-    except BaseException as error:  # noqa: BLE001  (every failure becomes a message and an exit code)
-        if isinstance(error, SystemExit):
-            raise
-        error = _interrupt_behind(error) or error
-        code, message = _classify(error, args)
-        if args.verbose >= 2:
-            import traceback
+        _start_up()
+        _configure_logging(args.verbose, args.quiet)
+        from mpi4py import MPI
 
-            message += "\n" + "".join(traceback.format_exception(error))
+        from dolfinx_nnqem import collective
+
+        collective.init()  # on every rank before any rank acts on an interrupt (it is collective)
+        code, message = EXIT_OK, ""
+        try:
+            _install_sigterm()
+            _raise_held_signal()
+            if args.command == "two-beams":
+                code = _two_beams(args)
+            elif args.command == "run":
+                code = _run(args)
+            elif args.command == "plot":
+                code = _plot(args)
+            else:
+                code = EXIT_USAGE
+        except BaseException as error:  # noqa: BLE001  (every failure becomes a message and an exit code)
+            if isinstance(error, SystemExit):
+                raise
+            error = _interrupt_behind(error) or error
+            code, message = _classify(error, args)
+            if args.verbose >= 2:
+                import traceback
+
+                message += "\n" + "".join(traceback.format_exception(error))
+    finally:  # a run that failed or was interrupted does not wait for them: they are killed
+        _close_picture_workers(args)
     code, message = collective.finish_collectively(code, message)
     if message and MPI.COMM_WORLD.rank == 0:
         print(message, file=sys.stderr, flush=True)
@@ -515,6 +522,36 @@ def _main(argv: list[str] | None) -> int:
     if hdf5_left_open():  # HDF5's clean-up at exit would hang or abort on a file it cannot close
         collective.end_job(code)
     return code
+
+
+def _start_picture_workers(args):
+    """The picture workers of a command-line ``run`` that draws its pictures, on the rank that
+    draws them (:mod:`dolfinx_nnqem.io.picture_worker`); None otherwise.
+
+    Started before the imports of MPI, PETSc and DOLFINx, so that the workers import matplotlib
+    and pyvista while the run starts and solves; the rank is the launcher's (``mpiexec``) then.
+    Not with ``--no-pictures``, ``--check``, ``DOLFINX_NNQEM_PICTURES=0``, nor in a user's program
+    calling :func:`main`, which draws in its own process."""
+    if args.command != "run" or args.no_pictures or args.check or not interrupts.is_command_line():
+        return None
+    from dolfinx_nnqem.io.picture_worker import PictureWorkers, launcher_rank
+
+    if launcher_rank() not in (None, 0):
+        return None
+    from dolfinx_nnqem.io.run_pictures import pictures_enabled
+
+    if not pictures_enabled():
+        return None
+    level = logging.ERROR if args.quiet else (logging.INFO if args.verbose >= 2 else logging.WARNING)
+    return PictureWorkers(shown=args.verbose >= 1 and not args.quiet, level=level)
+
+
+def _close_picture_workers(args) -> None:
+    """End the picture workers of ``args`` (if any): none outlives the run."""
+    workers = getattr(args, "picture_workers", None)
+    args.picture_workers = None
+    if workers is not None:
+        workers.close()
 
 
 def _start_up() -> None:

@@ -183,10 +183,10 @@ def test_two_beams_quiet_is_quiet_without_a_display(tmp_path):
 def test_a_picture_vtk_cannot_render_is_skipped_with_the_reason(tmp_path, monkeypatch):
     """Where VTK cannot render (no display, a VTK without off-screen rendering) the pyvista
     pictures name the reason and the run goes on; the matplotlib curves are drawn."""
-    from dolfinx_nnqem import compat
+    from dolfinx_nnqem import pyvista_compat
     from dolfinx_nnqem.io.run_pictures import draw_run_pictures
 
-    monkeypatch.setattr(compat, "vtk_render_problem", lambda: "no display (a test)")
+    monkeypatch.setattr(pyvista_compat, "vtk_render_problem", lambda: "no display (a test)")
     out = tmp_path / "out"
     assert main(["-q", "two-beams", "--increments", "1", "--out", str(out)]) == EXIT_OK
     drawn = draw_run_pictures(out, out=tmp_path / "pictures")

@@ -1,13 +1,13 @@
 """A pyvista plotter that draws off-screen, or the reason it cannot.
 
 Every picture the package draws with pyvista starts here, so that a machine where VTK cannot
-render (:func:`dolfinx_nnqem.compat.vtk_render_problem`) skips the picture with that reason
+render (:func:`dolfinx_nnqem.pyvista_compat.vtk_render_problem`) skips the picture with that reason
 instead of losing the process to VTK's abort.
 """
 
 from __future__ import annotations
 
-from dolfinx_nnqem import compat
+from dolfinx_nnqem import pyvista_compat
 from dolfinx_nnqem.chatter import apply_vtk_options
 
 __all__ = ["PictureUnavailable", "offscreen_plotter"]
@@ -25,10 +25,10 @@ def offscreen_plotter(window_size: tuple[int, int]):
     PictureUnavailable
         VTK cannot render in this process.
     """
-    pyvista = compat.import_pyvista()
+    pyvista = pyvista_compat.import_pyvista()
 
     apply_vtk_options()  # VTK's "bad X server connection" (it renders off-screen anyway): only with -v
-    reason = compat.vtk_render_problem()
+    reason = pyvista_compat.vtk_render_problem()
     if reason is not None:
         raise PictureUnavailable(reason)
     pyvista.OFF_SCREEN = True

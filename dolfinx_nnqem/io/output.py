@@ -43,7 +43,7 @@ from dolfinx_nnqem.contact.laws import STATE_NAMES
 from dolfinx_nnqem.io.field_series import FieldSeriesWriter
 from dolfinx_nnqem.io.locking import OutputLock, clear_outputs, previous_outputs
 from dolfinx_nnqem.io.quadratic_fields import QuadraticFieldWriter, writes_quadratic_fields
-from dolfinx_nnqem.io.run_pictures import draw_live_pictures, pictures_enabled
+from dolfinx_nnqem.io.run_pictures import PictureDrawer, draw_live_pictures, pictures_enabled
 from dolfinx_nnqem.io.safe_io import StagedFiles, atomic_write, atomic_write_text, commit, remove_stale_temporaries
 from dolfinx_nnqem.io.vtk_xml import point_cloud_text
 from dolfinx_nnqem.material.von_mises import von_mises_stress
@@ -370,17 +370,22 @@ class ResultsWriter:
         (:mod:`dolfinx_nnqem.io.run_pictures`): after a completed run, and after one that stopped
         at an increment that did not converge (its converged increments). None (default): yes,
         unless the environment sets ``DOLFINX_NNQEM_PICTURES=0``; False: never.
+    picture_worker
+        :class:`~dolfinx_nnqem.io.picture_worker.PictureWorkers` started with the run (rank 0's;
+        None elsewhere) that draw the pictures (the caller owns them and closes them); None:
+        the pictures are drawn in this process.
     """
 
     def __init__(self, problem, method: str, folder: str | os.PathLike, increments: int,
                  probes: Mapping[str, Probe] | None = None, extra: dict | None = None,
                  fields: bool = True, *, overwrite: bool = True, resume: bool = False, lock: bool = True,
-                 pictures: bool | None = None):
+                 pictures: bool | None = None, picture_worker: PictureDrawer | None = None):
 
         check_output_folder(folder)
         self.folder = Path(folder)
         self.problem = problem
         self.pictures = pictures
+        self.picture_worker = picture_worker
         self.drawn: dict = {}  # what close() drew: picture name -> path, or why it was not drawn
         self._lock = OutputLock(self.folder) if lock else None
 
@@ -534,7 +539,7 @@ class ResultsWriter:
                 or not self.summary.data.get("load_factors")):
             return
         self.drawn = draw_live_pictures(self.problem, self.folder, completed=status == "completed",
-                                        step=self._last_field_step())
+                                        step=self._last_field_step(), worker=self.picture_worker)
 
     def _last_field_step(self) -> dict | None:
         """Collective: on rank 0 the fields of the last increment written, as a picture step

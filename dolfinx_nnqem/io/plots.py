@@ -1,6 +1,8 @@
 """Pictures: pyvista (off-screen PNG) for fields, matplotlib for curves.
 
-Collective functions gather what they draw on rank 0, which alone writes the file.
+Collective functions gather what they draw on rank 0, which alone writes the file. The module
+imports neither DOLFINx nor MPI until a function needs them: a process that only draws
+(:mod:`dolfinx_nnqem.io.picture_worker`) uses :func:`draw_contact_pressure`.
 Off-screen pyvista needs no X server with the PyPI VTK; Debian's VTK needs one (run under
 ``xvfb-run -a``, see ``docs/install.md``): without it the pyvista pictures are skipped with that
 reason (:mod:`dolfinx_nnqem.io.offscreen`).
@@ -13,11 +15,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from dolfinx_nnqem import compat
-import dolfinx_nnqem.io.results as res
-from dolfinx_nnqem.contact.nearest import nearest
+from dolfinx_nnqem import pyvista_compat
 from dolfinx_nnqem.io.offscreen import offscreen_plotter
-from dolfinx_nnqem.material.von_mises import von_mises_stress
 
 STATE_COLOURS = {0: "white", 1: "royalblue", 2: "crimson"}  # open, stick, slip
 
@@ -74,6 +73,8 @@ def _gather_grid(problem, field: str):
     """Rank 0: (topology, cell_types, points, u, cell values) of the whole mesh; None elsewhere."""
     import dolfinx.plot
 
+    from dolfinx_nnqem.material.von_mises import von_mises_stress
+
     topology, cell_types, x = dolfinx.plot.vtk_mesh(problem.V)
     u = problem.u.x.array.reshape(-1, 3)[: len(x)]
     state = problem.state
@@ -115,11 +116,13 @@ def plot_deformed(problem, path: str | os.PathLike, *, field: str = "von_mises",
     camera, or None (VTK's default); ``focus``: the point looked at (default the mesh centre);
     ``zoom``: > 1 magnifies. Collective.
     """
+    from dolfinx_nnqem.io.results import pair_table
+
     grid_data = _gather_grid(problem, field)
-    table = res.pair_table(problem) if (show_pairs and problem.has_contact) else None
+    table = pair_table(problem) if (show_pairs and problem.has_contact) else None
     if problem.comm.rank != 0:
         return
-    pyvista = compat.import_pyvista()
+    pyvista = pyvista_compat.import_pyvista()
 
     plotter = offscreen_plotter((1200, 700))
     topology, cell_types, x, u, values = grid_data
@@ -166,6 +169,9 @@ def _slave_triangles(problem, table: dict) -> np.ndarray | None:
     out. None as well for a surface of quadrilaterals or pairs without slave facets (node-to-node,
     obstacles): then the points alone are drawn.
     """
+    from dolfinx_nnqem import compat
+    from dolfinx_nnqem.contact.nearest import nearest
+
     slave = getattr(problem.contact.interfaces[0].pairs, "slave", None)
     if slave is None:  # node-to-node pairs and obstacles name no slave facets: points are drawn
         return None  # (the same answer on every rank: no collective call is skipped by one)
@@ -188,6 +194,24 @@ def _slave_triangles(problem, table: dict) -> np.ndarray | None:
     return row[np.all(row >= 0, axis=1)]
 
 
+def contact_pressure_data(problem) -> dict | None:
+    """What :func:`draw_contact_pressure` draws of ``problem``, gathered on rank 0 (None elsewhere).
+
+    Collective. A dict of ``points`` (the pairs' slave nodes, ``position_b`` of the pair table),
+    ``pressure`` (Pa, per pair), ``interface`` (each pair's index into the problem's interfaces) and
+    ``triangles`` (:func:`_slave_triangles`: the slave facets as rows of the table, or None where
+    the points alone are drawn): NumPy arrays only, so that another process can draw them.
+    """
+    from dolfinx_nnqem.io.results import pair_table
+
+    table = pair_table(problem)
+    triangles = _slave_triangles(problem, table) if len(problem.contact.interfaces) == 1 else None
+    if problem.comm.rank != 0:
+        return None
+    return {"points": table["position_b"], "pressure": table["pressure"], "interface": table["interface"],
+            "triangles": triangles}
+
+
 def plot_contact_pressure(problem_or_table, path: str | os.PathLike, *, problem=None, title: str = "",
                           unit: str = "MPa", camera: str | Sequence[float] = "bottom", point_size: float = 12.0,
                           interface: int | None = None, circle: float | None = None) -> None:
@@ -201,24 +225,44 @@ def plot_contact_pressure(problem_or_table, path: str | os.PathLike, *, problem=
     direction from the centre to the camera. ``circle``: the radius of a reference contact
     circle about the y axis (e.g. Hertz's a), drawn just below the surface. Rank 0 writes the PNG.
     """
+    data: dict | None
     if isinstance(problem_or_table, dict):
-        table, problem = problem_or_table, problem
-        triangles = None
+        table = problem_or_table
+        data = {"points": table["position_b"], "pressure": table["pressure"], "interface": table.get("interface"),
+                "triangles": None}
+        if problem is not None and problem.comm.rank != 0:
+            data = None
     else:
-        problem = problem_or_table
-        table = res.pair_table(problem)
-        triangles = _slave_triangles(problem, table) if len(problem.contact.interfaces) == 1 else None
-    comm = None if problem is None else problem.comm
-    if comm is not None and comm.rank != 0:
+        data = contact_pressure_data(problem_or_table)
+    if data is None:  # not rank 0
         return
-    select = np.ones(len(table["pressure"]), dtype=bool)
-    if interface is not None:
-        select = table["interface"] == interface
-    pyvista = compat.import_pyvista()
+    select = None if interface is None else np.asarray(data["interface"]) == interface
+    draw_contact_pressure(data, path, title=title, unit=unit, camera=camera, point_size=point_size,
+                          select=select, circle=circle)
+
+
+def draw_contact_pressure(data: dict, path: str | os.PathLike, *, title: str = "", unit: str = "MPa",
+                          camera: str | Sequence[float] = "bottom", point_size: float = 12.0,
+                          select: np.ndarray | None = None, circle: float | None = None) -> None:
+    """Draw the contact pressure of :func:`contact_pressure_data` into ``path`` (not collective).
+
+    Parameters
+    ----------
+    data
+        ``points`` (n, 3), ``pressure`` (n,) and ``triangles`` (rows of ``points``, or None: the
+        points are drawn as spheres coloured by pressure).
+    select
+        The pairs drawn (a boolean mask; default all).
+    title, unit, camera, point_size, circle
+        As :func:`plot_contact_pressure`.
+    """
+    points, triangles = np.asarray(data["points"]), data["triangles"]
+    if select is None:
+        select = np.ones(len(data["pressure"]), dtype=bool)
+    pyvista = pyvista_compat.import_pyvista()
 
     plotter = offscreen_plotter((1000, 800))  # two-beams -q without fields printed VTK's X warning (issue 31)
-    points = table["position_b"]
-    pressure = np.where(select, table["pressure"], np.nan)
+    pressure = np.where(select, data["pressure"], np.nan)
     bar = {"title": f"contact pressure ({unit})"}
     finite = pressure[np.isfinite(pressure)]
     clim = (0.0, float(finite.max()) if len(finite) and finite.max() > 0 else 1.0)

@@ -27,9 +27,11 @@ only; its cell fields colour the cells).
   increment (``residual_histories``).
 
 A picture whose data the folder lacks is skipped with the reason (:func:`draw_run_pictures`
-returns it). ``contact_pressure.png``, the pressure drawn on the surface of the deformed bodies,
-comes from ``plots.plot_contact_pressure`` where that function exists; it needs the live problem,
-so only :func:`draw_live_pictures` (the end of a run) draws it.
+returns it). ``contact_pressure.png``, the pressure drawn on the surface of the deformed bodies
+(``plots.draw_contact_pressure``), needs the live problem, so only :func:`draw_live_pictures`
+(the end of a run) draws it. At the end of a command-line run the pictures are drawn by worker
+processes started with the run (:mod:`dolfinx_nnqem.io.picture_worker`), with the same
+functions (:func:`draw_job`); this module imports no DOLFINx and no MPI for them.
 """
 
 from __future__ import annotations
@@ -40,15 +42,19 @@ import os
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
+from collections.abc import Collection, Mapping
+from typing import Any, Protocol
+
 import numpy as np
 
 import dolfinx_nnqem.io.plots as plots
-from dolfinx_nnqem import compat
+from dolfinx_nnqem import pyvista_compat
 from dolfinx_nnqem.io.live_fields import LINEAR_VTK_CELLS
 from dolfinx_nnqem.io.offscreen import PictureUnavailable, offscreen_plotter
 from dolfinx_nnqem.io.reader import read_pairs, read_summary, start_reading_fields
 
-__all__ = ["PICTURE_FOLDER", "PICTURES", "draw_live_pictures", "draw_run_pictures", "pictures_enabled"]
+__all__ = ["CONTACT_PICTURE", "PICTURE_FOLDER", "PICTURES", "PictureDrawer", "draw_job", "draw_live_pictures", "draw_run_pictures",
+           "pictures_enabled"]
 
 PICTURE_FOLDER = "pictures"
 PICTURES = ("deformed.png", "pair_pressure.png", "load_curve.png", "convergence.png")
@@ -103,7 +109,7 @@ def _field_grid(step: dict, scale: float | None):
     ``fields_p2.pvd``) is drawn on those VTK cells whole, a quadratic one with its edge nodes;
     a step read from ``fields.xdmf`` by the corners of its cells (:data:`VTK_CELLS`).
     """
-    pyvista = compat.import_pyvista()
+    pyvista = pyvista_compat.import_pyvista()
 
     topology = np.asarray(step["topology"], dtype=np.int64)
     if "cell_type" in step:
@@ -141,7 +147,7 @@ def _with_quadratic_displacement(folder: Path, step: dict) -> dict:
         datasets = list(ET.parse(index).iter("DataSet"))
         if not datasets or float(datasets[-1].attrib["timestep"]) != float(step["time"]):
             raise ValueError("its last increment is not the last of fields.xdmf")
-        grid = compat.import_pyvista().read(str(folder / datasets[-1].attrib["file"]))
+        grid = pyvista_compat.import_pyvista().read(str(folder / datasets[-1].attrib["file"]))
         cell_type = int(grid.celltypes[0])
         if cell_type not in LINEAR_VTK_CELLS or np.any(grid.celltypes != cell_type):
             raise ValueError(f"cells of VTK types {sorted(set(grid.celltypes.tolist()))}")
@@ -199,7 +205,7 @@ def draw_deformed(step: dict, rows: list[dict], path: Path, *, title: str = "", 
     if "p" in grid.cell_data and np.any(grid.cell_data["p"] > 0):
         plastic = grid.extract_cells(np.flatnonzero(grid.cell_data["p"] > 0))
         # the outline of the plastic zone (not its inner cell faces), drawn over the colours
-        edges = compat.extract_outer_surface(plastic).extract_feature_edges(
+        edges = pyvista_compat.extract_outer_surface(plastic).extract_feature_edges(
             boundary_edges=True, feature_edges=True, manifold_edges=False, non_manifold_edges=False)
         plotter.add_mesh(edges, color="darkorange", line_width=4, label="plastic zone (p > 0)")
     points, states = _pair_points(rows, scale)
@@ -339,7 +345,8 @@ def draw_convergence(summary: dict, path: Path, *, title: str = "") -> Path:
 # -- the whole set -------------------------------------------------------------------------------
 def draw_run_pictures(folder: str | os.PathLike, *, out: str | os.PathLike | None = None,
                       scale: float | None = None, field: str = "von_mises",
-                      camera: str = "iso", step: dict | None = None) -> dict[str, Path | str]:
+                      camera: str = "iso", step: dict | None = None,
+                      names: Collection[str] = PICTURES) -> dict[str, Path | str]:
     """Draw :data:`PICTURES` from a results folder; not collective (call it on one rank).
 
     Parameters
@@ -359,13 +366,20 @@ def draw_run_pictures(folder: str | os.PathLike, *, out: str | os.PathLike | Non
         The fields of the last increment the folder lists, as the run still holds them
         (:func:`~dolfinx_nnqem.io.live_fields.gather_field_step`): ``deformed.png`` is drawn
         from them instead of reading ``fields.xdmf`` (and ``fields_p2.pvd``) back.
+    names
+        The pictures drawn, of :data:`PICTURES` (default all; a picture worker draws a part).
 
     Returns
     -------
     dict
-        Per picture name, its path, or the reason it was not drawn (a string).
+        Per picture name of ``names`` (in the order of :data:`PICTURES`), its path, or the reason
+        it was not drawn (a string).
     """
 
+    unknown = set(names) - set(PICTURES)
+    if unknown:
+        raise ValueError(f"pictures {sorted(unknown)}: expected some of {PICTURES}")
+    names = [name for name in PICTURES if name in names]
     folder = Path(folder)
     out = Path(out) if out is not None else folder / PICTURE_FOLDER
     out.mkdir(parents=True, exist_ok=True)
@@ -382,9 +396,11 @@ def draw_run_pictures(folder: str | os.PathLike, *, out: str | os.PathLike | Non
             done[name] = f"not drawn: {error}"
 
     if not summary.get("load_factors"):
-        return {name: "not drawn: no converged increment" for name in PICTURES}
+        return {name: "not drawn: no converged increment" for name in names}
     fields = None
-    if step is not None:
+    if "deformed.png" not in names:
+        pass
+    elif step is not None:
         fields = lambda: [step]  # noqa: E731  (from memory: nothing to read)
     elif (folder / "fields.xdmf").exists():  # the last step is read (by a child process) while the curves are drawn
         try:
@@ -392,12 +408,16 @@ def draw_run_pictures(folder: str | os.PathLike, *, out: str | os.PathLike | Non
         except OSError as error:
             done["deformed.png"] = f"not drawn: {error}"
     try:
-        if rows:
+        if "pair_pressure.png" not in names:
+            pass
+        elif rows:
             attempt("pair_pressure.png", draw_pair_pressure, rows, title=title)
         else:
             done["pair_pressure.png"] = "not drawn: no contact pairs"
-        attempt("load_curve.png", draw_load_curve, summary, title=title)
-        attempt("convergence.png", draw_convergence, summary, title=title)
+        if "load_curve.png" in names:
+            attempt("load_curve.png", draw_load_curve, summary, title=title)
+        if "convergence.png" in names:
+            attempt("convergence.png", draw_convergence, summary, title=title)
     finally:  # the reading process is waited for whatever happened
         try:
             steps = fields() if fields is not None else []
@@ -407,37 +427,93 @@ def draw_run_pictures(folder: str | os.PathLike, *, out: str | os.PathLike | Non
         last = steps[-1] if step is not None else _with_quadratic_displacement(folder, steps[-1])
         attempt("deformed.png", draw_deformed, last, rows, title=title, scale=scale, field=field, camera=camera)
     done.setdefault("deformed.png", "not drawn: no fields (the run was made with fields = false)")
-    return {name: done[name] for name in PICTURES}
+    return {name: done[name] for name in names}
+
+
+CONTACT_PICTURE = "contact_pressure.png"
+"""The picture of the contact pressure on the deformed bodies' surface (the live problem's)."""
+
+
+def draw_job(job: Mapping[str, Any]) -> dict[str, Path | str]:
+    """Draw the end-of-run pictures a job names, in this process; never raises for a picture.
+
+    The same function draws them in the run's process and in a picture worker
+    (:mod:`dolfinx_nnqem.io.picture_worker`): a job holds plain data only.
+
+    Parameters
+    ----------
+    job
+        ``folder`` (the results folder), ``names`` (pictures of :data:`PICTURES`), ``step``
+        (the last increment's fields from memory, or None) and ``contact``: for
+        :data:`CONTACT_PICTURE`, the data of :func:`~dolfinx_nnqem.io.plots.contact_pressure_data`,
+        the reason it is not drawn (a string), or None (not asked for).
+
+    Returns
+    -------
+    dict
+        Per picture, its path or the reason it was not drawn (``"not drawn: ..."``), in the
+        order of :data:`PICTURES`, :data:`CONTACT_PICTURE` last.
+    """
+    folder = Path(job["folder"])
+    names = tuple(job.get("names", ()))
+    done: dict[str, Path | str] = {}
+    if names:
+        try:
+            done = draw_run_pictures(folder, step=job.get("step"), names=names)
+        except Exception as error:  # noqa: BLE001  (the results are written; a picture is a bonus)
+            done = {name: f"not drawn: {type(error).__name__}: {error}" for name in names}
+    contact = job.get("contact")
+    if isinstance(contact, str):
+        done[CONTACT_PICTURE] = contact
+    elif contact is not None:
+        path = folder / PICTURE_FOLDER / CONTACT_PICTURE
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            plots.draw_contact_pressure(contact, path)
+            done[CONTACT_PICTURE] = path
+        except Exception as error:  # noqa: BLE001  (as above: a picture never ends the run)
+            done[CONTACT_PICTURE] = f"not drawn: {type(error).__name__}: {error}"
+    return done
+
+
+class PictureDrawer(Protocol):
+    """What draws a job of :func:`draw_job` elsewhere (the picture workers of a run,
+    :class:`~dolfinx_nnqem.io.picture_worker.PictureWorkers`)."""
+
+    def draw(self, job: Mapping[str, Any]) -> dict[str, Path | str]:
+        """The same as ``draw_job(job)``."""
+        ...
 
 
 def draw_live_pictures(problem, folder: str | os.PathLike, *, completed: bool,
-                       step: dict | None = None) -> dict[str, Path | str]:
+                       step: dict | None = None, worker: PictureDrawer | None = None) -> dict[str, Path | str]:
     """The end of a run: :func:`draw_run_pictures` on rank 0 (with the run's last ``step`` of
-    the fields, from memory, where it has one), then the live-problem hook.
+    the fields, from memory, where it has one), and :data:`CONTACT_PICTURE` of the live problem.
 
-    Collective. ``contact_pressure.png`` is drawn by ``plots.plot_contact_pressure(problem,
-    path)`` when that function exists (it draws on the problem's surfaces, collectively), the
-    problem has contact and the run ``completed`` (after a failed increment the problem holds
-    no converged state); otherwise that picture is skipped. A picture that cannot be drawn
-    never ends the run: its reason is logged.
+    Collective. ``contact_pressure.png`` is drawn from the problem's pair table and slave surface,
+    gathered on rank 0 (:func:`~dolfinx_nnqem.io.plots.contact_pressure_data`), when the problem
+    has contact and the run ``completed`` (after a failed increment the problem holds no
+    converged state); otherwise that picture is skipped. A picture that cannot be drawn never
+    ends the run: its reason is logged.
+
+    ``worker``: picture workers started with the run (:mod:`dolfinx_nnqem.io.picture_worker`,
+    rank 0's; None elsewhere): they draw the pictures, with their libraries imported already;
+    what a worker could not draw (it died, it could not start) is drawn here. Without one,
+    everything is drawn in this process (:func:`draw_job`).
     """
 
     folder = Path(folder)
+    contact: dict | str | None = None  # rank 0: the data of contact_pressure.png, or why not
+    if problem.has_contact and completed:
+        try:  # the gathers inside are reached on every rank before anything can fail
+            contact = plots.contact_pressure_data(problem)
+        except Exception as error:  # noqa: BLE001  (a picture never ends the run)
+            contact = f"not drawn: {type(error).__name__}: {error}"
     done: dict[str, Path | str] = {}
     if problem.comm.rank == 0:
-        try:
-            done = draw_run_pictures(folder, step=step)
-        except Exception as error:  # noqa: BLE001  (the results are written; a picture is a bonus)
-            done = {name: f"not drawn: {type(error).__name__}: {error}" for name in PICTURES}
+        job = {"folder": folder, "names": PICTURES, "step": step, "contact": contact}
+        done = worker.draw(job) if worker is not None else draw_job(job)
     done = problem.comm.bcast(done, root=0)
-    plot_contact_pressure = getattr(plots, "plot_contact_pressure", None)
-    if plot_contact_pressure is not None and problem.has_contact and completed:
-        path = folder / PICTURE_FOLDER / "contact_pressure.png"
-        try:  # the gather inside is reached on every rank before anything can fail; rank 0 draws
-            plot_contact_pressure(problem, path)
-            done["contact_pressure.png"] = path
-        except Exception as error:  # noqa: BLE001  (as above: a picture never ends the run)
-            done["contact_pressure.png"] = f"not drawn: {type(error).__name__}: {error}"
     for name, result in done.items():
         if isinstance(result, str):
             _log.warning(f"picture {name}: {result}")
