@@ -202,3 +202,14 @@ def test_no_worker_with_no_pictures_in_the_command_line(tmp_path):
     run, workers = _start_run(tmp_path, "--increments", "2", "--no-pictures")
     out, err = run.communicate(timeout=300)
     assert run.returncode == EXIT_OK and workers == [] and not (tmp_path / "out" / "pictures").exists()
+
+
+def test_io_modules_stay_reachable_as_attributes():
+    """``import dolfinx_nnqem.io`` imports its public names lazily; its modules stay reachable as
+    attributes (``io.output``, ``io.plots``), as when the package imported them eagerly."""
+    import dolfinx_nnqem.io as io
+
+    assert io.output.ResultsWriter is io.ResultsWriter
+    assert callable(io.plots.plot_contact_pressure) and callable(io.results.pair_table)
+    with pytest.raises(AttributeError, match="no attribute 'no_such_module'"):
+        io.no_such_module  # noqa: B018

@@ -31,9 +31,16 @@ __all__ = ["Checkpointer", "ResultsWriter", "equilibrium_check", "pair_table", "
 
 
 def __getattr__(name: str) -> Any:
-    """A public name of :data:`__all__`, imported from its module on first use (PEP 562)."""
+    """A public name of :data:`__all__`, imported from its module on first use (PEP 562); or a
+    module of this package (``io.output``, ``io.plots``), imported as ``import`` would: the
+    package imported its writer, checkpoint, reader and results modules eagerly before."""
     if name in _HOMES:
         value = getattr(importlib.import_module(f"{__name__}.{_HOMES[name]}"), name)
         globals()[name] = value
         return value
+    try:
+        return importlib.import_module(f"{__name__}.{name}")
+    except ModuleNotFoundError as error:
+        if error.name != f"{__name__}.{name}":  # the module exists; something it imports does not
+            raise
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
