@@ -18,8 +18,12 @@ import logging
 import math
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from dolfinx_nnqem import interrupts
+
+if TYPE_CHECKING:
+    from dolfinx_nnqem.io.picture_worker import PictureWorkers
 
 METHODS = ("monolithic", "nneqm1", "nneqm2")
 """The methods by name: :data:`dolfinx_nnqem.solvers.options.METHODS` (``tests/test_cli.py`` holds
@@ -177,7 +181,7 @@ def _increment_line(method: str):
     return line
 
 
-def _run(args) -> int:
+def _run(args, workers: PictureWorkers | None = None) -> int:
     from mpi4py import MPI
 
     from dolfinx_nnqem.collective import agree
@@ -189,8 +193,9 @@ def _run(args) -> int:
     method = args.method or spec.solver["method"]
     increments = args.increments or spec.solver["increments"]
     rank0 = comm.rank == 0
-    if not rank0 or not spec.output["pictures"]:  # (the launcher named no rank, or no pictures after all)
-        _close_picture_workers(args)
+    if workers is not None and (not rank0 or not spec.output["pictures"]):  # (the launcher named no rank,
+        workers.close()  # or no pictures after all)
+        workers = None
     problem = build_problem(spec, comm)
     if rank0 and not args.quiet:
         _print_header(args.problem, problem, method, increments)
@@ -202,7 +207,7 @@ def _run(args) -> int:
 
         check_direct_solver(comm, options.petsc_options)  # an unknown solver package is reported as such
     with make_solver(method, problem, options, **method_options) as solver:  # frees PETSc's objects
-        writer = _solve_problem_file(args, spec, problem, solver, method, increments)
+        writer = _solve_problem_file(args, spec, problem, solver, method, increments, workers)
     if rank0 and not args.quiet:
         s = writer.summary.data
         print(f"converged: {s['converged']}; iterations {s['iterations']}; global equilibrium "
@@ -222,7 +227,7 @@ def _print_header(path: str, problem, method: str, increments) -> None:
         print(f"  held by friction only: {motion}", flush=True)
 
 
-def _solve_problem_file(args, spec, problem, solver, method: str, increments):
+def _solve_problem_file(args, spec, problem, solver, method: str, increments, workers: PictureWorkers | None):
     """Solve the load steps of ``run`` with its writers, checkpoints and progress lines; returns
     the :class:`~dolfinx_nnqem.io.output.ResultsWriter` (closed). ``summary.json`` records how a
     run that started solving ended."""
@@ -241,7 +246,7 @@ def _solve_problem_file(args, spec, problem, solver, method: str, increments):
     writer = ResultsWriter(problem, method, out, increments, probes=spec.output["probes"] or None,
                            fields=spec.output["fields"], extra={"problem_file": str(args.problem)},
                            overwrite=args.overwrite, resume=args.restart, pictures=None if pictures else False,
-                           picture_worker=getattr(args, "picture_workers", None))
+                           picture_worker=workers)
     solving = False  # summary.json records how a run ended only once it has started solving
     try:
         resume = None
@@ -482,7 +487,7 @@ def _main(argv: list[str] | None) -> int:
     if scale is not None and not (math.isfinite(scale) and 0 < scale <= 1e20):  # nan drew a blank picture
         print(f"dolfinx-nnqem: error: --scale must be a number in (0, 1e20], got {scale}", file=sys.stderr)
         return EXIT_USAGE
-    args.picture_workers = _start_picture_workers(args)  # they import their libraries meanwhile
+    workers = _start_picture_workers(args)  # they import their libraries meanwhile
     try:
         _start_up()
         _configure_logging(args.verbose, args.quiet)
@@ -498,7 +503,7 @@ def _main(argv: list[str] | None) -> int:
             if args.command == "two-beams":
                 code = _two_beams(args)
             elif args.command == "run":
-                code = _run(args)
+                code = _run(args, workers)
             elif args.command == "plot":
                 code = _plot(args)
             else:
@@ -513,7 +518,8 @@ def _main(argv: list[str] | None) -> int:
 
                 message += "\n" + "".join(traceback.format_exception(error))
     finally:  # a run that failed or was interrupted does not wait for them: they are killed
-        _close_picture_workers(args)
+        if workers is not None:
+            workers.close()
     code, message = collective.finish_collectively(code, message)
     if message and MPI.COMM_WORLD.rank == 0:
         print(message, file=sys.stderr, flush=True)
@@ -524,7 +530,7 @@ def _main(argv: list[str] | None) -> int:
     return code
 
 
-def _start_picture_workers(args):
+def _start_picture_workers(args) -> PictureWorkers | None:
     """The picture workers of a command-line ``run`` that draws its pictures, on the rank that
     draws them (:mod:`dolfinx_nnqem.io.picture_worker`); None otherwise.
 
@@ -544,14 +550,6 @@ def _start_picture_workers(args):
         return None
     level = logging.ERROR if args.quiet else (logging.INFO if args.verbose >= 2 else logging.WARNING)
     return PictureWorkers(shown=args.verbose >= 1 and not args.quiet, level=level)
-
-
-def _close_picture_workers(args) -> None:
-    """End the picture workers of ``args`` (if any): none outlives the run."""
-    workers = getattr(args, "picture_workers", None)
-    args.picture_workers = None
-    if workers is not None:
-        workers.close()
 
 
 def _start_up() -> None:
