@@ -536,13 +536,14 @@ def _start_picture_workers(args) -> PictureWorkers | None:
 
     Started before the imports of MPI, PETSc and DOLFINx, so that the workers import matplotlib
     and pyvista while the run starts and solves; the rank is the launcher's (``mpiexec``) then.
-    Not with ``--no-pictures``, ``--check``, ``DOLFINX_NNQEM_PICTURES=0``, nor in a user's program
-    calling :func:`main`, which draws in its own process."""
+    Not with ``--no-pictures``, ``--check``, ``DOLFINX_NNQEM_PICTURES=0``, in a job of several
+    ranks or on one core (:func:`~dolfinx_nnqem.io.picture_worker.worth_starting`), nor in a
+    user's program calling :func:`main`, which draws in its own process."""
     if args.command != "run" or args.no_pictures or args.check or not interrupts.is_command_line():
         return None
-    from dolfinx_nnqem.io.picture_worker import PictureWorkers, launcher_rank
+    from dolfinx_nnqem.io.picture_worker import PictureWorkers, launcher_rank, worth_starting
 
-    if launcher_rank() not in (None, 0):
+    if launcher_rank() not in (None, 0) or not worth_starting():
         return None
     from dolfinx_nnqem.io.run_pictures import pictures_enabled
 

@@ -101,13 +101,15 @@ def test_a_dead_worker_leaves_its_pictures_to_the_run(reference, tmp_path, monke
 
 
 def test_no_worker_without_pictures(monkeypatch):
-    """--no-pictures, --check, DOLFINX_NNQEM_PICTURES=0, a rank other than 0, a user's program
-    calling main(): no worker is started (nothing is spent)."""
+    """--no-pictures, --check, DOLFINX_NNQEM_PICTURES=0, a rank other than 0, a job of several
+    ranks, a user's program calling main(): no worker is started (nothing is spent)."""
     started = []
     monkeypatch.setattr("dolfinx_nnqem.io.picture_worker.PictureWorkers",
                         lambda *a, **k: started.append(1) or "workers")
     monkeypatch.delenv(ENV_SWITCH, raising=False)
-    monkeypatch.delenv("PMI_RANK", raising=False)
+    monkeypatch.setattr(picture_worker.os, "cpu_count", lambda: 2)  # the machine's own count aside
+    for name in ("PMI_RANK", "PMI_SIZE", "PMIX_SIZE", "OMPI_COMM_WORLD_SIZE", "MV2_COMM_WORLD_SIZE", "SLURM_NTASKS"):
+        monkeypatch.delenv(name, raising=False)
 
     def workers(*argv, command_line=True, **env):
         monkeypatch.setattr(cli.interrupts, "is_command_line", lambda: command_line)
@@ -124,6 +126,8 @@ def test_no_worker_without_pictures(monkeypatch):
     assert workers("plot", "results") is None
     assert workers("run", str(EXAMPLE), PMI_RANK="1") is None
     monkeypatch.setenv("PMI_RANK", "0")
+    assert workers("run", str(EXAMPLE), PMI_SIZE="2") is None  # a job of several ranks: no idle core
+    monkeypatch.setenv("PMI_SIZE", "1")
     assert workers("run", str(EXAMPLE), **{ENV_SWITCH: "0"}) is None
     assert started == [1]
 

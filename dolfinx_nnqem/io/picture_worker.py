@@ -34,7 +34,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import IO, Any
 
-__all__ = ["ROLES", "PictureWorkers", "launcher_rank", "serve"]
+__all__ = ["ROLES", "PictureWorkers", "launcher_rank", "launcher_size", "serve", "worth_starting"]
 
 ROLES: dict[str, tuple[tuple[str, ...], bool]] = {
     "curves": (("pair_pressure.png", "load_curve.png", "convergence.png"), False),
@@ -62,6 +62,23 @@ serve(sys.argv[2:])
 and its ``__init__`` (which imports DOLFINx in a user's program) left out."""
 
 _log = logging.getLogger("dolfinx_nnqem")
+
+
+def launcher_size() -> int | None:
+    """The number of processes ``mpiexec`` (or ``srun``) announces for the job, before MPI is
+    initialised; None where none is announced (a process without a launcher)."""
+    for name in ("PMI_SIZE", "PMIX_SIZE", "OMPI_COMM_WORLD_SIZE", "MV2_COMM_WORLD_SIZE", "SLURM_NTASKS"):
+        value = os.environ.get(name, "").strip()
+        if value.isdigit():
+            return int(value)
+    return None
+
+
+def worth_starting() -> bool:
+    """Workers save wall-clock time only where a core is idle while the run solves: not in a job
+    of several ranks (they take the cores; a worker also shifted where a Ctrl-C met the two ranks
+    of an Open MPI job), nor on a single core."""
+    return (launcher_size() or 1) == 1 and (os.cpu_count() or 1) >= 2
 
 
 def launcher_rank() -> int | None:
