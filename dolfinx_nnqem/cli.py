@@ -290,6 +290,19 @@ def _raise_swallowed_interrupt(*_) -> None:
         raise interrupt
 
 
+def _quiet_about_lost_interrupts(hook):
+    """``sys.unraisablehook`` that leaves out the interrupts whose exception Python dropped (they
+    are recorded and raised again, :func:`_raise_swallowed_interrupt`): the run ends with its one
+    line, not with an "Exception ignored" traceback too. Every other unraisable goes to ``hook``."""
+
+    def quiet(unraisable) -> None:
+        if issubclass(unraisable.exc_type, KeyboardInterrupt) and interrupts.received:
+            return
+        hook(unraisable)
+
+    return quiet
+
+
 def _progress_callbacks(args, increments, method: str, rank: int) -> list:
     """The progress bar, and with -v a line per increment (-vv: the log has it); first, the check
     for an interrupt whose exception was lost (:func:`_raise_swallowed_interrupt`)."""
@@ -445,9 +458,12 @@ def _abort_unless_ended(code: int, reason: str) -> None:
 def main(argv: list[str] | None = None) -> int:
     interrupts.received.clear()
     _hold_signals()  # start-up: an interrupt is recorded, and acted on once the run can end cleanly
+    unraisable_hook = sys.unraisablehook
+    sys.unraisablehook = _quiet_about_lost_interrupts(unraisable_hook)
     try:
         code = _main(argv)
     finally:
+        sys.unraisablehook = unraisable_hook
         _install_sigterm()  # never leave the start-up handlers behind (in-process callers)
         if "dolfinx_nnqem.collective" in sys.modules and not interrupts.is_command_line():
             sys.modules["dolfinx_nnqem.collective"].disarm_abort()  # (the command line's process ends)

@@ -327,15 +327,27 @@ def test_an_interrupt_whose_exception_was_lost_still_ends_the_run(tmp_path, monk
     """A signal handler's exception raised inside a weak-reference callback or a finaliser is printed
     and dropped by Python ("Exception ignored"): a SIGTERM 0.4 s into a run once met the import
     system's module-lock callback and the run exited 0. The recorded signal still ends the run
-    after the next increment: exit 143, the summary "interrupted", the increments written."""
+    after the increment: exit 143, the summary "interrupted", the increments written."""
     from dolfinx_nnqem import cli, interrupts
 
     original = cli._progress_callbacks
 
     def with_a_lost_sigterm(args, increments, method, rank):
         def lose(result):
-            if result.index == 2:  # as if the handler ran and its exception was dropped
-                interrupts.received.append(signal.SIGTERM)
+            if result.index == 2:  # the handler runs inside a weak-reference callback: its exception is dropped
+                import weakref
+
+                class Held:
+                    pass
+
+                def callback(ref):
+                    interrupts.received.append(signal.SIGTERM)
+                    raise cli.Terminated()
+
+                held = Held()
+                ref = weakref.ref(held, callback)
+                del held
+                assert ref() is None
         return original(args, increments, method, rank) + [lose]
 
     monkeypatch.setattr(cli, "_progress_callbacks", with_a_lost_sigterm)
@@ -344,3 +356,24 @@ def test_an_interrupt_whose_exception_was_lost_still_ends_the_run(tmp_path, monk
     assert main(["-q", "run", str(p), "--out", str(out), "--no-pictures"]) == EXIT_TERMINATED
     summary = read_summary(out)
     assert summary["status"] == "interrupted" and len(summary["load_factors"]) == 3
+
+
+def test_a_lost_interrupt_is_not_reported_as_an_unraisable_exception(monkeypatch):
+    """The command line's ``sys.unraisablehook`` leaves out a dropped interrupt that was recorded (the
+    run ends with its one line, not with an "Exception ignored" traceback too) and passes every
+    other unraisable exception on."""
+    import types
+
+    from dolfinx_nnqem import cli, interrupts
+
+    passed_on = []
+    hook = cli._quiet_about_lost_interrupts(passed_on.append)
+    monkeypatch.setattr(interrupts, "received", [signal.SIGTERM])
+    lost = types.SimpleNamespace(exc_type=cli.Terminated)
+    other = types.SimpleNamespace(exc_type=ValueError)
+    hook(lost)
+    hook(other)
+    assert passed_on == [other]
+    monkeypatch.setattr(interrupts, "received", [])
+    hook(lost)  # not a recorded signal's: reported
+    assert passed_on == [other, lost]
