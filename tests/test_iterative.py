@@ -146,3 +146,55 @@ def test_bad_level_is_refused(level):
 def test_bad_body2_division_is_refused(n2):
     with pytest.raises(ValueError, match="n2"):
         pressed_blocks_problem(1, MPI.COMM_SELF, n2=n2)
+
+
+def _tridiagonal(n: int) -> PETSc.Mat:
+    A = PETSc.Mat().createAIJ((n, n), nnz=3, comm=MPI.COMM_SELF)
+    for i in range(n):
+        A[i, i] = 2.0
+        if i > 0:
+            A[i, i - 1] = -1.0
+        if i < n - 1:
+            A[i, i + 1] = -1.0
+    A.assemble()
+    return A
+
+
+def test_products_lose_their_intermediates_only_inside_the_block():
+    """The AMG set-up runs with ``mat_product_clear`` set; outside the block the option is as before
+    (absent, or the caller's own value), so a caller's products stay reusable."""
+    from dolfinx_nnqem.numerics.linalg import products_without_intermediates
+    opts = PETSc.Options()
+    assert not opts.hasName("mat_product_clear")
+    with products_without_intermediates():
+        assert opts.getBool("mat_product_clear")
+    assert not opts.hasName("mat_product_clear")
+    opts.setValue("mat_product_clear", "false")
+    try:
+        with products_without_intermediates():
+            assert opts.getBool("mat_product_clear")
+        assert opts.getString("mat_product_clear") == "false"
+    finally:
+        opts.delValue("mat_product_clear")
+
+
+def test_a_callers_product_stays_reusable_after_an_iterative_solve():
+    """A product the caller made before the solve is recomputed in place after it (PETSc would crash
+    on a product whose data was cleared), and the solve leaves no option behind."""
+    A = _tridiagonal(12)
+    P = PETSc.Mat().createAIJ((12, 4), nnz=1, comm=MPI.COMM_SELF)
+    for i in range(12):
+        P[i, i // 3] = 1.0
+    P.assemble()
+    C = A.PtAP(P)
+    problem = pressed_blocks_problem(1, MPI.COMM_SELF)
+    with MonolithicSolver(problem, monolithic=MonolithicOptions(linear_solver="iterative")) as solver:
+        solve_load_steps(problem, solver, 2, final_load_factor=1.0 / 3.0)
+        assert solver.amg_setups >= 1
+    assert not PETSc.Options().hasName("mat_product_clear")
+    A.scale(2.0)
+    A.PtAP(P, C)  # MAT_REUSE_MATRIX
+    expected = A.PtAP(P)
+    assert np.allclose(C.convert("dense").getDenseArray(), expected.convert("dense").getDenseArray())
+    for m in (A, P, C, expected):
+        m.destroy()

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 import numpy as np
 from mpi4py import MPI
@@ -59,6 +61,32 @@ def clear_options(prefix: str, options: dict) -> None:
     for key in options:
         if opts.hasName(prefix + key):
             opts.delValue(prefix + key)
+
+
+@contextmanager
+def products_without_intermediates() -> Iterator[None]:
+    """Within: the sparse matrix products PETSc creates drop their intermediate data after their
+    numeric phase (the global option ``mat_product_clear``, restored on leaving).
+
+    For an AMG set-up in the ``with`` block. GAMG's Galerkin products PᵀAP keep, by default,
+    what a later product of the same pattern would reuse (AP, Pᵀ and the local parts of P): on
+    the pressed blocks a tenth of the peak memory (``docs/performance.md``). The lagged
+    hierarchy of :class:`~dolfinx_nnqem.solvers.linear_solver.IterativeSolver` is rebuilt after
+    many Newton iterations, and GAMG then makes its products anew when they carry no data (it
+    reuses only products that do). Only products made inside the block are affected: a caller's
+    own products, which it may reuse, keep theirs (a reuse of a cleared product crashes PETSc).
+    """
+    opts = PETSc.Options()
+    key = "mat_product_clear"
+    before = opts.getString(key) if opts.hasName(key) else None
+    opts.setValue(key, "true")
+    try:
+        yield
+    finally:
+        if before is None:
+            opts.delValue(key)
+        else:
+            opts.setValue(key, before)
 
 
 PARALLEL_MUMPS_OPTIONS = {"mat_mumps_icntl_7": 5}

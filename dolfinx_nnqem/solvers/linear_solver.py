@@ -28,7 +28,7 @@ from petsc4py import PETSc
 
 from dolfinx_nnqem.solvers.convergence import logger
 from dolfinx_nnqem.numerics.linalg import (ITERATIVE_NO_CONTACT_OPTIONS, ITERATIVE_SOLVER_OPTIONS, clear_options, create_ksp,
-                                  relative_residual,
+                                  products_without_intermediates, relative_residual,
                                   direct_options, rigid_body_modes, vec_norm)
 
 __all__ = ["DIRECT_RESIDUAL_TOL", "DirectSolver", "IterativeSolver"]
@@ -224,11 +224,13 @@ class IterativeSolver:
         """Set up (lagging the u block's AMG where it may) and solve; PETSc errors are raised."""
         t0 = time.perf_counter()
         try:
-            self.ksp.setUp()
-            self._lag_u_preconditioner(pair_state)
-            _tick(self.timings, "setup", t0)
-            t0 = time.perf_counter()
-            self.ksp.solve(b, x)
+            # the AMG set-up happens within the solve; its products' reuse data would outlive it
+            with products_without_intermediates():
+                self.ksp.setUp()
+                self._lag_u_preconditioner(pair_state)
+                _tick(self.timings, "setup", t0)
+                t0 = time.perf_counter()
+                self.ksp.solve(b, x)
         except PETSc.Error:
             self._refresh = True  # whatever failed, do not lag from it
             raise
