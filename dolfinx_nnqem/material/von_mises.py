@@ -211,6 +211,7 @@ class PlasticState:
         self._return_map_u: fem.Function | None = None
         self._commit_u: fem.Function | None = None
         self._trial_dp: fem.Function | None = None
+        self._material_expressions: tuple[fem.Expression, ...] | None = None  # compiled at the first at_points
 
     # -- the return map -------------------------------------------------------------------
     def elastic_stress(self, eps) -> ufl.core.expr.Expr:
@@ -366,15 +367,22 @@ class PlasticState:
         return imap.size_global * self.W_scalar.dofmap.index_map_bs
 
     def at_points(self) -> VonMisesAtPoints:
-        """The material at this rank's owned Gauss points (interpolated once per call)."""
-        at = self.values_at_points
-        return VonMisesAtPoints(at(self.mu), at(self.lmbda), at(self.sigma_y0), at(self.H), at(self.E))
+        """The material at this rank's owned Gauss points (interpolated at every call, so that a caller
+        holds them only while it needs them; the compiled expressions are kept)."""
+        if self._material_expressions is None:
+            self._material_expressions = tuple(jit.expression(e, self._points)
+                                               for e in (self.mu, self.lmbda, self.sigma_y0, self.H, self.E))
+        return VonMisesAtPoints(*(self._owned_values(e) for e in self._material_expressions))
 
     def values_at_points(self, expr) -> np.ndarray:
         """A scalar UFL expression (e.g. a material field) at this rank's owned Gauss points."""
+        return self._owned_values(jit.expression(expr, self._points)).copy()
+
+    def _owned_values(self, compiled) -> np.ndarray:
+        """A compiled scalar expression at the owned Gauss points (a view of a function of its own)."""
         f = fem.Function(self.W_scalar)
-        f.interpolate(jit.expression(expr, self._points))
-        return f.x.array[:self.W_scalar.dofmap.index_map.size_local].copy()
+        f.interpolate(compiled)
+        return f.x.array[:self.W_scalar.dofmap.index_map.size_local]
 
 
 ELASTIC_YIELD_STRESS = np.finfo(float).max / 1e10

@@ -57,7 +57,8 @@ from dolfinx_nnqem.problem.validation import check_real
 from dolfinx_nnqem.solvers.constitutive import ConstitutiveCheck, check_constitutive_law
 from dolfinx_nnqem.solvers.options import SolverOptions
 
-__all__ = ["CheckOptions", "StateCheck", "check_state", "failure_details"]
+__all__ = ["CheckOptions", "StateCheck", "check_state", "failure_details", "radial_return_values",
+           "values_to_commit"]
 
 DEFAULT_MAX_STRAIN = 0.1
 """Largest strain (Frobenius norm of sym ∇u at a Gauss point) accepted by default."""
@@ -121,45 +122,78 @@ class StateCheck:
 
 
 class _Forms:
-    """Compiled objects of one problem used by the check (built on first use)."""
+    """Compiled objects of one problem used by the check (built on first use).
+
+    Only the compiled expressions and forms are kept between checks: the Gauss-point functions
+    they fill (72 bytes a point for a tensor, 40 for the material) are made for each check and
+    dropped after it, so that they do not add to the memory the linear solver's set-up needs in
+    the next increment.
+    """
 
     def __init__(self, problem):
         st = problem.state
         points = compat.interpolation_points(st.W_tensor)
-        # one Gauss-point tensor function holds ∇u, Δε and the radial return's Δε_p in turn, and
-        # the stress function the radial return's σ too: each is 72 bytes a point (94 MB a rank
-        # at 10⁶ dofs), and the check needs them one after the other (copies are taken)
-        self.grad = fem.Function(st.W_tensor)
         self.grad_expr = jit.expression(ufl.grad(problem.u), points)
-        self.strain_increment = self.grad
         self.strain_increment_expr = jit.expression(strain(problem.u) - strain(st.u_n), points)
-        self.sigma = fem.Function(st.W_tensor)
-        self.own_force = jit.form(ufl.inner(self.sigma, strain(ufl.TestFunction(problem.V))) * st.dx)
-        self._return_map = None
-        self._material = None
+        self._own_force: tuple[fem.Function, fem.Form] | None = None
         # the state, not the problem: this object is the value of a WeakKeyDictionary keyed by
         # the problem, and a reference to its key would keep both alive for the whole process
         self._state = st
 
-    def material_at_points(self) -> PointwisePlasticity:
-        """The material at the owned Gauss points (computed once)."""
-        if self._material is None:
-            self._material = self._state.at_points()
-        return self._material
-
-    def return_map_values(self, p) -> GaussPointValues:
-        """The values the radial return gives at the problem ``p``'s u: what a commit without a
-        solver's own values stores."""
+    def at_points(self, expr) -> np.ndarray:
+        """A tensor expression at the owned Gauss points, (n, 3, 3), in a function of its own."""
         st = self._state
-        if self._return_map is None:
-            self._return_map = (self.sigma, fem.Function(st.W_scalar), self.grad)
-        sigma, dp, deps = self._return_map
-        e_sigma, e_dp, e_deps = st.return_map_expressions(p.u)
-        for f, e in ((sigma, e_sigma), (dp, e_dp), (deps, e_deps)):
-            f.interpolate(e)
+        f = fem.Function(st.W_tensor)
+        f.interpolate(expr)
         n = st.W_scalar.dofmap.index_map.size_local
-        return GaussPointValues(p.u.x.array, sigma.x.array[:9 * n].reshape(n, 3, 3).copy(), dp.x.array[:n].copy(),
-                                deps.x.array[:9 * n].reshape(n, 3, 3).copy(), "backward-euler")
+        return f.x.array[:9 * n].reshape(n, 3, 3)
+
+    def own_force(self, sigma: np.ndarray) -> fem.Form:
+        """The internal force form of the Gauss-point stresses ``sigma`` (owned points), kept once made
+        (solvers with their own Gauss-point values only)."""
+        st = self._state
+        if self._own_force is None:
+            sigma_f = fem.Function(st.W_tensor)
+            v = ufl.TestFunction(st.u_n.function_space)
+            self._own_force = (sigma_f, jit.form(ufl.inner(sigma_f, strain(v)) * st.dx))
+        sigma_f, form = self._own_force
+        sigma_f.x.array[:sigma.size] = sigma.reshape(-1)
+        sigma_f.x.scatter_forward()
+        return form
+
+    def material_at_points(self) -> PointwisePlasticity:
+        """The material at the owned Gauss points (interpolated for each check, not kept)."""
+        return self._state.at_points()
+
+
+def radial_return_values(problem) -> GaussPointValues:
+    """The values the radial return gives at the problem's u, at the owned Gauss points (collective):
+    what the commit stores for a solver without Gauss-point values of its own."""
+    st = problem.state
+    e_sigma, e_dp, e_deps = st.return_map_expressions(problem.u)
+    sigma, dp, deps = fem.Function(st.W_tensor), fem.Function(st.W_scalar), fem.Function(st.W_tensor)
+    for f, e in ((sigma, e_sigma), (dp, e_dp), (deps, e_deps)):
+        f.interpolate(e)
+    n = st.W_scalar.dofmap.index_map.size_local
+    return GaussPointValues(problem.u.x.array.copy(), sigma.x.array[:9 * n].reshape(n, 3, 3), dp.x.array[:n],
+                            deps.x.array[:9 * n].reshape(n, 3, 3), "backward-euler")
+
+
+def values_to_commit(problem, report=None) -> GaussPointValues:
+    """The Gauss-point values a commit of the problem's current iterate stores (collective): the
+    solver's own (``report.gauss_point_values``) where they belong to the current u on every
+    rank, else the radial return's at u. The check verifies these, and the commit stores them."""
+    gpv = getattr(report, "gauss_point_values", None)
+    if _own_values(problem, gpv):
+        assert gpv is not None  # _own_values: given
+        return gpv
+    return radial_return_values(problem)
+
+
+def _own_values(problem, gpv: GaussPointValues | None) -> bool:
+    """``gpv`` is given and belongs to the problem's current u, on every rank."""
+    own = gpv is not None and np.array_equal(gpv.u, problem.u.x.array)
+    return bool(problem.comm.allreduce(int(own), op=MPI.MIN))
 
 
 _FORMS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
@@ -176,7 +210,8 @@ def _allmax(comm, value: float) -> float:
     return comm.allreduce(float(value), op=MPI.MAX)
 
 
-def check_state(problem, report=None, solver_options=None, options: CheckOptions | None = None) -> StateCheck:
+def check_state(problem, report=None, solver_options=None, options: CheckOptions | None = None,
+                values: GaussPointValues | None = None) -> StateCheck:
     """Check the problem's current iterate (collective; call before commit).
 
     Parameters
@@ -191,6 +226,9 @@ def check_state(problem, report=None, solver_options=None, options: CheckOptions
         The solver's :class:`~dolfinx_nnqem.solvers.options.SolverOptions` (rtol, atol); default ones if None.
     options
         :class:`CheckOptions`.
+    values
+        The Gauss-point values the commit will store, as :func:`values_to_commit` gives them
+        (computed here if None).
     """
     options = options or CheckOptions()
     solver_options = solver_options or SolverOptions()
@@ -201,8 +239,9 @@ def check_state(problem, report=None, solver_options=None, options: CheckOptions
         nan = float("nan")
         return StateCheck(False, "the state holds NaN or infinite values", nan, nan, nan, nan, nan, nan, tol, False)
     gpv = getattr(report, "gauss_point_values", None)
-    own = gpv is not None and np.array_equal(gpv.u, problem.u.x.array)
-    own = bool(comm.allreduce(int(own), op=MPI.MIN))
+    own = _own_values(problem, gpv)
+    if values is None:
+        values = values_to_commit(problem, report)
     reasons: list[str] = []
 
     # -- equilibrium (with the stresses the commit will store)
@@ -214,7 +253,6 @@ def check_state(problem, report=None, solver_options=None, options: CheckOptions
         reasons.append(f"equilibrium residual |R|/F = {eq:.3e} > {tol:.1e} (F = {F:.4g} N){hint}")
 
     # -- the constitutive law at every Gauss point, of the values the commit will store
-    values = gpv if own and gpv is not None else forms.return_map_values(problem)  # own: gpv is not None
     constitutive, yield_violation = _constitutive(problem, forms, values)
     if comm.allreduce(int(np.any(np.asarray(values.dp) < 0.0)), op=MPI.MAX):
         yield_violation = math.inf
@@ -269,10 +307,7 @@ def _equilibrium(problem, forms: _Forms, gpv: GaussPointValues | None):
     """(R at the free dofs, the force scale F, |R_free|/F) with the solver's own Gauss-point stresses
     ``gpv``, or the radial return's when None."""
     if gpv is not None:
-        n_gp = problem.state.W_scalar.dofmap.index_map.size_local
-        forms.sigma.x.array[:9 * n_gp] = np.asarray(gpv.sigma, dtype=float).reshape(-1)
-        forms.sigma.x.scatter_forward()
-        F_int = assemble_vector(forms.own_force, problem.V)
+        F_int = assemble_vector(forms.own_force(np.asarray(gpv.sigma, dtype=float)), problem.V)
     else:
         F_int = problem.assemble_internal_force()
     F_ext = problem.external_force()
@@ -302,9 +337,7 @@ def _contact_law(problem, F: float) -> tuple[float, float, np.ndarray]:
 def _largest_strain_and_rotation(problem, forms: _Forms) -> tuple[float, float]:
     """The largest |sym ∇u| and infinitesimal rotation |axial(skew ∇u)| over the Gauss points."""
     comm = problem.comm
-    forms.grad.interpolate(forms.grad_expr)
-    n_gp = problem.state.W_scalar.dofmap.index_map.size_local
-    G = forms.grad.x.array[:9 * n_gp].reshape(-1, 3, 3)
+    G = forms.at_points(forms.grad_expr)
     sym = 0.5 * (G + G.transpose(0, 2, 1))
     strain = _allmax(comm, np.max(np.sqrt(np.einsum("nij,nij->n", sym, sym)), initial=0.0))
     rotation = _allmax(comm, np.max(0.5 * np.sqrt((G[:, 2, 1] - G[:, 1, 2]) ** 2 + (G[:, 0, 2] - G[:, 2, 0]) ** 2
@@ -327,12 +360,11 @@ def _constitutive(problem, forms: _Forms, values: GaussPointValues) -> tuple[Con
     yield-surface figure alone."""
     st = problem.state
     n = st.W_scalar.dofmap.index_map.size_local
-    forms.strain_increment.interpolate(forms.strain_increment_expr)
     deps_p = values.deps_p
     if deps_p is None:  # values given without their plastic strains: what the stresses leave over
         deps_p = st.plastic_strain_of(problem.u, np.asarray(values.sigma).reshape(n, 3, 3))
     result = check_constitutive_law(
-        problem.comm, forms.strain_increment.x.array[:9 * n].reshape(n, 3, 3),
+        problem.comm, forms.at_points(forms.strain_increment_expr),
         np.asarray(values.sigma, dtype=float).reshape(n, 3, 3), np.asarray(values.dp, dtype=float).reshape(n),
         np.asarray(deps_p, dtype=float).reshape(n, 3, 3), values.flow_rule,
         st.sigma_n.x.array[:9 * n].reshape(n, 3, 3), st.p_n.x.array[:n], forms.material_at_points())

@@ -23,7 +23,8 @@ from dataclasses import dataclass
 from mpi4py import MPI
 
 from dolfinx_nnqem.contact.model import LostContactError
-from dolfinx_nnqem.solvers.checks import CheckOptions, StateCheck, check_state, failure_details
+from dolfinx_nnqem.material.von_mises import GaussPointValues
+from dolfinx_nnqem.solvers.checks import CheckOptions, StateCheck, check_state, failure_details, values_to_commit
 from dolfinx_nnqem.solvers.convergence import ConvergenceError, SolveReport, logger
 from dolfinx_nnqem.numerics.linalg import free_dropped_objects
 from dolfinx_nnqem.solvers.step_control import AutomaticIncrements, as_step_control
@@ -125,7 +126,7 @@ def solve_load_steps(
         target = schedule.target(ell)
         free_dropped_objects(problem.petsc_comms)
         t0 = time.perf_counter()
-        report, verdict = _solve_and_check(problem, solver, target, check, max_displacement)
+        report, verdict, values = _solve_and_check(problem, solver, target, check, max_displacement)
         if not report.converged:
             if not schedule.can_cut_back(max_cutbacks):
                 _fail(problem, solver, report, target, increment=index0 + len(results) + 1,
@@ -135,7 +136,7 @@ def solve_load_steps(
             logger.warning(f"[{solver.name}] increment to load factor {target:.6g} failed "
                            f"({report.message}); cutback {schedule.cutbacks}, new step {schedule.step:.6g}")
             continue
-        result = _commit(problem, solver, report, target, index=index0 + len(results) + 1,
+        result = _commit(problem, solver, report, values, target, index=index0 + len(results) + 1,
                          cutbacks=schedule.cutbacks, verdict=verdict, t0=t0, callbacks=callbacks)
         results.append(result)
         ell = target
@@ -216,13 +217,17 @@ class _Schedule:
 
 
 def _solve_and_check(problem, solver, target: float, check: CheckOptions | None,
-                     max_displacement: float | None = None) -> tuple[SolveReport, StateCheck | None]:
+                     max_displacement: float | None = None
+                     ) -> tuple[SolveReport, StateCheck | None, GaussPointValues | None]:
     """Solve the increment to ``target``; a solver's "converged" stands only if the independent
-    check confirms it and the displacement stays below ``max_displacement``."""
+    check confirms it and the displacement stays below ``max_displacement``. Returns the report,
+    the check and the Gauss-point values to commit (None if the solve did not converge)."""
     report = _solve(problem, solver, float(target))
-    verdict = None
+    verdict, values = None, None
     if report.converged:
-        verdict = check_state(problem, report, getattr(solver, "options", None), check)
+        # the Gauss-point values to commit, computed once: the check verifies them, the commit stores them
+        values = values_to_commit(problem, report)
+        verdict = check_state(problem, report, getattr(solver, "options", None), check, values)
         if not verdict.ok:
             report.converged = False
             report.message = f"the solver reported convergence, but the independent check failed: {verdict.reason}"
@@ -232,7 +237,7 @@ def _solve_and_check(problem, solver, target: float, check: CheckOptions | None,
             report.converged = False
             report.message = (f"largest displacement {u_max:.4g} exceeds max_displacement = "
                               f"{max_displacement:.4g} (collapse)")
-    return report, verdict
+    return report, verdict, values
 
 
 GEOMETRY_PASSES = 30
@@ -290,11 +295,12 @@ def _update_geometry(problem, target: float) -> SolveReport | None:
     return None
 
 
-def _commit(problem, solver, report: SolveReport, target: float, *, index: int, cutbacks: int,
-            verdict: StateCheck | None, t0: float, callbacks) -> IncrementResult:
-    """Commit a converged increment and hand it to the callbacks (the writers)."""
+def _commit(problem, solver, report: SolveReport, values: GaussPointValues | None, target: float, *,
+            index: int, cutbacks: int, verdict: StateCheck | None, t0: float, callbacks) -> IncrementResult:
+    """Commit a converged increment with the Gauss-point ``values`` (the radial return's at u if None)
+    and hand it to the callbacks (the writers)."""
     t_commit = time.perf_counter()
-    problem.commit(report.gauss_point_values)
+    problem.commit(values)
     result = IncrementResult(
         index=index, load_factor=float(target), report=report,
         plastic_points=problem.state.count_plastic_points(),
@@ -390,9 +396,9 @@ def solve_load_path(problem, solver, load_factors: Sequence[float], *,
     results: list[IncrementResult] = []
     for target in load_factors:
         t0 = time.perf_counter()
-        report, verdict = _solve_and_check(problem, solver, target, check)
+        report, verdict, values = _solve_and_check(problem, solver, target, check)
         if not report.converged:
             _fail(problem, solver, report, target, increment=len(results) + 1, cutbacks=0, callbacks=callbacks)
-        results.append(_commit(problem, solver, report, target, index=len(results) + 1, cutbacks=0,
+        results.append(_commit(problem, solver, report, values, target, index=len(results) + 1, cutbacks=0,
                                verdict=verdict, t0=t0, callbacks=callbacks))
     return results
