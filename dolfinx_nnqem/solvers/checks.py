@@ -125,9 +125,8 @@ class _Forms:
     """Compiled objects of one problem used by the check (built on first use).
 
     Only the compiled expressions and forms are kept between checks: the Gauss-point functions
-    they fill (72 bytes a point for a tensor, 40 for the material) are made for each check and
-    dropped after it, so that they do not add to the memory the linear solver's set-up needs in
-    the next increment.
+    they fill (72 bytes a point for a tensor) are made for each check and dropped after it, so
+    that they do not add to the memory the linear solver's set-up needs in the next increment.
     """
 
     def __init__(self, problem):
@@ -136,6 +135,7 @@ class _Forms:
         self.grad_expr = jit.expression(ufl.grad(problem.u), points)
         self.strain_increment_expr = jit.expression(strain(problem.u) - strain(st.u_n), points)
         self._own_force: tuple[fem.Function, fem.Form] | None = None
+        self._material: PointwisePlasticity | None = None
         # the state, not the problem: this object is the value of a WeakKeyDictionary keyed by
         # the problem, and a reference to its key would keep both alive for the whole process
         self._state = st
@@ -162,8 +162,11 @@ class _Forms:
         return form
 
     def material_at_points(self) -> PointwisePlasticity:
-        """The material at the owned Gauss points (interpolated for each check, not kept)."""
-        return self._state.at_points()
+        """The material at the owned Gauss points (computed once; made per check instead, they did not
+        lower the measured peak memory, ``docs/performance.md``)."""
+        if self._material is None:
+            self._material = self._state.at_points()
+        return self._material
 
 
 def radial_return_values(problem) -> GaussPointValues:
