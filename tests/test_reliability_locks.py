@@ -7,7 +7,7 @@ import sys
 import time
 
 from dolfinx_nnqem.cli import EXIT_IO, EXIT_OK, main
-from dolfinx_nnqem.io.locking import LOCK_NAME, REMOVING_PREFIX, OutputLock, set_aside_outputs
+from dolfinx_nnqem.io.locking import LOCK_NAME, OutputLock
 
 from reliability_helpers import env, kill_session, problem_file, start, wait_for_checkpoint
 
@@ -56,29 +56,6 @@ def test_a_used_folder_is_refused_or_cleared_with_overwrite(tmp_path, capsys):
     print(f"\n  without --overwrite: {err}\n  with --overwrite: pair tables {csv}, field steps {steps}, "
           f"user's file kept: {(out / 'notes.txt').exists()}")
     assert "earlier run" in err and len(csv) == 3 and len(steps) == 3 and (out / "notes.txt").exists()
-    assert not list(out.glob(REMOVING_PREFIX + "*"))  # the earlier outputs' deletion ended with the run
-
-
-def test_earlier_outputs_are_set_aside_at_once_and_deleted_in_the_background(tmp_path):
-    """The old results leave the folder by renames before the function returns; the deletion (also
-    of a folder a killed run set aside and never deleted) happens in a thread; the user's files stay."""
-    out = tmp_path / "out"
-    (out / "pairs").mkdir(parents=True)
-    for i in range(20):
-        (out / "pairs" / f"pairs_{i:04d}.csv").write_text("x")
-    (out / "summary.json").write_text("{}")
-    (out / "notes.txt").write_text("the user's own file")
-    killed = out / (REMOVING_PREFIX + "killed")
-    (killed / "fields").mkdir(parents=True)
-    (killed / "fields" / "u.h5").write_text("x")
-    removed, thread = set_aside_outputs(out)
-    left = sorted(p.name for p in out.iterdir() if not p.name.startswith(REMOVING_PREFIX))
-    assert sorted(p.name for p in removed) == ["pairs", "summary.json"] and left == ["notes.txt"]
-    assert thread is not None
-    thread.join(timeout=60)
-    print(f"\n  set aside {[p.name for p in removed]}; left {left}; after the thread: {sorted(p.name for p in out.iterdir())}")
-    assert sorted(p.name for p in out.iterdir()) == ["notes.txt"]
-    assert set_aside_outputs(out) == ([], None)
 
 
 PROBE = """

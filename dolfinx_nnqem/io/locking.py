@@ -7,37 +7,25 @@ is simply taken over; a lock held by a live run makes the second run refuse with
 the holder (process id, host, start time). Only rank 0 takes it (MPI runs share one folder).
 
 :func:`previous_outputs` lists what an earlier run left in a folder and :func:`clear_outputs`
-removes exactly those files (never anything else the user keeps there). :func:`set_aside_outputs`
-does the same in two steps: it renames them into a hidden folder at once, and a thread deletes
-that folder while the new run works (deleting files that were ``fsync``-ed costs milliseconds
-each on a journaling file system).
+removes exactly those files (never anything else the user keeps there).
 """
 
 from __future__ import annotations
 
 import fcntl
 import json
-import logging
 import os
 import shutil
 import socket
-import tempfile
-import threading
 import time
 from pathlib import Path
 
-__all__ = ["LOCK_NAME", "OUTPUT_NAMES", "REMOVING_PREFIX", "FolderInUse", "OutputLock", "clear_outputs",
-           "previous_outputs", "set_aside_outputs"]
-
-_log = logging.getLogger("dolfinx_nnqem")
+__all__ = ["LOCK_NAME", "OUTPUT_NAMES", "FolderInUse", "OutputLock", "clear_outputs", "previous_outputs"]
 
 LOCK_NAME = ".nnqem.lock"
 OUTPUT_NAMES = ("summary.json", "fields.xdmf", "fields.h5", "fields", "fields_p2.pvd", "pairs.pvd", "pairs", "checkpoints",
                 "pictures")
 """What a run writes into its folder (files and folders); cleared by ``--overwrite``."""
-REMOVING_PREFIX = ".nnqem-removing-"
-"""The hidden folders :func:`set_aside_outputs` moves an earlier run's outputs into (a run that
-died before their deletion finished leaves one; the next clearing removes it)."""
 
 
 class FolderInUse(OSError):
@@ -147,35 +135,3 @@ def clear_outputs(folder: str | os.PathLike) -> list[Path]:
         else:
             path.unlink()
     return removed
-
-
-def set_aside_outputs(folder: str | os.PathLike) -> tuple[list[Path], threading.Thread | None]:
-    """Clear an earlier run's outputs from ``folder`` at once, deleting them in the background.
-
-    The outputs (as :func:`previous_outputs` lists them) are renamed into a new hidden folder
-    (``REMOVING_PREFIX`` + a random suffix) in ``folder``: each rename is atomic, so from here on
-    the folder holds no old result. A thread then deletes that folder, and any such folder a
-    killed run left. Returns what was set aside and the thread (None if there was nothing to
-    delete); join it before the process ends (it is not a daemon: Python's exit waits for it).
-    """
-    folder = Path(folder)
-    removed = previous_outputs(folder)
-    leftovers = [p for p in folder.glob(REMOVING_PREFIX + "*") if p.is_dir() and not p.is_symlink()]
-    if not removed and not leftovers:
-        return removed, None
-    if removed:
-        aside = Path(tempfile.mkdtemp(prefix=REMOVING_PREFIX, dir=folder))
-        for path in removed:
-            os.rename(path, aside / path.name)
-        leftovers.append(aside)
-    thread = threading.Thread(target=_delete_folders, args=(leftovers,), name="nnqem-remove-old-outputs")
-    thread.start()
-    return removed, thread
-
-
-def _delete_folders(folders: list[Path]) -> None:
-    for path in folders:
-        try:
-            shutil.rmtree(path)
-        except OSError as error:  # what is left is hidden, holds no result, and the next run tries again
-            _log.warning(f"could not delete the earlier outputs set aside in {path}: {error}")

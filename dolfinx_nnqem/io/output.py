@@ -29,7 +29,6 @@ import csv
 import json
 import math
 import os
-import threading
 import time
 import warnings
 from collections.abc import Mapping, Sequence
@@ -42,7 +41,7 @@ from dolfinx_nnqem import interrupts
 from dolfinx_nnqem.collective import on_rank0
 from dolfinx_nnqem.contact.laws import STATE_NAMES
 from dolfinx_nnqem.io.field_series import FieldSeriesWriter
-from dolfinx_nnqem.io.locking import OutputLock, previous_outputs, set_aside_outputs
+from dolfinx_nnqem.io.locking import OutputLock, clear_outputs, previous_outputs
 from dolfinx_nnqem.io.quadratic_fields import QuadraticFieldWriter, writes_quadratic_fields
 from dolfinx_nnqem.io.run_pictures import PictureDrawer, draw_live_pictures, pictures_enabled
 from dolfinx_nnqem.io.safe_io import StagedFiles, atomic_write, atomic_write_text, commit, remove_stale_temporaries
@@ -389,7 +388,6 @@ class ResultsWriter:
         self.picture_worker = picture_worker
         self.drawn: dict = {}  # what close() drew: picture name -> path, or why it was not drawn
         self._lock = OutputLock(self.folder) if lock else None
-        self._removal: threading.Thread | None = None  # deletes the earlier outputs set aside (rank 0)
 
         def prepare():
             self.folder.mkdir(parents=True, exist_ok=True)
@@ -404,7 +402,7 @@ class ResultsWriter:
                                                   f"({', '.join(p.name for p in old)}); use --overwrite to replace "
                                                   "them, --restart to continue that run, or another folder",
                                               str(self.folder))
-                    _, self._removal = set_aside_outputs(self.folder)
+                    clear_outputs(self.folder)
             except BaseException:
                 if self._lock is not None:
                     self._lock.release()
@@ -561,9 +559,6 @@ class ResultsWriter:
         return gather_field_step(space, values, self.fields.cell_means(), t, whole_cells=whole)
 
     def _release(self) -> None:
-        if self._removal is not None:  # the earlier outputs' deletion ends with the run
-            self._removal.join()
-            self._removal = None
         if self._lock is not None and self.problem.comm.rank == 0:
             self._lock.release()
 
