@@ -287,9 +287,9 @@ class PlasticState:
             raise ValueError("PlasticState.commit must always be given the same displacement Function")
         e_sigma, e_dp, e_deps_p = self.return_map_expressions(u)
         sigma_new = fem.Function(self.W_tensor)
-        sigma_new.interpolate(e_sigma)
-        self.dp_n.interpolate(e_dp)
-        self.deps_p_n.interpolate(e_deps_p)
+        compat.interpolate_expression(sigma_new, e_sigma)
+        compat.interpolate_expression(self.dp_n, e_dp)
+        compat.interpolate_expression(self.deps_p_n, e_deps_p)
         self.sigma_n.x.array[:] = sigma_new.x.array
         self.p_n.x.array[:] += self.dp_n.x.array
         self.u_n.x.array[:] = u.x.array
@@ -339,7 +339,8 @@ class PlasticState:
         """dev Δε − dev(σ − σ_n)/(2μ) at the owned Gauss points (n, 3, 3), Δε = ε(u) − ε(u_n)."""
         n = sigma.shape[0]
         strain_increment = fem.Function(self.W_tensor)
-        strain_increment.interpolate(jit.expression(ufl.dev(strain(u) - strain(self.u_n)), self._points))
+        dev_increment = jit.expression(ufl.dev(strain(u) - strain(self.u_n)), self._points)
+        compat.interpolate_expression(strain_increment, dev_increment)
         mu = self.values_at_points(self.mu)
         dsigma = sigma - self.sigma_n.x.array[:9 * n].reshape(n, 3, 3)
         dev_dsigma = dsigma - np.trace(dsigma, axis1=1, axis2=2)[:, None, None] * np.eye(3) / 3.0
@@ -357,7 +358,7 @@ class PlasticState:
         if self._trial_dp is None:
             self._trial_dp = fem.Function(self.W_scalar)
         dp = self._trial_dp
-        dp.interpolate(self.return_map_expressions(u)[1])
+        compat.interpolate_expression(dp, self.return_map_expressions(u)[1])
         n_local = self.W_scalar.dofmap.index_map.size_local * self.W_scalar.dofmap.index_map_bs
         return self.mesh.comm.allreduce(int(np.count_nonzero(dp.x.array[:n_local] > 0.0)), op=MPI.SUM)
 
@@ -381,7 +382,7 @@ class PlasticState:
     def _owned_values(self, compiled) -> np.ndarray:
         """A compiled scalar expression at the owned Gauss points (a view of a function of its own)."""
         f = fem.Function(self.W_scalar)
-        f.interpolate(compiled)
+        compat.interpolate_expression(f, compiled)
         return f.x.array[:self.W_scalar.dofmap.index_map.size_local]
 
 

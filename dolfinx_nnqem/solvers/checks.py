@@ -144,7 +144,7 @@ class _Forms:
         """A tensor expression at the owned Gauss points, (n, 3, 3), in a function of its own."""
         st = self._state
         f = fem.Function(st.W_tensor)
-        f.interpolate(expr)
+        compat.interpolate_expression(f, expr)
         n = st.W_scalar.dofmap.index_map.size_local
         return f.x.array[:9 * n].reshape(n, 3, 3)
 
@@ -176,7 +176,7 @@ def radial_return_values(problem) -> GaussPointValues:
     e_sigma, e_dp, e_deps = st.return_map_expressions(problem.u)
     sigma, dp, deps = fem.Function(st.W_tensor), fem.Function(st.W_scalar), fem.Function(st.W_tensor)
     for f, e in ((sigma, e_sigma), (dp, e_dp), (deps, e_deps)):
-        f.interpolate(e)
+        compat.interpolate_expression(f, e)
     n = st.W_scalar.dofmap.index_map.size_local
     return GaussPointValues(problem.u.x.array.copy(), sigma.x.array[:9 * n].reshape(n, 3, 3), dp.x.array[:n],
                             deps.x.array[:9 * n].reshape(n, 3, 3), "backward-euler")

@@ -38,6 +38,7 @@ import dolfinx.fem as fem
 import numpy as np
 from mpi4py import MPI
 
+from dolfinx_nnqem import compat
 from dolfinx_nnqem.material.von_mises import GaussPointValues, deviator_coordinates, deviator_tensors, elastic_stress
 from dolfinx_nnqem.numerics.linalg import vec_norm
 from dolfinx_nnqem.numerics.newton import solve
@@ -264,7 +265,7 @@ class NNEQM2Solver(ReleasesPETSc):
         R_free = p.free_residual(R)
         eq = vec_norm(R_free) / scale  # F, as the independent check has it (atol is no scale: issue 31)
         # the radial-return stress of the same displacement, from the same converged state
-        self._sigma_rm.interpolate(self._return_map)
+        compat.interpolate_expression(self._sigma_rm, self._return_map)
         diff = np.linalg.norm((values.sigma - self._sigma_rm.x.array[:9 * gp.n_gp].reshape(gp.n_gp, 3, 3))
                               .reshape(gp.n_gp, 9), axis=1) / gp.stress_unit
         f = (gp.material.yield_value(deviator_coordinates(values.sigma), st.p_n.x.array[:gp.n_gp] + values.dp)
