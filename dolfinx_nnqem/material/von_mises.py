@@ -338,13 +338,12 @@ class PlasticState:
     def plastic_strain_of(self, u: fem.Function, sigma: np.ndarray) -> np.ndarray:
         """dev Δε − dev(σ − σ_n)/(2μ) at the owned Gauss points (n, 3, 3), Δε = ε(u) − ε(u_n)."""
         n = sigma.shape[0]
-        strain_increment = fem.Function(self.W_tensor)
-        dev_increment = jit.expression(ufl.dev(strain(u) - strain(self.u_n)), self._points)
-        compat.interpolate_expression(strain_increment, dev_increment)
+        dev_increment = self.owned_at_points(jit.expression(ufl.dev(strain(u) - strain(self.u_n)), self._points),
+                                             tensor=True)
         mu = self.values_at_points(self.mu)
         dsigma = sigma - self.sigma_n.x.array[:9 * n].reshape(n, 3, 3)
         dev_dsigma = dsigma - np.trace(dsigma, axis1=1, axis2=2)[:, None, None] * np.eye(3) / 3.0
-        return strain_increment.x.array[:9 * n].reshape(n, 3, 3) - dev_dsigma / (2.0 * mu[:, None, None])
+        return dev_increment - dev_dsigma / (2.0 * mu[:, None, None])
 
     def count_plastic_points(self) -> int:
         """Number of Gauss points (over all ranks) that yielded in the last converged increment."""
@@ -373,17 +372,19 @@ class PlasticState:
         if self._material_expressions is None:
             self._material_expressions = tuple(jit.expression(e, self._points)
                                                for e in (self.mu, self.lmbda, self.sigma_y0, self.H, self.E))
-        return VonMisesAtPoints(*(self._owned_values(e) for e in self._material_expressions))
+        return VonMisesAtPoints(*(self.owned_at_points(e) for e in self._material_expressions))
 
     def values_at_points(self, expr) -> np.ndarray:
         """A scalar UFL expression (e.g. a material field) at this rank's owned Gauss points."""
-        return self._owned_values(jit.expression(expr, self._points)).copy()
+        return self.owned_at_points(jit.expression(expr, self._points)).copy()
 
-    def _owned_values(self, compiled) -> np.ndarray:
-        """A compiled scalar expression at the owned Gauss points (a view of a function of its own)."""
-        f = fem.Function(self.W_scalar)
+    def owned_at_points(self, compiled: fem.Expression, tensor: bool = False) -> np.ndarray:
+        """A compiled expression at this rank's owned Gauss points: (n,) for a scalar, (n, 3, 3) for
+        a ``tensor``; a view of a function of its own (kept alive by the view, dropped with it)."""
+        f = fem.Function(self.W_tensor if tensor else self.W_scalar)
         compat.interpolate_expression(f, compiled)
-        return f.x.array[:self.W_scalar.dofmap.index_map.size_local]
+        n = self.W_scalar.dofmap.index_map.size_local
+        return f.x.array[:9 * n].reshape(n, 3, 3) if tensor else f.x.array[:n]
 
 
 ELASTIC_YIELD_STRESS = np.finfo(float).max / 1e10

@@ -141,12 +141,8 @@ class _Forms:
         self._state = st
 
     def at_points(self, expr) -> np.ndarray:
-        """A tensor expression at the owned Gauss points, (n, 3, 3), in a function of its own."""
-        st = self._state
-        f = fem.Function(st.W_tensor)
-        compat.interpolate_expression(f, expr)
-        n = st.W_scalar.dofmap.index_map.size_local
-        return f.x.array[:9 * n].reshape(n, 3, 3)
+        """A compiled tensor expression at the owned Gauss points, (n, 3, 3), in a function of its own."""
+        return self._state.owned_at_points(expr, tensor=True)
 
     def own_force(self, sigma: np.ndarray) -> fem.Form:
         """The internal force form of the Gauss-point stresses ``sigma`` (owned points), kept once made
@@ -174,12 +170,8 @@ def radial_return_values(problem) -> GaussPointValues:
     what the commit stores for a solver without Gauss-point values of its own."""
     st = problem.state
     e_sigma, e_dp, e_deps = st.return_map_expressions(problem.u)
-    sigma, dp, deps = fem.Function(st.W_tensor), fem.Function(st.W_scalar), fem.Function(st.W_tensor)
-    for f, e in ((sigma, e_sigma), (dp, e_dp), (deps, e_deps)):
-        compat.interpolate_expression(f, e)
-    n = st.W_scalar.dofmap.index_map.size_local
-    return GaussPointValues(problem.u.x.array.copy(), sigma.x.array[:9 * n].reshape(n, 3, 3), dp.x.array[:n],
-                            deps.x.array[:9 * n].reshape(n, 3, 3), "backward-euler")
+    return GaussPointValues(problem.u.x.array.copy(), st.owned_at_points(e_sigma, tensor=True),
+                            st.owned_at_points(e_dp), st.owned_at_points(e_deps, tensor=True), "backward-euler")
 
 
 def values_to_commit(problem, report=None) -> GaussPointValues:
