@@ -172,7 +172,7 @@ class Checkpointer:
 def _write_rank(tmp: Path, problem) -> None:
     st = problem.state
     arrays = {"u": problem.u.x.array, "u_n": st.u_n.x.array, "sigma_n": st.sigma_n.x.array,
-              "p_n": st.p_n.x.array, "dp_n": st.dp_n.x.array, "deps_p_n": st.deps_p_n.x.array}
+              "p_n": st.p_n.x.array, "dp_n": st.dp_n.x.array}
     info = {"format": FORMAT, "fingerprint": _fingerprint(problem), "load_factor_n": float(problem.load_factor_n),
             "load_factor": float(problem.load_factor)}
     if problem.has_contact:
@@ -273,9 +273,7 @@ def _read_rank(path: Path, problem) -> None:
                                   "the problem or the partition changed")
         for name, f in (("u", problem.u), ("u_n", st.u_n), ("sigma_n", st.sigma_n), ("p_n", st.p_n),
                         ("dp_n", st.dp_n)):
-            f.x.array[:] = data[name]
-        if "deps_p_n" in data:  # a checkpoint of release 0.1 has no Δε_p,n (only NNEQM2's predictor reads it)
-            st.deps_p_n.x.array[:] = data["deps_p_n"]
+            f.x.array[:] = data[name]  # an earlier checkpoint's "deps_p_n" (state no solver read) is not read
         problem.load_factor_n = float(info["load_factor_n"])
         problem.load_factor = float(info["load_factor"])
         if problem.has_contact:

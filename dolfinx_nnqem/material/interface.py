@@ -61,7 +61,6 @@ class MaterialState(Protocol):
     sigma_n: Any  #: converged stress
     p_n: Any  #: converged equivalent plastic strain
     dp_n: Any  #: its increment in the last converged increment
-    deps_p_n: Any  #: the plastic strain increment of the last converged increment
     u_n: Any  #: converged displacement
     E: Any
     mu: Any
@@ -91,7 +90,7 @@ class MaterialState(Protocol):
         """Accept ``u``: the state from the return map."""
         ...
 
-    def commit_values(self, u, sigma: np.ndarray, dp: np.ndarray, deps_p: np.ndarray | None = None) -> None:
+    def commit_values(self, u, sigma: np.ndarray, dp: np.ndarray) -> None:
         """Accept ``u`` with Gauss-point values a solver computed itself."""
         ...
 

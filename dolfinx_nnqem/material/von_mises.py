@@ -203,7 +203,6 @@ class PlasticState:
         self.sigma_n = fem.Function(W_tensor, name="sigma")  # converged stress
         self.p_n = fem.Function(W_scalar, name="p")  # converged equivalent plastic strain
         self.dp_n = fem.Function(W_scalar, name="dp")  # Δp of the last converged increment
-        self.deps_p_n = fem.Function(W_tensor, name="deps_p")  # Δε_p of the last converged increment
         self.u_n = fem.Function(V, name="u_converged")  # converged displacement
         self._points = compat.interpolation_points(W_scalar)
         # compiled at the first commit and count_trial_plastic_points, for the u they are given
@@ -279,30 +278,27 @@ class PlasticState:
         return self._return_map_expressions
 
     def commit(self, u: fem.Function) -> None:
-        """Accept ``u`` as converged: update σ_n, p_n, Δp_n, Δε_p,n and u_n at every Gauss point
-        by the radial return."""
+        """Accept ``u`` as converged: update σ_n, p_n, Δp_n and u_n at every Gauss point by the
+        radial return."""
         if self._commit_u is None:
             self._commit_u = u
         elif u is not self._commit_u:
             raise ValueError("PlasticState.commit must always be given the same displacement Function")
-        e_sigma, e_dp, e_deps_p = self.return_map_expressions(u)
+        e_sigma, e_dp, _ = self.return_map_expressions(u)
         sigma_new = fem.Function(self.W_tensor)
         compat.interpolate_expression(sigma_new, e_sigma)
         compat.interpolate_expression(self.dp_n, e_dp)
-        compat.interpolate_expression(self.deps_p_n, e_deps_p)
         self.sigma_n.x.array[:] = sigma_new.x.array
         self.p_n.x.array[:] += self.dp_n.x.array
         self.u_n.x.array[:] = u.x.array
-        for f in (self.sigma_n, self.p_n, self.dp_n, self.deps_p_n, self.u_n):
+        for f in (self.sigma_n, self.p_n, self.dp_n, self.u_n):
             f.x.scatter_forward()
 
-    def commit_values(self, u: fem.Function, sigma: np.ndarray, dp: np.ndarray,
-                      deps_p: np.ndarray | None = None) -> None:
+    def commit_values(self, u: fem.Function, sigma: np.ndarray, dp: np.ndarray) -> None:
         """Accept ``u`` as converged with Gauss-point values computed by the caller.
 
         For solvers whose stress update is not this class's radial return (NNEQM2's own
-        integration): σ_n ← ``sigma``, Δp_n ← ``dp``, p_n ← p_n + ``dp``, Δε_p,n ← ``deps_p``,
-        u_n ← ``u``.
+        integration): σ_n ← ``sigma``, Δp_n ← ``dp``, p_n ← p_n + ``dp``, u_n ← ``u``.
 
         Parameters
         ----------
@@ -311,10 +307,6 @@ class PlasticState:
             in the order of :attr:`W_tensor`'s owned dofs.
         dp
             Equivalent plastic strain increments at the owned Gauss points, shape ``(n_owned,)``.
-        deps_p
-            Plastic strain increments at the owned Gauss points, ``(n_owned, 3, 3)``; None: the
-            part of the strain increment the stress increment does not account for,
-            dev Δε − dev(σ − σ_n) / (2μ) (plastic strains are deviatoric).
         """
         n = self.W_scalar.dofmap.index_map.size_local
         sigma = np.asarray(sigma, dtype=float).reshape(-1)
@@ -322,17 +314,11 @@ class PlasticState:
         if sigma.size != 9 * n or dp.size != n:
             raise ValueError(f"commit_values: expected {n} owned Gauss points, got sigma of size "
                              f"{sigma.size} (9 per point) and dp of size {dp.size}")
-        if deps_p is None:
-            deps_p = self.plastic_strain_of(u, sigma.reshape(n, 3, 3))
-        deps_p = np.asarray(deps_p, dtype=float).reshape(-1)
-        if deps_p.size != 9 * n:
-            raise ValueError(f"commit_values: expected deps_p of size {9 * n}, got {deps_p.size}")
         self.sigma_n.x.array[:9 * n] = sigma
         self.dp_n.x.array[:n] = dp
         self.p_n.x.array[:n] += dp
-        self.deps_p_n.x.array[:9 * n] = deps_p
         self.u_n.x.array[:] = u.x.array
-        for f in (self.sigma_n, self.p_n, self.dp_n, self.deps_p_n, self.u_n):
+        for f in (self.sigma_n, self.p_n, self.dp_n, self.u_n):
             f.x.scatter_forward()
 
     def plastic_strain_of(self, u: fem.Function, sigma: np.ndarray) -> np.ndarray:

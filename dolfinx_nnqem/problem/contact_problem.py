@@ -589,8 +589,7 @@ class ContactProblem:
         self._previous = (self.load_factor_n, self.state.u_n.x.array.copy(),
                           self.contact.z_n.copy() if self.contact is not None else None)
         if gauss_point_values is not None and np.array_equal(gauss_point_values.u, self.u.x.array):
-            self.state.commit_values(self.u, gauss_point_values.sigma, gauss_point_values.dp,
-                                     gauss_point_values.deps_p)
+            self.state.commit_values(self.u, gauss_point_values.sigma, gauss_point_values.dp)
         else:
             self.state.commit(self.u)
         self.load_factor_n = self.load_factor
