@@ -23,7 +23,9 @@ class IterationRecord:
     step_length: float  #: line-search step α (1 = full Newton step); NaN before the first step
     kind: str  #: "newton", "lm" (Levenberg–Marquardt) or "" for the last, converged record
     states: tuple[int, int, int] = (0, 0, 0)  #: numbers of open, stick, slip pairs
-    plastic_points: int = 0  #: Gauss points on the plastic branch at this iterate
+    #: Gauss points on the plastic branch at this iterate; None: not counted (the count interpolates
+    #: the return map at every Gauss point, so it is made only for the iteration log and a failure)
+    plastic_points: int | None = None
     inner_iterations: int = 0  #: iterations of a nested nonsmooth solve (NNEQM1), else 0
     yield_residual: float = 0.0  #: ‖G̃‖ of NNEQM2's yield rows (relative to the stress unit), else 0
 
@@ -34,7 +36,7 @@ class IterationRecord:
         return (
             f"[{solver}] it {self.iteration:3d}  |R|/F {self.equilibrium:9.3e}  |H|/F {self.contact:9.3e}"
             f"  step {alpha} {self.kind:6s} open/stick/slip {self.states[0]}/{self.states[1]}/{self.states[2]}"
-            f"  plastic GP {self.plastic_points}{inner}"
+            f"  plastic GP {'-' if self.plastic_points is None else self.plastic_points}{inner}"
         )
 
 
@@ -60,6 +62,15 @@ class ConvergenceError(RuntimeError):
     """An increment did not converge even after the allowed cutbacks."""
 
     failure: dict  #: set by load stepping: increment, load factor, reason, the worst nodes and pairs
+
+
+def iteration_log_on(comm) -> bool:
+    """Whether some rank logs the iterations (the package's logger at INFO, e.g. ``-v``). What is
+    counted for that log only is counted by every rank or none: the counts are collective, and a
+    program may configure logging on rank 0 alone."""
+    from mpi4py import MPI
+
+    return bool(comm.allreduce(logger.isEnabledFor(logging.INFO), op=MPI.LOR))
 
 
 def count_states(states_local: np.ndarray, comm) -> tuple[int, int, int]:

@@ -34,7 +34,7 @@ from dolfinx_nnqem.contact.geometric_stiffness import GeometricTerms
 from dolfinx_nnqem.contact.laws import LawEvaluation, Linearisation
 from dolfinx_nnqem.solvers.block_system import AugmentedSystem, MonolithicMatrix, free_mask
 from dolfinx_nnqem.solvers.contract import ReleasesPETSc
-from dolfinx_nnqem.solvers.convergence import IterationRecord, SolveReport, count_states, logger
+from dolfinx_nnqem.solvers.convergence import IterationRecord, SolveReport, count_states, iteration_log_on, logger
 from dolfinx_nnqem.numerics.linalg import (clear_options, create_ksp, direct_options, free_dropped_objects, global_norm,
                                            vec_norm)
 from dolfinx_nnqem.solvers.linear_solver import DirectSolver, IterativeSolver
@@ -439,6 +439,7 @@ class _NewtonSystem:
         self.report = report
         self.align_sliding = align_sliding  #: see MonolithicSolver.set_iterate
         self.current: _Evaluation | None = None
+        self._count_plastic = iteration_log_on(self.problem.comm)  # trial plastic points, for the log only
         self._start: tuple[np.ndarray, np.ndarray | None, _Evaluation] | None = None  # (u0, z0, evaluation) of the step being taken
         self._direction: tuple[np.ndarray, np.ndarray] | None = None
         self._slope = math.nan
@@ -459,8 +460,8 @@ class _NewtonSystem:
         free_dropped_objects(p.petsc_comms)  # once per iteration, on every rank
         ref = ev.scale  # F, as the independent check has it (atol is no scale: issue 31)
         states = count_states(ev.law.state, p.comm) if ev.law is not None else (0, 0, 0)
-        record = IterationRecord(iteration, ev.norm_R / ref, ev.norm_H / ref, step_length, kind, states,
-                                 p.state.count_trial_plastic_points(p.u))
+        plastic = p.state.count_trial_plastic_points(p.u) if self._count_plastic else None
+        record = IterationRecord(iteration, ev.norm_R / ref, ev.norm_H / ref, step_length, kind, states, plastic)
         self.report.history.append(record)
         logger.info(record.line(self.solver.name))
 

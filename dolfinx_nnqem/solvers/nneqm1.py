@@ -48,7 +48,7 @@ from dolfinx_nnqem.solvers.condensed import CondensedProblem, CondensedSystem, n
 from dolfinx_nnqem.contact.laws import LawEvaluation
 from dolfinx_nnqem.contact.model import PairLaws
 from dolfinx_nnqem.solvers.contract import ReleasesPETSc, contact_model
-from dolfinx_nnqem.solvers.convergence import IterationRecord, SolveReport, count_states, logger
+from dolfinx_nnqem.solvers.convergence import IterationRecord, SolveReport, count_states, iteration_log_on, logger
 from dolfinx_nnqem.numerics.linalg import free_dropped_objects, global_norm, vec_norm
 from dolfinx_nnqem.numerics.newton import Globalisation, Merit, solve
 from dolfinx_nnqem.numerics.nonsmooth import Fallback, solve_dense
@@ -200,6 +200,7 @@ class _OuterSystem:
         self.inner_iterations = 0
         self.inner_failure: str | None = None
         self.current: _Evaluation | None = None  #: set by evaluate()
+        self._count_plastic = iteration_log_on(self.problem.comm)  # trial plastic points, for the log only
         self._step: tuple[np.ndarray, np.ndarray] | None = None  #: (du, z_new), set by newton_direction
 
     def evaluate(self) -> Merit:
@@ -223,9 +224,9 @@ class _OuterSystem:
         assert self.current is not None  # the driver evaluates before it records
         _, _, law, scale, norm_R, norm_H = self.current
         ref = scale  # F, as the independent check has it (atol is no scale: issue 31)
+        plastic = p.state.count_trial_plastic_points(p.u) if self._count_plastic else None
         record = IterationRecord(iteration, norm_R / ref, norm_H / ref, step_length, "newton" if iteration else "",
-                                 count_states(law.state, p.comm), p.state.count_trial_plastic_points(p.u),
-                                 self.inner_iterations)
+                                 count_states(law.state, p.comm), plastic, self.inner_iterations)
         self.report.history.append(record)
         logger.info(record.line(self.solver.name))
 

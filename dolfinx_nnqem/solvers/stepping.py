@@ -326,6 +326,9 @@ def _fail(problem, solver, report: SolveReport, target: float, *, increment: int
     failure.update({"cutbacks": cutbacks, "reason": report.message, **failure_details(problem)})
     if _sliding_bodies(problem, report):
         failure["friction_held"] = list(problem.friction_held.motions)
+    last = report.final
+    if last is not None and last.plastic_points is None:  # not counted without the iteration log
+        last.plastic_points = problem.state.count_trial_plastic_points(problem.u)  # the iterate the solver left
     problem.restore()
     _give_up(_failure_message(solver, float(target), report, cutbacks, problem), failure, callbacks)
 
