@@ -31,6 +31,22 @@ def assert_indices_agree(summary: dict, pairs: list[dict], steps: list[dict]) ->
     assert all(x == longest[:len(x)] for x in lists)
 
 
+def assert_restart_ends_as(ref, p, out) -> None:
+    """``run --restart`` into the killed run's folder ``out`` ends as the uninterrupted run in
+    ``ref``: load factors, iterations, final displacement (to 1e-12), every index complete."""
+    a = read_summary(ref)
+    t_ref, u_ref = _final_u(ref)
+    assert main(["-q", "run", str(p), "--out", str(out), "--restart", "--no-pictures"]) == EXIT_OK
+    b = read_summary(out)
+    t_out, u_out = _final_u(out)
+    du = np.max(np.abs(u_out - u_ref)) / np.max(np.abs(u_ref))
+    print(f"; restarted: {len(b['load_factors'])} increments, max |u - u_ref| / max |u_ref| = {du:.1e}", end="")
+    assert b["status"] == "completed" and b["load_factors"] == a["load_factors"] and b["iterations"] == a["iterations"]
+    assert t_out == t_ref and du <= 1e-12
+    assert_indices_agree(b, read_pairs(out), read_fields(out))
+    assert len(read_fields(out)) == len(read_pairs(out)) == len(a["load_factors"])
+
+
 def test_sigkill_then_read_then_restart_equals_an_uninterrupted_run(tmp_path):
     p = problem_file(tmp_path, increments=30)
     ref, out = tmp_path / "ref", tmp_path / "killed"
@@ -306,8 +322,6 @@ def test_sigkill_at_random_moments_leaves_readable_resumable_results(tmp_path):
     p = problem_file(tmp_path, increments=20)
     ref = tmp_path / "ref"
     assert main(["-q", "run", str(p), "--out", str(ref), "--no-pictures"]) == EXIT_OK
-    a = read_summary(ref)
-    t_ref, u_ref = _final_u(ref)
     rng = random.Random(32)
     for kill in range(4):
         out = tmp_path / f"killed{kill}"
@@ -323,14 +337,7 @@ def test_sigkill_at_random_moments_leaves_readable_resumable_results(tmp_path):
         assert run.returncode == -signal.SIGKILL and min(n) >= k and max(n) - min(n) <= 1
         assert_indices_agree(summary, pairs, steps)
         assert all(np.isfinite(s["u"]).all() for s in steps)
-        assert main(["-q", "run", str(p), "--out", str(out), "--restart", "--no-pictures"]) == EXIT_OK
-        b = read_summary(out)
-        t_out, u_out = _final_u(out)
-        du = np.max(np.abs(u_out - u_ref)) / np.max(np.abs(u_ref))
-        print(f"; restarted: {len(b['load_factors'])} increments, max |u - u_ref| / max |u_ref| = {du:.1e}", end="")
-        assert b["status"] == "completed" and b["load_factors"] == a["load_factors"] and b["iterations"] == a["iterations"]
-        assert t_out == t_ref and du <= 1e-12
-        assert len(read_fields(out)) == len(read_pairs(out)) == len(a["load_factors"])
+        assert_restart_ends_as(ref, p, out)
 
 
 KILLED_AFTER_RENAMES = """
@@ -363,8 +370,6 @@ def test_sigkill_between_the_renames_of_a_commit_point(tmp_path, renamed):
     p = problem_file(tmp_path, increments=5)
     ref = tmp_path / "ref"
     assert main(["-q", "run", str(p), "--out", str(ref), "--no-pictures"]) == EXIT_OK
-    a = read_summary(ref)
-    t_ref, u_ref = _final_u(ref)
     staged_per_increment = 4
     out = tmp_path / "out"
     killed = subprocess.run([sys.executable, "-c", KILLED_AFTER_RENAMES, str(2 * staged_per_increment + renamed),
@@ -378,15 +383,7 @@ def test_sigkill_between_the_renames_of_a_commit_point(tmp_path, renamed):
     assert killed.returncode == -signal.SIGKILL and latest == 2 and set(n) <= {2, 3} and 3 in n
     assert_indices_agree(summary, pairs, steps)
     assert all(np.isfinite(s["u"]).all() for s in steps)
-    assert main(["-q", "run", str(p), "--out", str(out), "--restart", "--no-pictures"]) == EXIT_OK
-    b = read_summary(out)
-    t_out, u_out = _final_u(out)
-    du = np.max(np.abs(u_out - u_ref)) / np.max(np.abs(u_ref))
-    print(f"; restarted: {len(b['load_factors'])} increments, max |u - u_ref| / max |u_ref| = {du:.1e}", end="")
-    assert b["status"] == "completed" and b["load_factors"] == a["load_factors"] and b["iterations"] == a["iterations"]
-    assert t_out == t_ref and du <= 1e-12
-    assert_indices_agree(b, read_pairs(out), read_fields(out))
-    assert len(read_fields(out)) == len(read_pairs(out)) == len(a["load_factors"])
+    assert_restart_ends_as(ref, p, out)
 
 
 def test_an_interrupt_whose_exception_was_lost_still_ends_the_run(tmp_path, monkeypatch):
