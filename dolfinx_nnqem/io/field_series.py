@@ -100,7 +100,7 @@ class FieldSeriesWriter:
         """(load factor, space, local values) of the displacement last written, with ``keep_last``."""
         self.folder = Path(folder)
         self.staged = staged
-        self._grids: dict[tuple[int, float], ET.Element] = {}  # a step's grid, read once from its file
+        self._grids: dict[tuple[int, float], str] = {}  # a step's grid as index text, read once from its file
         self.comm = problem.mesh.comm
         self.steps: list[tuple[int, float]] = []  # (increment, load factor) in the index
         self._means = CellMeans(problem)
@@ -172,17 +172,17 @@ class FieldSeriesWriter:
             raise OutputError(28, f"cannot write {path.with_suffix('.h5')}: {error}", str(path)) from error
 
     def _write_index(self, at_once: bool = False) -> None:
-        """The index of the steps (rank 0): staged, or with ``at_once`` (or no staging) replaced now."""
-        root = ET.Element("Xdmf", {"Version": "3.0", "xmlns:xi": "http://www.w3.org/2001/XInclude"})
-        domain = ET.SubElement(root, "Domain")
-        series = ET.SubElement(domain, "Grid", {"Name": "fields", "GridType": "Collection",
-                                                "CollectionType": "Temporal"})
+        """The index of the steps (rank 0): staged, or with ``at_once`` (or no staging) replaced now.
+
+        Each step's grid is parsed from its step file and serialised once (:func:`_grid_text`);
+        the index is their concatenation (re-serialising every grid at every increment made the
+        index cost grow with the number of increments)."""
+        grids = []
         for index, t in self.steps:
             if (index, t) not in self._grids:
-                self._grids[(index, t)] = _step_grid(self.folder / FOLDER / f"{_step_name(index)}.xdmf", t)
-            series.append(self._grids[(index, t)])
-        ET.indent(root)
-        text = '<?xml version="1.0"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+                self._grids[(index, t)] = _grid_text(_step_grid(self.folder / FOLDER / f"{_step_name(index)}.xdmf", t))
+            grids.append(self._grids[(index, t)])
+        text = _INDEX_HEAD + "".join(grids) + _INDEX_TAIL
         if self.staged is None or at_once:
             atomic_write_text(self.folder / INDEX, text)
         else:
@@ -247,6 +247,18 @@ def check_free_space(path: Path, needed: int) -> None:
     if free < needed:
         raise OutputError(28, f"cannot write {path}: No space left on device ({free / 1024:.0f} kB free, the "
                               f"step file needs about {needed / 1024:.0f} kB)", str(path))
+
+
+_INDEX_HEAD = ('<?xml version="1.0"?>\n<Xdmf Version="3.0" xmlns:xi="http://www.w3.org/2001/XInclude">\n'
+               '  <Domain>\n    <Grid Name="fields" GridType="Collection" CollectionType="Temporal">\n')
+_INDEX_TAIL = "    </Grid>\n  </Domain>\n</Xdmf>\n"
+"""The index around its step grids (what ElementTree writes for these elements, indented)."""
+
+
+def _grid_text(grid: ET.Element) -> str:
+    """A step's grid as it stands in the index: indented at its depth (3), with its line end."""
+    ET.indent(grid, space="  ", level=3)
+    return "      " + ET.tostring(grid, encoding="unicode") + "\n"
 
 
 def _step_grid(step_file: Path, t: float) -> ET.Element:

@@ -141,9 +141,11 @@ def reactions(problem, R=None) -> dict[int, np.ndarray]:
     return out
 
 
-def applied_load(problem) -> np.ndarray:
-    """Resultant of the applied loads F_ext(ℓ) (N), global frame."""
-    arr = problem.external_force().getArray(readonly=True).reshape(-1, 3)
+def applied_load(problem, F_ext=None) -> np.ndarray:
+    """Resultant of the applied loads F_ext(ℓ) (N), global frame (``F_ext``: if the caller has it)."""
+    if F_ext is None:
+        F_ext = problem.external_force()
+    arr = F_ext.getArray(readonly=True).reshape(-1, 3)
     local = arr.sum(axis=0)
     total = np.zeros(3)
     problem.comm.Allreduce(local, total, op=MPI.SUM)
@@ -160,18 +162,22 @@ def equilibrium_check(problem) -> dict:
     applied), and the relative free-dof residual ‖R_free‖ / F with the problem's force scale
     F = max(‖F_ext(ℓ)‖, ‖F_int‖, ‖Bᵀλ‖) (meaningful also when only displacements are prescribed).
     """
-    R = problem.residual()
+    # each vector assembled once: F_int(u), F_ext(ℓ), Bᵀλ(z), and R from them
+    F_int = problem.assemble_internal_force()
+    F_ext = problem.external_force()
+    contact_force = problem.contact.global_force(problem.contact.force()) if problem.has_contact else None
+    R = problem.residual(F_int=F_int, F_ext=F_ext, contact_force=contact_force)
     react = reactions(problem, R)
     obstacles = problem.contact.obstacle_reactions() if problem.has_contact else {}
-    applied = applied_load(problem)
+    applied = applied_load(problem, F_ext)
     total_reaction = sum(react.values(), np.zeros(3)) + sum(obstacles.values(), np.zeros(3))
     imbalance = applied + total_reaction
     scale = max(np.linalg.norm(applied), sum(np.linalg.norm(r) for r in react.values()),
                 sum(np.linalg.norm(r) for r in obstacles.values()), 1e-300)
     R_free = problem.free_residual(R)
-    F_scale = max(problem.external_force().norm(), problem.assemble_internal_force().norm(), 1e-300)
-    if problem.has_contact:
-        F_scale = max(F_scale, problem.contact.global_force(problem.contact.force()).norm())
+    F_scale = max(F_ext.norm(), F_int.norm(), 1e-300)
+    if contact_force is not None:
+        F_scale = max(F_scale, contact_force.norm())
     return {
         "applied_load": applied, "reactions": react, "obstacle_forces": obstacles, "reaction_sum": total_reaction,
         "global_imbalance": float(np.linalg.norm(imbalance) / scale),
