@@ -77,8 +77,11 @@ class PairWriter:
         if self.rank == 0:
             (self.folder / "pairs").mkdir(parents=True, exist_ok=True)
 
-    def __call__(self, result) -> None:
-        table = res.pair_table(self.problem)  # collective
+    def __call__(self, result, table: dict | None = None) -> None:
+        """Write the increment's pair files; ``table``: its :func:`~dolfinx_nnqem.io.results.pair_table`
+        if the caller has it (made here otherwise: collective)."""
+        if table is None:
+            table = res.pair_table(self.problem)
         on_rank0(self.problem.comm, self._write, result, table)
 
     def _write(self, result, table) -> None:
@@ -205,7 +208,9 @@ class SummaryWriter:
         self.probe_points = np.array(points).reshape(-1, 3)
         self.probe_blocks = np.array(blocks, dtype=np.int64)
 
-    def __call__(self, result) -> None:
+    def __call__(self, result, table: dict | None = None) -> None:
+        """Add the increment to the summary and write it; ``table``: the increment's
+        :func:`~dolfinx_nnqem.io.results.pair_table` if the caller has it (made here otherwise)."""
         p = self.problem
         d = self.data
         d["load_factors"].append(float(result.load_factor))
@@ -240,7 +245,7 @@ class SummaryWriter:
                            for n, x, ui in zip(self.probe_names, self.probe_points, u)]
             d.setdefault("probe_history", []).append([ui.tolist() for ui in u])
         if p.has_contact:
-            t = res.pair_table(p)
+            t = res.pair_table(p) if table is None else table
             d["pairs"] = [
                 {"position": t["position"][i].tolist(), "state": str(t["state_name"][i]),
                  "force_on_body1": t["force_on_body1"][i].tolist(),
@@ -292,7 +297,9 @@ class SummaryWriter:
             pass
 
     def state(self) -> dict:
-        return {"data": jsonable_copy(self.data)}
+        """The summary's data for a checkpoint: the data itself, not a copy (the checkpoint encodes
+        it at once; a copy cost every increment as much as encoding it)."""
+        return {"data": self.data}
 
     def resume(self, state: dict) -> None:
         data = dict(state.get("data", {}))
@@ -432,8 +439,13 @@ class ResultsWriter:
     def __call__(self, result) -> None:
         if self.problem.comm.allreduce(bool(self.staged)):  # a checkpoint due at the last one did not come
             self.commit()
+        # the pair table (collective) once, for the pair files and the summary
+        table = res.pair_table(self.problem) if self.problem.has_contact else None
         for w in self.writers:
-            w(result)
+            if isinstance(w, (PairWriter, SummaryWriter)):
+                w(result, table)
+            else:
+                w(result)
         if not (self.checkpoint_every and result.index % self.checkpoint_every == 0):
             self.commit()
         self._reserve()
