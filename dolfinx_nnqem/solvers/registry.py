@@ -4,17 +4,27 @@ from __future__ import annotations
 
 from dolfinx_nnqem.problem.contact_problem import ContactProblem
 from dolfinx_nnqem.solvers.contract import Solver
-from dolfinx_nnqem.solvers.monolithic import MonolithicSolver
-from dolfinx_nnqem.solvers.nneqm1 import NNEQM1Solver
-from dolfinx_nnqem.solvers.nneqm2 import NNEQM2Solver
 from dolfinx_nnqem.solvers.options import (METHODS, MonolithicOptions, NNEQM1Options, NNEQM2Options,
                                            SolverOptions)
 
 __all__ = ["make_solver"]
 
-_SOLVERS = {"monolithic": (MonolithicSolver, MonolithicOptions),
-            "nneqm1": (NNEQM1Solver, NNEQM1Options),
-            "nneqm2": (NNEQM2Solver, NNEQM2Options)}
+_OPTIONS = {"monolithic": MonolithicOptions, "nneqm1": NNEQM1Options, "nneqm2": NNEQM2Options}
+
+
+def _solver_class(method: str) -> type:
+    """The class of ``method``, imported when it is chosen (a run imports one solver's modules)."""
+    if method == "monolithic":
+        from dolfinx_nnqem.solvers.monolithic import MonolithicSolver
+
+        return MonolithicSolver
+    if method == "nneqm1":
+        from dolfinx_nnqem.solvers.nneqm1 import NNEQM1Solver
+
+        return NNEQM1Solver
+    from dolfinx_nnqem.solvers.nneqm2 import NNEQM2Solver
+
+    return NNEQM2Solver
 
 
 def make_solver(method: str, problem: ContactProblem, options: SolverOptions | None = None,
@@ -53,17 +63,17 @@ def make_solver(method: str, problem: ContactProblem, options: SolverOptions | N
     unknown = sorted(set(method_options) - {method})
     if unknown:
         raise ValueError(f"make_solver({method!r}): options {unknown} belong to another method")
-    solver_class, options_class = _SOLVERS[method]
+    options_class = _OPTIONS[method]
     own = method_options.get(method)
     if own is not None and not isinstance(own, options_class):
         raise TypeError(f"make_solver: {method}= must be a {options_class.__name__}, got {type(own).__name__}"
                         + _where_it_goes(own))
-    return solver_class(problem, options, own)
+    return _solver_class(method)(problem, options, own)
 
 
 def _where_it_goes(value: object) -> str:
     """A hint naming the keyword that takes ``value``'s type, if it is some method's options."""
-    for name, (_, options_class) in _SOLVERS.items():
+    for name, options_class in _OPTIONS.items():
         if isinstance(value, options_class):
             return f" (a {options_class.__name__} goes in {name}={options_class.__name__}(...))"
     if isinstance(value, SolverOptions):
