@@ -151,7 +151,8 @@ class Checkpointer:
         }
 
         def stage():
-            atomic_write(target / "meta.json", lambda tmp: tmp.write_text(json.dumps(meta)), durable=False)
+            text = _json(meta)  # now: the writers' state is theirs, not a copy
+            atomic_write(target / "meta.json", lambda tmp: tmp.write_text(text), durable=False)
             self.staged.stage(self.folder / "latest.json", json.dumps(
                 {"index": index, "path": name, "ranks": comm.size, "load_factor": meta["load_factor"]}))
 
@@ -167,6 +168,17 @@ class Checkpointer:
                self.staged)
         on_rank0(comm, tidy)
         return target
+
+
+def _json(value) -> str:
+    """``value`` as JSON text through the C encoder; numpy values and non-finite floats, where
+    there are any, first made JSON-ready (:func:`~dolfinx_nnqem.io.output.jsonable_copy`)."""
+    try:
+        return json.dumps(value, allow_nan=False)
+    except (TypeError, ValueError):
+        from dolfinx_nnqem.io.output import jsonable_copy
+
+        return json.dumps(jsonable_copy(value))
 
 
 def _write_rank(tmp: Path, problem) -> None:
