@@ -1,10 +1,11 @@
-"""Write the project's gmsh meshes (``.msh``) with the builders of ``dolfinx_nnqem.problem.meshing``.
+"""Write the project's meshes (gmsh ``.msh``; the seed's also as XDMF) with the builders of ``dolfinx_nnqem.problem.meshing``.
 
     python meshes/generate.py                 # all models, default parameters, into meshes/
     python meshes/generate.py two_beams --refine 2 --output-dir /tmp
 
 Written files: ``two_beams.msh`` (the seed benchmark, ``benchmark-two-beams.md``; with
-``--refine n``: ``two_beams_refine{n}.msh``), ``stacked_blocks.msh``, ``thick_cylinder.msh``,
+``--refine n``: ``two_beams_refine{n}.msh``) and the same mesh as ``two_beams.xdmf`` + ``.h5``
+(DOLFINx's format, which ``demos/two_beams.toml`` reads), ``stacked_blocks.msh``, ``thick_cylinder.msh``,
 ``three_blocks.msh`` (three unit blocks of height 0.5 stacked along y, 4 × 2 × 4 hexahedra
 each: two contact interfaces) and ``indenter_block.msh`` (the half block |x| ≤ 6 mm, 0 ≤ z ≤ 6 mm,
 −6 ≤ y ≤ 0 mm, graded to h = 0.25 mm at the top point x = z = 0, for a rigid indenter). They hold the physical groups
@@ -44,7 +45,12 @@ def main(argv: list[str] | None = None) -> list[pathlib.Path]:
         if model == "two_beams":
             name = "two_beams.msh" if args.refine == 1 else f"two_beams_refine{args.refine}.msh"
             path = args.output_dir / name
-            mesh, _, _ = meshing.build_two_beams(comm, refine=args.refine, msh_file=path)
+            meshing.build_two_beams(comm, refine=args.refine, msh_file=path)
+            # and the same mesh, read back from the .msh, in DOLFINx's own format (what
+            # demos/two_beams.toml reads: no gmsh library to load)
+            mesh, cell_tags, facet_tags = meshing.read_msh(path, comm)
+            meshing.write_xdmf(path.with_suffix(".xdmf"), mesh, cell_tags, facet_tags)
+            written.append(path.with_suffix(".xdmf"))
         elif model == "stacked_blocks":
             path = args.output_dir / "stacked_blocks.msh"
             mesh, _, _ = meshing.build_stacked_blocks(comm, msh_file=path)

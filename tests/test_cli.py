@@ -104,7 +104,7 @@ def test_problem_file_with_an_xdmf_mesh(tmp_path):
         mesh.topology.create_connectivity(2, 3)
         xdmf.write_meshtags(cell_tags, mesh.geometry)
         xdmf.write_meshtags(facet_tags, mesh.geometry)
-    text = EXAMPLE.read_text().replace('file = "../meshes/two_beams.msh"',
+    text = EXAMPLE.read_text().replace('file = "../meshes/two_beams.xdmf"',
                                        f'file = "{(tmp_path / "beams.xdmf").as_posix()}"')
     text = text.replace("increments = 15", "increments = 3")
     (tmp_path / "p.toml").write_text(text)
@@ -145,8 +145,8 @@ def test_an_interrupt_inside_compiled_code_is_still_an_interrupt():
 
 def test_run_verbose_prints_a_line_per_increment(tmp_path, capsys):
     """Issue 31, item 9: ``run -v`` printed no line per increment although ``--help`` says so."""
-    text = EXAMPLE.read_text().replace('file = "../meshes/two_beams.msh"',
-                                       f'file = "{(ROOT / "meshes" / "two_beams.msh").as_posix()}"')
+    text = EXAMPLE.read_text().replace('file = "../meshes/two_beams.xdmf"',
+                                       f'file = "{(ROOT / "meshes" / "two_beams.xdmf").as_posix()}"')
     (tmp_path / "p.toml").write_text(text.replace("increments = 15", "increments = 3"))
     assert main(["-v", "run", str(tmp_path / "p.toml"), "--out", str(tmp_path / "out")]) == EXIT_OK
     lines = [line for line in capsys.readouterr().out.splitlines() if "] increment " in line]

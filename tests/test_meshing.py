@@ -128,6 +128,37 @@ def test_committed_two_beams_msh_matches_builder():
     np.testing.assert_array_equal(a, b)
 
 
+def _cells_by_tag(mesh, tags) -> dict[int, list]:
+    """Per tag value, each tagged entity as its sorted node positions: tags compared by geometry,
+    whatever the numbering of the nodes and cells."""
+    out = {}
+    for value in np.unique(tags.values):
+        nodes = compat.entities_to_geometry(mesh, tags.dim, tags.indices[tags.values == value])
+        out[int(value)] = sorted(tuple(sorted(map(tuple, mesh.geometry.x[row].round(12)))) for row in nodes)
+    return out
+
+
+def test_committed_two_beams_xdmf_is_the_msh():
+    """meshes/two_beams.xdmf (what demos/two_beams.toml reads) is meshes/two_beams.msh: the same
+    nodes, cells and tagged cells and facets."""
+    from dolfinx.io import XDMFFile
+
+    msh, msh_cells, msh_facets = compat.read_from_msh(str(ROOT / "meshes" / "two_beams.msh"), MPI.COMM_SELF)
+    with XDMFFile(MPI.COMM_SELF, str(ROOT / "meshes" / "two_beams.xdmf"), "r") as xdmf:
+        mesh = xdmf.read_mesh(name="mesh")
+        mesh.topology.create_connectivity(2, 3)
+        cells = xdmf.read_meshtags(mesh, name="cell_tags")
+        facets = xdmf.read_meshtags(mesh, name="facet_tags")
+    print(f"\n  two_beams.xdmf: {num_cells(mesh)} cells, {mesh.geometry.x.shape[0]} nodes, facets "
+          f"{tag_counts(mesh, facets)}")
+    np.testing.assert_array_equal(np.unique(mesh.geometry.x, axis=0), np.unique(msh.geometry.x, axis=0))
+    for a, b in ((cells, msh_cells), (facets, msh_facets)):
+        tagged, tagged_msh = _cells_by_tag(mesh, a), _cells_by_tag(msh, b)
+        assert sorted(tagged) == sorted(tagged_msh)
+        for value in tagged:
+            assert tagged[value] == tagged_msh[value]
+
+
 def test_generate_script(tmp_path):
     import importlib.util
 
@@ -138,7 +169,7 @@ def test_generate_script(tmp_path):
     names = sorted(p.name for p in written)
     print(f"\n  generate.py wrote {names}")
     assert names == ["indenter_block.msh", "stacked_blocks.msh", "thick_cylinder.msh", "three_blocks.msh",
-                     "two_beams.msh"]
+                     "two_beams.msh", "two_beams.xdmf"]
     assert all((tmp_path / n).stat().st_size > 0 for n in names)
     # the graded block is written with its graded nodes: it reads back as the builder's mesh
     from dolfinx_nnqem import compat

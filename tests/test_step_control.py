@@ -106,7 +106,7 @@ def test_a_load_no_state_can_carry_ends_in_a_clear_error():
 
 def _two_beams_file(tmp_path, solver_lines: str):
     demo = Path(__file__).resolve().parents[1] / "demos" / "two_beams.toml"
-    text = demo.read_text().replace('file = "../meshes/two_beams.msh"', f'file = "{demo.parent.parent / "meshes" / "two_beams.msh"}"')
+    text = demo.read_text().replace('file = "../meshes/two_beams.xdmf"', f'file = "{demo.parent.parent / "meshes" / "two_beams.xdmf"}"')
     text = text.replace("increments = 15", solver_lines)
     path = tmp_path / "auto.toml"
     path.write_text(text)
