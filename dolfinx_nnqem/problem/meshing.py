@@ -297,7 +297,8 @@ def read_msh(file: str | os.PathLike, comm: MPI.Comm = MPI.COMM_WORLD) -> MeshAn
 def write_xdmf(file: str | os.PathLike, mesh: dolfinx.mesh.Mesh, cell_tags: dolfinx.mesh.MeshTags,
                facet_tags: dolfinx.mesh.MeshTags) -> None:
     """Write a mesh and its tags to ``file`` (``.xdmf`` + ``.h5``, collective) as a problem file
-    reads them by default: grids ``mesh``, ``cell_tags`` and ``facet_tags``.
+    reads them by default: grids ``mesh``, ``cell_tags`` and ``facet_tags`` (the three objects
+    are given these names).
 
     DOLFINx reads this format itself; a ``.msh`` needs gmsh's library, whose loading alone costs
     a small run about 18 ms (``docs/performance.md``).
