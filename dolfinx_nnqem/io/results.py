@@ -7,10 +7,15 @@ Nothing here solves or writes files.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 from mpi4py import MPI
 
 from dolfinx_nnqem.contact.laws import STATE_NAMES
+
+if TYPE_CHECKING:
+    from petsc4py import PETSc
 
 
 def values_at_blocks(problem, blocks: np.ndarray, vec=None) -> np.ndarray:
@@ -141,7 +146,7 @@ def reactions(problem, R=None) -> dict[int, np.ndarray]:
     return out
 
 
-def applied_load(problem, F_ext=None) -> np.ndarray:
+def applied_load(problem, F_ext: PETSc.Vec | None = None) -> np.ndarray:
     """Resultant of the applied loads F_ext(ℓ) (N), global frame (``F_ext``: if the caller has it)."""
     if F_ext is None:
         F_ext = problem.external_force()
