@@ -24,8 +24,9 @@ A problem file names a mesh with physical tags and everything :class:`ContactPro
                                           # (auto: node-to-node if the nodes coincide, else mortar)
     # slave = 22                          # optional: the slave side (default: surface2 for
                                           # node-to-node, the finer side otherwise)
-    # geometry = "reference"             # or "current": pairs re-evaluated at X + u (large
-                                          # sliding; node-to-surface and obstacles only)
+    # geometry = "auto"                  # or "reference", "current": auto re-evaluates the pairs at
+                                          # X + u once the surfaces slide 0.25 facet sizes (large
+                                          # sliding; node-to-surface, mortar and obstacles only)
 
     [[contact]]                           # a rigid obstacle as the master side
     surface2 = 5
@@ -348,7 +349,7 @@ def _contact_section(contact: dict, w: str) -> dict:
         raise ProblemFileError(f"{w}.name = {contact['name']!r}: expected a string")
     from dolfinx_nnqem.contact.current_geometry import GEOMETRIES
 
-    if contact.get("geometry", "reference") not in GEOMETRIES:
+    if contact.get("geometry", "auto") not in GEOMETRIES:
         raise ProblemFileError(f"{w}.geometry = {contact['geometry']!r}: expected one of {', '.join(GEOMETRIES)}")
     return contact
 

@@ -20,7 +20,7 @@ import logging
 import numpy as np
 import pytest
 
-from dolfinx_nnqem.cases.large_sliding import obstacle_force, slave_force, sliding_blocks, sliding_sphere
+from dolfinx_nnqem.cases.large_sliding import ironing, obstacle_force, slave_force, sliding_blocks, sliding_sphere
 from dolfinx_nnqem.problem import Contact
 from dolfinx_nnqem.solvers import ConvergenceError, SolverOptions, make_solver, solve_load_steps
 
@@ -93,15 +93,67 @@ def test_plane_current_geometry_equals_reference(method, law):
     assert error < 1e-8
 
 
-def test_issue_sliding_sphere_reference_geometry_names_the_cause(caplog):
+def test_issue_sliding_sphere_reference_geometry_stops_before_a_stale_state():
+    """geometry = "reference" chosen: the first converged state slid past 0.25 facet sizes is not
+    committed; the run stops there (no cutback), naming the interface, the slip and what to use."""
     problem = sliding_sphere(8, geometry="reference")
-    with caplog.at_level(logging.WARNING, logger="dolfinx_nnqem"):
+    committed = []
+    with make_solver("monolithic", problem, OPTIONS) as solver:
         with pytest.raises(ConvergenceError) as error:
-            _run(problem, "monolithic", 20)
-    message = str(error.value)
-    print(f"\n  reference geometry: {message}")
-    assert "likely cause: contact sphere-201 (rigid obstacle, reference geometry)" in message
-    assert "use geometry = 'current'" in message
+            solve_load_steps(problem, solver, 20, callbacks=[lambda r: committed.append(r.load_factor)])
+    message, failure = str(error.value), error.value.failure
+    slips = problem.contact.slipped(problem.relative_displacement())
+    print(f"\n  reference geometry: committed {committed}; {message}")
+    assert "converged, but is not committed: the contact geometry is stale" in message
+    assert "contact sphere-201 (rigid obstacle, reference geometry): the surfaces slid" in message
+    assert "geometry = 'reference' was chosen for it (use 'auto' or 'current' for large sliding)" in message
+    assert failure["stale_geometry"] == ["sphere-201"] and failure["cutbacks"] == 0
+    assert failure["load_factor"] == pytest.approx(committed[-1] + 0.05)
+    assert not slips  # the last committed state, restored, is within the limit
+
+
+@pytest.mark.parametrize("method, law, nx, increments, switch", [("monolithic", "alart-curnier", 32, 40, 0.225),
+                                                              ("monolithic", "polar", 32, 40, 0.225),
+                                                              ("nneqm1", "alart-curnier", 16, 20, 0.25)])
+def test_default_geometry_follows_a_dragged_punch(method, law, nx, increments, switch):
+    """Issue 39, item 1: a cylinder pressed into a plastic strip and dragged 16 facets along it (8 for
+    NNEQM1: time), with the default geometry. The press leaves the surfaces where they were; the
+    drag slides them past 0.25 facet sizes at ℓ = 0.225 (0.25 with 8 facets), and from that increment on the pairs are
+    re-evaluated where the bodies are: every committed force is the current geometry's, to round-off.
+    (The reference geometry, the default before, committed forces 1.8 to 2.4 times too large
+    there, then stopped on the strain check.)"""
+    forces = {}
+    for geometry in (None, "current"):
+        problem = ironing(nx, law=law, geometry=geometry)
+        history = []
+        with make_solver(method, problem, OPTIONS) as solver:
+            results = solve_load_steps(problem, solver, increments,
+                                       callbacks=[lambda r: history.append(obstacle_force(problem))])
+        forces[geometry] = np.array(history)
+        if geometry is None:
+            switches = problem.slip_warnings
+            following = problem.contact.following_bodies()
+    a, b = forces[None], forces["current"]
+    error = (np.abs(a - b).max(axis=1) / np.abs(b).max(axis=1)).max()
+    print(f"\n  {method}/{law}, {nx} × {nx // 4} × 2: {len(results)} increments; {switches}; largest difference "
+          f"from geometry = 'current' over the path {error:.1e} (tolerance 1e-8); F at the end {a[-1]}")
+    assert len(a) == len(b) == increments and following == [True]
+    assert len(switches) == 1 and f"at load factor {switch:g}:" in switches[0] and "geometry = 'auto'" in switches[0]
+    assert error < 1e-8
+
+
+def test_nneqm2_stops_where_the_default_geometry_goes_stale():
+    """NNEQM2 condenses contact in the reference geometry only: the dragged punch's first state past the
+    slip limit is not committed, the run stops there and says why."""
+    problem = ironing(16, geometry=None)
+    committed = []
+    with make_solver("nneqm2", problem, OPTIONS) as solver:
+        with pytest.raises(ConvergenceError) as error:
+            solve_load_steps(problem, solver, 20, callbacks=[lambda r: committed.append(r.load_factor)])
+    print(f"\n  committed {committed}; {error.value}")
+    assert committed[-1] == pytest.approx(0.2) and error.value.failure["load_factor"] == pytest.approx(0.25)
+    assert "nneqm2 solves contact in the reference geometry only (use the monolithic solver or NNEQM1 for large " \
+           "sliding)" in str(error.value)
 
 
 def test_issue_sliding_sphere_current_geometry():
@@ -151,7 +203,7 @@ def test_nneqm2_refuses_current_geometry():
 def test_current_geometry_refused_where_not_implemented(discretisation, why):
     with pytest.raises(ValueError, match=why):
         Contact(21, 22, mu_f=0.0, discretisation=discretisation, geometry="current")
-    with pytest.raises(ValueError, match="geometry = 'deformed'; expected one of reference, current"):
+    with pytest.raises(ValueError, match="geometry = 'deformed'; expected one of auto, reference, current"):
         Contact(21, 22, mu_f=0.0, geometry="deformed")
 
 
@@ -280,6 +332,48 @@ def test_restart_in_current_geometry(tmp_path, method):
     print(f"\n  {method}: stopped after increment 5 with {pairs_at_stop} pairs, resumed for {len(results)} increments: "
           f"u {du:.1e}, force {df:.1e} (tolerance 1e-12)")
     assert pairs_at_stop == 42 and [r.index for r in results] == list(range(6, n + 1))
+    assert du < 1e-12 and df < 1e-12
+
+
+@pytest.mark.parametrize("stop", [3, 6])
+def test_restart_of_a_default_geometry_run(tmp_path, stop):
+    """The frictional block slide with geometry = "auto" (node-to-surface: the reference pairs until the
+    slide passes 0.25 facet sizes, at increment 5), interrupted after increment ``stop`` (before and
+    after that switch) and resumed in a fresh problem: the uninterrupted run to 1e-12, with the
+    interface in the geometry the checkpoint had."""
+    from dolfinx_nnqem.io import checkpoint
+
+    def build():
+        return sliding_blocks(slide=0.4, mu_f=0.3, geometry="auto")
+
+    n = 12
+    reference = build()
+    _run(reference, "monolithic", n)
+    out = tmp_path / "run"
+    first = build()
+    checkpointer = checkpoint.Checkpointer(out)
+
+    def checkpoint_then_stop(problem, stepper_state, result):
+        checkpointer(problem, stepper_state, result)
+        if result.index == stop:
+            raise KeyboardInterrupt  # as Ctrl-C would, after the checkpoint
+
+    with pytest.raises(KeyboardInterrupt):
+        with make_solver("monolithic", first, OPTIONS) as solver:
+            solve_load_steps(first, solver, n, checkpoint=checkpoint_then_stop)
+    following_at_stop = first.contact.following_bodies()
+    second = build()
+    state, _ = checkpoint.restore(second, out)
+    following_restored = second.contact.following_bodies()
+    with make_solver("monolithic", second, OPTIONS) as solver:
+        results = solve_load_steps(second, solver, n, resume=state)
+    du = np.abs(second.u.x.array - reference.u.x.array).max() / np.abs(reference.u.x.array).max()
+    df = np.linalg.norm(slave_force(second) - slave_force(reference)) / np.linalg.norm(slave_force(reference))
+    print(f"\n  stopped after increment {stop} (current geometry: {following_at_stop}), resumed for {len(results)} "
+          f"increments: u {du:.1e}, force {df:.1e} (tolerance 1e-12); switched: {reference.slip_warnings}")
+    assert following_at_stop == following_restored == [stop == 6]
+    assert reference.contact.following_bodies() == second.contact.following_bodies() == [True]
+    assert [r.index for r in results] == list(range(stop + 1, n + 1))
     assert du < 1e-12 and df < 1e-12
 
 
@@ -433,9 +527,10 @@ def test_iterative_linear_solver_in_current_geometry():
     assert error < 1e-8
 
 
-def test_node_to_node_slip_check_names_the_interface(caplog):
-    """Matching blocks (node-to-node pairs, reference geometry) dragged 0.4 facet sizes: a warning
-    names the interface and suggests node-to-surface with the current geometry; results unchanged."""
+def test_node_to_node_past_the_slip_limit_stops_naming_the_interface():
+    """Matching blocks (node-to-node pairs, geometry = "auto") dragged 0.4 facet sizes: node-to-node pairs
+    cannot follow the bodies, so the first state slid past 0.25 facet sizes is not committed; the run
+    stops there, naming the interface and suggesting node-to-surface."""
     from mpi4py import MPI
 
     from dolfinx_nnqem.problem import ContactProblem, Dirichlet
@@ -451,13 +546,17 @@ def test_node_to_node_slip_check_names_the_interface(caplog):
                    Dirichlet(T.top(2), drag, [0], amplitude=lambda l: max(0.0, 2 * l - 1.0)),
                    Dirichlet(T.top(2), 0.0, [2])],
         contact=Contact(T.top(1), T.bottom(2), mu_f=0.0))
-    with caplog.at_level(logging.WARNING, logger="dolfinx_nnqem"):
-        _run(problem, "monolithic", 8)
-    warnings = [r.getMessage() for r in caplog.records if "reference geometry" in r.getMessage()]
-    print(f"\n  {problem.contact.interfaces[0].pairs.kind}: {warnings}; problem.slip_warnings {len(problem.slip_warnings)}")
-    assert len(warnings) == 1 and problem.slip_warnings == warnings
-    assert warnings[0].startswith("contact 201-102 (node-to-node, reference geometry)")
-    assert "use discretisation = 'node-to-surface' with geometry = 'current'" in warnings[0]
+    committed = []
+    with make_solver("monolithic", problem, OPTIONS) as solver:
+        with pytest.raises(ConvergenceError) as error:
+            solve_load_steps(problem, solver, 8, callbacks=[lambda r: committed.append(r.load_factor)])
+    message = str(error.value)
+    print(f"\n  {problem.contact.interfaces[0].pairs.kind}: committed {committed}; {message}")
+    assert committed == [0.125, 0.25, 0.375, 0.5, 0.625, 0.75]  # 0.75: slid 0.05, 0.2 facet sizes
+    assert error.value.failure["load_factor"] == 0.875 and error.value.failure["stale_geometry"] == ["201-102"]
+    assert "contact 201-102 (node-to-node, reference geometry): the surfaces slid 0.075" in message
+    assert "0.3 × the facet size 0.25 (more than 0.25) at load factor 0.875" in message
+    assert "(use discretisation = 'node-to-surface' or 'mortar' for large sliding)" in message
 
 
 def test_problem_file_refuses_an_unknown_geometry(tmp_path):
@@ -467,7 +566,7 @@ def test_problem_file_refuses_an_unknown_geometry(tmp_path):
     text = BLOCKS_FILE.replace("MESH", (tmp_path / "m.msh").as_posix()).replace("METHOD", "monolithic").replace(
         "LAW", "polar").replace('geometry = "current"', 'geometry = "deformed"')
     (tmp_path / "p.toml").write_text(text)
-    with pytest.raises(ProblemFileError, match=r"\[contact\]\.geometry = 'deformed': expected one of reference, current"):
+    with pytest.raises(ProblemFileError, match=r"\[contact\]\.geometry = 'deformed': expected one of auto, reference, current"):
         load_problem_file(tmp_path / "p.toml")
 
 

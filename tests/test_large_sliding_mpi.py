@@ -56,5 +56,6 @@ def test_large_sliding_on_several_ranks_matches_serial(ranks, cases, serial, tmp
             if ranks == 2 or case == "blocks":
                 assert np.count_nonzero(p["pairs_per_rank"]) >= 2  # the pairs are split
             assert df < 1e-8 and dF < 1e-8
+            assert p["following"].all() and s["following"].all()  # "auto" moved the ironing to the current geometry
             if case == "blocks":
                 assert p["foreign_masters"] > 0  # the gathered surfaces found facets of the other rank

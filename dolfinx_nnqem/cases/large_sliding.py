@@ -26,6 +26,8 @@ from __future__ import annotations
 
 from dolfinx_nnqem import compat  # noqa: I001  (first: loads MPI/PETSc for the PyPI wheel)
 
+from dataclasses import replace
+
 import numpy as np
 from mpi4py import MPI
 
@@ -147,15 +149,18 @@ IRONING_PRESSED_AT = 0.2
 
 
 def ironing(nx: int = 16, *, law: str = "alart-curnier", mu_f: float = 0.1, depth: float = 0.005,
-            comm: MPI.Comm = MPI.COMM_WORLD) -> ContactProblem:
-    """A cylinder pressed into an elastoplastic strip and dragged along it (module docstring)."""
+            geometry: str | None = "current", comm: MPI.Comm = MPI.COMM_WORLD) -> ContactProblem:
+    """A cylinder pressed into an elastoplastic strip and dragged along it (module docstring);
+    ``geometry=None``: the contact's default geometry."""
     mesh, ct, ft = build_block_stack(comm, 2.0, 0.25, [0.5], [(nx, max(nx // 4, 1), 2)])
     path = PiecewiseLinearPath([[0.0, 0.0, 0.0, 0.0], [IRONING_PRESSED_AT, 0.0, -depth, 0.0], [1.0, 1.0, -depth, 0.0]])
     radius = 0.5
     punch = Cylinder(point=(0.5, 0.5 + radius, 0.0), axis=(0.0, 0.0, 1.0), radius=radius, motion=path)
     dirichlet = [Dirichlet(T.bottom(1)), Dirichlet(T.zmin(1), 0.0, [2]), Dirichlet(T.zmax(1), 0.0, [2])]
-    return ContactProblem(mesh, ct, ft, materials=IRONING_MATERIAL, dirichlet=dirichlet,
-                          contact=Contact(punch, T.top(1), mu_f=mu_f, law=law, geometry="current"))
+    contact = Contact(punch, T.top(1), mu_f=mu_f, law=law)
+    if geometry is not None:
+        contact = replace(contact, geometry=geometry)
+    return ContactProblem(mesh, ct, ft, materials=IRONING_MATERIAL, dirichlet=dirichlet, contact=contact)
 
 
 def obstacle_force(problem: ContactProblem) -> np.ndarray:

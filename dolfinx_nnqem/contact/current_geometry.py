@@ -48,9 +48,12 @@ from dolfinx_nnqem.contact.surfaces import (GatheredSurfaces, check_no_shared_no
 __all__ = ["GEOMETRIES", "MortarTracker", "ObstacleTracker", "SurfaceTracker", "displacement_at", "match_pairs",
            "moved_surfaces", "remapper", "surface_tracker"]
 
-GEOMETRIES = ("reference", "current")
-"""``Contact(geometry=...)``: pairs computed once in the reference configuration, or re-evaluated
-in the current one."""
+GEOMETRIES = ("auto", "reference", "current")
+"""``Contact(geometry=...)``: ``"reference"``, pairs computed once in the reference configuration;
+``"current"``, re-evaluated in the current one from the start; ``"auto"`` (the default), the
+reference pairs while the surfaces slide less than
+:data:`~dolfinx_nnqem.contact.slip_check.SLIP_LIMIT` × the facet size, re-evaluated in the current
+configuration once they slide more (``docs/reliability.md``, "Which contact geometry")."""
 
 
 EDGE_ALLOWANCE = 0.05

@@ -41,7 +41,7 @@ from dolfinx_nnqem.contact.obstacles import ObstaclePairs, RigidObstacle, obstac
 from dolfinx_nnqem.contact.geometric_stiffness import GeometricTerms, no_terms, obstacle_terms
 from dolfinx_nnqem.contact.discretisation import DISCRETISATIONS, OBSTACLE_DISCRETISATIONS, discretise
 from dolfinx_nnqem.contact.pairset import PairRows, PairSet, rows_matrix
-from dolfinx_nnqem.contact.slip_check import stale_interfaces
+from dolfinx_nnqem.contact.slip_check import Slip, slipped_interfaces
 from dolfinx_nnqem.contact.surfaces import ContactPairError, NoPairsError, mesh_tolerance, owned_supports, space_degree
 from dolfinx_nnqem.contact.current_geometry import (GEOMETRIES, MortarTracker, ObstacleTracker, SurfaceTracker,
                                                     remapper, surface_tracker)
@@ -142,11 +142,16 @@ class Contact:
         node-to-node; the finer side for node-to-surface and mortar. The pair table's body 1 is
         always the master side.
     geometry
-        ``"reference"`` (the default: closest points, normals and gaps computed once, in the
-        reference configuration) or ``"current"`` (re-evaluated at X + u as the bodies move:
-        large sliding, :mod:`~dolfinx_nnqem.contact.current_geometry`). ``"current"`` takes a rigid
-        obstacle, node-to-surface or mortar pairs (``"auto"`` then means node-to-surface);
-        node-to-node pairs are refused.
+        ``"auto"`` (the default), ``"reference"`` or ``"current"``: where the closest points,
+        normals and gaps come from. ``"reference"``: computed once, in the reference configuration;
+        ``"current"``: re-evaluated at X + u as the bodies move (large sliding,
+        :mod:`~dolfinx_nnqem.contact.current_geometry`); ``"auto"``: the reference ones while the
+        surfaces slide less than :data:`~dolfinx_nnqem.contact.slip_check.SLIP_LIMIT` × the facet
+        size, the current ones from the increment where they slide more. No state is committed in a
+        geometry known to be stale: a reference-geometry interface past the limit that cannot follow
+        the bodies (``"reference"``, node-to-node pairs, degree 2, NNEQM2) stops the run there.
+        ``"current"`` takes a rigid obstacle, node-to-surface or mortar pairs (``discretisation =
+        "auto"`` then means node-to-surface); node-to-node pairs are refused.
     """
 
     surface1: int | RigidObstacle
@@ -160,7 +165,7 @@ class Contact:
     name: str | None = None
     discretisation: str = "auto"
     slave: int | None = None
-    geometry: str = "reference"
+    geometry: str = "auto"
 
     def __post_init__(self):
         _real("mu_f", self.mu_f)
@@ -198,7 +203,7 @@ class Contact:
         """Refuse ``geometry = "current"`` where this version does not re-evaluate the pairs."""
         if self.geometry not in GEOMETRIES:
             raise ValueError(f"Contact: geometry = {self.geometry!r}; expected one of {', '.join(GEOMETRIES)}")
-        if self.geometry == "reference" or self.obstacle is not None:
+        if self.geometry != "current" or self.obstacle is not None:
             return
         if self.discretisation == "node-to-node" or self.initial_gap is not None:
             raise ValueError("Contact: geometry = 'current' does not apply to node-to-node pairs: they join nodes "
@@ -236,14 +241,26 @@ class Contact:
                           initial_gap=self.initial_gap, supported=supported)
 
 
-    def tracker(self, V, facet_tags, supported: np.ndarray | None = None) -> GeometryTracker:
-        """What re-evaluates the pairs of a ``geometry = "current"`` interface (collective)."""
+    def tracker(self, V, facet_tags, supported: np.ndarray | None = None, *,
+                reference: PairSet | None = None) -> GeometryTracker:
+        """What re-evaluates the pairs of the interface in the current configuration (collective).
+
+        ``reference``: the interface's reference-geometry pairs, when ``geometry = "auto"`` moves it to
+        the current geometry during a run: the tracker then keeps their discretisation (mortar where
+        ``discretisation = "auto"`` chose mortar) and slave side, so that every pair keeps its slave
+        node. Without it, ``discretisation = "auto"`` means node-to-surface.
+        """
         if isinstance(self.surface1, RigidObstacle):
             tolerance = mesh_tolerance(V.mesh) if self.tolerance is None else float(self.tolerance)
             return ObstacleTracker(obstacle_pairs(V, facet_tags, int(self.surface2), self.surface1,
                                                   tolerance=tolerance))
-        discretisation = "mortar" if self.discretisation == "mortar" else "node-to-surface"  # auto: node-to-surface
-        return surface_tracker(V, facet_tags, (int(self.surface1), int(self.surface2)), slave=self.slave,
+        slave = self.slave
+        if reference is not None:
+            discretisation = "mortar" if reference.kind == "mortar" else "node-to-surface"
+            slave = getattr(reference, "slave", slave)  # node-to-surface and mortar pairs name their slave side
+        else:
+            discretisation = "mortar" if self.discretisation == "mortar" else "node-to-surface"  # auto: node-to-surface
+        return surface_tracker(V, facet_tags, (int(self.surface1), int(self.surface2)), slave=slave,
                                search_distance=self.search_distance, supported=supported,
                                discretisation=discretisation)
 
@@ -470,7 +487,7 @@ class ContactModel:
         self._constrained_dofs = constrained_dofs.copy()
         self.geometry_version = 0  #: counts :meth:`update_geometry` calls (solvers rebuild what uses B)
         self._refreshed_at: np.ndarray | None = None  # where refresh_obstacle_geometry last evaluated
-        self._slip_warned: set[str] = set()  # interfaces whose slip beyond the facet size was reported
+        self._facet_tags = facet_tags  # for the trackers of interfaces that start following the bodies
         interfaces = []
         for contact, E_interface in zip(contacts, moduli):
             r = float(default_r(E_interface, h)) if contact.r is None else _checked_r(contact, E_interface, h)
@@ -792,15 +809,14 @@ class ContactModel:
     @staticmethod
     def _pairs_or_lost(interface: Interface, tracker: GeometryTracker, u, load_factor: float) -> PairSet:
         """The tracker's pairs at (u, ℓ); :class:`LostContactError` naming the interface if there are none."""
+        lost = (f"contact {interface.contact.label}: no pairs in the current geometry at load factor "
+                f"{load_factor:.6g}: no slave node faces the master surface any more (the bodies slid apart)")
         try:
             pairs: PairSet = tracker.pairs_at(u, load_factor)
-        except NoPairsError as error:
-            raise LostContactError(f"contact {interface.contact.label}: no pairs in the current geometry at load "
-                                   f"factor {load_factor:.6g}: no slave node projects onto the master surface any "
-                                   "more (the bodies slid apart)") from error
+        except NoPairsError as error:  # node-to-surface and mortar alike: one outcome, one message
+            raise LostContactError(lost) from error
         if pairs.num_global == 0:
-            raise LostContactError(f"contact {interface.contact.label}: no pairs in the current geometry at load "
-                                   f"factor {load_factor:.6g}")
+            raise LostContactError(lost)
         return pairs
 
     @property
@@ -896,14 +912,49 @@ class ContactModel:
             if isinstance(tracker, SurfaceTracker) and facets is not None:
                 tracker.facets = np.asarray(facets, dtype=np.int64).copy()
 
-    def check_slip(self, w: np.ndarray) -> list[str]:
-        """Reference-geometry interfaces that slid past :data:`~dolfinx_nnqem.contact.slip_check.SLIP_LIMIT`
-        × their facet size, each reported once with a warning (collective; see
-        :func:`~dolfinx_nnqem.contact.slip_check.stale_interfaces`); the lines are returned."""
-        lines = stale_interfaces(self.comm, self.interfaces, self.trackers, w, self._slip_warned)
-        for line in lines:
-            logger.warning(line)
-        return lines
+    def slipped(self, w: np.ndarray) -> list[Slip]:
+        """The reference-geometry interfaces whose surfaces slid past
+        :data:`~dolfinx_nnqem.contact.slip_check.SLIP_LIMIT` × their facet size at the relative
+        displacement ``w`` (collective; :func:`~dolfinx_nnqem.contact.slip_check.slipped_interfaces`)."""
+        return slipped_interfaces(self.comm, self.interfaces, self.trackers, w)
+
+    def why_not_current(self, k: int) -> str | None:
+        """None if interface ``k`` (in the reference geometry) can be re-evaluated in the current
+        configuration from now on (``geometry = "auto"``); else the reason it cannot."""
+        interface = self.interfaces[k]
+        if interface.contact.geometry == "reference":
+            return "geometry = 'reference' was chosen for it (use 'auto' or 'current' for large sliding)"
+        if interface.pairs.kind == "node-to-node":
+            return ("node-to-node pairs join nodes that faced each other in the reference configuration (use "
+                    "discretisation = 'node-to-surface' or 'mortar' for large sliding)")
+        if space_degree(self.V) != 1:
+            return (f"the current geometry takes degree-1 displacements in this version (its closest points and "
+                    f"pair rows are those of linear facets); the displacements here have degree {space_degree(self.V)} "
+                    "(use degree 1 for large sliding)")
+        return None
+
+    def follow_bodies(self, k: int) -> None:
+        """Re-evaluate interface ``k`` in the current configuration from now on (collective): its tracker
+        is made, and the next :meth:`update_geometry` evaluates its pairs where the bodies are.
+
+        For ``geometry = "auto"`` past the slip limit (:meth:`why_not_current` must be None).
+        """
+        if self.trackers[k] is not None:
+            return
+        interface = self.interfaces[k]
+        with self._constrained_dofs.localForm() as c:
+            self.trackers[k] = interface.contact.tracker(self.V, self._facet_tags, supported=c.array.copy(),
+                                                         reference=interface.pairs)
+
+    @property
+    def pairs_may_change(self) -> bool:
+        """True if some interface's pairs depend on u: in the current geometry, or ``geometry = "auto"``
+        and able to move there (:meth:`why_not_current`)."""
+        return any(t is not None or self.why_not_current(k) is None for k, t in enumerate(self.trackers))
+
+    def following_bodies(self) -> list[bool]:
+        """Per interface: True where its pairs are re-evaluated in the current configuration."""
+        return [t is not None for t in self.trackers]
 
     # -- reporting ----------------------------------------------------------------------------------
     def obstacle_reactions(self, lam: np.ndarray | None = None) -> dict[str, np.ndarray]:

@@ -1,24 +1,44 @@
-"""The slip check of reference-geometry interfaces (issue 27).
+"""The slip check of reference-geometry interfaces: no state is committed in a stale geometry.
 
 An interface whose pairs were found in the reference configuration describes the surfaces only
 while they slide little against each other. Past :data:`SLIP_LIMIT` × the facet size the closest
-points, normals and gaps no longer fit, and a run that then fails (e.g. on the strain check) fails
-for that reason: :func:`stale_interfaces` names such interfaces once, and load stepping adds them to
-a failure's message as the likely cause.
+points, normals and gaps no longer fit. Load stepping measures the slip of every converged state
+before it commits it (:func:`slipped_interfaces`); an interface past the limit is either
+re-evaluated in the current configuration from that increment on (``geometry = "auto"``, where
+the current geometry is available) or the run stops there, naming the interface
+(:func:`stale_message`). ``docs/reliability.md`` states the rule.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 from mpi4py import MPI
 
-__all__ = ["SLIP_LIMIT", "facet_size_of", "slip_message", "stale_interfaces"]
+__all__ = ["SLIP_LIMIT", "Slip", "facet_size_of", "slipped_interfaces", "stale_message", "switch_message"]
 
 SLIP_LIMIT = 0.25
 """A reference-geometry interface whose relative tangential displacement exceeds this fraction of its
-facet size is reported (:func:`stale_interfaces`)."""
+facet size no longer describes the surfaces (:func:`slipped_interfaces`)."""
+
+
+@dataclass(frozen=True)
+class Slip:
+    """A reference-geometry interface that slid past :data:`SLIP_LIMIT` × its facet size."""
+
+    index: int  #: the interface's position in the model
+    label: str  #: its name
+    kind: str  #: its discretisation ("node-to-node", "rigid obstacle", ...)
+    slip: float  #: the largest relative tangential displacement of a pair
+    facet_size: float  #: the slave surface's facet size (:func:`facet_size_of`)
+
+    def describe(self) -> str:
+        """What slid, by how much, against what limit."""
+        return (f"contact {self.label} ({self.kind}, reference geometry): the surfaces slid {self.slip:.4g} "
+                f"relative to each other, {self.slip / self.facet_size:.3g} × the facet size {self.facet_size:.4g} "
+                f"(more than {SLIP_LIMIT:g})")
 
 
 def facet_size_of(comm: MPI.Comm, area: np.ndarray) -> float:
@@ -30,39 +50,39 @@ def facet_size_of(comm: MPI.Comm, area: np.ndarray) -> float:
     return float(np.sqrt(np.percentile(areas, 90.0))) if len(areas) else 0.0
 
 
-def slip_message(interface, slip: float, size: float) -> str:
-    """The warning of :func:`stale_interfaces` for ``interface`` (a model's ``Interface``)."""
-    kind = interface.pairs.kind
-    advice = ("use discretisation = 'node-to-surface' with geometry = 'current'" if kind == "node-to-node"
-              else "use geometry = 'current'")
-    return (f"contact {interface.contact.label} ({kind}, reference geometry): the surfaces slid {slip:.4g} "
-            f"relative to each other, {slip / size:.3g} × the facet size {size:.4g} (more than {SLIP_LIMIT:g}): "
-            f"the pairs, normals and gaps found in the reference configuration no longer describe the "
-            f"surfaces; {advice} for large sliding")
-
-
-def stale_interfaces(comm: MPI.Comm, interfaces: Sequence, trackers: Sequence, w: np.ndarray,
-                     warned: set[str]) -> list[str]:
-    """Messages for the reference-geometry interfaces (no tracker) whose relative tangential
-    displacement ``w[:, 1:]`` exceeds :data:`SLIP_LIMIT` × their facet size, not yet in ``warned``
-    (which they are added to; collective).
+def slipped_interfaces(comm: MPI.Comm, interfaces: Sequence, trackers: Sequence, w: np.ndarray) -> list[Slip]:
+    """The reference-geometry interfaces (no tracker) whose relative tangential displacement ``w[:, 1:]``
+    exceeds :data:`SLIP_LIMIT` × their facet size (collective: every rank gets the same list).
 
     Parameters
     ----------
     interfaces, trackers
         The model's interfaces and their geometry trackers (None: reference geometry).
     w
-        (num_local, 3) the model's relative displacements.
+        (num_local, 3) the model's relative displacements, measured from the reference configuration.
     """
-    lines = []
-    for interface, tracker in zip(interfaces, trackers):
-        label = interface.contact.label
-        if tracker is not None or label in warned:
+    out = []
+    for k, (interface, tracker) in enumerate(zip(interfaces, trackers)):
+        if tracker is not None:
             continue
         w_t = w[interface.local, 1:]
         slip = comm.allreduce(float(np.hypot(w_t[:, 0], w_t[:, 1]).max(initial=0.0)), op=MPI.MAX)
         size = facet_size_of(comm, interface.pairs.area)
         if slip > SLIP_LIMIT * size:
-            warned.add(label)
-            lines.append(slip_message(interface, slip, size))
-    return lines
+            out.append(Slip(k, interface.contact.label, interface.pairs.kind, slip, size))
+    return out
+
+
+def switch_message(slip: Slip, load_factor: float) -> str:
+    """The warning of an interface that ``geometry = "auto"`` moves to the current geometry."""
+    return (f"{slip.describe()} at load factor {load_factor:.6g}: the pairs, normals and gaps found in the reference "
+            "configuration no longer describe the surfaces; geometry = 'auto': from this increment on they are "
+            "re-evaluated in the current configuration, and the increment is solved again")
+
+
+def stale_message(slip: Slip, load_factor: float, why_not_current: str) -> str:
+    """Why the run stops at an interface that slid past the limit and cannot follow the bodies
+    (``why_not_current``: the reason, with what to use instead)."""
+    return (f"{slip.describe()} at load factor {load_factor:.6g}: the pairs, normals and gaps found in the reference "
+            f"configuration no longer describe the surfaces, and the state is not committed; the interface cannot "
+            f"be re-evaluated in the current configuration: {why_not_current}")

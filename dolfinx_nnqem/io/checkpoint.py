@@ -68,9 +68,9 @@ def _fingerprint(problem) -> dict:
 
 
 def _pairs_fixed(problem, pairs: int) -> int:
-    """``pairs``, or −1 where the contact geometry follows the bodies (the pairs then depend on u and
-    are evaluated again when the checkpoint is read, :func:`_read_contact`)."""
-    return -1 if problem.has_contact and problem.contact.current_geometry else pairs
+    """``pairs``, or −1 where the contact geometry follows (or may come to follow) the bodies (the pairs
+    then depend on u and are evaluated again when the checkpoint is read, :func:`_read_contact`)."""
+    return -1 if problem.has_contact and problem.contact.pairs_may_change else pairs
 
 
 def _global_fingerprint(problem) -> dict:
@@ -194,6 +194,7 @@ def _write_rank(tmp: Path, problem) -> None:
         for k, facets in enumerate(c.geometry_state()):
             if facets is not None:
                 arrays[f"contact_facets_{k}"] = facets
+        arrays["contact_following"] = np.array(c.following_bodies(), dtype=bool)
     history = problem.predictor_history
     if history is not None:
         ell, u_prev, z_prev = history
@@ -258,6 +259,10 @@ def _read_contact(data, path: Path, problem) -> None:
     """The pair unknowns; where the geometry follows the bodies, the pairs are first evaluated where
     the checkpoint's last increment ended (u, ℓ_n), with the master facets it had (collective)."""
     c = problem.contact
+    if "contact_following" in data:  # interfaces that geometry = "auto" moved to the current geometry
+        for k, following in enumerate(data["contact_following"]):
+            if following:
+                c.follow_bodies(k)
     if c.current_geometry:
         c.set_geometry_state([data[f"contact_facets_{k}"] if f"contact_facets_{k}" in data else None
                               for k in range(len(c.interfaces))])

@@ -245,6 +245,10 @@ class SummaryWriter:
                            for n, x, ui in zip(self.probe_names, self.probe_points, u)]
             d.setdefault("probe_history", []).append([ui.tolist() for ui in u])
         if p.has_contact:
+            model = p.contact
+            # where each interface's pairs come from now ("auto" moves one to "current" once it slides)
+            d["contact_geometry"] = {i.contact.label: "current" if following else "reference"
+                                     for i, following in zip(model.interfaces, model.following_bodies())}
             t = res.pair_table(p) if table is None else table
             d["pairs"] = [
                 {"position": t["position"][i].tolist(), "state": str(t["state_name"][i]),

@@ -182,7 +182,8 @@ class ContactProblem:
         self.warm_start = False
         """Start the next solve from the current iterate, not the secant predictor (set while an
         increment is solved again in a new contact geometry, :meth:`update_contact_geometry`)."""
-        self.slip_warnings: list[str] = []  #: reference-geometry interfaces that slid past the facet size
+        #: interfaces that slid past the slip limit and were moved to the current geometry (``geometry = "auto"``)
+        self.slip_warnings: list[str] = []
         self.contact: ContactModel | None = None
         E_max = self.comm.allreduce(float(np.max(self.state.E.x.array, initial=0.0)), op=MPI.MAX)
         self.force_floor = FORCE_FLOOR_STRAIN * E_max * self.characteristic_length() ** 2
@@ -596,7 +597,6 @@ class ContactProblem:
         if self.contact is not None:
             w = self.relative_displacement()
             self.contact.commit(w)
-            self.slip_warnings += self.contact.check_slip(w)
 
     def restore(self) -> None:
         """Return to the last converged increment (after a failed attempt)."""

@@ -149,6 +149,9 @@ class Solver(Protocol):
 
     name: str  #: "monolithic", "nneqm1" or "nneqm2"
     options: SolverOptions  #: the tolerances the independent check derives its own from
+    #: True if the solver takes interfaces whose pairs are re-evaluated in the current configuration
+    #: (``geometry = "current"``, and ``"auto"`` once the surfaces slid past the slip limit)
+    follows_contact_geometry: bool
 
     @property
     def timings(self) -> dict[str, float]:

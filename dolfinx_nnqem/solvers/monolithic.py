@@ -74,6 +74,7 @@ class MonolithicSolver(ReleasesPETSc):
     """
 
     name = "monolithic"
+    follows_contact_geometry = True
 
     def __init__(self, problem: ContactProblem, options: SolverOptions | None = None,
                  monolithic: MonolithicOptions | None = None):
@@ -88,13 +89,18 @@ class MonolithicSolver(ReleasesPETSc):
         self._matrix: MonolithicMatrix | None = None  # the direct Newton matrix (also the LM fallback's)
         self._augmented: AugmentedSystem | None = self._augmented_system_of_pairs()
         self._geometry_version = problem.contact.geometry_version if problem.contact is not None else 0
-        # current-geometry obstacles re-evaluated at every iterate, their geometric terms in J
-        self.consistent_geometry = (self.settings.consistent_geometry and problem.contact is not None
-                                    and problem.contact.obstacle_geometry)
         self._timings: dict[str, float] = {}
         # the vectors of every iteration, created once and refilled (as DOLFINx's NonlinearProblem
         # does); only the free residual of an evaluation is new, since the watchdog keeps evaluations
         self._work: dict[str, PETSc.Vec] = {}
+
+    @property
+    def consistent_geometry(self) -> bool:
+        """True if current-geometry obstacles are re-evaluated at every iterate, their geometric terms in
+        J (asked anew at every use: ``geometry = "auto"`` moves an obstacle to the current geometry
+        during a run)."""
+        model = self.problem.contact
+        return self.settings.consistent_geometry and model is not None and model.obstacle_geometry
 
     @property
     def timings(self) -> dict[str, float]:

@@ -75,6 +75,7 @@ class NNEQM1Solver(ReleasesPETSc):
     """
 
     name = "nneqm1"
+    follows_contact_geometry = True
 
     def __init__(self, problem: ContactProblem, options: SolverOptions | None = None,
                  nneqm1: NNEQM1Options | None = None):

@@ -92,6 +92,7 @@ class NNEQM2Solver(ReleasesPETSc):
     """
 
     name = "nneqm2"
+    follows_contact_geometry = False  # its condensation is built once per run on B (refuse_current_geometry)
 
     def __init__(self, problem: ContactProblem, options: SolverOptions | None = None,
                  nneqm2: NNEQM2Options | None = None):

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from mpi4py import MPI
 
 from dolfinx_nnqem.contact.model import LostContactError
+from dolfinx_nnqem.contact.slip_check import stale_message, switch_message
 from dolfinx_nnqem.material.von_mises import GaussPointValues
 from dolfinx_nnqem.solvers.checks import CheckOptions, StateCheck, check_state, failure_details, values_to_commit
 from dolfinx_nnqem.solvers.convergence import ConvergenceError, SolveReport, logger
@@ -127,6 +128,10 @@ def solve_load_steps(
         free_dropped_objects(problem.petsc_comms)
         t0 = time.perf_counter()
         report, verdict, values = _solve_and_check(problem, solver, target, check, max_displacement)
+        if report.converged and _moved_to_current_geometry(problem, solver, report, target, index0 + len(results) + 1,
+                                                           schedule.cutbacks, callbacks, ell):
+            problem.restore()  # the same increment again, the slid interfaces in the current geometry
+            continue
         if not report.converged:
             if not schedule.can_cut_back(max_cutbacks):
                 _fail(problem, solver, report, target, increment=index0 + len(results) + 1,
@@ -295,6 +300,50 @@ def _update_geometry(problem, target: float) -> SolveReport | None:
     return None
 
 
+def _moved_to_current_geometry(problem, solver, report: SolveReport, target: float, increment: int, cutbacks: int,
+                               callbacks, last_converged: float | None) -> bool:
+    """The slip check before a converged state is committed (collective): no state is committed in a
+    contact geometry known to be stale (``docs/reliability.md``, "Which contact geometry").
+
+    Reference-geometry interfaces whose surfaces slid past
+    :data:`~dolfinx_nnqem.contact.slip_check.SLIP_LIMIT` × their facet size are moved to the current
+    geometry where they can be (``geometry = "auto"``, node-to-surface, mortar or a rigid obstacle,
+    degree 1, a solver that follows the geometry); True then: the caller solves the increment again.
+    Where one cannot, the run stops here (:class:`ConvergenceError`, no cutback: a smaller increment
+    slides as far the next time), naming the interface and why.
+    """
+    model = problem.contact
+    if model is None:
+        return False
+    slips = model.slipped(problem.relative_displacement())
+    if not slips:
+        return False
+    stale = []
+    for slip in slips:
+        why_not = model.why_not_current(slip.index)
+        if why_not is None and not solver.follows_contact_geometry:
+            why_not = (f"{solver.name} solves contact in the reference geometry only (use the monolithic solver or "
+                       "NNEQM1 for large sliding)")
+        if why_not is not None:
+            stale.append(stale_message(slip, target, why_not))
+    if stale:
+        failure: dict[str, object] = {"increment": increment, "load_factor": float(target)}
+        if last_converged is not None:
+            failure["last_converged_load_factor"] = float(last_converged)
+        failure.update({"cutbacks": cutbacks, "reason": "; ".join(stale), **failure_details(problem),
+                        "stale_geometry": [slip.label for slip in slips]})
+        problem.restore()
+        message = "\n".join([f"{solver.name}: the increment to load factor {target:.6g} converged, but is not "
+                             "committed: the contact geometry is stale"] + [f"  {line}" for line in stale])
+        _give_up(message, failure, callbacks)
+    for slip in slips:
+        model.follow_bodies(slip.index)
+        message = switch_message(slip, target)
+        problem.slip_warnings.append(message)
+        logger.warning(f"[{solver.name}] {message}")
+    return True
+
+
 def _commit(problem, solver, report: SolveReport, values: GaussPointValues | None, target: float, *,
             index: int, cutbacks: int, verdict: StateCheck | None, t0: float, callbacks) -> IncrementResult:
     """Commit a converged increment with the Gauss-point ``values`` (the radial return's at u if None)
@@ -362,13 +411,14 @@ def _failure_message(solver, target: float, report: SolveReport, cutbacks: int, 
 
 
 def _stale_geometry(problem) -> list[str]:
-    """The likely cause when a reference-geometry interface slid past its facet size (at the failed
-    iterate or before): its pairs no longer describe the surfaces (collective)."""
+    """The likely cause when a reference-geometry interface slid past the slip limit at the failed
+    iterate: its pairs no longer describe the surfaces (collective)."""
     model = getattr(problem, "contact", None)
     if model is None:
         return []
-    reasons = list(problem.slip_warnings) + model.check_slip(problem.relative_displacement())
-    return [f"  likely cause: {reason}" for reason in reasons]
+    return [f"  likely cause: {slip.describe()} at the last iterate: the pairs, normals and gaps found in the "
+            "reference configuration no longer describe the surfaces"
+            for slip in model.slipped(problem.relative_displacement())]
 
 
 def _sliding_bodies(problem, report: SolveReport) -> list[str]:
@@ -400,6 +450,10 @@ def solve_load_path(problem, solver, load_factors: Sequence[float], *,
     for target in load_factors:
         t0 = time.perf_counter()
         report, verdict, values = _solve_and_check(problem, solver, target, check)
+        while report.converged and _moved_to_current_geometry(problem, solver, report, target, len(results) + 1, 0,
+                                                              callbacks, problem.load_factor_n):
+            problem.restore()
+            report, verdict, values = _solve_and_check(problem, solver, target, check)
         if not report.converged:
             _fail(problem, solver, report, target, increment=len(results) + 1, cutbacks=0, callbacks=callbacks)
         results.append(_commit(problem, solver, report, values, target, index=len(results) + 1, cutbacks=0,

@@ -4,7 +4,8 @@
 
 The frictionless sphere slid over the block (6³, rigid obstacle), the frictional block slid 1.6
 master facets over another (node-to-surface, μ_f = 0.3; the same with dual mortar) and the ironing of an elastoplastic strip
-by a cylinder dragged 8 facets (μ_f = 0.1), current geometry, monolithic and NNEQM1
+by a cylinder dragged 8 facets (μ_f = 0.1; the default geometry = "auto", which moves it to the current
+geometry once the punch slides), current geometry, monolithic and NNEQM1
 (:mod:`dolfinx_nnqem.cases.large_sliding`). Rank 0 writes, per ``CASE/METHOD/``, the pair table's
 slave positions and forces on the master side in global pair order, the resultant force, the
 Newton iterations per increment, the pairs each rank owns and how many pairs have a master node
@@ -30,7 +31,7 @@ CASES = {
     "sphere": (lambda comm: sliding_sphere(6, comm=comm), obstacle_force, 16),
     "blocks": (lambda comm: sliding_blocks(slide=0.4, mu_f=0.3, comm=comm), slave_force, 12),
     "mortar": (lambda comm: sliding_blocks(slide=0.4, mu_f=0.3, discretisation="mortar", comm=comm), slave_force, 12),
-    "ironing": (lambda comm: ironing(16, comm=comm), obstacle_force, 40),
+    "ironing": (lambda comm: ironing(16, geometry=None, comm=comm), obstacle_force, 40),
 }
 
 
@@ -45,6 +46,7 @@ def solve(case: str, method: str, comm=MPI.COMM_WORLD) -> dict[str, np.ndarray]:
     return {"position": t["position_b"], "force": t["force_on_body1"], "total": force(problem),
             "iterations": np.array([r.iterations for r in results]),
             "pairs_per_rank": np.array(comm.allgather(problem.contact.num_local)),
+            "following": np.array(problem.contact.following_bodies()),
             "foreign_masters": np.array(comm.allreduce(foreign_masters(problem), op=MPI.SUM))}
 
 
