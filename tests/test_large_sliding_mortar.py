@@ -108,3 +108,40 @@ def test_problem_file_mortar_in_current_geometry(tmp_path):
     python = [r.iterations for r in _run(sliding_blocks(slide=0.4, mu_f=0.3, discretisation="mortar"), "monolithic", 12)]
     print(f"\n  converged {summary['converged']}, iterations {summary['iterations']} (Python: {python})")
     assert summary["converged"] and summary["iterations"] == python
+
+
+@pytest.mark.parametrize("discretisation", ["node-to-surface", "mortar"])
+def test_slid_off_the_master_is_one_outcome(tmp_path, discretisation):
+    """Issue 39, item 7: the upper block slid 1.2, off its master, in the current geometry. Node-to-surface
+    and mortar end alike: the increment where no slave node faces the master is cut back, then the run
+    stops with ConvergenceError naming the interface and the load factor; through the CLI exit code 1
+    (not 3, "bad input") with ``failure`` in summary.json. Mortar used to end with exit 3 and no
+    failure record."""
+    from dolfinx_nnqem.cli import EXIT_DIVERGED, main
+    from dolfinx_nnqem.problem.meshing import build_block_stack
+    from dolfinx_nnqem.solvers import ConvergenceError, solve_load_steps
+    from test_large_sliding import _blocks_file
+
+    problem = sliding_blocks(slide=1.2, discretisation=discretisation)
+    with make_solver("monolithic", problem, SolverOptions()) as solver:
+        with pytest.raises(ConvergenceError) as error:
+            solve_load_steps(problem, solver, 12)
+    failure = error.value.failure
+    print(f"\n  {discretisation}: {str(error.value).splitlines()[0]}")
+    assert failure["cutbacks"] == 5 and 0.8 < failure["load_factor"] < 0.95
+    assert failure["reason"] == (f"contact 201-102: no pairs in the current geometry at load factor "
+                                 f"{failure['load_factor']:.6g}: no slave node faces the master surface any more "
+                                 "(the bodies slid apart)")
+    if MPI.COMM_WORLD.size > 1:
+        return  # the CLI part runs serially
+    build_block_stack(MPI.COMM_SELF, 1.0, 1.0, [0.5, 0.5], [(4, 2, 4), (6, 2, 6)], msh_file=tmp_path / "blocks.msh")
+    text = (_blocks_file(E1=1.0e3, press=-0.01, pressed_at=0.25, slide=1.2, z_tags=[202], increments=12)
+            .replace("MESH", (tmp_path / "blocks.msh").as_posix()).replace("METHOD", "monolithic")
+            .replace("LAW", "alart-curnier").replace("mu_f = 0.3", "mu_f = 0.0")
+            .replace('discretisation = "node-to-surface"', f'discretisation = "{discretisation}"'))
+    (tmp_path / "off.toml").write_text(text)
+    code = main(["-q", "run", str(tmp_path / "off.toml"), "--out", str(tmp_path / "out"), "--no-pictures"])
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    print(f"  CLI: exit {code}, status {summary['status']}, failure reason {summary['failure']['reason']}")
+    assert code == EXIT_DIVERGED and summary["status"] == "not converged"
+    assert "no pairs in the current geometry" in summary["failure"]["reason"]

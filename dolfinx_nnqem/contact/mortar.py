@@ -49,7 +49,7 @@ import numpy as np
 from dolfinx_nnqem.contact.facet_layout import node_combination
 from dolfinx_nnqem.contact.mortar_geometry import mortar_integrals
 from dolfinx_nnqem.contact.surface_pairs import SurfacePairs, facet_size, surface_pairs
-from dolfinx_nnqem.contact.surfaces import ContactPairError, GatheredSurfaces, first_by_position, format_point
+from dolfinx_nnqem.contact.surfaces import ContactPairError, GatheredSurfaces, NoPairsError, first_by_position, format_point
 
 __all__ = ["MAX_COVERAGE", "MIN_COVERED", "ROUND_OFF", "mortar_pairs"]
 
@@ -118,8 +118,8 @@ def mortar_pairs(V, surfaces: GatheredSurfaces, *, tolerance: float, search_dist
         _drop_round_off(mi)
     m = np.asarray(mi.M.sum(axis=1)).ravel()
     keep = np.flatnonzero(m >= MIN_COVERED * mi.D)
-    if len(keep) == 0:
-        raise ContactPairError(
+    if len(keep) == 0:  # NoPairsError: in the current geometry the bodies slid apart (a failed solve, not bad input)
+        raise NoPairsError(
             f"no node of the slave surface {tags[1]} is covered by the master surface {tags[0]} within the search "
             f"distance {search_distance:.6g}: do the surfaces face each other? (pass search_distance for larger "
             "initial gaps)")
