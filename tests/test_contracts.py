@@ -80,7 +80,7 @@ def test_the_material_satisfies_the_material_contracts():
     # the pointwise return map is the UFL one's (the consistent tangent's derivative included)
     rng = np.random.default_rng(1)
     t = rng.standard_normal((points.mu.size, 5)) * 3.0 * STEEL.sigma_y0
-    eps_p, dp = points.plastic_strain(t, np.zeros(points.mu.size))
+    eps_p, dp = points.plastic_strain(t, {"p": np.zeros(points.mu.size)})
     assert np.all(dp > 0.0) and np.allclose(np.linalg.norm(eps_p, axis=1), np.sqrt(1.5) * dp)
 
 
