@@ -8,11 +8,15 @@ A problem file names a mesh with physical tags and everything :class:`ContactPro
                                           # second-order mesh: 10-node tetrahedra, 27-node hexahedra)
 
     [materials.1]                         # cell tag → material
+    # model = "von-mises"                 # or "elastic" (E, nu, density only)
     E = 2.0e10
     nu = 0.17
     sigma_y0 = 5.0e5                      # omit for an elastic material
     H = 2.0e10
     density = 2400.0
+    # hardening = "voce"                  # "linear" (default: sigma_y0, H), "voce" (sigma_y0, Q, b, H)
+    # Q = 1.0e5                           # or "table": table = [[sigma_y, p], ...] (CalculiX order)
+    # b = 50.0
 
     [[contact]]                           # one table per interface ([contact] for a single one)
     surface1 = 21                         # facet tags: master (body 1) and slave (body 2) sides
@@ -113,7 +117,7 @@ class ProblemFileError(ValueError):
 OBSTACLE_KEYS = {"plane": {"point", "normal"}, "sphere": {"centre", "radius"}, "cylinder": {"point", "axis", "radius"}}
 KEYS: dict[str, frozenset[str]] = {
     "mesh": frozenset({"file", "mesh_name", "cell_tags", "facet_tags", "degree"}),
-    "materials.TAG": frozenset({"E", "nu", "sigma_y0", "H", "density"}),
+    "materials.TAG": frozenset({"model", "E", "nu", "sigma_y0", "H", "density", "hardening", "Q", "b", "table"}),
     "contact": frozenset({"surface1", "surface2", "obstacle", "mu_f", "law", "r", "tolerance", "search_distance",
                           "name", "discretisation", "slave", "geometry"}),
     "contact.obstacle": frozenset({"type", "motion", "amplitude"}.union(*OBSTACLE_KEYS.values())),
@@ -277,7 +281,7 @@ def _mesh_section(mesh: dict, folder: Path, where: str) -> dict:
 
 
 def _materials_section(materials: dict, where: str) -> dict:
-    from dolfinx_nnqem.material.von_mises import VonMises
+    from dolfinx_nnqem.material.models import material_from_table
 
     if not materials:
         raise ProblemFileError(f"{where}: [materials] is empty; give [materials.TAG] per cell tag")
@@ -290,12 +294,25 @@ def _materials_section(materials: dict, where: str) -> dict:
             raise ProblemFileError(f"{w}: the key must be a cell tag (an integer)") from None
         params = _checked_keys(params, KEYS["materials.TAG"], {"E", "nu"}, w)
         for name, value in params.items():
-            _number(value, f"{w}.{name}")
+            if name in ("model", "hardening"):
+                if not isinstance(value, str):
+                    raise ProblemFileError(f"{w}.{name} = {value!r}: expected a string")
+            elif name == "table":
+                params[name] = _hardening_table(value, f"{w}.table")
+            else:
+                _number(value, f"{w}.{name}")
         try:
-            out[tag] = VonMises(**{k: float(v) for k, v in params.items()})
+            out[tag] = material_from_table(params)
         except ValueError as error:
             raise ProblemFileError(f"{w}: {error}") from None
     return out
+
+
+def _hardening_table(value, where: str) -> list:
+    """Rows [sigma_y, p] of numbers (their order and ranges: the hardening law checks them)."""
+    if not isinstance(value, list) or not all(isinstance(row, list) and len(row) == 2 for row in value):
+        raise ProblemFileError(f"{where} = {value!r}: expected rows [sigma_y, p], e.g. [[2.5e8, 0.0], [3.0e8, 0.05]]")
+    return [[_number(v, f"{where}[{i}][{j}]") for j, v in enumerate(row)] for i, row in enumerate(value)]
 
 
 def _contact_tables(contact, where: str) -> list:

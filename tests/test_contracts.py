@@ -80,7 +80,7 @@ def test_the_material_satisfies_the_material_contracts():
     # the pointwise return map is the UFL one's (the consistent tangent's derivative included)
     rng = np.random.default_rng(1)
     t = rng.standard_normal((points.mu.size, 5)) * 3.0 * STEEL.sigma_y0
-    eps_p, dp = points.plastic_strain(t, np.zeros(points.mu.size))
+    eps_p, dp = points.plastic_strain(t, {"p": np.zeros(points.mu.size)})
     assert np.all(dp > 0.0) and np.allclose(np.linalg.norm(eps_p, axis=1), np.sqrt(1.5) * dp)
 
 
@@ -162,6 +162,43 @@ def test_the_layers_have_no_circle_and_import_only_downwards():
     solvers = {f"dolfinx_nnqem.solvers.{m}" for m in ("monolithic", "nneqm1", "nneqm2")}
     for solver in solvers:
         assert not (edges[solver] & (solvers - {solver})), f"{solver} imports another solver"
+
+
+MATERIAL_DOOR = {"dolfinx_nnqem.material.interface", "dolfinx_nnqem.material.kinematics",
+                 "dolfinx_nnqem.material.state", "dolfinx_nnqem.material.conformance"}
+"""What the package outside ``material/`` may import of it: the interface, the kinematics, the
+factory of the mesh-wide state, and the type checker's conformance functions."""
+FRONT_END = ("dolfinx_nnqem.cli", "dolfinx_nnqem.problem_file", "dolfinx_nnqem.cases")
+
+
+def _material_imports_outside_the_door() -> list[str]:
+    """Imports of a concrete material (a module of material/ outside :data:`MATERIAL_DOOR`, or a name
+    of the package defined in one) by modules outside material/ and the front end."""
+    package = importlib.import_module("dolfinx_nnqem.material")
+    found = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        module = ".".join(("dolfinx_nnqem", *path.relative_to(PACKAGE).with_suffix("").parts)).removesuffix(".__init__")
+        if module.startswith(("dolfinx_nnqem.material",) + FRONT_END):
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            targets = []
+            if isinstance(node, ast.ImportFrom) and node.module == "dolfinx_nnqem.material":
+                targets = [getattr(package, a.name).__module__ if hasattr(getattr(package, a.name), "__module__")
+                           else f"dolfinx_nnqem.material.{a.name}" for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and (node.module or "").startswith("dolfinx_nnqem.material."):
+                targets = [node.module]
+            elif isinstance(node, ast.Import):
+                targets = [a.name for a in node.names if a.name.startswith("dolfinx_nnqem.material.")]
+            found += [f"{module} imports {t}" for t in targets if t not in MATERIAL_DOOR]
+    return found
+
+
+def test_no_module_outside_material_imports_a_concrete_material():
+    """The material interface is the only door: solvers, checks, stepping, IO and the problem
+    layer reach materials through material.interface / kinematics / state (issue 40)."""
+    found = _material_imports_outside_the_door()
+    print(f"\n  imports of a concrete material outside material/, the front end and cases/: {found}")
+    assert found == [], found
 
 
 def test_every_type_ignore_names_its_code_and_why():

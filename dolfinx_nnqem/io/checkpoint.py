@@ -182,9 +182,7 @@ def _json(value) -> str:
 
 
 def _write_rank(tmp: Path, problem) -> None:
-    st = problem.state
-    arrays = {"u": problem.u.x.array, "u_n": st.u_n.x.array, "sigma_n": st.sigma_n.x.array,
-              "p_n": st.p_n.x.array, "dp_n": st.dp_n.x.array}
+    arrays = {"u": problem.u.x.array, **problem.state.checkpoint_arrays()}
     info = {"format": FORMAT, "fingerprint": _fingerprint(problem), "load_factor_n": float(problem.load_factor_n),
             "load_factor": float(problem.load_factor)}
     if problem.has_contact:
@@ -275,7 +273,6 @@ def _read_contact(data, path: Path, problem) -> None:
 
 
 def _read_rank(path: Path, problem) -> None:
-    st = problem.state
     try:
         data = np.load(path, allow_pickle=False)
         info = json.loads(data["info"].tobytes().decode())
@@ -288,9 +285,11 @@ def _read_rank(path: Path, problem) -> None:
             differs = sorted(k for k in mine if saved.get(k) != mine[k])
             raise CheckpointError(f"{path}: this rank's part of the mesh differs from the checkpoint's ({differs}); "
                                   "the problem or the partition changed")
-        for name, f in (("u", problem.u), ("u_n", st.u_n), ("sigma_n", st.sigma_n), ("p_n", st.p_n),
-                        ("dp_n", st.dp_n)):
-            f.x.array[:] = data[name]  # an earlier checkpoint's "deps_p_n" (state no solver read) is not read
+        problem.u.x.array[:] = data["u"]
+        try:  # an earlier checkpoint's "deps_p_n" (state no solver read) is not read
+            problem.state.restore_arrays({name: data[name] for name in problem.state.checkpoint_arrays()})
+        except KeyError as error:
+            raise CheckpointError(f"{path}: no array {error} (the checkpoint is of another material)") from None
         problem.load_factor_n = float(info["load_factor_n"])
         problem.load_factor = float(info["load_factor"])
         if problem.has_contact:

@@ -33,7 +33,7 @@ from dolfinx_nnqem import compat
 from dolfinx_nnqem.collective import on_rank0
 from dolfinx_nnqem.io.safe_io import OutputError, StagedFiles, atomic_write_text
 from dolfinx_nnqem.io.xdmf_steps import child, data_path, read_field_index
-from dolfinx_nnqem.material.von_mises import von_mises_stress
+from dolfinx_nnqem.material.kinematics import von_mises_stress
 
 __all__ = ["CellMeans", "FieldSeriesWriter", "read_field_index"]
 
@@ -47,8 +47,10 @@ def _step_name(index: int) -> str:
 
 class CellMeans:
     """Cell means of the Gauss-point state, as piecewise-constant fields for the output files:
-    the von Mises stress ``von_mises``, the equivalent plastic strain ``p`` and the fraction of
-    the cell's Gauss points that yielded in the last increment ``plastic``."""
+    the von Mises stress ``von_mises``, the equivalent plastic strain ``p``, the fraction of
+    the cell's Gauss points that yielded in the last increment ``plastic`` and the yield
+    function's value over the yield stress ``yield_function`` (f/σ_y: 0 on the yield surface,
+    −1 where the material cannot yield)."""
 
     def __init__(self, problem):
         self.problem = problem
@@ -56,10 +58,11 @@ class CellMeans:
         self.q = fem.Function(self.Q0, name="von_mises")
         self.p = fem.Function(self.Q0, name="p")
         self.plastic = fem.Function(self.Q0, name="plastic")
+        self.yield_function = fem.Function(self.Q0, name="yield_function")
 
     @property
-    def fields(self) -> tuple[fem.Function, fem.Function, fem.Function]:
-        return self.q, self.p, self.plastic
+    def fields(self) -> tuple[fem.Function, ...]:
+        return self.q, self.p, self.plastic, self.yield_function
 
     def update(self) -> None:
         """The means of the last converged state (owned and ghost cells)."""
@@ -73,6 +76,7 @@ class CellMeans:
         self.q.x.array[dg] = von_mises_stress(sigma[qdofs]).mean(axis=1)
         self.p.x.array[dg] = state.p_n.x.array[qdofs].mean(axis=1)
         self.plastic.x.array[dg] = (state.dp_n.x.array[qdofs] > 0).mean(axis=1)
+        self.yield_function.x.array[dg] = state.yield_function_values()[qdofs].mean(axis=1)
 
 
 class FieldSeriesWriter:
@@ -135,7 +139,7 @@ class FieldSeriesWriter:
         on_rank0(self.comm, self._write_index)
 
     def cell_means(self) -> dict[str, fem.Function]:
-        """The cell fields as last written, by name (``von_mises``, ``p``, ``plastic``)."""
+        """The cell fields as last written, by name (``von_mises``, ``p``, ``plastic``, ``yield_function``)."""
         return {f.name: f for f in self._means.fields}
 
     def _bytes_needed(self) -> int:

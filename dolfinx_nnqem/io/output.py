@@ -6,8 +6,8 @@ after every increment, so a run that dies at increment k leaves increments 1..k 
 
 - ``fields.xdmf`` + ``fields/fields_XXXX.xdmf|h5``: one time series (time = load factor) with
   the displacement ``u`` (P1), and per cell the von Mises stress ``von_mises``, the equivalent
-  plastic strain ``p`` and the fraction of Gauss points that yielded in the increment
-  ``plastic`` (cell means of the Gauss-point values); one closed file per increment and an
+  plastic strain ``p``, the fraction of Gauss points that yielded in the increment
+  ``plastic`` and f/σ_y ``yield_function`` (cell means of the Gauss-point values); one closed file per increment and an
   atomically replaced index (:mod:`dolfinx_nnqem.io.field_series`: survives a kill).
 - ``fields_p2.pvd`` + ``fields/u_p2_XXXX*.pvtu``/``.vtu`` (degree 2): the quadratic displacement at
   its own nodes, on VTK Lagrange cells (:mod:`dolfinx_nnqem.io.quadratic_fields`).
@@ -46,7 +46,7 @@ from dolfinx_nnqem.io.quadratic_fields import QuadraticFieldWriter, writes_quadr
 from dolfinx_nnqem.io.run_pictures import PictureDrawer, draw_live_pictures, pictures_enabled
 from dolfinx_nnqem.io.safe_io import StagedFiles, atomic_write, atomic_write_text, commit, remove_stale_temporaries
 from dolfinx_nnqem.io.vtk_xml import point_cloud_text
-from dolfinx_nnqem.material.von_mises import von_mises_stress
+from dolfinx_nnqem.material.kinematics import von_mises_stress
 from dolfinx_nnqem.problem.validation import check_output_folder
 from dolfinx_nnqem.solvers.convergence import ConvergenceError
 
@@ -218,6 +218,7 @@ class SummaryWriter:
         d["residual_histories"].append(
             [[h.equilibrium, h.contact] for h in result.report.history])
         d["plastic_gauss_points"].append(int(result.plastic_points))
+        d["materials"] = p.state.maxima_by_body()  # per body: the largest p and f/σ_y
         d["system_order"] = int(result.report.system_order)
         d["wall_time_s"] = time.perf_counter() - self.t0
         d["converged"] = bool(math.isclose(result.load_factor, 1.0))

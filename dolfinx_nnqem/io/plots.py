@@ -73,7 +73,7 @@ def _gather_grid(problem, field: str):
     """Rank 0: (topology, cell_types, points, u, cell values) of the whole mesh; None elsewhere."""
     import dolfinx.plot
 
-    from dolfinx_nnqem.material.von_mises import von_mises_stress
+    from dolfinx_nnqem.material.kinematics import von_mises_stress
 
     topology, cell_types, x = dolfinx.plot.vtk_mesh(problem.V)
     u = problem.u.x.array.reshape(-1, 3)[: len(x)]

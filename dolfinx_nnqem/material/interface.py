@@ -1,33 +1,89 @@
-"""The material interface: what the problem and the solvers use of a bulk material.
+"""The material interface: the only door through which the problem, the solvers, the checks and the
+writers reach a bulk material.
 
-Three parts, each a Protocol that :mod:`~dolfinx_nnqem.material.von_mises` implements (checked by
-the type checker in :mod:`~dolfinx_nnqem.solvers.conformance` and by ``tests/test_contracts.py``);
-a second material implements the same three and no solver changes:
+Four Protocols (checked by the type checker in :mod:`~dolfinx_nnqem.material.conformance` and by
+``tests/test_contracts.py``). A material module implements the first, third and fourth; the
+second is implemented once, for every material, by :class:`~dolfinx_nnqem.material.state.GaussPointState`,
+built by :func:`~dolfinx_nnqem.material.state.material_state` from ``{cell_tag: material}``:
 
-* :class:`Material` — the parameters of one body, as the user gives them;
-* :class:`MaterialState` — the material fields and the Gauss-point state of the whole mesh, in UFL
-  (the return map at u from the converged state, its consistent tangent, the forms of the
-  internal force and of the stiffnesses) and in quadrature functions; the monolithic solver and
-  NNEQM1 use the forms, every solver commits through it;
-* :class:`PointwisePlasticity` — what NNEQM2 needs besides: the same return map on numpy arrays of
-  Gauss-point values, in the orthonormal coordinates of the deviators
-  (:data:`~dolfinx_nnqem.material.von_mises.DEVIATORIC_BASIS`): the plastic strain increment of a
-  trial deviator and its derivative, and the yield function, so that the plastic strains can be
-  unknowns of its nonsmooth system.
+* :class:`Material` — the parameters of one body, as the user gives them, and how the bodies of
+  its kind get their Gauss-point state (:meth:`Material.make_part`);
+* :class:`MaterialState` — the state of the whole mesh, whatever materials its bodies have: the
+  converged stress and named internal variables in quadrature functions, the return map at u
+  from the converged state and its consistent tangent as forms (the monolithic solver, NNEQM1),
+  the same return map as Gauss-point values (the commit, the independent check), the pointwise
+  material (NNEQM2), commit, checkpoint arrays and output fields;
+* :class:`MaterialPart` — one material kind's share of that state (the cells of its bodies):
+  its stress and consistent tangent in UFL, an ``evaluate`` hook for a return map evaluated on
+  arrays at the Gauss points, its return map's values, its pointwise form;
+* :class:`PointwiseMaterial` — the return map on numpy arrays of Gauss-point values (what NNEQM2
+  and the independent check need): plastic strain increment of a trial deviator and its
+  derivative, the yield function, the flow direction, the hardening slope.
+
+Internal variables have names: ``"p"`` (the equivalent plastic strain, scalar; every material
+has it, 0 where a material cannot yield) and, per material, others with their value shapes
+(``MaterialPart.internal_variables``; e.g. a back-stress ``"alpha_1"`` of shape (3, 3)). Pointwise
+methods take them as a mapping name → (n, ...) array. Stresses at points are coordinates in the
+orthonormal basis of :mod:`~dolfinx_nnqem.material.kinematics`: (n, 5) deviators, or (n, 6) with
+the volumetric coordinate tr σ/√3 last (a pressure-dependent material needs it).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-__all__ = ["Material", "MaterialState", "PointwisePlasticity"]
+__all__ = ["GaussPointValues", "Material", "MaterialPart", "MaterialState", "PointwiseMaterial",
+           "PointwisePlasticity", "ReturnMapValues"]
+
+
+@dataclass(frozen=True)
+class GaussPointValues:
+    """Gauss-point values at the end of an increment: a solver's own, or the return map's at u.
+
+    Attributes
+    ----------
+    u
+        The displacement array (owned and ghost entries) they belong to.
+    sigma
+        (owned Gauss points, 3, 3) stresses.
+    dp
+        (owned Gauss points,) equivalent plastic strain increments.
+    deps_p
+        (owned Gauss points, 3, 3) plastic strain increments (None: not given).
+    flow_rule
+        How the flow was integrated: "backward-euler" (the return map: the flow direction at the
+        end of the increment) or "frozen-directions" (NNEQM2's seed variant: the directions at
+        its start). The independent check verifies the values against the rule they claim.
+    internal
+        The other internal variables at the end of the increment, by name (owned points), for a
+        material that has any besides p (None: it has none, or the commit derives them).
+    """
+
+    u: np.ndarray
+    sigma: np.ndarray
+    dp: np.ndarray
+    deps_p: np.ndarray | None = None
+    flow_rule: str = "backward-euler"
+    internal: Mapping[str, np.ndarray] | None = None
+
+
+@dataclass(frozen=True)
+class ReturnMapValues:
+    """A part's return map at u on every LOCAL Gauss point of the mesh (owned and ghost, in the
+    quadrature spaces' order; only the part's own points are meaningful)."""
+
+    sigma: np.ndarray  #: (N, 3, 3)
+    dp: np.ndarray  #: (N,)
+    deps_p: np.ndarray  #: (N, 3, 3)
 
 
 @runtime_checkable
 class Material(Protocol):
-    """A body's material parameters."""
+    """A body's material parameters, and how the bodies of its kind get their Gauss-point state."""
 
     @property
     def E(self) -> float:
@@ -50,6 +106,51 @@ class Material(Protocol):
     @property
     def lmbda(self) -> float: ...
 
+    @property
+    def part_kind(self) -> str:
+        """Bodies whose materials have the same kind share one :class:`MaterialPart` (one set of UFL
+        expressions with cell-wise parameters), e.g. "von-mises" or "elastic"."""
+        ...
+
+    def make_part(self, space: Any, members: Mapping[int | None, Any]) -> MaterialPart:
+        """The part holding the state of the bodies ``members`` ({cell tag: material}, all of this
+        kind; tag None: every cell), in the mesh-wide ``space``
+        (:class:`~dolfinx_nnqem.material.state.GaussPointState`)."""
+        ...
+
+
+@runtime_checkable
+class MaterialPart(Protocol):
+    """One material kind's share of the mesh's Gauss-point state."""
+
+    internal_variables: Mapping[str, tuple[int, ...]]
+    """Internal variables besides p, by name, with their value shapes (e.g. {"alpha_1": (3, 3)})."""
+
+    def stress(self, u) -> Any:
+        """UFL: σ at ``u`` by the return map from the converged state (the internal force reads it)."""
+        ...
+
+    def tangent(self, u, eps_du) -> Any:
+        """UFL: C_alg : ``eps_du``, the consistent tangent at ``u``."""
+        ...
+
+    def evaluate(self, u) -> None:
+        """Bring what :meth:`stress` and :meth:`tangent` read to ``u`` (a return map evaluated on
+        arrays at the Gauss points); nothing for a return map written in UFL."""
+        ...
+
+    def return_map(self, u) -> ReturnMapValues:
+        """The return map's σ, Δp and Δε_p at ``u`` on every local Gauss point."""
+        ...
+
+    def trial_dp(self, u) -> np.ndarray:
+        """Δp of the return map at ``u`` on every local Gauss point (counting the plastic points)."""
+        ...
+
+    def at_points(self, points: np.ndarray) -> PointwiseMaterial:
+        """The material at the local Gauss points ``points`` (indices into the quadrature spaces)."""
+        ...
+
 
 @runtime_checkable
 class MaterialState(Protocol):
@@ -59,21 +160,22 @@ class MaterialState(Protocol):
     W_scalar: Any  #: quadrature space of scalars
     dx: Any  #: the integration measure whose points are the quadrature spaces'
     sigma_n: Any  #: converged stress
-    p_n: Any  #: converged equivalent plastic strain
+    p_n: Any  #: converged equivalent plastic strain (0 where a material cannot yield)
     dp_n: Any  #: its increment in the last converged increment
     u_n: Any  #: converged displacement
-    E: Any
+    E: Any  #: Young's modulus per cell
     mu: Any
     lmbda: Any
-    sigma_y0: Any
-    H: Any
+    density: Any  #: mass density per cell
 
-    def return_map(self, u) -> Any:
-        """UFL: the update from the converged state for the displacement ``u`` (σ, Δp, Δε_p, ...)."""
+    @property
+    def internal_variables(self) -> Mapping[str, Any]:
+        """Every converged internal variable by name ("p" first), as quadrature functions."""
         ...
 
-    def return_map_expressions(self, u) -> tuple[Any, Any, Any]:
-        """The return map's σ, Δp and Δε_p at ``u``, compiled for the Gauss points (once per ``u``)."""
+    def evaluate(self, u) -> None:
+        """Bring the quadrature data the forms read to ``u``: call before assembling the internal
+        force or the tangent at a new iterate (:class:`~dolfinx_nnqem.problem.ContactProblem` does)."""
         ...
 
     def elastic_stress(self, eps) -> Any:
@@ -86,15 +188,25 @@ class MaterialState(Protocol):
 
     def elastic_stiffness_form(self, du, v) -> Any: ...
 
+    def return_map_values(self, u) -> GaussPointValues:
+        """The return map's values at ``u`` at this rank's owned Gauss points."""
+        ...
+
     def commit(self, u) -> None:
         """Accept ``u``: the state from the return map."""
         ...
 
-    def commit_values(self, u, sigma: np.ndarray, dp: np.ndarray) -> None:
+    def commit_values(self, u, values: GaussPointValues) -> None:
         """Accept ``u`` with Gauss-point values a solver computed itself."""
         ...
 
+    def internal_at_points(self, values: GaussPointValues | None = None) -> dict[str, np.ndarray]:
+        """The internal variables at the owned Gauss points: converged, or after ``values``."""
+        ...
+
     def values_at_points(self, expr) -> np.ndarray: ...
+
+    def owned_at_points(self, compiled, tensor: bool = False) -> np.ndarray: ...
 
     def count_plastic_points(self) -> int: ...
 
@@ -104,17 +216,29 @@ class MaterialState(Protocol):
 
     def plastic_strain_of(self, u, sigma: np.ndarray) -> np.ndarray: ...
 
-    def at_points(self) -> PointwisePlasticity:
-        """The material at this rank's owned Gauss points (:class:`PointwisePlasticity`)."""
+    def at_points(self) -> PointwiseMaterial:
+        """The material at this rank's owned Gauss points (:class:`PointwiseMaterial`)."""
+        ...
+
+    def checkpoint_arrays(self) -> dict[str, np.ndarray]:
+        """The converged state as named local arrays (a checkpoint)."""
+        ...
+
+    def restore_arrays(self, arrays: Mapping[str, np.ndarray]) -> None:
+        """Restore :meth:`checkpoint_arrays`' arrays (the same mesh and partition)."""
+        ...
+
+    def yield_function_values(self) -> np.ndarray:
+        """f/σ_y at the converged state at every local Gauss point (−1 where nothing can yield)."""
         ...
 
 
 @runtime_checkable
-class PointwisePlasticity(Protocol):
-    """The return map on numpy arrays of this rank's Gauss points (what NNEQM2 needs).
+class PointwiseMaterial(Protocol):
+    """The return map on numpy arrays of Gauss points (what NNEQM2 and the independent check need).
 
-    Deviators are (n, 5) coordinates in the orthonormal deviatoric basis; ``t`` is a trial
-    deviator s_n + 2μ dev Δε, ``p`` the equivalent plastic strain.
+    ``t`` is a trial deviator s_n + 2μ dev Δε (coordinates, (n, 5)), ``s`` a stress as coordinates
+    ((n, 5), or (n, 6) with tr σ/√3 last), ``internal`` the internal variables by name ("p": (n,)).
     """
 
     @property
@@ -129,7 +253,7 @@ class PointwisePlasticity(Protocol):
 
     @property
     def stress_unit(self) -> np.ndarray:
-        """σ_u (n,), the unit of the yield rows."""
+        """σ_u (n,), the unit of the yield rows and of the check."""
         ...
 
     @property
@@ -137,26 +261,50 @@ class PointwisePlasticity(Protocol):
         """(n,) bool: the points of a material that can yield."""
         ...
 
-    def plastic_strain(self, t: np.ndarray, p_n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(Δε_p (n, 5), Δp (n,)) of the return map from p_n for the trial deviators t."""
+    @property
+    def yield_criterion(self) -> str:
+        """"von-mises" (f = q(s) − σ_y(p), N = (3/2) s/q: isotropic hardening of any shape), "none"
+        (cannot yield), or a material's own name; "mixed" where the points' criteria differ."""
         ...
 
-    def plastic_strain_tangent(self, t: np.ndarray, p_n: np.ndarray) -> np.ndarray:
+    @property
+    def deviatoric_flow(self) -> bool:
+        """The plastic strain is deviatoric with Δp = √(2/3)|Δε_p| (what NNEQM2's unknowns assume)."""
+        ...
+
+    def plastic_strain(self, t: np.ndarray, internal: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        """(Δε_p (n, 5), Δp (n,)) of the return map from the converged ``internal`` for trial deviators t."""
+        ...
+
+    def plastic_strain_tangent(self, t: np.ndarray, internal: Mapping[str, np.ndarray]) -> np.ndarray:
         """∂Δε_p/∂e (n, 5, 5), e the deviatoric strain increment (t = s_n + 2μ e)."""
         ...
 
-    def yield_value(self, s: np.ndarray, p: np.ndarray) -> np.ndarray:
-        """f (n,) of the stress deviators s at the equivalent plastic strain p (≤ 0: admissible)."""
+    def yield_value(self, s: np.ndarray, internal: Mapping[str, np.ndarray]) -> np.ndarray:
+        """f (n,) of the stresses s with the internal variables ``internal`` (≤ 0: admissible)."""
         ...
 
-    def flow_direction(self, s: np.ndarray) -> np.ndarray:
-        """N = ∂f/∂σ (n, 5) at the stress deviators s (0 where s = 0); the flow is Δε_p = Δp N."""
+    def flow_direction(self, s: np.ndarray, internal: Mapping[str, np.ndarray]) -> np.ndarray:
+        """N (the shape of s) at the stresses s (0 where undefined): the flow is Δε_p = Δp N."""
         ...
 
-    def hardening(self) -> np.ndarray:
-        """dσ_y/dp (n,): the slope of the yield stress in p (H for linear hardening)."""
+    def hardening(self, internal: Mapping[str, np.ndarray]) -> np.ndarray:
+        """dσ_y/dp (n,) at p = ``internal["p"]`` (H for linear hardening)."""
         ...
 
-    def subset(self, index: slice) -> PointwisePlasticity:
-        """The material at the points ``index`` selects (a check goes through the points in chunks)."""
+    def yield_stress(self, internal: Mapping[str, np.ndarray]) -> np.ndarray:
+        """The size of the elastic domain in stress units (n,): σ_y(p) for von Mises, inf where
+        nothing yields (the unit of the output f/σ_y)."""
         ...
+
+    def subset(self, index) -> PointwiseMaterial:
+        """The material at the points ``index`` selects (a slice, a boolean mask or indices)."""
+        ...
+
+    def gathered(self, gather: Callable[[np.ndarray], np.ndarray]) -> PointwiseMaterial:
+        """The material with every per-point array passed through ``gather`` (e.g. over the ranks)."""
+        ...
+
+
+PointwisePlasticity = PointwiseMaterial
+"""The name of release 0.1."""

@@ -41,7 +41,8 @@ from dolfinx_nnqem.problem.bodies import (check_rigid_modes, find_bodies, free_r
 from dolfinx_nnqem.contact.model import Contact, ContactModel
 from dolfinx_nnqem.contact.surfaces import ContactPairError
 from dolfinx_nnqem.contact.obstacles import Cylinder, Plane, Sphere  # noqa: F401  (the user's imports)
-from dolfinx_nnqem.material.von_mises import GaussPointValues, PlasticState
+from dolfinx_nnqem.material.interface import GaussPointValues
+from dolfinx_nnqem.material.state import material_state
 from dolfinx_nnqem.problem.validation import check_cell_tag, check_magnitude, check_mesh
 from dolfinx_nnqem.numerics.linalg import vec_norm
 
@@ -95,7 +96,7 @@ class BodyForce:
 
 @dataclass(frozen=True)
 class Gravity:
-    """Self-weight ``ℓ · ρ g`` with each body's density (from its :class:`VonMises`)."""
+    """Self-weight ``ℓ · ρ g`` with each body's density (from its material)."""
 
     g: Sequence[float] = (0.0, -9.81, 0.0)
     amplitude: Callable[[float], float] | None = None  #: a(ℓ) replacing ℓ
@@ -110,7 +111,8 @@ class ContactProblem:
     mesh, cell_tags, facet_tags
         A DOLFINx mesh holding all bodies (no shared nodes between bodies in contact) and its tags.
     materials
-        One :class:`VonMises` or ``{cell_tag: VonMises}``.
+        One material or ``{cell_tag: material}`` (:mod:`dolfinx_nnqem.material`: ``VonMises``,
+        ``Elastic``, ...); the bodies may have materials of different kinds.
     dirichlet, tractions, body_forces
         Supports and loads; all scaled by the load factor.
     contact
@@ -163,7 +165,7 @@ class ContactProblem:
         self.comm = mesh.comm
         self.V = fem.functionspace(mesh, ("Lagrange", degree, (3,)))
         self.u = fem.Function(self.V, name="u")
-        self.state = PlasticState(self.V, materials, cell_tags, quadrature_degree)
+        self.state = material_state(self.V, materials, cell_tags, quadrature_degree)
 
         self._check_facet_tags([d.tag for d in dirichlet] + [t.tag for t in tractions])
         self.dirichlet = list(dirichlet)
@@ -393,11 +395,13 @@ class ContactProblem:
 
     def assemble_internal_force(self, F: PETSc.Vec | None = None) -> PETSc.Vec:
         """F_int(u) = ∫ σ(u) : ε(v) dx with the return map from the converged state."""
+        self.state.evaluate(self.u)
         return assemble_vector(self.F_int_form, self.V, F)
 
     def assemble_tangent(self, A: PETSc.Mat | None = None, extra_bcs: Sequence = ()) -> PETSc.Mat:
         """K_t(u), the consistent tangent, with identity rows and columns at constrained dofs
         (and at the dofs of ``extra_bcs``)."""
+        self.state.evaluate(self.u)
         return self._assemble_matrix(self.K_t_form, A, extra_bcs)
 
     def assemble_elastic_stiffness(self, A: PETSc.Mat | None = None, extra_bcs: Sequence = ()) -> PETSc.Mat:
@@ -480,6 +484,7 @@ class ContactProblem:
             self._delta = fem.Function(self.V)
             self._tangent_action = jit.form(self.state.tangent_form(self.u, self._delta, ufl.TestFunction(self.V)))
         self._delta.x.array[:] = delta
+        self.state.evaluate(self.u)
         return assemble_vector(self._tangent_action, self.V)
 
     def free_residual(self, R: PETSc.Vec, out: PETSc.Vec | None = None) -> PETSc.Vec:
@@ -590,7 +595,7 @@ class ContactProblem:
         self._previous = (self.load_factor_n, self.state.u_n.x.array.copy(),
                           self.contact.z_n.copy() if self.contact is not None else None)
         if gauss_point_values is not None and np.array_equal(gauss_point_values.u, self.u.x.array):
-            self.state.commit_values(self.u, gauss_point_values.sigma, gauss_point_values.dp)
+            self.state.commit_values(self.u, gauss_point_values)
         else:
             self.state.commit(self.u)
         self.load_factor_n = self.load_factor

@@ -7,18 +7,19 @@ API only, before committing it:
 * **equilibrium**: the full residual R = F_int(u) − F_ext(ℓ) − Bᵀλ(z) at the free dofs,
   ‖R_free‖ ≤ tol · F (the solver's atol is not added: a loose absolute tolerance never excuses
   a residual), F = max(‖F_ext(ℓ)‖, ‖F_int‖, ‖Bᵀλ‖) the problem's force scale
-  (the one the solvers use). F_int is the radial return at u from the converged state, except
+  (the one the solvers use). F_int is the material's return map at u from the converged state, except
   for a solver that returns its own Gauss-point stresses (NNEQM2: ``report.gauss_point_values``,
   which is what the commit stores): then F_int = ∫ σ_own : ε(v) dx;
 * **contact**: every pair's law H(w, z) (force units, the supports' pinned directions applied),
   ‖H‖ ≤ tol · F, and, independently of how a law is written, the Coulomb conditions of
   the forces λ(z): p_n ≥ −tol·F and |λ_t| ≤ μ_f max(p_n, 0) + tol·F at every pair;
 * **the constitutive law** at every Gauss point (:mod:`~dolfinx_nnqem.solvers.constitutive`), of
-  the values the commit will store — a solver's own (NNEQM2) or the radial return's at u
-  (monolithic, NNEQM1): σ = σ_n + C (Δε − Δε_p) with Δε from u itself; Δε_p deviatoric with
-  |Δε_p| = √(3/2) Δp (ε_p,n+1 − ε_p,n = Δγ N, p_n+1 = p_n + Δγ); Δε_p along the end stress's normal
-  for the backward-Euler rule; Δp ≥ 0, f ≤ 0, and f = 0 where Δp > 0 (Δγ f = 0); each to
-  tol · σ_u with σ_u = min(σ_y0, 10⁻² E);
+  the values the commit will store — a solver's own (NNEQM2) or the return map's at u
+  (monolithic, NNEQM1): σ = σ_n + C (Δε − Δε_p) with Δε from u itself; Δε_p = Δp N with the
+  material's flow direction N (for von Mises deviatoric, |Δε_p| = √(3/2) Δp); N at the end stress
+  for the backward-Euler rule; Δp ≥ 0, f ≤ 0, and f = 0 where Δp > 0 (Δγ f = 0), with the
+  material's own yield function; each to tol · σ_u with σ_u the material's stress unit
+  (min(σ_y0, 10⁻² E) for von Mises);
 * **finite values**: u and z hold no NaN or infinity;
 * **small strain**: the package solves small-strain problems, so a state with a strain (the
   largest ‖sym ∇u‖ at a Gauss point, Frobenius norm) above ``max_strain`` or an infinitesimal
@@ -50,8 +51,8 @@ from mpi4py import MPI
 
 from dolfinx_nnqem import compat, jit
 from dolfinx_nnqem.contact.laws import STATE_NAMES
-from dolfinx_nnqem.material.interface import PointwisePlasticity
-from dolfinx_nnqem.material.von_mises import GaussPointValues, strain
+from dolfinx_nnqem.material.interface import GaussPointValues, PointwiseMaterial
+from dolfinx_nnqem.material.kinematics import strain
 from dolfinx_nnqem.problem.contact_problem import assemble_vector
 from dolfinx_nnqem.problem.validation import check_real
 from dolfinx_nnqem.solvers.constitutive import ConstitutiveCheck, check_constitutive_law
@@ -135,7 +136,7 @@ class _Forms:
         self.grad_expr = jit.expression(ufl.grad(problem.u), points)
         self.strain_increment_expr = jit.expression(strain(problem.u) - strain(st.u_n), points)
         self._own_force: tuple[fem.Function, fem.Form] | None = None
-        self._material: PointwisePlasticity | None = None
+        self._material: PointwiseMaterial | None = None
         # the state, not the problem: this object is the value of a WeakKeyDictionary keyed by
         # the problem, and a reference to its key would keep both alive for the whole process
         self._state = st
@@ -157,7 +158,7 @@ class _Forms:
         sigma_f.x.scatter_forward()
         return form
 
-    def material_at_points(self) -> PointwisePlasticity:
+    def material_at_points(self) -> PointwiseMaterial:
         """The material at the owned Gauss points (computed once; made per check instead, they did not
         lower the measured peak memory, ``docs/performance.md``)."""
         if self._material is None:
@@ -166,18 +167,15 @@ class _Forms:
 
 
 def radial_return_values(problem) -> GaussPointValues:
-    """The values the radial return gives at the problem's u, at the owned Gauss points (collective):
-    what the commit stores for a solver without Gauss-point values of its own."""
-    st = problem.state
-    e_sigma, e_dp, e_deps = st.return_map_expressions(problem.u)
-    return GaussPointValues(problem.u.x.array.copy(), st.owned_at_points(e_sigma, tensor=True),
-                            st.owned_at_points(e_dp), st.owned_at_points(e_deps, tensor=True), "backward-euler")
+    """The values the material's return map gives at the problem's u, at the owned Gauss points
+    (collective): what the commit stores for a solver without Gauss-point values of its own."""
+    return problem.state.return_map_values(problem.u)
 
 
 def values_to_commit(problem, report=None) -> GaussPointValues:
     """The Gauss-point values a commit of the problem's current iterate stores (collective): the
     solver's own (``report.gauss_point_values``) where they belong to the current u on every
-    rank, else the radial return's at u. The check verifies these, and the commit stores them."""
+    rank, else the return map's at u. The check verifies these, and the commit stores them."""
     gpv = getattr(report, "gauss_point_values", None)
     if _own_values(problem, gpv):
         assert gpv is not None  # _own_values: given
@@ -255,7 +253,7 @@ def check_state(problem, report=None, solver_options=None, options: CheckOptions
     broken = [f"{_RELATIONS[name]} (by {value:.3e} σ_u)" for name, value in constitutive._asdict().items()
               if not value <= tol]
     if broken:
-        source = "the solver's" if own else "the radial return's"
+        source = "the solver's" if own else "the return map's"
         reasons.append(f"{source} Gauss-point values break the constitutive law beyond {tol:.1e} σ_u: "
                        + "; ".join(broken))
 
@@ -300,7 +298,7 @@ def _finite(problem) -> bool:
 
 def _equilibrium(problem, forms: _Forms, gpv: GaussPointValues | None):
     """(R at the free dofs, the force scale F, |R_free|/F) with the solver's own Gauss-point stresses
-    ``gpv``, or the radial return's when None."""
+    ``gpv``, or the return map's when None."""
     if gpv is not None:
         F_int = assemble_vector(forms.own_force(np.asarray(gpv.sigma, dtype=float)), problem.V)
     else:
@@ -342,8 +340,8 @@ def _largest_strain_and_rotation(problem, forms: _Forms) -> tuple[float, float]:
 
 _RELATIONS = {
     "elasticity": "σ = σ_n + C (Δε − Δε_p)",
-    "plastic_strain": "Δε_p deviatoric with √(2/3)|Δε_p| = Δp",
-    "flow_direction": "Δε_p = Δp (3/2) s/q (the flow along the normal at the end of the increment)",
+    "plastic_strain": "Δε_p of the size Δp |N| (deviatoric for von Mises: √(2/3)|Δε_p| = Δp)",
+    "flow_direction": "Δε_p = Δp N(σ) (the flow along the material's direction at the end of the increment)",
     "yield_surface": "the stress within the yield surface, f(σ, p_n + Δp) ≤ 0",
     "complementarity": "Δp ≥ 0 and f = 0 where Δp > 0",
 }
@@ -362,7 +360,7 @@ def _constitutive(problem, forms: _Forms, values: GaussPointValues) -> tuple[Con
         problem.comm, forms.at_points(forms.strain_increment_expr),
         np.asarray(values.sigma, dtype=float).reshape(n, 3, 3), np.asarray(values.dp, dtype=float).reshape(n),
         np.asarray(deps_p, dtype=float).reshape(n, 3, 3), values.flow_rule,
-        st.sigma_n.x.array[:9 * n].reshape(n, 3, 3), st.p_n.x.array[:n], forms.material_at_points())
+        st.sigma_n.x.array[:9 * n].reshape(n, 3, 3), st.internal_at_points(values), forms.material_at_points())
     return result, result.yield_surface
 
 

@@ -3,8 +3,8 @@
 Each function below returns an implementation as its Protocol; the type checker (mypy, run by
 ``.ci/run``) verifies that the implementation has every member of the Protocol with compatible
 signatures, and ``tests/test_contracts.py`` calls these functions on real objects to check the
-same at run time. A new solver, pair set, obstacle or material adds a line here
-(``CONTRIBUTING.md``).
+same at run time. A new solver, pair set or obstacle adds a line here; a material, in
+:mod:`dolfinx_nnqem.material.conformance` (re-exported here) (``CONTRIBUTING.md``).
 """
 
 from __future__ import annotations
@@ -13,15 +13,16 @@ from dolfinx_nnqem.contact.obstacles import ObstaclePairs
 from dolfinx_nnqem.contact.pairs import ContactPairs
 from dolfinx_nnqem.contact.pairset import PairSet
 from dolfinx_nnqem.contact.surface_pairs import SurfacePairs
-from dolfinx_nnqem.material.interface import Material, MaterialState, PointwisePlasticity
-from dolfinx_nnqem.material.von_mises import PlasticState, VonMises, VonMisesAtPoints
+from dolfinx_nnqem.material.conformance import (as_material, as_material_part, as_material_state,  # noqa: F401
+                                                as_pointwise_material, as_pointwise_plasticity)
 from dolfinx_nnqem.problem.contact_problem import ContactProblem
 from dolfinx_nnqem.solvers.contract import SolvableProblem, Solver
 from dolfinx_nnqem.solvers.monolithic import MonolithicSolver
 from dolfinx_nnqem.solvers.nneqm1 import NNEQM1Solver
 from dolfinx_nnqem.solvers.nneqm2 import NNEQM2Solver
 
-__all__ = ["as_material", "as_material_state", "as_pair_set", "as_pointwise_plasticity", "as_problem", "as_solver"]
+__all__ = ["as_material", "as_material_part", "as_material_state", "as_pair_set", "as_pointwise_material",
+           "as_pointwise_plasticity", "as_problem", "as_solver"]
 
 
 def as_solver(solver: MonolithicSolver | NNEQM1Solver | NNEQM2Solver) -> Solver:
@@ -34,15 +35,3 @@ def as_problem(problem: ContactProblem) -> SolvableProblem:
 
 def as_pair_set(pairs: ContactPairs | SurfacePairs | ObstaclePairs) -> PairSet:
     return pairs
-
-
-def as_material(material: VonMises) -> Material:
-    return material
-
-
-def as_material_state(state: PlasticState) -> MaterialState:
-    return state
-
-
-def as_pointwise_plasticity(points: VonMisesAtPoints) -> PointwisePlasticity:
-    return points

@@ -25,7 +25,7 @@ if TYPE_CHECKING:
 
     from dolfinx_nnqem.contact.model import ContactModel
     from dolfinx_nnqem.material.interface import MaterialState
-    from dolfinx_nnqem.material.von_mises import GaussPointValues
+    from dolfinx_nnqem.material.interface import GaussPointValues
     from dolfinx_nnqem.problem.bodies import RigidModes
     from dolfinx_nnqem.solvers.convergence import SolveReport
     from dolfinx_nnqem.solvers.options import SolverOptions

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from dolfinx_nnqem.contact.laws import STATE_NAMES  # noqa: F401  (the pair states' names, kept here for old imports)
-from dolfinx_nnqem.material.von_mises import GaussPointValues
+from dolfinx_nnqem.material.interface import GaussPointValues
 
 logger = logging.getLogger("dolfinx_nnqem")
 

@@ -6,7 +6,7 @@ material's points, σ_y0 = inf, carry no unknown) as equations of its own, so it
 the problem's forms: the strain operator A (rows (j, kl) of the owned Gauss points: A u =
 w_j ε_j(u)_kl, w_j the quadrature weight times det J), the quadrature force ∫ σ : ε(v) dx of
 Gauss-point stresses, and the Gauss points' material values. Deviatoric tensors are handled in
-the orthonormal coordinates of :data:`~dolfinx_nnqem.material.von_mises.DEVIATORIC_BASIS`.
+the orthonormal coordinates of :data:`~dolfinx_nnqem.material.kinematics.DEVIATORIC_BASIS`.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ import ufl
 from petsc4py import PETSc
 
 from dolfinx_nnqem import jit
-from dolfinx_nnqem.material.von_mises import DEVIATORIC_BASIS, deviator_coordinates, strain
+from dolfinx_nnqem.material.kinematics import DEVIATORIC_BASIS, deviator_coordinates, strain
 from dolfinx_nnqem.problem.contact_problem import ContactProblem, assemble_vector
 
 __all__ = ["GaussPointOperators"]

@@ -17,13 +17,13 @@ round-off from accumulating.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from petsc4py import PETSc
 
 from dolfinx_nnqem.contact.model import PairLaws
-from dolfinx_nnqem.material.von_mises import deviator_coordinates
+from dolfinx_nnqem.material.kinematics import deviator_coordinates
 from dolfinx_nnqem.problem.contact_problem import ContactProblem
 from dolfinx_nnqem.solvers.condensation import Condensation
 from dolfinx_nnqem.solvers.gauss_points import GaussPointOperators
@@ -43,9 +43,9 @@ class IncrementStart:
         The predictor's right-hand side (a PETSc vector laid out like V) and G b (owned rows).
     F_ext
         F_ext(ℓ).
-    sigma_n, s_n, p_n
-        The converged stresses (n_gp, 3, 3), their deviators (n_gp, 5) and p_n (n_gp,) at the
-        owned Gauss points.
+    sigma_n, s_n, p_n, internal_n
+        The converged stresses (n_gp, 3, 3), their deviators (n_gp, 5), p_n (n_gp,) and every
+        internal variable by name ("p": p_n) at the owned Gauss points.
     force_scale
         F = the problem's force scale with the internal force ∫ σ_n : ε(v) + K_e Δu_D.
     extrapolation
@@ -70,6 +70,7 @@ class IncrementStart:
     w_prev: np.ndarray | None
     z: np.ndarray | None
     w_start: np.ndarray | None
+    internal_n: dict[str, np.ndarray] = field(default_factory=dict)
 
     def destroy(self) -> None:
         for vec in (self.b, self.F_ext):
@@ -113,7 +114,8 @@ def start_increment(problem: ContactProblem, gp: GaussPointOperators, elastic: C
     start = IncrementStart(
         load_factor=float(load_factor), b=b, du0=du0.getArray(readonly=True).copy(), F_ext=F_ext,
         sigma_n=sigma_n, s_n=deviator_coordinates(sigma_n), p_n=st.p_n.x.array[:gp.n_gp].copy(),
-        force_scale=scale, extrapolation=beta, laws=laws, w_prev=w_prev, z=z, w_start=w_start)
+        force_scale=scale, extrapolation=beta, laws=laws, w_prev=w_prev, z=z, w_start=w_start,
+        internal_n=st.internal_at_points())
     for vec in (F_n, lift, du0):
         vec.destroy()
     return start

@@ -34,12 +34,11 @@ from __future__ import annotations
 import math
 import time
 
-import dolfinx.fem as fem
 import numpy as np
 from mpi4py import MPI
 
-from dolfinx_nnqem import compat
-from dolfinx_nnqem.material.von_mises import GaussPointValues, deviator_coordinates, deviator_tensors, elastic_stress
+from dolfinx_nnqem.material.interface import GaussPointValues
+from dolfinx_nnqem.material.kinematics import deviator_coordinates, deviator_tensors, elastic_stress
 from dolfinx_nnqem.numerics.linalg import vec_norm
 from dolfinx_nnqem.numerics.newton import solve
 from dolfinx_nnqem.problem.contact_problem import ContactProblem
@@ -68,6 +67,25 @@ def refuse_current_geometry(problem: ContactProblem) -> None:
         "every increment through the elastic stiffness factorised once per run and its pair flexibility, and "
         "rebuilding them in a geometry that moves within the increment is not implemented; use "
         "the monolithic solver or NNEQM1 for large sliding, or geometry = 'reference'")
+
+
+def refuse_material(gp: GaussPointOperators, frozen: bool) -> None:
+    """NNEQM2's Gauss-point unknowns are deviatoric plastic strains (5 coordinates, Δp = √(2/3)|Δε_p|);
+    the seed's frozen variant is written for von Mises yield (N = (3/2) s/q, isotropic hardening).
+    Raise, before solving, for a material it cannot take."""
+    material = gp.material
+    criterion = gp.problem.comm.allgather(material.yield_criterion if np.any(material.yields) else "none")
+    criteria = sorted(set(criterion) - {"none"})
+    if not gp.problem.comm.allreduce(bool(material.deviatoric_flow), op=MPI.LAND):
+        raise ValueError(
+            f"nneqm2: a material of the problem ({', '.join(criteria) or 'its yield criterion'}) has a volumetric "
+            "plastic strain; NNEQM2's Gauss-point unknowns are deviatoric plastic strains (5 coordinates): use the "
+            "monolithic solver or NNEQM1")
+    if frozen and criteria not in ([], ["von-mises"]):
+        raise ValueError(
+            f"nneqm2: flow_directions='frozen' is the seed's method for von Mises yield with isotropic hardening "
+            f"(N = (3/2) s/q frozen in the increment); the problem's materials yield by {criteria}: use "
+            "flow_directions='return-map' (the default), the monolithic solver or NNEQM1")
 
 
 class NNEQM2Solver(ReleasesPETSc):
@@ -104,6 +122,7 @@ class NNEQM2Solver(ReleasesPETSc):
         t0 = time.perf_counter()
         self.gp = GaussPointOperators(problem)
         self.frozen = self.settings.flow_directions == "frozen"
+        refuse_material(self.gp, self.frozen)
         n_r = problem.rigid_modes.count
         self.system_order = 3 * problem.num_pairs + (1 if self.frozen else 5) * self.gp.num_yield_points + n_r
         if self.frozen and self.system_order > self.settings.max_dense_order:
@@ -120,8 +139,6 @@ class NNEQM2Solver(ReleasesPETSc):
                                                              self.options.petsc_options)
         self._frozen = (FrozenDirections(problem, self.gp, self.elastic, self.settings.inner_globalisations,
                                          self.settings.inner_max_iterations) if self.frozen else None)
-        self._return_map = problem.state.return_map_expressions(problem.u)[0]  # σ (shared with the commit)
-        self._sigma_rm = fem.Function(problem.state.W_tensor)
         self._factorised = False
         self._timings = {"setup": time.perf_counter() - t0}
         self._phases: list[dict[str, float]] = []
@@ -265,11 +282,10 @@ class NNEQM2Solver(ReleasesPETSc):
         R = p.residual(F_int=F_int)
         R_free = p.free_residual(R)
         eq = vec_norm(R_free) / scale  # F, as the independent check has it (atol is no scale: issue 31)
-        # the radial-return stress of the same displacement, from the same converged state
-        compat.interpolate_expression(self._sigma_rm, self._return_map)
-        diff = np.linalg.norm((values.sigma - self._sigma_rm.x.array[:9 * gp.n_gp].reshape(gp.n_gp, 3, 3))
-                              .reshape(gp.n_gp, 9), axis=1) / gp.stress_unit
-        f = (gp.material.yield_value(deviator_coordinates(values.sigma), st.p_n.x.array[:gp.n_gp] + values.dp)
+        # the return map's stress of the same displacement, from the same converged state
+        sigma_rm = st.return_map_values(p.u).sigma
+        diff = np.linalg.norm((values.sigma - sigma_rm).reshape(gp.n_gp, 9), axis=1) / gp.stress_unit
+        f = (gp.material.yield_value(deviator_coordinates(values.sigma), st.internal_at_points(values))
              / gp.stress_unit)[gp.yields]
         for vec in (F_int, F_ext, R, R_free):
             vec.destroy()

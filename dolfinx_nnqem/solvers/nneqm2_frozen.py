@@ -12,7 +12,9 @@ Gauss point the stress σ_j = σ_n,j + C (ε_j(du) − Δγ_j N_j). The rows: th
 floating bodies' self-equilibrium (:class:`~dolfinx_nnqem.solvers.condensed.CondensedSystem`,
 Δγ its further unknowns ξ), and per Gauss point the yield complementarity, dimensionless,
 
-    H4_j = min(−f_j / σ_u,j, Δγ_j (3μ_j + H_j) / σ_u,j),   f_j = q(σ_j) − σ_y0,j − H_j (p_n,j + Δγ_j),
+    H4_j = min(−f_j / σ_u,j, Δγ_j (3μ_j + H_j) / σ_u,j),   f_j = q(σ_j) − σ_y(p_n,j + Δγ_j),
+
+(σ_y = σ_y0 + H p for linear hardening; H_j = σ_y'),
 
 with the chain-rule Jacobian through S_B = dev ε(G Bᵀ) and S_Q = dev ε(G Q) (NG solves per
 increment with the one factorisation). At a tie the yield branch is differentiated.
@@ -37,8 +39,9 @@ import numpy as np
 from petsc4py import PETSc
 
 from dolfinx_nnqem.contact.model import PairLaws
-from dolfinx_nnqem.material.von_mises import (DEVIATORIC_BASIS, VonMisesAtPoints, equivalent_stress,
-                                              flow_direction, yield_function)
+from dolfinx_nnqem.material.interface import PointwiseMaterial
+from dolfinx_nnqem.material.kinematics import DEVIATORIC_BASIS, equivalent_stress
+from dolfinx_nnqem.material.kinematics import equivalent_stress_gradient as flow_direction
 from dolfinx_nnqem.numerics.nonsmooth import NonsmoothResult, solve_dense
 from dolfinx_nnqem.numerics.newton import Globalisation
 from dolfinx_nnqem.problem.contact_problem import ContactProblem
@@ -75,14 +78,12 @@ class FrozenDirections:
 
     def __init__(self, problem: ContactProblem, gp: GaussPointOperators, elastic: Condensation,
                  globalisations: tuple[Globalisation, ...], max_iterations: int):
-        if not isinstance(gp.material, VonMisesAtPoints):
-            raise ValueError("NNEQM2's frozen flow directions are the seed's method for von Mises (N = (3/2) s/q); "
-                             f"the material is {type(gp.material).__name__}: use flow_directions='return-map'")
         self.p, self.gp, self.elastic = problem, gp, elastic
-        self.material: VonMisesAtPoints = gp.material
+        self.material: PointwiseMaterial = gp.material  # von Mises yield (NNEQM2Solver refuses others)
         self.globalisations, self.max_iterations = globalisations, max_iterations
         self.timings: dict[str, float] = {}
-        self.gscale = gp.gather_yielding(gp.stress_unit / (3.0 * gp.mu + self.material.H))  # Δγ = Δγ̃ · gscale
+        slope = self.material.hardening({"p": problem.state.p_n.x.array[:gp.n_gp]})
+        self.gscale = gp.gather_yielding(gp.stress_unit / (3.0 * gp.mu + slope))  # Δγ = Δγ̃ · gscale
         self._pairs = None  # G Bᵀ (owned rows), its strains (NG, 5, 3NC) and B G Bᵀ: built once
 
     # -- influence of loads -----------------------------------------------------------------------------
@@ -292,15 +293,14 @@ class FrozenDirections:
 class _YieldRows:
     """The Gauss points' yield complementarity rows H4 and their Jacobian (module docstring)."""
 
-    def __init__(self, system: CondensedSystem, gp: GaussPointOperators, material: VonMisesAtPoints,
+    def __init__(self, system: CondensedSystem, gp: GaussPointOperators, material: PointwiseMaterial,
                  start: IncrementStart, e0, SB, SQ, N, gscale):
         self.system = system
         self.e0, self.SB, self.SQ, self.N, self.gscale = e0, SB, SQ, N, gscale
         self.s_n = gp.gather_yielding(start.s_n)
         self.p_n = gp.gather_yielding(start.p_n)
         self.mu = gp.gather_yielding(gp.mu)
-        self.sy = gp.gather_yielding(material.sigma_y0)
-        self.Hh = gp.gather_yielding(material.H)
+        self.material = material.subset(gp.yields).gathered(gp.gather)  # the points that can yield, gathered
         self.su = gp.gather_yielding(gp.stress_unit)
         self.can_flow = np.linalg.norm(N, axis=1) > 0.0  # a point with no direction cannot flow
         dp_n = gp.gather_yielding(gp.problem.state.dp_n.x.array[:gp.n_gp])
@@ -319,7 +319,7 @@ class _YieldRows:
         e = e + np.einsum("jak,k->ja", self.SQ, dg)
         s = self.s_n + 2.0 * self.mu[:, None] * (e - self.N * dg[:, None])
         q = equivalent_stress(s)
-        return -yield_function(q, self.sy, self.Hh, self.p_n + dg) / self.su, dgt, s, q
+        return -self.material.yield_value(s, {"p": self.p_n + dg}) / self.su, dgt, s, q
 
     def rows(self, x: np.ndarray, pair, yield_branch=None) -> tuple[np.ndarray, np.ndarray, int]:
         """H4 (NG,), its Jacobian rows (NG, n) and the number of points on the plastic branch."""
@@ -334,9 +334,10 @@ class _YieldRows:
         gvec = np.where((q > 0.0)[:, None], 1.5 * s / qs[:, None], 0.0) * (2.0 * self.mu)[:, None]  # ∂q/∂e
         rows = np.flatnonzero(use_a)
         if rows.size:
+            Hh = self.material.hardening({"p": self.p_n + b * self.gscale})  # dσ_y/dp where the points are
             gr = gvec[rows]
             Jgg = np.einsum("ja,jak->jk", gr, self.SQ[rows])
-            Jgg[np.arange(rows.size), rows] -= np.einsum("ja,ja->j", gr, self.N[rows]) + self.Hh[rows]
+            Jgg[np.arange(rows.size), rows] -= np.einsum("ja,ja->j", gr, self.N[rows]) + Hh[rows]
             J[rows, n3:n3 + NG] = -(Jgg * self.gscale[None, :]) / self.su[rows, None]
             if system.nc:
                 JgB = np.einsum("ja,jak->jk", gr, self.SB[rows])  # w.r.t. λ

@@ -15,9 +15,13 @@ The equations (all dimensionless):
     Nᵀ (b + Bᵀλ + q) / F = 0                                the floating bodies' self-equilibrium
     G_j = (Δε_p,j − P_j(t_j)) √(2/3) (3μ_j + H_j) / σ_u,j = 0   every Gauss point that can yield
 
-with the trial deviator t_j = s_n,j + 2μ_j dev ε_j(du) and the radial return's plastic strain
+with the trial deviator t_j = s_n,j + 2μ_j dev ε_j(du) and the material's return map P_j
+(``PointwiseMaterial.plastic_strain``; H_j the hardening slope at p_n). For von Mises with linear
+hardening the radial return's plastic strain
 
-    P_j(t) = max(f_tr, 0) / (3μ + H) · (3/2) t / q(t),   f_tr = q(t) − σ_y0 − H p_n.
+    P_j(t) = max(f_tr, 0) / (3μ + H) · (3/2) t / q(t),   f_tr = q(t) − σ_y0 − H p_n;
+
+with a hardening law of any shape Δp solves q(t) − 3μ Δp = σ_y(p_n + Δp) and the direction is the same.
 
 G_j = 0 is the seed's yield complementarity min(−f_j, Δγ_j (3μ + H)) = 0 (its component along t:
 for von Mises the returned stress is parallel to the trial stress, so f_j = f_tr − (3μ + H) Δγ_j)
@@ -26,7 +30,7 @@ start of the increment. Its solution is the backward-Euler (radial return) state
 solver's and NNEQM1's.
 
 A Newton step eliminates the Gauss points' rows, which are local: with R'_j = ∂P_j/∂e (5 × 5,
-:func:`~dolfinx_nnqem.material.von_mises.return_map_tangent`) and the step's displacement y,
+``PointwiseMaterial.plastic_strain_tangent``) and the step's displacement y,
 
     dΔε_p,j = −G_j + R'_j dev ε_j(y),   K_t y = Bᵀ dλ − q(G),
 
@@ -51,7 +55,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from dolfinx_nnqem.contact.laws import LawEvaluation
-from dolfinx_nnqem.material.von_mises import deviator_tensors
+from dolfinx_nnqem.material.kinematics import deviator_tensors
 from dolfinx_nnqem.numerics.linalg import free_dropped_objects, global_norm
 from dolfinx_nnqem.numerics.newton import Globalisation, Merit
 from dolfinx_nnqem.problem.contact_problem import ContactProblem
@@ -116,7 +120,8 @@ class ReturnMapIncrement:
         self.start, self.tol, self.report = start, tol, report
         self.align_sliding = align_sliding
         self.F = start.force_scale
-        self.row_scale = np.where(gp.yields, _SQRT23 * (3.0 * gp.mu + gp.material.hardening()) / gp.stress_unit, 0.0)
+        self.row_scale = np.where(gp.yields, _SQRT23 * (3.0 * gp.mu + gp.material.hardening(start.internal_n))
+                                  / gp.stress_unit, 0.0)
         self.timings: dict[str, float] = {}
         z = problem.contact.z.copy() if problem.contact is not None else np.zeros((0, 3))
         self.x = _Iterate(z, np.zeros((gp.n_gp, 5)), np.zeros(elastic.num_modes))
@@ -151,11 +156,11 @@ class ReturnMapIncrement:
 
     def _return_map(self, t: np.ndarray) -> np.ndarray:
         """The return map's plastic strains for trial deviators t, 0 where nothing yields."""
-        plastic_strain, _ = self.gp.material.plastic_strain(t, self.start.p_n)
+        plastic_strain, _ = self.gp.material.plastic_strain(t, self.start.internal_n)
         return np.where(self.gp.yields[:, None], plastic_strain, 0.0)
 
     def _return_map_tangent(self, t: np.ndarray) -> np.ndarray:
-        return self.gp.material.plastic_strain_tangent(t, self.start.p_n)
+        return self.gp.material.plastic_strain_tangent(t, self.start.internal_n)
 
     def _displace(self, x: _Iterate) -> None:
         """du = G (b + Bᵀλ + q) + N α, the problem's u = u_n + du, and the rows that follow."""

@@ -24,7 +24,7 @@ from mpi4py import MPI
 
 from dolfinx_nnqem.contact.model import LostContactError
 from dolfinx_nnqem.contact.slip_check import stale_message, switch_message
-from dolfinx_nnqem.material.von_mises import GaussPointValues
+from dolfinx_nnqem.material.interface import GaussPointValues
 from dolfinx_nnqem.solvers.checks import CheckOptions, StateCheck, check_state, failure_details, values_to_commit
 from dolfinx_nnqem.solvers.convergence import ConvergenceError, SolveReport, logger
 from dolfinx_nnqem.numerics.linalg import free_dropped_objects

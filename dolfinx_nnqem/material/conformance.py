@@ -1,0 +1,38 @@
+"""The materials, held to the interface's Protocols by the type checker.
+
+Each function returns an implementation as its Protocol; mypy (run by ``.ci/run``) verifies that
+the implementation has every member with compatible signatures, and ``tests/test_contracts.py``
+calls them on real objects. A new material adds its classes here (``CONTRIBUTING.md``).
+"""
+
+from __future__ import annotations
+
+from dolfinx_nnqem.material.composite import CompositeAtPoints
+from dolfinx_nnqem.material.elastic import Elastic, ElasticAtPoints, ElasticPart
+from dolfinx_nnqem.material.interface import Material, MaterialPart, MaterialState, PointwiseMaterial
+from dolfinx_nnqem.material.isotropic import IsotropicAtPoints, IsotropicHardeningPart
+from dolfinx_nnqem.material.state import GaussPointState
+from dolfinx_nnqem.material.von_mises import VonMises, VonMisesAtPoints, VonMisesPart
+
+__all__ = ["as_material", "as_material_part", "as_material_state", "as_pointwise_material",
+           "as_pointwise_plasticity"]
+
+
+def as_material(material: VonMises | Elastic) -> Material:
+    return material
+
+
+def as_material_part(part: VonMisesPart | IsotropicHardeningPart | ElasticPart) -> MaterialPart:
+    return part
+
+
+def as_material_state(state: GaussPointState) -> MaterialState:
+    return state
+
+
+def as_pointwise_material(points: VonMisesAtPoints | IsotropicAtPoints | ElasticAtPoints | CompositeAtPoints
+                          ) -> PointwiseMaterial:
+    return points
+
+
+as_pointwise_plasticity = as_pointwise_material

@@ -1,0 +1,403 @@
+"""The Gauss-point state of a mesh whose bodies may have different materials, built from the materials.
+
+:func:`material_state` is the factory the problem calls with ``{cell_tag: material}``: the
+bodies are grouped by their material's kind (``Material.part_kind``) and each group gets one
+:class:`~dolfinx_nnqem.material.interface.MaterialPart` (``Material.make_part``) over its cells.
+:class:`GaussPointState` holds what every material has — the cell-wise elastic moduli and
+density, the converged stress σ_n, displacement u_n and equivalent plastic strain p_n (with
+its last increment Δp_n), in quadrature spaces (``basix.ufl.quadrature_element``) whose points
+are the points of the integration measure ``dx`` — and composes the parts' stresses and
+tangents into the forms: one part over the whole mesh integrates over ``dx`` itself, several
+integrate each over its own cells.
+"""
+
+from __future__ import annotations
+
+import functools
+import operator
+from collections.abc import Mapping
+
+import basix.ufl
+import dolfinx.fem as fem
+import dolfinx.mesh
+import numpy as np
+import ufl
+from mpi4py import MPI
+
+from dolfinx_nnqem import compat, jit
+from dolfinx_nnqem.material.composite import CompositeAtPoints
+from dolfinx_nnqem.material.interface import (GaussPointValues, Material, MaterialPart, PointwiseMaterial,
+                                              ReturnMapValues)
+from dolfinx_nnqem.material.kinematics import strain, symmetric_coordinates
+
+__all__ = ["GaussPointState", "material_state"]
+
+
+def material_state(V: fem.FunctionSpace, materials, cell_tags=None, quadrature_degree: int = 2) -> GaussPointState:
+    """The Gauss-point state of the mesh of ``V`` for one material or ``{cell_tag: material}``."""
+    return GaussPointState(V, materials, cell_tags, quadrature_degree)
+
+
+class GaussPointState:
+    """Material fields and Gauss-point state of a mesh made of one or more bodies.
+
+    Parameters
+    ----------
+    V
+        Vector Lagrange space of the displacement.
+    materials
+        One material (:class:`~dolfinx_nnqem.material.interface.Material`) for the whole mesh, or
+        ``{cell_tag: material}``; the bodies may have materials of different kinds.
+    cell_tags
+        Cell tags naming the bodies; required when ``materials`` is a dict.
+    quadrature_degree
+        Degree of the Gauss rule used by the forms and the state (2 gives 2×2×2 points on
+        hexahedra and 4 points on tetrahedra).
+    """
+
+    def __init__(self, V: fem.FunctionSpace, materials, cell_tags=None, quadrature_degree: int = 2):
+        mesh = V.mesh
+        self.V, self.mesh, self.quadrature_degree, self.cell_tags = V, mesh, quadrature_degree, cell_tags
+        self.materials: dict[int | None, Material] = _materials_by_tag(materials, cell_tags, mesh)
+        # piecewise-constant fields (one value per cell): bodies of different materials share one form
+        self.Q0 = fem.functionspace(mesh, ("DG", 0))
+        self.E = fem.Function(self.Q0, name="E")
+        self.nu = fem.Function(self.Q0, name="nu")
+        self.density = fem.Function(self.Q0, name="density")
+        self.fill_cellwise({"E": self.E, "nu": self.nu, "density": self.density})
+        E, nu = self.E, self.nu
+        self.mu = E / (2 * (1 + nu))
+        self.lmbda = E * nu / ((1 + nu) * (1 - 2 * nu))
+        self.kappa = self.lmbda + 2 * self.mu / 3
+        cell = mesh.topology.cell_name()
+        metadata = {"quadrature_degree": quadrature_degree, "quadrature_scheme": "default"}
+        self.dx = ufl.Measure("dx", domain=mesh, metadata=metadata)
+        self.W_tensor = fem.functionspace(
+            mesh, basix.ufl.quadrature_element(cell, value_shape=(3, 3), degree=quadrature_degree))
+        self.W_scalar = fem.functionspace(
+            mesh, basix.ufl.quadrature_element(cell, value_shape=(), degree=quadrature_degree))
+        self._points = compat.interpolation_points(self.W_scalar)
+        self.version = 0
+        """Counts the changes of the converged state (commits, restores): a part that caches its
+        return map at u (:meth:`evaluate`) recomputes it when this moves."""
+        # the parts (their cell-wise parameters are created here, before the state's functions,
+        # so that UFL orders a closed-form return map's coefficients as it always has)
+        groups: dict[str, dict[int | None, Material]] = {}
+        for tag, material in self.materials.items():
+            groups.setdefault(material.part_kind, {})[tag] = material
+        self.kinds = list(groups)
+        self.parts: list[MaterialPart] = [next(iter(m.values())).make_part(self, m) for m in groups.values()]
+        self.sigma_n = fem.Function(self.W_tensor, name="sigma")  # converged stress
+        self.p_n = fem.Function(self.W_scalar, name="p")  # converged equivalent plastic strain
+        self.dp_n = fem.Function(self.W_scalar, name="dp")  # Δp of the last converged increment
+        self.u_n = fem.Function(V, name="u_converged")  # converged displacement
+        self._others = {name: fem.Function(self._space_of(shape), name=name)
+                        for part in self.parts for name, shape in part.internal_variables.items()}
+        self._part_of_point = self._point_owners(groups)
+        self._dx_parts = self._part_measure(metadata) if len(self.parts) > 1 else None
+        self._commit_u: fem.Function | None = None
+        self._material_at_points: PointwiseMaterial | None = None
+
+    # -- set-up ---------------------------------------------------------------------------------------
+    def cells_of(self, tag: int | None) -> np.ndarray:
+        """Local cells (owned and ghost) of the body tagged ``tag`` (None: every cell)."""
+        tdim = self.mesh.topology.dim
+        imap = self.mesh.topology.index_map(tdim)
+        if tag is None:
+            return np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32)
+        return self.cell_tags.find(tag)
+
+    def points_of(self, cells: np.ndarray) -> np.ndarray:
+        """The local Gauss points (indices into the quadrature spaces) of ``cells``."""
+        return np.sort(self.W_scalar.dofmap.list[cells].reshape(-1))
+
+    def fill_cellwise(self, fields: Mapping[str, fem.Function], default: Mapping[str, float] | None = None,
+                      tags=None) -> None:
+        """Set cell-wise (DG 0) ``fields`` from the materials' attributes of the same names (of the
+        bodies ``tags``, all by default; the other cells get ``default``)."""
+        tags = list(self.materials) if tags is None else list(tags)
+        for name, f in fields.items():
+            if default is not None:
+                f.x.array[:] = default[name]
+        assigned = np.zeros(self.Q0.dofmap.index_map.size_local + self.Q0.dofmap.index_map.num_ghosts, dtype=bool)
+        for tag in tags:
+            material = self.materials[tag]
+            dofs = self.Q0.dofmap.list[self.cells_of(tag), 0]
+            assigned[dofs] = True
+            for name, f in fields.items():
+                f.x.array[dofs] = getattr(material, name)
+        if default is None:
+            n_owned = self.Q0.dofmap.index_map.size_local
+            n_missing = self.mesh.comm.allreduce(int(np.count_nonzero(~assigned[:n_owned])), op=MPI.SUM)
+            if n_missing:
+                raise ValueError(f"materials: {n_missing} cells carry none of the tags {sorted(str(t) for t in self.materials)}; "
+                                 "every cell needs a material")
+        for f in fields.values():
+            f.x.scatter_forward()
+
+    def _space_of(self, shape: tuple[int, ...]) -> fem.FunctionSpace:
+        if shape == ():
+            return self.W_scalar
+        if shape == (3, 3):
+            return self.W_tensor
+        cell = self.mesh.topology.cell_name()
+        return fem.functionspace(self.mesh, basix.ufl.quadrature_element(cell, value_shape=shape,
+                                                                          degree=self.quadrature_degree))
+
+    def _point_owners(self, groups) -> np.ndarray:
+        """The part of every local Gauss point."""
+        imap = self.W_scalar.dofmap.index_map
+        owner = np.full(imap.size_local + imap.num_ghosts, -1, dtype=np.int64)
+        for k, members in enumerate(groups.values()):
+            for tag in members:
+                owner[self.points_of(self.cells_of(tag))] = k
+        return owner
+
+    def _part_measure(self, metadata) -> ufl.Measure:
+        """dx with the owned cells tagged by their part's index."""
+        tdim = self.mesh.topology.dim
+        cells = np.arange(self.mesh.topology.index_map(tdim).size_local, dtype=np.int32)
+        first_point = self.W_scalar.dofmap.list[cells, 0]
+        tags = dolfinx.mesh.meshtags(self.mesh, tdim, cells, self._part_of_point[first_point].astype(np.int32))
+        return ufl.Measure("dx", domain=self.mesh, subdomain_data=tags, metadata=metadata)
+
+    # -- the forms ----------------------------------------------------------------------------------------
+    def elastic_stress(self, eps) -> ufl.core.expr.Expr:
+        """σ = λ tr(ε) I + 2μ ε."""
+        return self.lmbda * ufl.tr(eps) * ufl.Identity(3) + 2 * self.mu * eps
+
+    def _integral(self, integrand) -> ufl.Form:
+        """∫ integrand(part) over each part's cells."""
+        if self._dx_parts is None:
+            return integrand(self.parts[0]) * self.dx
+        dx = self._dx_parts
+        return functools.reduce(operator.add, (integrand(part) * dx(k) for k, part in enumerate(self.parts)))
+
+    def internal_force_form(self, u, v) -> ufl.Form:
+        """F_int(u)[v] = ∫ σ(u) : ε(v) dx."""
+        return self._integral(lambda part: ufl.inner(part.stress(u), strain(v)))
+
+    def tangent_form(self, u, du, v) -> ufl.Form:
+        """K_t(u)[du, v] = ∫ (C_alg : ε(du)) : ε(v) dx."""
+        return self._integral(lambda part: ufl.inner(part.tangent(u, strain(du)), strain(v)))
+
+    def elastic_stiffness_form(self, du, v) -> ufl.Form:
+        """K_e[du, v] = ∫ (C : ε(du)) : ε(v) dx."""
+        return ufl.inner(self.elastic_stress(strain(du)), strain(v)) * self.dx
+
+    def evaluate(self, u: fem.Function) -> None:
+        """Bring the quadrature data of the forms to ``u`` (the parts' return maps evaluated on arrays)."""
+        for part in self.parts:
+            part.evaluate(u)
+
+    # -- the return map's values ----------------------------------------------------------------------------
+    def _merged(self, values: list[np.ndarray]) -> np.ndarray:
+        """Per-part arrays over every local point, merged by the points' parts."""
+        if len(values) == 1:
+            return values[0]
+        out = np.array(values[0], copy=True)
+        for k, part_values in enumerate(values[1:], start=1):
+            mask = self._part_of_point == k
+            out[mask] = part_values[mask]
+        return out
+
+    def local_return_map(self, u: fem.Function) -> ReturnMapValues:
+        """The return map at ``u`` at every local Gauss point (owned and ghost)."""
+        maps = [part.return_map(u) for part in self.parts]
+        if len(maps) == 1:
+            return maps[0]
+        return ReturnMapValues(*(self._merged([getattr(m, name) for m in maps]) for name in ("sigma", "dp", "deps_p")))
+
+    def return_map_values(self, u: fem.Function) -> GaussPointValues:
+        """The return map's values at ``u`` at this rank's owned Gauss points."""
+        n = self.num_owned_points()
+        rm = self.local_return_map(u)
+        return GaussPointValues(u.x.array.copy(), rm.sigma[:n], rm.dp[:n], rm.deps_p[:n], "backward-euler")
+
+    def num_owned_points(self) -> int:
+        return self.W_scalar.dofmap.index_map.size_local
+
+    # -- commit ---------------------------------------------------------------------------------------------
+    def commit(self, u: fem.Function) -> None:
+        """Accept ``u`` as converged: σ_n, p_n, Δp_n and u_n at every Gauss point from the return map."""
+        if self._commit_u is None:
+            self._commit_u = u
+        elif u is not self._commit_u:
+            raise ValueError("GaussPointState.commit must always be given the same displacement Function")
+        if any(part.internal_variables for part in self.parts):
+            raise NotImplementedError("commit: a material with internal variables besides p updates them itself")
+        rm = self.local_return_map(u)
+        self.sigma_n.x.array[:] = np.asarray(rm.sigma).reshape(-1)
+        self.dp_n.x.array[:] = rm.dp
+        self.p_n.x.array[:] += self.dp_n.x.array
+        self.u_n.x.array[:] = u.x.array
+        self._scatter_state()
+
+    def commit_values(self, u: fem.Function, values: GaussPointValues) -> None:
+        """Accept ``u`` as converged with Gauss-point values computed by a solver (NNEQM2's own
+        integration): σ_n ← ``values.sigma``, Δp_n ← ``values.dp``, p_n ← p_n + Δp_n, u_n ← ``u``, at
+        this rank's OWNED Gauss points, in the order of :attr:`W_tensor`'s owned dofs."""
+        n = self.num_owned_points()
+        sigma = np.asarray(values.sigma, dtype=float).reshape(-1)
+        dp = np.asarray(values.dp, dtype=float).reshape(-1)
+        if sigma.size != 9 * n or dp.size != n:
+            raise ValueError(f"commit_values: expected {n} owned Gauss points, got sigma of size "
+                             f"{sigma.size} (9 per point) and dp of size {dp.size}")
+        missing = sorted(set(self._others) - set(values.internal or {}))
+        if missing:
+            raise ValueError(f"commit_values: the values lack the internal variables {missing}")
+        self.sigma_n.x.array[:9 * n] = sigma
+        self.dp_n.x.array[:n] = dp
+        self.p_n.x.array[:n] += dp
+        for name, f in self._others.items():
+            assert values.internal is not None  # no variable is missing
+            block = f.function_space.dofmap.index_map_bs
+            f.x.array[:block * n] = np.asarray(values.internal[name], dtype=float).reshape(-1)
+        self.u_n.x.array[:] = u.x.array
+        self._scatter_state()
+
+    def _scatter_state(self) -> None:
+        for f in (self.sigma_n, self.p_n, self.dp_n, self.u_n, *self._others.values()):
+            f.x.scatter_forward()
+        self.version += 1
+
+    @property
+    def internal_variables(self) -> dict[str, fem.Function]:
+        """Every converged internal variable by name, "p" first."""
+        return {"p": self.p_n, **self._others}
+
+    def internal_at_points(self, values: GaussPointValues | None = None) -> dict[str, np.ndarray]:
+        """The internal variables at the owned Gauss points: converged, or after ``values``."""
+        n = self.num_owned_points()
+        p = self.p_n.x.array[:n]
+        out = {"p": p.copy() if values is None else p + np.asarray(values.dp).reshape(n)}
+        for name, f in self._others.items():
+            block = f.function_space.dofmap.index_map_bs
+            if values is not None and values.internal is not None:
+                out[name] = np.asarray(values.internal[name])
+            else:
+                out[name] = f.x.array[:block * n].reshape((n, *f.ufl_shape)).copy()
+        return out
+
+    # -- checkpoints --------------------------------------------------------------------------------------------
+    def checkpoint_arrays(self) -> dict[str, np.ndarray]:
+        """The converged state as named local arrays (owned and ghost entries)."""
+        arrays = {"u_n": self.u_n.x.array, "sigma_n": self.sigma_n.x.array, "p_n": self.p_n.x.array,
+                  "dp_n": self.dp_n.x.array}
+        arrays.update({f"internal_{name}": f.x.array for name, f in self._others.items()})
+        return arrays
+
+    def restore_arrays(self, arrays: Mapping[str, np.ndarray]) -> None:
+        """Restore :meth:`checkpoint_arrays` (the same mesh and partition)."""
+        targets = {"u_n": self.u_n, "sigma_n": self.sigma_n, "p_n": self.p_n, "dp_n": self.dp_n}
+        targets.update({f"internal_{name}": f for name, f in self._others.items()})
+        for name, f in targets.items():
+            if name not in arrays:
+                raise ValueError(f"restore_arrays: no array {name!r} (the checkpoint is of another material)")
+            f.x.array[:] = arrays[name]
+        self.version += 1
+
+    # -- counts and values at points ---------------------------------------------------------------------------
+    def count_plastic_points(self) -> int:
+        """Number of Gauss points (over all ranks) that yielded in the last converged increment."""
+        imap = self.W_scalar.dofmap.index_map
+        n_local = imap.size_local * self.W_scalar.dofmap.index_map_bs
+        local = int(np.count_nonzero(self.dp_n.x.array[:n_local] > 0.0))
+        return self.mesh.comm.allreduce(local, op=MPI.SUM)
+
+    def count_trial_plastic_points(self, u: fem.Function) -> int:
+        """Number of Gauss points (over all ranks) where the return map at ``u`` is plastic."""
+        dp = self._merged([part.trial_dp(u) for part in self.parts])
+        n_local = self.W_scalar.dofmap.index_map.size_local * self.W_scalar.dofmap.index_map_bs
+        return self.mesh.comm.allreduce(int(np.count_nonzero(dp[:n_local] > 0.0)), op=MPI.SUM)
+
+    def num_gauss_points(self) -> int:
+        """Total number of Gauss points (over all ranks)."""
+        imap = self.W_scalar.dofmap.index_map
+        return imap.size_global * self.W_scalar.dofmap.index_map_bs
+
+    def at_points(self) -> PointwiseMaterial:
+        """The material at this rank's owned Gauss points."""
+        n = self.num_owned_points()
+        if len(self.parts) == 1:
+            return self.parts[0].at_points(np.arange(n))
+        owner = self._part_of_point[:n]
+        return CompositeAtPoints(owner, [part.at_points(np.flatnonzero(owner == k))
+                                         for k, part in enumerate(self.parts)])
+
+    def plastic_strain_of(self, u: fem.Function, sigma: np.ndarray) -> np.ndarray:
+        """dev Δε − dev(σ − σ_n)/(2μ) at the owned Gauss points (n, 3, 3), Δε = ε(u) − ε(u_n)."""
+        n = sigma.shape[0]
+        dev_increment = self.owned_at_points(jit.expression(ufl.dev(strain(u) - strain(self.u_n)), self._points),
+                                             tensor=True)
+        mu = self.values_at_points(self.mu)
+        dsigma = sigma - self.sigma_n.x.array[:9 * n].reshape(n, 3, 3)
+        dev_dsigma = dsigma - np.trace(dsigma, axis1=1, axis2=2)[:, None, None] * np.eye(3) / 3.0
+        return dev_increment - dev_dsigma / (2.0 * mu[:, None, None])
+
+    def values_at_points(self, expr) -> np.ndarray:
+        """A scalar UFL expression (e.g. a material field) at this rank's owned Gauss points."""
+        return self.owned_at_points(jit.expression(expr, self._points)).copy()
+
+    def owned_at_points(self, compiled: fem.Expression, tensor: bool = False) -> np.ndarray:
+        """A compiled expression at this rank's owned Gauss points: (n,) for a scalar, (n, 3, 3) for
+        a ``tensor``; a view of a function of its own (kept alive by the view, dropped with it)."""
+        f = fem.Function(self.W_tensor if tensor else self.W_scalar)
+        compat.interpolate_expression(f, compiled)
+        n = self.W_scalar.dofmap.index_map.size_local
+        return f.x.array[:9 * n].reshape(n, 3, 3) if tensor else f.x.array[:n]
+
+    # -- outputs ----------------------------------------------------------------------------------------------
+    def yield_function_values(self) -> np.ndarray:
+        """f/σ_y at the converged state at every local Gauss point (owned and ghost; −1 where the
+        material cannot yield): 0 on the yield surface, −1 without deviatoric stress for von Mises."""
+        if self._material_at_points is None:
+            self._material_at_points = self.at_points()
+        material = self._material_at_points
+        n = self.num_owned_points()
+        sigma = self.sigma_n.x.array[:9 * n].reshape(n, 3, 3)
+        internal = self.internal_at_points()
+        f = material.yield_value(symmetric_coordinates(sigma), internal)
+        size = material.yield_stress(internal)
+        ratio = np.full(n, -1.0)
+        ok = material.yields & np.isfinite(size) & (size > 0.0)
+        ratio[ok] = f[ok] / size[ok]
+        out = fem.Function(self.W_scalar)
+        out.x.array[:n] = ratio
+        out.x.scatter_forward()
+        return out.x.array
+
+    def maxima_by_body(self) -> dict[str, dict[str, float]]:
+        """Per body (cell tag; "all" for a single material), the largest p and f/σ_y of the converged
+        state over all ranks (collective)."""
+        n = self.num_owned_points()
+        ratio = self.yield_function_values()[:n]
+        p = self.p_n.x.array[:n]
+        out: dict[str, dict[str, float]] = {"p": {}, "f_over_sigma_y": {}}
+        for tag in self.materials:
+            points = self.points_of(self.cells_of(tag))
+            points = points[points < n]
+            name = "all" if tag is None else str(tag)
+            out["p"][name] = self.mesh.comm.allreduce(float(np.max(p[points], initial=0.0)), op=MPI.MAX)
+            out["f_over_sigma_y"][name] = self.mesh.comm.allreduce(float(np.max(ratio[points], initial=-1.0)),
+                                                                  op=MPI.MAX)
+        return out
+
+
+def _materials_by_tag(materials, cell_tags, mesh) -> dict:
+    """``{tag: material}`` (tag None: one material for every cell), each a Material, each tag present."""
+    if isinstance(materials, Material):
+        return {None: materials}
+    if not isinstance(materials, dict) or not materials:
+        raise TypeError(f"materials = {materials!r}: expected a material (e.g. VonMises, Elastic) or a non-empty "
+                        "dict {cell_tag: material}")
+    if cell_tags is None:
+        raise ValueError("materials given per cell tag, but no cell_tags were given")
+    for tag, m in materials.items():
+        if not isinstance(m, Material):
+            raise TypeError(f"materials[{tag}] is {type(m).__name__}, expected a material (e.g. VonMises, Elastic)")
+        n = mesh.comm.allreduce(int(np.count_nonzero(cell_tags.values == tag)), op=MPI.SUM)
+        if n == 0:
+            present = sorted(set(np.concatenate(mesh.comm.allgather(np.unique(cell_tags.values))).tolist()))
+            raise ValueError(f"materials: cell tag {tag} has no cells; the mesh's cell tags are {present}")
+    return dict(materials)
