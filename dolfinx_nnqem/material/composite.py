@@ -91,6 +91,10 @@ class CompositeAtPoints:
     def flow_direction(self, s: np.ndarray, internal: Mapping[str, np.ndarray]) -> np.ndarray:
         return self._scattered(self._each("flow_direction", s, internal=internal))
 
+    def flow_direction_of(self, s: np.ndarray, deps_p: np.ndarray, dp: np.ndarray,
+                          internal: Mapping[str, np.ndarray]) -> np.ndarray:
+        return self._scattered(self._each("flow_direction_of", s, deps_p, dp, internal=internal))
+
     def hardening(self, internal: Mapping[str, np.ndarray]) -> np.ndarray:
         return self._scattered(self._each("hardening", internal=internal))
 

@@ -62,6 +62,7 @@ class ElasticPart:
     """The bodies of :class:`Elastic` materials: σ = σ_n + C : Δε in UFL."""
 
     internal_variables: Mapping[str, tuple[int, ...]] = {}
+    symmetric_tangent = True
 
     def __init__(self, space, members: Mapping):
         self.space = space
@@ -90,6 +91,11 @@ class ElasticPart:
     def trial_dp(self, u) -> np.ndarray:
         imap = self.space.W_scalar.dofmap.index_map
         return np.zeros(imap.size_local + imap.num_ghosts)
+
+    def updated_internal(self, points: np.ndarray, deps_p: np.ndarray, dp: np.ndarray,
+                         internal_n: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """{}: no internal variable besides p."""
+        return {}
 
     def at_points(self, points: np.ndarray) -> ElasticAtPoints:
         st = self.space
@@ -130,6 +136,10 @@ class ElasticAtPoints:
 
     def flow_direction(self, s: np.ndarray, internal: Mapping[str, np.ndarray]) -> np.ndarray:
         return np.zeros_like(s)
+
+    def flow_direction_of(self, s: np.ndarray, deps_p: np.ndarray, dp: np.ndarray,
+                          internal: Mapping[str, np.ndarray]) -> np.ndarray:
+        return self.flow_direction(s, internal)
 
     def hardening(self, internal: Mapping[str, np.ndarray]) -> np.ndarray:
         return np.zeros(self.mu.size)

@@ -126,6 +126,10 @@ class MaterialPart(Protocol):
     internal_variables: Mapping[str, tuple[int, ...]]
     """Internal variables besides p, by name, with their value shapes (e.g. {"alpha_1": (3, 3)})."""
 
+    symmetric_tangent: bool
+    """The consistent tangent is symmetric (False: non-associated flow, Armstrong–Frederick's
+    back-stresses): the linear solvers must not assume a symmetric matrix (no Cholesky, no CG)."""
+
     def stress(self, u) -> Any:
         """UFL: σ at ``u`` by the return map from the converged state (the internal force reads it)."""
         ...
@@ -149,6 +153,13 @@ class MaterialPart(Protocol):
 
     def at_points(self, points: np.ndarray) -> PointwiseMaterial:
         """The material at the local Gauss points ``points`` (indices into the quadrature spaces)."""
+        ...
+
+    def updated_internal(self, points: np.ndarray, deps_p: np.ndarray, dp: np.ndarray,
+                         internal_n: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """The internal variables besides p at the end of an increment, at the local Gauss points
+        ``points``, from its plastic strain Δε_p (m, 3, 3), Δp (m,) and the converged ``internal_n``
+        there (by name); {} for a material that has none (the commit calls it)."""
         ...
 
 
@@ -286,6 +297,13 @@ class PointwiseMaterial(Protocol):
 
     def flow_direction(self, s: np.ndarray, internal: Mapping[str, np.ndarray]) -> np.ndarray:
         """N (the shape of s) at the stresses s (0 where undefined): the flow is Δε_p = Δp N."""
+        ...
+
+    def flow_direction_of(self, s: np.ndarray, deps_p: np.ndarray, dp: np.ndarray,
+                          internal: Mapping[str, np.ndarray]) -> np.ndarray:
+        """The flow direction N at s that the plastic strain ``deps_p`` (coordinates, the shape of s)
+        with Δp = ``dp`` is checked against: :meth:`flow_direction` where it is unique; where it is not
+        (a cone's apex), the element of the normal cone there nearest Δε_p/Δp."""
         ...
 
     def hardening(self, internal: Mapping[str, np.ndarray]) -> np.ndarray:

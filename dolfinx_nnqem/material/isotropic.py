@@ -195,6 +195,10 @@ class IsotropicAtPoints:
         N[:, 5:] = 0.0
         return N
 
+    def flow_direction_of(self, s: np.ndarray, deps_p: np.ndarray, dp: np.ndarray,
+                          internal: Mapping[str, np.ndarray]) -> np.ndarray:
+        return self.flow_direction(s, internal)
+
     def hardening(self, internal: Mapping[str, np.ndarray]) -> np.ndarray:
         return self.law.slope(internal["p"])
 

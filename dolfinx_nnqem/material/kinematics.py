@@ -19,9 +19,9 @@ import math
 import numpy as np
 import ufl
 
-__all__ = ["DEVIATORIC_BASIS", "deviator", "deviator_coordinates", "deviator_tensors", "elastic_stress",
-           "equivalent_stress", "equivalent_stress_gradient", "strain", "symmetric_coordinates", "symmetric_tensors",
-           "von_mises_stress"]
+__all__ = ["DEVIATORIC_BASIS", "coordinate_tangent", "deviator", "deviator_coordinates", "deviator_tensors",
+           "elastic_stress", "equivalent_stress", "equivalent_stress_gradient", "strain", "symmetric_coordinates",
+           "symmetric_tensors", "von_mises_stress"]
 
 
 def strain(u) -> ufl.core.expr.Expr:
@@ -95,3 +95,9 @@ def elastic_stress(eps: np.ndarray, lmbda: np.ndarray, mu: np.ndarray) -> np.nda
     """σ = λ tr(ε) I + 2μ ε for strains (n, 3, 3) and per-point Lamé parameters (n,)."""
     return (lmbda[:, None, None] * np.trace(eps, axis1=1, axis2=2)[:, None, None] * np.eye(3)
             + 2.0 * mu[:, None, None] * eps)
+
+
+def coordinate_tangent(M: np.ndarray) -> np.ndarray:
+    """The fourth-order tensors (n, 3, 3, 3, 3) of linear maps of symmetric tensors given in
+    coordinates (n, 6, 6) (:func:`symmetric_coordinates`): T_ijkl = Σ_ab D_a,ij M_ab D_b,kl."""
+    return np.einsum("ai,nab,bj->nij", _SYMMETRIC_BASIS, M, _SYMMETRIC_BASIS).reshape(-1, 3, 3, 3, 3)

@@ -47,6 +47,7 @@ class QuadraturePart:
     """
 
     internal_variables: Mapping[str, tuple[int, ...]] = {}
+    symmetric_tangent = True
 
     def __init__(self, space, members: Mapping):
         self.space = space
@@ -72,6 +73,12 @@ class QuadraturePart:
                              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(σ (m, 3, 3), Δp (m,), Δε_p (m, 3, 3), C_alg (m, 3, 3, 3, 3)) at the part's points."""
         raise NotImplementedError  # pragma: no cover - each material defines it
+
+    def updated_internal(self, points: np.ndarray, deps_p: np.ndarray, dp: np.ndarray,
+                         internal_n: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """{}: the base part has no internal variable besides p (a subclass that declares some
+        computes them here)."""
+        return {}
 
     # -- the forms --------------------------------------------------------------------------------------
     def stress(self, u) -> ufl.core.expr.Expr:
@@ -99,7 +106,7 @@ class QuadraturePart:
                 return
         pts = self.points
         sigma, dp, deps_p, C = self.pointwise_return_map(
-            st.sigma_n.x.array.reshape(-1, 3, 3)[pts], self._strain_increment(u), {"p": st.p_n.x.array[pts]})
+            st.sigma_n.x.array.reshape(-1, 3, 3)[pts], self._strain_increment(u), st.local_internal(pts))
         self.sigma_q.x.array.reshape(-1, 9)[pts] = sigma.reshape(-1, 9)
         self.dp_q.x.array[pts] = dp
         self.deps_p_q.x.array.reshape(-1, 9)[pts] = deps_p.reshape(-1, 9)

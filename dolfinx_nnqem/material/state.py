@@ -224,9 +224,10 @@ class GaussPointState:
             self._commit_u = u
         elif u is not self._commit_u:
             raise ValueError("GaussPointState.commit must always be given the same displacement Function")
-        if any(part.internal_variables for part in self.parts):
-            raise NotImplementedError("commit: a material with internal variables besides p updates them itself")
         rm = self.local_return_map(u)
+        if self._others:  # from the converged values, before p_n moves
+            every = np.arange(self._part_of_point.size)
+            self._store_internal(every, self._internal_after(every, rm.deps_p, rm.dp))
         self.sigma_n.x.array[:] = np.asarray(rm.sigma).reshape(-1)
         self.dp_n.x.array[:] = rm.dp
         self.p_n.x.array[:] += self.dp_n.x.array
@@ -243,16 +244,11 @@ class GaussPointState:
         if sigma.size != 9 * n or dp.size != n:
             raise ValueError(f"commit_values: expected {n} owned Gauss points, got sigma of size "
                              f"{sigma.size} (9 per point) and dp of size {dp.size}")
-        missing = sorted(set(self._others) - set(values.internal or {}))
-        if missing:
-            raise ValueError(f"commit_values: the values lack the internal variables {missing}")
+        if self._others:  # the values' own, or from their plastic strains (before p_n moves)
+            self._store_internal(np.arange(n), self.internal_at_points(values))
         self.sigma_n.x.array[:9 * n] = sigma
         self.dp_n.x.array[:n] = dp
         self.p_n.x.array[:n] += dp
-        for name, f in self._others.items():
-            assert values.internal is not None  # no variable is missing
-            block = f.function_space.dofmap.index_map_bs
-            f.x.array[:block * n] = np.asarray(values.internal[name], dtype=float).reshape(-1)
         self.u_n.x.array[:] = u.x.array
         self._scatter_state()
 
@@ -267,17 +263,52 @@ class GaussPointState:
         return {"p": self.p_n, **self._others}
 
     def internal_at_points(self, values: GaussPointValues | None = None) -> dict[str, np.ndarray]:
-        """The internal variables at the owned Gauss points: converged, or after ``values``."""
+        """The internal variables at the owned Gauss points: converged, or after ``values`` (their
+        own ``internal``, or the materials' update from their Δε_p and Δp)."""
         n = self.num_owned_points()
-        p = self.p_n.x.array[:n]
-        out = {"p": p.copy() if values is None else p + np.asarray(values.dp).reshape(n)}
-        for name, f in self._others.items():
-            block = f.function_space.dofmap.index_map_bs
-            if values is not None and values.internal is not None:
-                out[name] = np.asarray(values.internal[name])
-            else:
-                out[name] = f.x.array[:block * n].reshape((n, *f.ufl_shape)).copy()
+        owned = np.arange(n)
+        if values is None:
+            return self.local_internal(owned)
+        out = {"p": self.p_n.x.array[:n] + np.asarray(values.dp).reshape(n)}
+        if values.internal is not None:
+            missing = sorted(set(self._others) - set(values.internal))
+            if missing:
+                raise ValueError(f"the Gauss-point values lack the internal variables {missing}")
+            out.update({name: np.asarray(values.internal[name]) for name in self._others})
+        elif self._others:
+            if values.deps_p is None:
+                raise ValueError(f"the Gauss-point values give neither the internal variables {sorted(self._others)} "
+                                 "nor the plastic strain increments they follow from (deps_p)")
+            out.update(self._internal_after(owned, np.asarray(values.deps_p).reshape(n, 3, 3),
+                                            np.asarray(values.dp).reshape(n)))
         return out
+
+    def local_internal(self, points: np.ndarray) -> dict[str, np.ndarray]:
+        """The converged internal variables at the local Gauss points ``points``, by name ("p" first)."""
+        out = {"p": self.p_n.x.array[points].copy()}
+        for name, f in self._others.items():
+            out[name] = f.x.array.reshape((-1, *f.ufl_shape))[points].copy()
+        return out
+
+    def _internal_after(self, points: np.ndarray, deps_p: np.ndarray, dp: np.ndarray) -> dict[str, np.ndarray]:
+        """The internal variables besides p at ``points`` after an increment with Δε_p and Δp there
+        (arrays over ``points``): each part updates its own points, the others keep theirs."""
+        internal_n = self.local_internal(points)
+        out = {name: internal_n[name].copy() for name in self._others}
+        owner = self._part_of_point[points]
+        for k, part in enumerate(self.parts):
+            if not part.internal_variables:
+                continue
+            mine = np.flatnonzero(owner == k)
+            new = part.updated_internal(points[mine], deps_p[mine], dp[mine],
+                                        {name: v[mine] for name, v in internal_n.items()})
+            for name, value in new.items():
+                out[name][mine] = value
+        return out
+
+    def _store_internal(self, points: np.ndarray, internal: Mapping[str, np.ndarray]) -> None:
+        for name, f in self._others.items():
+            f.x.array.reshape((-1, *f.ufl_shape))[points] = internal[name]
 
     # -- checkpoints --------------------------------------------------------------------------------------------
     def checkpoint_arrays(self) -> dict[str, np.ndarray]:

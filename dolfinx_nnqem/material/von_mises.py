@@ -35,6 +35,7 @@ from dolfinx_nnqem import compat, jit
 from dolfinx_nnqem.material.hardening import IsotropicHardening, LinearHardening
 from dolfinx_nnqem.material.interface import GaussPointValues, MaterialPart, ReturnMapValues
 from dolfinx_nnqem.material.isotropic import IsotropicHardeningPart, radial_tangent
+from dolfinx_nnqem.material.kinematic import BackStress, KinematicHardeningPart, checked_back_stresses
 from dolfinx_nnqem.material.kinematics import (DEVIATORIC_BASIS, deviator_coordinates, deviator_tensors,  # noqa: F401
                                                elastic_stress, equivalent_stress, strain, von_mises_stress)
 from dolfinx_nnqem.material.kinematics import equivalent_stress_gradient as flow_direction  # noqa: F401
@@ -71,6 +72,10 @@ class VonMises:
         :class:`~dolfinx_nnqem.material.hardening.TabulatedHardening`); a
         :class:`~dolfinx_nnqem.material.hardening.LinearHardening` is the same as giving its
         ``sigma_y0`` and ``H`` here.
+    kinematic
+        Back-stresses (:class:`~dolfinx_nnqem.material.kinematic.BackStress`, or pairs (C, γ)):
+        kinematic hardening, linear (Prager, γ = 0) or Armstrong–Frederick (γ > 0), one or more
+        (Chaboche), combined with the isotropic law (:mod:`~dolfinx_nnqem.material.kinematic`).
     """
 
     E: float
@@ -79,6 +84,7 @@ class VonMises:
     H: float = 0.0
     density: float = 0.0
     hardening: IsotropicHardening | None = None
+    kinematic: tuple[BackStress, ...] = ()
 
     def __post_init__(self):
         check_parameters("VonMises", elastic_checks(self.E, self.nu, self.density) + [
@@ -87,6 +93,10 @@ class VonMises:
             ("H", self.H, lambda v: 0 <= v <= HIGH,
              f"a value in [0, {HIGH:g}] (H < 0, softening, makes the answer depend on the mesh)"),
         ])
+        object.__setattr__(self, "kinematic", checked_back_stresses(self.kinematic))
+        if self.kinematic and self.hardening is None and self.sigma_y0 == math.inf:
+            raise ValueError("VonMises: kinematic hardening needs a yield stress: give sigma_y0 (and H) or "
+                             "hardening=..., the isotropic part of the yield stress")
         if self.hardening is None:
             return
         if not isinstance(self.hardening, IsotropicHardening):
@@ -126,11 +136,21 @@ class VonMises:
         return self.sigma_y0 + self.H * np.asarray(p, dtype=float)
 
     @property
+    def isotropic_law(self) -> IsotropicHardening:
+        """σ_y(p) as a hardening law (a :class:`LinearHardening` for ``sigma_y0`` and ``H``)."""
+        return LinearHardening(self.sigma_y0, self.H) if self.hardening is None else self.hardening
+
+    @property
     def part_kind(self) -> str:
-        """"von-mises" (linear hardening: closed-form UFL) or "von-mises-isotropic" (another law)."""
+        """"von-mises" (linear hardening: closed-form UFL), "von-mises-isotropic" (another law) or
+        "von-mises-kinematic" (back-stresses)."""
+        if self.kinematic:
+            return "von-mises-kinematic"
         return "von-mises" if self.hardening is None else "von-mises-isotropic"
 
     def make_part(self, space: GaussPointState, members: Mapping[int | None, VonMises]) -> MaterialPart:
+        if self.kinematic:
+            return KinematicHardeningPart(space, members)
         if self.hardening is None:
             return VonMisesPart(space, members)
         return IsotropicHardeningPart(space, members)
@@ -164,6 +184,7 @@ class VonMisesPart:
     """
 
     internal_variables: Mapping[str, tuple[int, ...]] = {}
+    symmetric_tangent = True
 
     def __init__(self, space: GaussPointState, members: Mapping[int | None, VonMises]):
         self.space = space
@@ -247,6 +268,11 @@ class VonMisesPart:
             self._trial_dp = fem.Function(self.space.W_scalar)
         compat.interpolate_expression(self._trial_dp, self.return_map_expressions(u)[1])
         return self._trial_dp.x.array
+
+    def updated_internal(self, points: np.ndarray, deps_p: np.ndarray, dp: np.ndarray,
+                         internal_n: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """{}: no internal variable besides p."""
+        return {}
 
     def at_points(self, points: np.ndarray) -> VonMisesAtPoints:
         """The material at the owned Gauss points ``points`` (interpolated at every call, so that a
@@ -348,6 +374,10 @@ class VonMisesAtPoints:
         N = (1.5 / np.where(q > 0.0, q, 1.0))[:, None] * s * (q > 0.0)[:, None]
         N[:, 5:] = 0.0
         return N
+
+    def flow_direction_of(self, s: np.ndarray, deps_p: np.ndarray, dp: np.ndarray,
+                          internal: Mapping[str, np.ndarray]) -> np.ndarray:
+        return self.flow_direction(s, internal)
 
     def hardening(self, internal: Mapping[str, np.ndarray]) -> np.ndarray:
         return self.H

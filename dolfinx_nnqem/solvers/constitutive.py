@@ -94,9 +94,9 @@ def _largest_violations(strain_increment, sigma, dp, deps_p, flow_rule, sigma_n,
     sigma_expected = sigma_n + elastic_stress(strain_increment - deps_p, material.lmbda, mu)
     elasticity = np.linalg.norm((sigma - sigma_expected).reshape(-1, 9), axis=1) / su
     s = symmetric_coordinates(sigma)
-    N = material.flow_direction(s, internal)
-    f = material.yield_value(s, internal)
     e = symmetric_coordinates(deps_p)
+    N = material.flow_direction_of(s, e, dp, internal)  # at a cone's apex, the normal nearest the flow
+    f = material.yield_value(s, internal)
     size = np.linalg.norm(deps_p.reshape(-1, 9), axis=1)  # |Δε_p| (Frobenius)
     # |N| where the end stress gives one; where it gives none no point may flow (Δp must be 0)
     N_norm = np.linalg.norm(N, axis=1)
