@@ -117,7 +117,8 @@ class ProblemFileError(ValueError):
 OBSTACLE_KEYS = {"plane": {"point", "normal"}, "sphere": {"centre", "radius"}, "cylinder": {"point", "axis", "radius"}}
 KEYS: dict[str, frozenset[str]] = {
     "mesh": frozenset({"file", "mesh_name", "cell_tags", "facet_tags", "degree"}),
-    "materials.TAG": frozenset({"model", "E", "nu", "sigma_y0", "H", "density", "hardening", "Q", "b", "table"}),
+    "materials.TAG": frozenset({"model", "E", "nu", "sigma_y0", "H", "density", "hardening", "Q", "b", "table",
+                                "kinematic", "cohesion", "friction_angle", "dilatancy_angle", "match"}),
     "contact": frozenset({"surface1", "surface2", "obstacle", "mu_f", "law", "r", "tolerance", "search_distance",
                           "name", "discretisation", "slave", "geometry"}),
     "contact.obstacle": frozenset({"type", "motion", "amplitude"}.union(*OBSTACLE_KEYS.values())),
@@ -294,11 +295,13 @@ def _materials_section(materials: dict, where: str) -> dict:
             raise ProblemFileError(f"{w}: the key must be a cell tag (an integer)") from None
         params = _checked_keys(params, KEYS["materials.TAG"], {"E", "nu"}, w)
         for name, value in params.items():
-            if name in ("model", "hardening"):
+            if name in ("model", "hardening", "match"):
                 if not isinstance(value, str):
                     raise ProblemFileError(f"{w}.{name} = {value!r}: expected a string")
             elif name == "table":
                 params[name] = _hardening_table(value, f"{w}.table")
+            elif name == "kinematic":
+                params[name] = _back_stresses(value, f"{w}.kinematic")
             else:
                 _number(value, f"{w}.{name}")
         try:
@@ -306,6 +309,13 @@ def _materials_section(materials: dict, where: str) -> dict:
         except ValueError as error:
             raise ProblemFileError(f"{w}: {error}") from None
     return out
+
+
+def _back_stresses(value, where: str) -> list:
+    """Pairs [C, gamma] of numbers (their ranges: the back-stresses check them)."""
+    if not isinstance(value, list) or not value or not all(isinstance(row, list) and len(row) == 2 for row in value):
+        raise ProblemFileError(f"{where} = {value!r}: expected pairs [C, gamma], e.g. [[2.0e10, 200.0], [5.0e9, 0.0]]")
+    return [[_number(v, f"{where}[{i}][{j}]") for j, v in enumerate(row)] for i, row in enumerate(value)]
 
 
 def _hardening_table(value, where: str) -> list:

@@ -50,7 +50,8 @@ class CellMeans:
     the von Mises stress ``von_mises``, the equivalent plastic strain ``p``, the fraction of
     the cell's Gauss points that yielded in the last increment ``plastic`` and the yield
     function's value over the yield stress ``yield_function`` (f/σ_y: 0 on the yield surface,
-    −1 where the material cannot yield)."""
+    −1 where the material cannot yield); with a material that has back-stresses, also the
+    equivalent back-stress ``back_stress`` (q(α) = √(3/2)|α|, α = Σ_k α_k)."""
 
     def __init__(self, problem):
         self.problem = problem
@@ -59,9 +60,13 @@ class CellMeans:
         self.p = fem.Function(self.Q0, name="p")
         self.plastic = fem.Function(self.Q0, name="plastic")
         self.yield_function = fem.Function(self.Q0, name="yield_function")
+        self.back_stress = (fem.Function(self.Q0, name="back_stress")
+                            if problem.state.back_stress_values() is not None else None)
 
     @property
     def fields(self) -> tuple[fem.Function, ...]:
+        if self.back_stress is not None:
+            return self.q, self.p, self.plastic, self.yield_function, self.back_stress
         return self.q, self.p, self.plastic, self.yield_function
 
     def update(self) -> None:
@@ -77,6 +82,9 @@ class CellMeans:
         self.p.x.array[dg] = state.p_n.x.array[qdofs].mean(axis=1)
         self.plastic.x.array[dg] = (state.dp_n.x.array[qdofs] > 0).mean(axis=1)
         self.yield_function.x.array[dg] = state.yield_function_values()[qdofs].mean(axis=1)
+        back_stress = state.back_stress_values()
+        if self.back_stress is not None and back_stress is not None:
+            self.back_stress.x.array[dg] = back_stress[qdofs].mean(axis=1)
 
 
 class FieldSeriesWriter:

@@ -8,9 +8,11 @@ calls them on real objects. A new material adds its classes here (``CONTRIBUTING
 from __future__ import annotations
 
 from dolfinx_nnqem.material.composite import CompositeAtPoints
+from dolfinx_nnqem.material.drucker_prager import DruckerPrager, DruckerPragerAtPoints, DruckerPragerPart
 from dolfinx_nnqem.material.elastic import Elastic, ElasticAtPoints, ElasticPart
 from dolfinx_nnqem.material.interface import Material, MaterialPart, MaterialState, PointwiseMaterial
 from dolfinx_nnqem.material.isotropic import IsotropicAtPoints, IsotropicHardeningPart
+from dolfinx_nnqem.material.kinematic import KinematicAtPoints, KinematicHardeningPart
 from dolfinx_nnqem.material.state import GaussPointState
 from dolfinx_nnqem.material.von_mises import VonMises, VonMisesAtPoints, VonMisesPart
 
@@ -18,11 +20,12 @@ __all__ = ["as_material", "as_material_part", "as_material_state", "as_pointwise
            "as_pointwise_plasticity"]
 
 
-def as_material(material: VonMises | Elastic) -> Material:
+def as_material(material: VonMises | Elastic | DruckerPrager) -> Material:
     return material
 
 
-def as_material_part(part: VonMisesPart | IsotropicHardeningPart | ElasticPart) -> MaterialPart:
+def as_material_part(part: VonMisesPart | IsotropicHardeningPart | KinematicHardeningPart | DruckerPragerPart
+                     | ElasticPart) -> MaterialPart:
     return part
 
 
@@ -30,8 +33,8 @@ def as_material_state(state: GaussPointState) -> MaterialState:
     return state
 
 
-def as_pointwise_material(points: VonMisesAtPoints | IsotropicAtPoints | ElasticAtPoints | CompositeAtPoints
-                          ) -> PointwiseMaterial:
+def as_pointwise_material(points: VonMisesAtPoints | IsotropicAtPoints | KinematicAtPoints | DruckerPragerAtPoints
+                          | ElasticAtPoints | CompositeAtPoints) -> PointwiseMaterial:
     return points
 
 

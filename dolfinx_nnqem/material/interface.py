@@ -184,6 +184,11 @@ class MaterialState(Protocol):
         """Every converged internal variable by name ("p" first), as quadrature functions."""
         ...
 
+    @property
+    def symmetric_tangent(self) -> bool:
+        """Every part's consistent tangent is symmetric."""
+        ...
+
     def evaluate(self, u) -> None:
         """Bring the quadrature data the forms read to ``u``: call before assembling the internal
         force or the tangent at a new iterate (:class:`~dolfinx_nnqem.problem.ContactProblem` does)."""
@@ -237,6 +242,10 @@ class MaterialState(Protocol):
 
     def restore_arrays(self, arrays: Mapping[str, np.ndarray]) -> None:
         """Restore :meth:`checkpoint_arrays`' arrays (the same mesh and partition)."""
+        ...
+
+    def back_stress_values(self) -> np.ndarray | None:
+        """q(α) of the total back-stress at every local Gauss point; None without back-stresses."""
         ...
 
     def yield_function_values(self) -> np.ndarray:

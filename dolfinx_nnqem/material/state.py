@@ -258,6 +258,11 @@ class GaussPointState:
         self.version += 1
 
     @property
+    def symmetric_tangent(self) -> bool:
+        """Every part's consistent tangent is symmetric (False: the solvers must not assume it)."""
+        return all(part.symmetric_tangent for part in self.parts)
+
+    @property
     def internal_variables(self) -> dict[str, fem.Function]:
         """Every converged internal variable by name, "p" first."""
         return {"p": self.p_n, **self._others}
@@ -398,20 +403,30 @@ class GaussPointState:
         out.x.scatter_forward()
         return out.x.array
 
+    def back_stress_values(self) -> np.ndarray | None:
+        """q(α) = √(3/2)|α| of the total back-stress α = Σ_k α_k at the converged state at every local
+        Gauss point (0 where a material has none); None when no material has back-stresses."""
+        names = [name for name in self._others if name.startswith("alpha_")]
+        if not names:
+            return None
+        alpha = sum(self._others[name].x.array.reshape(-1, 3, 3) for name in names)
+        return np.sqrt(1.5 * np.einsum("nij,nij->n", alpha, alpha))
+
     def maxima_by_body(self) -> dict[str, dict[str, float]]:
         """Per body (cell tag; "all" for a single material), the largest p and f/σ_y of the converged
-        state over all ranks (collective)."""
+        state over all ranks (collective), and the largest q(α) where a material has back-stresses."""
         n = self.num_owned_points()
-        ratio = self.yield_function_values()[:n]
-        p = self.p_n.x.array[:n]
-        out: dict[str, dict[str, float]] = {"p": {}, "f_over_sigma_y": {}}
+        fields = {"p": (self.p_n.x.array[:n], 0.0), "f_over_sigma_y": (self.yield_function_values()[:n], -1.0)}
+        back_stress = self.back_stress_values()
+        if back_stress is not None:
+            fields["back_stress"] = (back_stress[:n], 0.0)
+        out: dict[str, dict[str, float]] = {key: {} for key in fields}
         for tag in self.materials:
             points = self.points_of(self.cells_of(tag))
             points = points[points < n]
             name = "all" if tag is None else str(tag)
-            out["p"][name] = self.mesh.comm.allreduce(float(np.max(p[points], initial=0.0)), op=MPI.MAX)
-            out["f_over_sigma_y"][name] = self.mesh.comm.allreduce(float(np.max(ratio[points], initial=-1.0)),
-                                                                  op=MPI.MAX)
+            for key, (values, least) in fields.items():
+                out[key][name] = self.mesh.comm.allreduce(float(np.max(values[points], initial=least)), op=MPI.MAX)
         return out
 
 

@@ -183,6 +183,15 @@ ITERATIVE_NO_CONTACT_OPTIONS = {
 }
 """Without contact: CG + GAMG on K_t (symmetric: associated plasticity, consistent tangent)."""
 
+ITERATIVE_NO_CONTACT_UNSYMMETRIC_OPTIONS = {**ITERATIVE_NO_CONTACT_OPTIONS, "ksp_type": "gmres", "ksp_gmres_restart": 30}
+"""Without contact, for an unsymmetric K_t (non-associated flow, Armstrong–Frederick back-stresses):
+GMRES instead of CG, which assumes a symmetric matrix."""
+
+SYMMETRIC_ONLY_OPTIONS = {"pc_type": ("cholesky", "icc"), "ksp_type": ("cg", "minres", "cr", "symmlq")}
+"""PETSc options (any prefix, e.g. ``fieldsplit_u_pc_type``) whose values assume a symmetric matrix:
+refused for an unsymmetric tangent (:func:`dolfinx_nnqem.solvers.registry.make_solver`); MUMPS
+then factorises with its unsymmetric LU (the default ``pc_type = "lu"``)."""
+
 
 def rigid_body_modes(V) -> PETSc.NullSpace:
     """The six rigid-body displacements of a 3D vector space, as an orthonormal PETSc near-nullspace.

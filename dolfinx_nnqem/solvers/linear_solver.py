@@ -27,7 +27,8 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from dolfinx_nnqem.solvers.convergence import logger
-from dolfinx_nnqem.numerics.linalg import (ITERATIVE_NO_CONTACT_OPTIONS, ITERATIVE_SOLVER_OPTIONS, clear_options, create_ksp,
+from dolfinx_nnqem.numerics.linalg import (ITERATIVE_NO_CONTACT_OPTIONS, ITERATIVE_NO_CONTACT_UNSYMMETRIC_OPTIONS,
+                                           ITERATIVE_SOLVER_OPTIONS, clear_options, create_ksp,
                                   products_without_intermediates, relative_residual,
                                   direct_options, rigid_body_modes, vec_norm)
 
@@ -130,18 +131,21 @@ class IterativeSolver:
         Pairs over all ranks (0 without contact).
     lag_preconditioner
         Keep the u block's AMG hierarchy while it works (with contact).
+    symmetric
+        The tangent is symmetric; False (non-associated flow): GMRES instead of CG without contact.
     """
 
     iterative = True
 
     def __init__(self, V, prefix: str, petsc_options: dict | None, rtol: float, num_pairs: int,
-                 lag_preconditioner: bool = True):
+                 lag_preconditioner: bool = True, symmetric: bool = True):
         self.V = V
         self.comm = V.mesh.comm
         self.prefix = prefix
         self.rtol = rtol
         self.num_pairs = num_pairs
-        defaults = ITERATIVE_SOLVER_OPTIONS if num_pairs else ITERATIVE_NO_CONTACT_OPTIONS
+        defaults = (ITERATIVE_SOLVER_OPTIONS if num_pairs else ITERATIVE_NO_CONTACT_OPTIONS if symmetric
+                    else ITERATIVE_NO_CONTACT_UNSYMMETRIC_OPTIONS)
         self._options = {**defaults, **(petsc_options or {})}
         self.ksp = create_ksp(self.comm, prefix, self._options)
         self._set_up_once = False

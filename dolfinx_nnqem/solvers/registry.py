@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dolfinx_nnqem.numerics.linalg import SYMMETRIC_ONLY_OPTIONS
 from dolfinx_nnqem.problem.contact_problem import ContactProblem
 from dolfinx_nnqem.solvers.contract import Solver
 from dolfinx_nnqem.solvers.options import (METHODS, MonolithicOptions, NNEQM1Options, NNEQM2Options,
@@ -68,7 +69,24 @@ def make_solver(method: str, problem: ContactProblem, options: SolverOptions | N
     if own is not None and not isinstance(own, options_class):
         raise TypeError(f"make_solver: {method}= must be a {options_class.__name__}, got {type(own).__name__}"
                         + _where_it_goes(own))
+    refuse_symmetric_options(problem, options)
     return _solver_class(method)(problem, options, own)
+
+
+def refuse_symmetric_options(problem: ContactProblem, options: SolverOptions | None) -> None:
+    """Raise, naming the option, if the problem's tangent is unsymmetric (non-associated flow,
+    Armstrong–Frederick back-stresses) and ``petsc_options`` assume a symmetric matrix
+    (:data:`~dolfinx_nnqem.numerics.linalg.SYMMETRIC_ONLY_OPTIONS`)."""
+    petsc_options = (options.petsc_options if options is not None else None) or {}
+    if problem.state.symmetric_tangent:
+        return
+    for key, value in petsc_options.items():
+        assumes = [values for name, values in SYMMETRIC_ONLY_OPTIONS.items() if str(key).endswith(name)]
+        if assumes and str(value).lower() in assumes[0]:
+            raise ValueError(
+                f"petsc_options {key} = {value!r} assumes a symmetric matrix, but the problem's consistent tangent is "
+                "unsymmetric (a material with non-associated flow or Armstrong–Frederick back-stresses): use LU "
+                "(pc_type = 'lu', the default, with MUMPS) and GMRES-type Krylov methods (docs/materials.md)")
 
 
 def _where_it_goes(value: object) -> str:
