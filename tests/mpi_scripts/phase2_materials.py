@@ -1,0 +1,27 @@
+"""MPI helper of tests/test_materials_phase2_solvers.py: the blocks with a kinematic or Drucker–Prager upper block.
+
+    mpiexec -n N python phase2_materials.py UPPER OUT.npz
+
+Rank 0 writes every node's position and displacement (gathered) and the largest p of the upper body.
+"""
+
+import sys
+from pathlib import Path
+
+import dolfinx_nnqem  # noqa: F401  (first: the PyPI wheel loads MPI/PETSc before dolfinx)
+import numpy as np
+from mpi4py import MPI
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from test_materials_phase2_solvers import _solve  # noqa: E402
+
+if __name__ == "__main__":
+    problem, _ = _solve("monolithic", "alart-curnier", sys.argv[1])
+    n = problem.V.dofmap.index_map.size_local
+    x = problem.V.tabulate_dof_coordinates()[:n]
+    u = problem.u.x.array.reshape(-1, 3)[:n]
+    maxima = problem.state.maxima_by_body()
+    xs, us = MPI.COMM_WORLD.gather(x), MPI.COMM_WORLD.gather(u)
+    if MPI.COMM_WORLD.rank == 0:
+        np.savez(sys.argv[2], x=np.concatenate(xs), u=np.concatenate(us), max_p=maxima["p"]["2"])
