@@ -3,7 +3,9 @@
 The pressed and dragged blocks (``tests/test_materials.py``: an upper block pressed 3e7 Pa and
 dragged 0.2 of it onto a lower one, ``--cells`` hexahedra per block edge), both blocks of one
 material: linear von Mises (closed-form UFL), Voce and a table (the return map on arrays at the
-Gauss points, ``material/quadrature_part.py``), and linear elasticity (``Elastic``). Prints, per
+Gauss points, ``material/quadrature_part.py``), linear elasticity (``Elastic``), kinematic
+hardening (Prager; Chaboche with two back-stresses on Voce) and Drucker–Prager (associated and
+ψ = 5°, an unsymmetric tangent). Prints, per
 material:
 
 * ``assembly``: the time of one F_int and one K_t at a new plastic iterate (the material's
@@ -30,7 +32,8 @@ from mpi4py import MPI
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from dolfinx_nnqem.material import Elastic, TabulatedHardening, VoceHardening, VonMises  # noqa: E402
+from dolfinx_nnqem.material import (BackStress, DruckerPrager, Elastic, TabulatedHardening, VoceHardening,  # noqa: E402
+                                    VonMises)
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Pressure, Traction  # noqa: E402
 from dolfinx_nnqem.problem.meshing import BlockStackTags as B  # noqa: E402
 from dolfinx_nnqem.problem.meshing import build_block_stack  # noqa: E402
@@ -42,6 +45,11 @@ MATERIALS = {
     "von-mises table": VonMises(E=2.0e10, nu=0.2, hardening=TabulatedHardening(
         [[2.0e7, 0.0], [2.5e7, 0.002], [2.8e7, 0.01], [3.0e7, 0.05]])),
     "elastic": Elastic(E=2.0e10, nu=0.2),
+    "prager": VonMises(E=2.0e10, nu=0.2, sigma_y0=2.0e7, H=2.0e9, kinematic=[BackStress(2.0e9)]),
+    "chaboche-2 voce": VonMises(E=2.0e10, nu=0.2, hardening=VoceHardening(2.0e7, 5.0e6, 200.0, 0.0),
+                                kinematic=[BackStress(4.0e9, 400.0), BackStress(5.0e8)]),
+    "drucker-prager": DruckerPrager(E=2.0e10, nu=0.2, cohesion=4.0e6, friction_angle=30.0, H=1.0e8),
+    "dp psi=5": DruckerPrager(E=2.0e10, nu=0.2, cohesion=4.0e6, friction_angle=30.0, dilatancy_angle=5.0, H=1.0e8),
 }
 
 
