@@ -41,7 +41,7 @@ from dolfinx_nnqem.contact.obstacles import ObstaclePairs, RigidObstacle, obstac
 from dolfinx_nnqem.contact.geometric_stiffness import GeometricTerms, no_terms, obstacle_terms
 from dolfinx_nnqem.contact.discretisation import DISCRETISATIONS, OBSTACLE_DISCRETISATIONS, discretise
 from dolfinx_nnqem.contact.pairset import PairRows, PairSet, rows_matrix
-from dolfinx_nnqem.contact.slip_check import Slip, slipped_interfaces
+from dolfinx_nnqem.contact.slip_check import Slip, facet_size_of, slipped_interfaces
 from dolfinx_nnqem.contact.surfaces import ContactPairError, NoPairsError, mesh_tolerance, owned_supports, space_degree
 from dolfinx_nnqem.contact.current_geometry import (GEOMETRIES, MortarTracker, ObstacleTracker, SurfaceTracker,
                                                     remapper, surface_tracker)
@@ -488,6 +488,7 @@ class ContactModel:
         self.geometry_version = 0  #: counts :meth:`update_geometry` calls (solvers rebuild what uses B)
         self._refreshed_at: np.ndarray | None = None  # where refresh_obstacle_geometry last evaluated
         self._facet_tags = facet_tags  # for the trackers of interfaces that start following the bodies
+        self._facet_sizes: list[float] | None = None  # of the interfaces' slave surfaces, at the first slip check
         interfaces = []
         for contact, E_interface in zip(contacts, moduli):
             r = float(default_r(E_interface, h)) if contact.r is None else _checked_r(contact, E_interface, h)
@@ -916,7 +917,10 @@ class ContactModel:
         """The reference-geometry interfaces whose surfaces slid past
         :data:`~dolfinx_nnqem.contact.slip_check.SLIP_LIMIT` × their facet size at the relative
         displacement ``w`` (collective; :func:`~dolfinx_nnqem.contact.slip_check.slipped_interfaces`)."""
-        return slipped_interfaces(self.comm, self.interfaces, self.trackers, w)
+        if self._facet_sizes is None:  # a reference-geometry interface's areas never change: measured once
+            self._facet_sizes = [facet_size_of(self.comm, i.pairs.area) for i in self.interfaces]
+        sizes = [None if t is not None else size for size, t in zip(self._facet_sizes, self.trackers)]
+        return slipped_interfaces(self.comm, self.interfaces, sizes, w)
 
     def why_not_current(self, k: int) -> str | None:
         """None if interface ``k`` (in the reference geometry) can be re-evaluated in the current

@@ -50,26 +50,30 @@ def facet_size_of(comm: MPI.Comm, area: np.ndarray) -> float:
     return float(np.sqrt(np.percentile(areas, 90.0))) if len(areas) else 0.0
 
 
-def slipped_interfaces(comm: MPI.Comm, interfaces: Sequence, trackers: Sequence, w: np.ndarray) -> list[Slip]:
-    """The reference-geometry interfaces (no tracker) whose relative tangential displacement ``w[:, 1:]``
-    exceeds :data:`SLIP_LIMIT` × their facet size (collective: every rank gets the same list).
+def slipped_interfaces(comm: MPI.Comm, interfaces: Sequence, facet_sizes: Sequence[float | None],
+                       w: np.ndarray) -> list[Slip]:
+    """The reference-geometry interfaces whose relative tangential displacement ``w[:, 1:]`` exceeds
+    :data:`SLIP_LIMIT` × their facet size (collective: every rank gets the same list).
 
     Parameters
     ----------
-    interfaces, trackers
-        The model's interfaces and their geometry trackers (None: reference geometry).
+    interfaces
+        The model's interfaces.
+    facet_sizes
+        Per interface, its facet size (:func:`facet_size_of`), or None where it is in the current
+        geometry (not checked).
     w
         (num_local, 3) the model's relative displacements, measured from the reference configuration.
     """
+    checked = [k for k, size in enumerate(facet_sizes) if size is not None]
+    local = np.array([np.hypot(*w[interfaces[k].local, 1:].T).max(initial=0.0) for k in checked])
+    slips = np.empty_like(local)
+    comm.Allreduce(local, slips, op=MPI.MAX)  # one reduction for every interface
     out = []
-    for k, (interface, tracker) in enumerate(zip(interfaces, trackers)):
-        if tracker is not None:
-            continue
-        w_t = w[interface.local, 1:]
-        slip = comm.allreduce(float(np.hypot(w_t[:, 0], w_t[:, 1]).max(initial=0.0)), op=MPI.MAX)
-        size = facet_size_of(comm, interface.pairs.area)
+    for k, slip in zip(checked, slips):
+        size = float(facet_sizes[k])  # type: ignore[arg-type]  # checked: not None
         if slip > SLIP_LIMIT * size:
-            out.append(Slip(k, interface.contact.label, interface.pairs.kind, slip, size))
+            out.append(Slip(k, interfaces[k].contact.label, interfaces[k].pairs.kind, float(slip), size))
     return out
 
 
