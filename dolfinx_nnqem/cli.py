@@ -490,6 +490,8 @@ def _exit(code: int) -> None:
     if "petsc4py.PETSc" in sys.modules:
         from petsc4py import PETSc
 
+        if code != EXIT_OK:  # a run that stopped early left its solver's options unread: PETSc's
+            PETSc.Options().setValue("options_left", "false")  # "options you set that were not used"
         PETSc._finalize()
     if "mpi4py.MPI" in sys.modules:
         from mpi4py import MPI
