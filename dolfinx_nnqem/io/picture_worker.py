@@ -101,6 +101,7 @@ class _Worker:
         self.role = role
         self.process = process
         self.answered = False  #: it answered its job (it exits at the end of its pipe)
+        self.pictures: Path | None = None  #: the folder its job draws into
 
     @classmethod
     def start(cls, role: str, *, shown: bool, level: int) -> _Worker | None:
@@ -129,6 +130,9 @@ class _Worker:
         stdin = self.process.stdin
         if stdin is None or self.process.poll() is not None:
             return False
+        from dolfinx_nnqem.io.run_pictures import PICTURE_FOLDER
+
+        self.pictures = Path(job["folder"]) / PICTURE_FOLDER
         try:
             pickle.dump(dict(job), stdin, protocol=pickle.HIGHEST_PROTOCOL)
             stdin.flush()
@@ -160,13 +164,18 @@ class _Worker:
     def stop(self) -> None:
         """End the worker and reap it (no zombie): one that answered exits at its end of file
         (waited for, a second at most); any other is killed at once (a run that failed, or was
-        interrupted while the worker drew, does not wait for it)."""
+        interrupted while the worker drew, does not wait for it), and the temporary of the
+        picture it was drawing is removed (a picture is whole or absent)."""
         self.finish()
         try:
             self.process.wait(timeout=1.0 if self.answered else 0.0)
         except subprocess.TimeoutExpired:
             self.process.kill()
             self.process.wait()
+        if self.pictures is not None and not self.answered:
+            from dolfinx_nnqem.io.safe_io import remove_temporaries_of
+
+            remove_temporaries_of(self.pictures, self.process.pid)
 
 
 class PictureWorkers:
