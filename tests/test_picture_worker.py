@@ -168,6 +168,7 @@ def test_a_ctrl_c_as_soon_as_a_worker_exists_ends_the_run(tmp_path):
     while not _children(run.pid) and run.poll() is None and time.monotonic() < deadline:
         pass  # no sleep: the signal must come while the worker is being made
     child = _children(run.pid)
+    assert child and run.poll() is None, run.communicate()  # (a reaped process's id may be another's)
     os.kill(run.pid, signal.SIGINT)
     try:
         out, err = run.communicate(timeout=300)
@@ -228,6 +229,7 @@ def test_ctrl_c_ends_the_workers_with_the_run(tmp_path):
     130, no traceback of a worker, no worker left."""
     run, workers = _start_run(tmp_path, "--increments", "200")
     time.sleep(1.0)
+    assert run.poll() is None, run.communicate()  # (a reaped process's id may be another's)
     os.killpg(run.pid, signal.SIGINT)
     out, err = run.communicate(timeout=120)
     time.sleep(0.2)
@@ -240,6 +242,7 @@ def test_ctrl_c_ends_the_workers_with_the_run(tmp_path):
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
 def test_the_workers_die_with_a_killed_run(tmp_path):
     run, workers = _start_run(tmp_path, "--increments", "200")
+    assert run.poll() is None, run.communicate()  # (a reaped process's id may be another's: SIGKILL)
     os.kill(run.pid, signal.SIGKILL)
     run.communicate(timeout=60)
     deadline = time.monotonic() + 10

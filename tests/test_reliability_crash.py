@@ -249,6 +249,7 @@ def test_two_beams_keeps_the_signal_contract(tmp_path, sig, code):
     while not (out / "summary.json").exists() and job.poll() is None and time.monotonic() < deadline:
         time.sleep(0.01)
     time.sleep(0.3)  # inside the increments
+    assert job.poll() is None, finish(job)  # (a reaped process's group id may be another's)
     kill_session(job, sig)
     _, err = finish(job)
     summary = read_summary(out)
