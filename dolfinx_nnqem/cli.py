@@ -495,11 +495,13 @@ def main(argv: list[str] | None = None) -> int:
     try:
         code = _main(argv)
     finally:
+        interrupts.run_over = True  # the outcome is decided (argparse's SystemExit too)
         sys.unraisablehook = unraisable_hook
         _install_sigterm()  # never leave the start-up handlers behind (in-process callers)
-        interrupts.run_over = False  # (the signals held after the outcome are dropped with it)
-        interrupts.deferred.clear()
-        interrupts.received.clear()
+        if argv is not None or not interrupts.is_command_line():  # an in-process caller goes on: the
+            interrupts.run_over = False  # signals held after this run's outcome are dropped with it
+            interrupts.deferred.clear()
+            interrupts.received.clear()
         if "dolfinx_nnqem.collective" in sys.modules and not interrupts.is_command_line():
             sys.modules["dolfinx_nnqem.collective"].disarm_abort()  # (the command line's process ends)
     if argv is None and interrupts.is_command_line():

@@ -68,9 +68,10 @@ def end_of_run() -> None:
     """The run's outcome is final: ``summary.json`` has its last status and the pictures are
     drawn (called at the end of :meth:`~dolfinx_nnqem.io.output.ResultsWriter.close`). In the
     command line a signal from now on is held, not acted on: the exit code stays the one
-    ``summary.json`` gives. Elsewhere nothing reads it."""
+    ``summary.json`` gives. Elsewhere (a user's program) it does nothing."""
     global run_over
-    run_over = True
+    if is_command_line():
+        run_over = True
 
 
 def hold_in_command_line() -> None:

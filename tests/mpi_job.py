@@ -194,7 +194,7 @@ def _report(done: subprocess.CompletedProcess, watch: _Watch, oom_before: dict, 
     # MPICH: "PID 123 RUNNING AT host" ... "EXIT STRING: Killed (signal 9)"; Open MPI: "process
     # rank 1 with PID 123 on node host exited on signal 9 (Killed)"
     mpich = re.search(r"PID (\d+) RUNNING AT", done.stdout), re.search(r"EXIT STRING: .* \(signal (\d+)\)", done.stdout)
-    openmpi = re.search(r"rank \d+ with PID (\d+) on node \S+ exited on signal (\d+)", done.stdout + done.stderr)
+    openmpi = re.search(r"rank \d+ with PID (\d+) on node \S+ exited on\s+signal (\d+)", done.stdout + done.stderr)
     pid = int(mpich[0].group(1)) if mpich[0] else int(openmpi.group(1)) if openmpi else None
     number = int(mpich[1].group(1)) if mpich[1] else int(openmpi.group(2)) if openmpi else None
     if pid is not None or number is not None:
@@ -214,7 +214,8 @@ def _report(done: subprocess.CompletedProcess, watch: _Watch, oom_before: dict, 
     lines.append(f"out-of-memory kills before the job {oom_before}, after it {oom_after}")
     if any(oom_after.get(key, 0) > count for key, count in oom_before.items()):
         lines += ["the kernel's log:", *_kernel_oom_lines()[-10:]]
-    lines += ["stdout (rank-tagged):", done.stdout[-4000:], "stderr (rank-tagged):", done.stderr[-4000:]]
+    tagged = " (rank-tagged)" if _tag_flags() else ""
+    lines += [f"stdout{tagged}:", done.stdout[-4000:], f"stderr{tagged}:", done.stderr[-4000:]]
     return "\n".join(lines)
 
 

@@ -63,7 +63,8 @@ def test_a_refusal_on_two_ranks_is_one_line_without_petsc_warnings(tmp_path):
     """Issue 39, item 12: on 2 ranks a run refused after its solver was made (exit 4: a folder
     holding an earlier run; exit 3: nothing to restart from) was followed by PETSc's "WARNING!
     There are options you set that were not used!" (its MUMPS options, read at the first
-    factorisation, which never came). The refusal is its one line."""
+    factorisation, which never came). The refusal is its one line (MPICH; Open MPI's launcher
+    adds its own lines about the exit code, and Debian's PETSc did not warn)."""
     p = problem_file(tmp_path, increments=1)
     (tmp_path / "used").mkdir()
     (tmp_path / "used" / "summary.json").write_text("{}")
@@ -73,10 +74,11 @@ def test_a_refusal_on_two_ranks_is_one_line_without_petsc_warnings(tmp_path):
         run, wall = _mpirun(_cli(["-q", "run", str(p), *extra]))
         refused[code] = run
         print(f"\n  exit {run.returncode} after {wall:.1f} s: stderr {run.stderr!r}; stdout {run.stdout!r}")
-    for code, run in refused.items():
+    for code, run in refused.items():  # (Open MPI's launcher adds its own lines about the exit code)
         both = run.stdout + run.stderr
         assert run.returncode == code and "options you set that were not used" not in both
-        assert len(both.strip().splitlines()) == 1 and both.startswith("dolfinx-nnqem: ")
+        assert "WARNING!" not in both and "Option left" not in both
+        assert len([line for line in both.splitlines() if line.startswith("dolfinx-nnqem")]) == 1
 
 
 def test_a_bad_value_found_by_one_rank_inside_a_collective_solve(tmp_path):
