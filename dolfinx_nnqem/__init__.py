@@ -7,13 +7,11 @@ be loaded before ``dolfinx`` and ``petsc4py`` (the command line does it in :func
 still import, with a deprecation warning (:mod:`dolfinx_nnqem._moved`).
 """
 
+# first: in the command line, importing interrupts holds Ctrl-C and SIGTERM (interrupts.py); the
+# command line imports MPI, PETSc and DOLFINx itself once it has read its arguments (cli.main)
 from dolfinx_nnqem import interrupts as _interrupts
 
-if _interrupts.is_command_line():
-    # Ctrl-C / SIGTERM held from the first import (interrupts.py); the command line imports MPI,
-    # PETSc and DOLFINx itself once it has read its arguments (cli.main: --help needs none)
-    _interrupts.hold()
-else:
+if not _interrupts.is_command_line():
     from dolfinx_nnqem import compat  # noqa: F401  (before dolfinx / petsc4py in a user's program)
 from dolfinx_nnqem import _moved  # noqa: E402
 

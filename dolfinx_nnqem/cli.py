@@ -122,8 +122,11 @@ def _two_beams(args) -> int:
 
     rank0 = MPI.COMM_WORLD.rank == 0
     methods = [m for m in METHODS if _available(m)] if args.method == "all" else [args.method]
-    summaries = []
+    summaries: list[dict] = []
     for method in methods:
+        if summaries:  # the previous run's outcome is final; a signal held since ends this one
+            interrupts.run_over = False
+            _raise_held_signal()
         out = Path(args.out) / method if args.method == "all" else Path(args.out)
 
         def progress(result, method=method):
@@ -213,6 +216,11 @@ def _run(args, workers: PictureWorkers | None = None) -> int:
         print(f"converged: {s['converged']}; iterations {s['iterations']}; global equilibrium "
               f"{s.get('equilibrium_residual', float('nan')):.2e}; results in {writer.folder}/", flush=True)
         _print_pictures(writer.drawn)
+        if args.restart and not writer.written and not writer.drawn:  # a restart of a completed run
+            from dolfinx_nnqem.io.run_pictures import pictures_enabled
+
+            print("nothing to do" + (f": every picture is in {writer.folder}/pictures/"
+                                     if pictures_enabled(writer.pictures) else ""), flush=True)
     return EXIT_OK
 
 
@@ -247,15 +255,16 @@ def _solve_problem_file(args, spec, problem, solver, method: str, increments, wo
                            fields=spec.output["fields"], extra={"problem_file": str(args.problem)},
                            overwrite=args.overwrite, resume=args.restart, pictures=None if pictures else False,
                            picture_worker=workers)
-    solving = False  # summary.json records how a run ended only once it has started solving
+    args.writer, args.checkpoints = writer, bool(spec.output["checkpoint_every"])  # (for the restart hint)
+    solving = False  # summary.json records how a run ended only once it has started solving (or resumed)
     try:
         resume = None
         if args.restart:
             resume, meta = checkpoint.restore(problem, out, expected_meta=identity)
-            writer.resume(meta["writers"][0])
+            writer.resume(meta["writers"][0])  # a run that had completed: "completed", nothing to solve
+            solving = args.solving = True
             if problem.comm.rank == 0 and not args.quiet:
-                print(f"restarting after increment {resume.index} (load factor {problem.load_factor_n:.6g}) "
-                      f"from {out}/checkpoints", flush=True)
+                print(_restarting_line(writer, resume.index, problem.load_factor_n), flush=True)
         every = spec.output["checkpoint_every"]
         ckpt = checkpoint.Checkpointer(out, every, writers=[writer], meta=identity) if every else None
         solving = args.solving = True
@@ -274,6 +283,14 @@ def _solve_problem_file(args, spec, problem, solver, method: str, increments, wo
         if problem.comm.rank == 0 and not args.quiet and writer.summary.data.get("status") == "not converged":
             _print_pictures(writer.drawn)  # the converged increments' pictures
     return writer
+
+
+def _restarting_line(writer, index: int, load_factor: float) -> str:
+    """What ``run --restart`` does: continue after the checkpoint, or nothing to solve."""
+    if writer.summary.data.get("status") == "completed":
+        return (f"{writer.folder}: the run had completed (increment {index}, load factor {load_factor:.6g}): "
+                "nothing to solve")
+    return f"restarting after increment {index} (load factor {load_factor:.6g}) from {writer.folder}/checkpoints"
 
 
 def _raise_swallowed_interrupt(*_) -> None:
@@ -417,23 +434,37 @@ def _os_text(error: OSError) -> str:
 
 
 def _restart_hint(args) -> str:
+    """How an interrupted ``run`` goes on: nothing was written; or ``--restart`` continues from the
+    last checkpoint (a run whose increments had all converged: it draws the missing pictures)."""
     if getattr(args, "command", None) != "run":
         return ""
     if not getattr(args, "solving", False):  # interrupted while starting: nothing to continue
         return "; before solving started (nothing written)"
-    return (f"; the converged increments are written; continue with: dolfinx-nnqem run {args.problem} --restart"
-            + (f" --out {args.out}" if args.out else ""))
+    writer = getattr(args, "writer", None)
+    converged = writer is not None and bool(writer.summary.data.get("converged"))
+    folder = writer.folder if writer is not None else args.out
+    written = ("; every increment is written, the pictures are not all drawn" if converged
+               else "; the converged increments are written")
+    out = f" --out {args.out}" if args.out else ""
+    if not getattr(args, "checkpoints", True):  # checkpoint_every = 0: nothing to restart from
+        return written + (f"; draw them with: dolfinx-nnqem plot {folder}" if converged
+                          else " (no checkpoints: checkpoint_every = 0)")
+    return written + f"; {'finish' if converged else 'continue'} with: dolfinx-nnqem run {args.problem} --restart{out}"
 
 
 def _install_sigterm() -> None:
     import signal
 
     def on_term(signum, frame):
+        if interrupts.run_over:  # the outcome is final: the exit code stays the run's
+            return interrupts.defer(signum, frame)
         interrupts.received.append(signum)
         _abort_unless_ended(EXIT_TERMINATED, "terminated (SIGTERM)")
         raise Terminated()
 
     def on_int(signum, frame):
+        if interrupts.run_over:
+            return interrupts.defer(signum, frame)
         interrupts.received.append(signum)
         _abort_unless_ended(EXIT_INTERRUPTED, "interrupted (Ctrl-C)")
         raise KeyboardInterrupt()
@@ -457,14 +488,20 @@ def _abort_unless_ended(code: int, reason: str) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     interrupts.received.clear()
+    interrupts.run_over = False
     _hold_signals()  # start-up: an interrupt is recorded, and acted on once the run can end cleanly
     unraisable_hook = sys.unraisablehook
     sys.unraisablehook = _quiet_about_lost_interrupts(unraisable_hook)
     try:
         code = _main(argv)
     finally:
+        interrupts.run_over = True  # the outcome is decided (argparse's SystemExit too)
         sys.unraisablehook = unraisable_hook
         _install_sigterm()  # never leave the start-up handlers behind (in-process callers)
+        if argv is not None or not interrupts.is_command_line():  # an in-process caller goes on: the
+            interrupts.run_over = False  # signals held after this run's outcome are dropped with it
+            interrupts.deferred.clear()
+            interrupts.received.clear()
         if "dolfinx_nnqem.collective" in sys.modules and not interrupts.is_command_line():
             sys.modules["dolfinx_nnqem.collective"].disarm_abort()  # (the command line's process ends)
     if argv is None and interrupts.is_command_line():
@@ -490,6 +527,8 @@ def _exit(code: int) -> None:
     if "petsc4py.PETSc" in sys.modules:
         from petsc4py import PETSc
 
+        if code != EXIT_OK:  # a run that stopped early left its solver's options unread: PETSc's
+            PETSc.Options().setValue("options_left", "false")  # "options you set that were not used"
         PETSc._finalize()
     if "mpi4py.MPI" in sys.modules:
         from mpi4py import MPI
@@ -540,7 +579,9 @@ def _main(argv: list[str] | None) -> int:
             else:
                 code = EXIT_USAGE
             _raise_swallowed_interrupt()
+            interrupts.end_of_run()  # (a run's writer said so already)
         except BaseException as error:  # noqa: BLE001  (every failure becomes a message and an exit code)
+            interrupts.run_over = True  # first: a signal from here on cannot replace this outcome
             if isinstance(error, SystemExit):
                 raise
             error = _interrupt_behind(error) or error

@@ -57,6 +57,27 @@ def wait_for_checkpoint(out: Path, index: int, process: subprocess.Popen, timeou
     raise AssertionError(f"no checkpoint {index} within {timeout} s")
 
 
+def catches(pid: int, sig: int) -> bool:
+    """Process ``pid`` has a handler for ``sig`` (its ``SigCgt`` mask in ``/proc``)."""
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("SigCgt:"):
+                return bool(int(line.split()[1], 16) >> (sig - 1) & 1)
+    except (OSError, ValueError):
+        pass
+    return False
+
+
+def wait_until_held(process: subprocess.Popen, timeout: float = 120.0) -> None:
+    """Wait (polling, no sleep) until the command line started as ``process`` holds Ctrl-C and
+    SIGTERM: the package's first line has run (Python itself has no SIGTERM handler, so the
+    handler's bit in ``SigCgt`` appears with ``dolfinx_nnqem.interrupts.hold``)."""
+    deadline = time.monotonic() + timeout
+    while not catches(process.pid, signal.SIGTERM):
+        if process.poll() is not None or time.monotonic() > deadline:
+            raise AssertionError(f"the package's hold never came: {process.poll()}")
+
+
 def finish(process: subprocess.Popen, timeout: float = 120.0) -> tuple[str, str]:
     """``process.communicate(timeout)``; on a timeout every process of its session is killed
     first (a hung MPI job's ranks would otherwise outlive the test and load the machine)."""

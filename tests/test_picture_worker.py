@@ -132,6 +132,55 @@ def test_no_worker_without_pictures(monkeypatch):
     assert started == [1]
 
 
+def test_a_ctrl_c_while_a_worker_starts_is_not_lost(monkeypatch):
+    """Issue 39, item 4: the run ignored SIGINT in its own process while it started each worker,
+    so a Ctrl-C then was lost (8 of 8 runs exited 0). A Ctrl-C that arrives while the worker's
+    process is being made now reaches the run's handler once the worker has started."""
+    received: list[int] = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: received.append(signum))
+    popen = subprocess.Popen
+
+    def interrupted_popen(*args, **kwargs):  # the Ctrl-C comes while the worker starts
+        process = popen(*args, **kwargs)
+        os.kill(os.getpid(), signal.SIGINT)
+        return process
+
+    monkeypatch.setattr(picture_worker.subprocess, "Popen", interrupted_popen)
+    try:
+        with PictureWorkers() as workers:
+            started = workers.pids
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    print(f"\n  workers {started}: Ctrl-C received by the run's handler {len(received)} times of {len(ROLES)}")
+    assert set(started) == set(ROLES) and received == [signal.SIGINT] * len(ROLES)
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_a_ctrl_c_as_soon_as_a_worker_exists_ends_the_run(tmp_path):
+    """Issue 39, item 4, as reported: SIGINT sent to the run as soon as it has a child process
+    (the first worker being started) used to be lost, and the run ended with exit 0."""
+    env = {k: v for k, v in os.environ.items() if k != ENV_SWITCH}
+    env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
+    run = subprocess.Popen([sys.executable, "-m", "dolfinx_nnqem", "run", str(EXAMPLE), "--out",
+                            str(tmp_path / "out"), "--increments", "200"], cwd=ROOT, env=env,
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    deadline = time.monotonic() + 120
+    while not _children(run.pid) and run.poll() is None and time.monotonic() < deadline:
+        pass  # no sleep: the signal must come while the worker is being made
+    child = _children(run.pid)
+    assert child and run.poll() is None, run.communicate()  # (a reaped process's id may be another's)
+    os.kill(run.pid, signal.SIGINT)
+    try:
+        out, err = run.communicate(timeout=300)
+    finally:
+        if run.poll() is None:
+            os.killpg(run.pid, signal.SIGKILL)
+            run.communicate()
+    print(f"\n  SIGINT with child {child}: exit {run.returncode}; stderr {err!r}")
+    assert child and run.returncode == EXIT_INTERRUPTED and "Traceback" not in err
+    assert err.startswith("dolfinx-nnqem: interrupted (Ctrl-C)") and err.count("\n") == 1
+
+
 def test_a_worker_imports_neither_dolfinx_nor_mpi():
     """The modules a worker uses import without DOLFINx, PETSc and MPI (blocked as in a worker)."""
     code = (f"import sys, types\nfor name in {BLOCKED!r}: sys.modules[name] = None\n"
@@ -180,6 +229,7 @@ def test_ctrl_c_ends_the_workers_with_the_run(tmp_path):
     130, no traceback of a worker, no worker left."""
     run, workers = _start_run(tmp_path, "--increments", "200")
     time.sleep(1.0)
+    assert run.poll() is None, run.communicate()  # (a reaped process's id may be another's)
     os.killpg(run.pid, signal.SIGINT)
     out, err = run.communicate(timeout=120)
     time.sleep(0.2)
@@ -192,6 +242,7 @@ def test_ctrl_c_ends_the_workers_with_the_run(tmp_path):
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
 def test_the_workers_die_with_a_killed_run(tmp_path):
     run, workers = _start_run(tmp_path, "--increments", "200")
+    assert run.poll() is None, run.communicate()  # (a reaped process's id may be another's: SIGKILL)
     os.kill(run.pid, signal.SIGKILL)
     run.communicate(timeout=60)
     deadline = time.monotonic() + 10

@@ -13,7 +13,8 @@ from dolfinx_nnqem.cli import (EXIT_BAD_INPUT, EXIT_DIVERGED, EXIT_INTERNAL, EXI
                                EXIT_PETSC, EXIT_TERMINATED, main)
 from dolfinx_nnqem.io import read_fields, read_pairs, read_summary
 
-from reliability_helpers import ROOT, env, finish, kill_session, problem_file, run_in_session, start, wait_for_checkpoint
+from reliability_helpers import (ROOT, catches, env, finish, kill_session, problem_file, run_in_session, start,
+                                 wait_for_checkpoint, wait_until_held)
 
 
 def _final_u(out):
@@ -248,6 +249,7 @@ def test_two_beams_keeps_the_signal_contract(tmp_path, sig, code):
     while not (out / "summary.json").exists() and job.poll() is None and time.monotonic() < deadline:
         time.sleep(0.01)
     time.sleep(0.3)  # inside the increments
+    assert job.poll() is None, finish(job)  # (a reaped process's group id may be another's)
     kill_session(job, sig)
     _, err = finish(job)
     summary = read_summary(out)
@@ -257,23 +259,47 @@ def test_two_beams_keeps_the_signal_contract(tmp_path, sig, code):
     assert summary["status"] == "interrupted" and not list(out.rglob(".*.tmp-*"))
 
 
-@pytest.mark.parametrize("delay", [0.05, 0.2, 0.4])
+@pytest.mark.parametrize("delay", [0.0, 0.2, 0.4])
 @pytest.mark.parametrize("sig, code, words", [(signal.SIGINT, EXIT_INTERRUPTED, "interrupted (Ctrl-C)"),
                                               (signal.SIGTERM, EXIT_TERMINATED, "terminated (SIGTERM)")])
 def test_an_interrupt_during_start_up(tmp_path, sig, code, words, delay):
     """Issue 31, item 7: Ctrl-C or SIGTERM while the command line starts (imports, MPI and PETSc
     set-up). Ctrl-C used to show a KeyboardInterrupt traceback (exit -2) and SIGTERM PETSc's error
-    dump (exit 15); now both end by the contract, with one line and no traceback."""
+    dump (exit 15); now both end by the contract, with one line and no traceback. The delay
+    counts from the package's first line, which holds the signals (issue 39, item 4: delays
+    from the process's start, 0.05 and even 0.2 s, came on a loaded machine before it, inside
+    Python's own start-up, which the package cannot reach: test_an_interrupt_before_the_package_runs)."""
     import time
 
     p = problem_file(tmp_path, increments=15)  # the run outlasts the largest delay (2 increments ended in 0.4 s)
     job = start(["-q", "run", str(p), "--out", str(tmp_path / "out")])
+    wait_until_held(job)
     time.sleep(delay)
     kill_session(job, sig)
     _, err = finish(job)
-    print(f"\n  {sig.name} {delay} s after the start: exit {job.returncode}: {err.strip()}")
+    print(f"\n  {sig.name} {delay} s after the package held it: exit {job.returncode}: {err.strip()}")
     assert job.returncode == code and err.strip().startswith(f"dolfinx-nnqem: {words}")
     assert "Traceback" not in err and "PETSC ERROR" not in err and len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("sig, codes, code", [(signal.SIGINT, (-signal.SIGINT, 1), EXIT_INTERRUPTED),
+                                              (signal.SIGTERM, (-signal.SIGTERM,), EXIT_TERMINATED)])
+def test_an_interrupt_before_the_package_runs(tmp_path, sig, codes, code):
+    """The one phase the contract cannot cover: Python's own start-up, before the package's first
+    line (the interpreter and the site-packages' .pth files; 0.06-0.14 s on the loaded
+    development machine, most of it setuptools' editable-install finder). A signal there acts
+    as on any Python program: the process ends at once (killed by the signal: a shell reports
+    130 or 143; or, for Ctrl-C once Python has installed its handler, Python's own
+    KeyboardInterrupt message and exit 1) and nothing is written. docs/reliability.md says so."""
+    p = problem_file(tmp_path, increments=15)
+    job = start(["-q", "run", str(p), "--out", str(tmp_path / "out")])
+    held = catches(job.pid, signal.SIGTERM)
+    kill_session(job, sig)  # at once: the process exists, its Python is starting
+    _, err = finish(job)
+    print(f"\n  {sig.name} at the start (package holding: {held}): exit {job.returncode}: {err.strip()[-200:]!r}")
+    assert job.returncode in (codes if not held else (code,)) and not (tmp_path / "out").exists()
+    if held:  # a machine fast enough to reach the package's first line first: the contract
+        assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
 
 
 @pytest.mark.parametrize("method", ["monolithic", "nneqm2"])
@@ -301,13 +327,39 @@ def test_a_later_run_removes_what_a_killed_run_left(tmp_path, again):
     assert main(["-q", "run", str(p), "--out", str(out)]) == EXIT_OK
     left = [out / ".summary.json.tmp-999999", out / "pairs" / ".pairs_0002.vtp.tmp-999999",
             out / "checkpoints" / "ckpt_00002" / ".rank_0000.npz.tmp-999999",
-            out / "checkpoints" / ".latest.json.tmp-999999", out / "fields" / ".fields_0002.h5.tmp-999999"]
+            out / "checkpoints" / ".latest.json.tmp-999999", out / "fields" / ".fields_0002.h5.tmp-999999",
+            out / ".pairs.pvd.tmp-999999-staged", out / "pictures" / ".deformed.png.tmp-999999.png"]
+    (out / "pictures").mkdir(exist_ok=True)
     for f in left:
         f.write_text("half a file")
     code = main(["-q", "run", str(p), "--out", str(out), *again])
     remaining = [str(f.relative_to(out)) for f in out.rglob(".*.tmp-*")]
     print(f"\n  next run {again or ['(no flag)']}: exit {code}, temporaries left {remaining}")
     assert code == (EXIT_IO if not again else EXIT_OK) and not remaining
+
+
+def test_the_outputs_page_names_every_temporary_a_kill_can_leave(tmp_path):
+    """Issue 39, item 12: a SIGKILL often leaves a hidden temporary (1 kill in 6 in the issue, 10 of
+    24 here), which the next run removes; docs/outputs.md says so, with each name the package
+    gives its temporaries (taken from the code: a plain write, a staged index file, a picture)."""
+    import os
+
+    from dolfinx_nnqem.io import run_pictures
+    from dolfinx_nnqem.io.safe_io import StagedFiles, atomic_write
+
+    made = []
+    atomic_write(tmp_path / "NAME", lambda tmp: (made.append(tmp.name), tmp.write_text("x")))
+    staged = StagedFiles()
+    staged.stage(tmp_path / "NAME", "x")
+    made += [p.name for p in tmp_path.glob(".NAME.*")]
+    staged.discard()
+    run_pictures._whole_picture(tmp_path / "NAME.png", lambda tmp: (made.append(tmp.name), tmp.write_bytes(b"x")))
+    patterns = sorted({name.replace(str(os.getpid()), "PID") for name in made})
+    page = " ".join((ROOT / "docs" / "outputs.md").read_text().split())
+    print(f"\n  temporaries made: {patterns}")
+    assert patterns == [".NAME.png.tmp-PID.png", ".NAME.tmp-PID", ".NAME.tmp-PID-staged"]
+    assert all(f"`{pattern.replace('NAME.png', 'NAME')}`" in page for pattern in patterns)
+    assert "leaves that write's temporary" in page and "next `dolfinx-nnqem run` into the folder removes" in page
 
 
 def test_sigkill_at_random_moments_leaves_readable_resumable_results(tmp_path):

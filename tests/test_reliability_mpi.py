@@ -59,6 +59,28 @@ def test_a_full_disk_on_rank_0_only(tmp_path):
     assert run.returncode == EXIT_IO and len(lines) == 1 and "No space left" in lines[0]
 
 
+def test_a_refusal_on_two_ranks_is_one_line_without_petsc_warnings(tmp_path):
+    """Issue 39, item 12: on 2 ranks a run refused after its solver was made (exit 4: a folder
+    holding an earlier run; exit 3: nothing to restart from) was followed by PETSc's "WARNING!
+    There are options you set that were not used!" (its MUMPS options, read at the first
+    factorisation, which never came). The refusal is its one line (MPICH; Open MPI's launcher
+    adds its own lines about the exit code, and Debian's PETSc did not warn)."""
+    p = problem_file(tmp_path, increments=1)
+    (tmp_path / "used").mkdir()
+    (tmp_path / "used" / "summary.json").write_text("{}")
+    refused = {}
+    for code, extra in ((EXIT_IO, ["--out", str(tmp_path / "used")]),
+                        (EXIT_BAD_INPUT, ["--out", str(tmp_path / "empty"), "--restart"])):
+        run, wall = _mpirun(_cli(["-q", "run", str(p), *extra]))
+        refused[code] = run
+        print(f"\n  exit {run.returncode} after {wall:.1f} s: stderr {run.stderr!r}; stdout {run.stdout!r}")
+    for code, run in refused.items():  # (Open MPI's launcher adds its own lines about the exit code)
+        both = run.stdout + run.stderr
+        assert run.returncode == code and "options you set that were not used" not in both
+        assert "WARNING!" not in both and "Option left" not in both
+        assert len([line for line in both.splitlines() if line.startswith("dolfinx-nnqem")]) == 1
+
+
 def test_a_bad_value_found_by_one_rank_inside_a_collective_solve(tmp_path):
     """Rank 1 raises while rank 0 waits inside the solver: the job is aborted with the code."""
     p = problem_file(tmp_path, increments=3)

@@ -43,7 +43,8 @@ from dolfinx_nnqem.contact.laws import STATE_NAMES
 from dolfinx_nnqem.io.field_series import FieldSeriesWriter
 from dolfinx_nnqem.io.locking import OutputLock, clear_outputs, previous_outputs
 from dolfinx_nnqem.io.quadratic_fields import QuadraticFieldWriter, writes_quadratic_fields
-from dolfinx_nnqem.io.run_pictures import PictureDrawer, draw_live_pictures, pictures_enabled
+from dolfinx_nnqem.io.run_pictures import (ALL_PICTURES, PictureDrawer, draw_live_pictures, missing_pictures,
+                                          pictures_enabled)
 from dolfinx_nnqem.io.safe_io import StagedFiles, atomic_write, atomic_write_text, commit, remove_stale_temporaries
 from dolfinx_nnqem.io.vtk_xml import point_cloud_text
 from dolfinx_nnqem.material.kinematics import von_mises_stress
@@ -285,8 +286,10 @@ class SummaryWriter:
 
     def ended(self, status: str, message: str = "") -> None:
         """Record how the run ended when it did not complete ("interrupted", "error"), without
-        waiting for the other ranks."""
-        if self.data.get("status") in ("completed", "not converged"):
+        waiting for the other ranks. An interrupt replaces "completed" and "not converged" too
+        (it came while the run closed or drew its pictures: the command line exits 130 or 143,
+        and the status says why; ``converged`` and ``failure`` stay); an error does not."""
+        if self.data.get("status") in ("completed", "not converged") and status != "interrupted":
             return
         self.data["status"] = status
         if message:
@@ -307,9 +310,11 @@ class SummaryWriter:
         return {"data": self.data}
 
     def resume(self, state: dict) -> None:
+        """Continue from a checkpoint's summary: "running", or "completed" when the checkpoint is
+        of the last increment (nothing is left to solve)."""
         data = dict(state.get("data", {}))
         data.pop("failure", None)
-        data["status"] = "running"
+        data["status"] = "completed" if data.get("converged") else "running"
         self.data.update(data)
         self.t0 -= float(data.get("wall_time_s", 0.0))
 
@@ -399,6 +404,7 @@ class ResultsWriter:
         self.pictures = pictures
         self.picture_worker = picture_worker
         self.drawn: dict = {}  # what close() drew: picture name -> path, or why it was not drawn
+        self.written = 0  #: increments written by this writer (a restart of a completed run: none)
         self._lock = OutputLock(self.folder) if lock else None
 
         def prepare():
@@ -454,6 +460,7 @@ class ResultsWriter:
         if not (self.checkpoint_every and result.index % self.checkpoint_every == 0):
             self.commit()
         self._reserve()
+        self.written += 1
 
     def commit(self) -> None:
         """The increment's commit point (collective): sync, then the staged index files in place."""
@@ -537,26 +544,42 @@ class ResultsWriter:
         self.close()
 
     def close(self) -> None:
-        """Close the files, draw the pictures (see ``pictures``), release the folder's lock."""
-        self._commit_here()  # the last renames made durable too
-        for w in self.writers:
-            if hasattr(w, "close"):
-                w.close()
+        """Close the files, draw the pictures (see ``pictures``), release the folder's lock.
+
+        An interrupt meanwhile (Ctrl-C or SIGTERM while the pictures are drawn) is recorded in
+        ``summary.json`` ("interrupted") and raised; a picture is written whole or not at all
+        (:func:`~dolfinx_nnqem.io.run_pictures.draw_run_pictures`). Then the run's outcome is
+        final (:func:`dolfinx_nnqem.interrupts.end_of_run`)."""
         try:
+            self._commit_here()  # the last renames made durable too
+            for w in self.writers:
+                if hasattr(w, "close"):
+                    w.close()
             self._draw_pictures()
+            if interrupts.received:  # the command line's handler acted, its exception was lost
+                self.ended("interrupted")  # (it is raised again: cli._raise_swallowed_interrupt)
+        except BaseException as error:
+            self.record_end(error)
+            raise
         finally:
+            interrupts.end_of_run()
             self._release()
 
     def _draw_pictures(self) -> None:
-
+        """The run's pictures (collective): all of them after a run that wrote increments; only
+        the missing ones after a restart of a run that had completed (it wrote none)."""
         status = self.summary.data.get("status")
         # only where every rank agrees on how the run ended (drawing is collective): not after
         # an error or an interrupt, which some ranks may not have seen
         if (not pictures_enabled(self.pictures) or status not in ("completed", "not converged")
                 or not self.summary.data.get("load_factors")):
             return
+        names = ALL_PICTURES if self.written else self.problem.comm.bcast(
+            missing_pictures(self.folder) if self.problem.comm.rank == 0 else None, root=0)
+        if not names:
+            return
         self.drawn = draw_live_pictures(self.problem, self.folder, completed=status == "completed",
-                                        step=self._last_field_step(), worker=self.picture_worker)
+                                        step=self._last_field_step(), worker=self.picture_worker, names=names)
 
     def _last_field_step(self) -> dict | None:
         """Collective: on rank 0 the fields of the last increment written, as a picture step

@@ -49,6 +49,7 @@ BLOCKED = ("mpi4py", "petsc4py", "dolfinx", "dolfinx_solver")
 _BOOT = """\
 import signal, sys
 signal.signal(signal.SIGINT, signal.SIG_IGN)
+signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 root = sys.argv[1]
 sys.path[0] = root
 import types
@@ -58,8 +59,9 @@ sys.modules["dolfinx_nnqem"] = package
 from dolfinx_nnqem.io.picture_worker import serve
 serve(sys.argv[2:])
 """
-"""The worker's ``python -c`` program: Ctrl-C ignored, the package found where the run found it,
-and its ``__init__`` (which imports DOLFINx in a user's program) left out."""
+"""The worker's ``python -c`` program: Ctrl-C ignored (and no longer blocked, as the run started
+it), the package found where the run found it, and its ``__init__`` (which imports DOLFINx in a
+user's program) left out."""
 
 _log = logging.getLogger("dolfinx_nnqem")
 
@@ -99,27 +101,28 @@ class _Worker:
         self.role = role
         self.process = process
         self.answered = False  #: it answered its job (it exits at the end of its pipe)
+        self.pictures: Path | None = None  #: the folder its job draws into
 
     @classmethod
     def start(cls, role: str, *, shown: bool, level: int) -> _Worker | None:
-        """Start a worker of ``role``; None where the process cannot be started."""
+        """Start a worker of ``role``; None where the process cannot be started.
+
+        SIGINT is blocked in this thread while the worker starts, never ignored: a Ctrl-C that
+        arrives meanwhile waits, and the run's handler acts on it once the worker has started
+        (with SIGINT ignored for the start, 8 Ctrl-C of 8 sent as soon as the worker existed
+        were lost: the run went on to exit 0). The worker inherits the blocked signal, so it
+        cannot act on a Ctrl-C before its first line, which ignores it (:data:`_BOOT`).
+        """
         root = str(Path(__file__).resolve().parents[2])
         command = [sys.executable, "-c", _BOOT, root, role, str(os.getpid()), "1" if shown else "0", str(level)]
-        previous = signal.getsignal(signal.SIGINT)
-        try:  # SIG_IGN is inherited: the worker ignores Ctrl-C from its start, before its first line
-            if previous is None:  # a handler set outside Python: it could not be put back
-                raise ValueError(previous)
-            signal.signal(signal.SIGINT, signal.SIG_IGN)
-        except ValueError:  # not the main thread: the worker ignores it from its first line
-            previous = None
+        blocked = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
         try:
             process = subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.PIPE, close_fds=True)
         except (OSError, ValueError, subprocess.SubprocessError) as error:  # no usable interpreter
             _log.info(f"picture worker {role}: not started ({error}); the pictures are drawn in the run")
             return None
-        finally:
-            if previous is not None:
-                signal.signal(signal.SIGINT, previous)
+        finally:  # a Ctrl-C received meanwhile is delivered now, to the run's handler
+            signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
         return cls(role, process)
 
     def send(self, job: Mapping[str, Any]) -> bool:
@@ -127,6 +130,9 @@ class _Worker:
         stdin = self.process.stdin
         if stdin is None or self.process.poll() is not None:
             return False
+        from dolfinx_nnqem.io.run_pictures import PICTURE_FOLDER
+
+        self.pictures = Path(job["folder"]) / PICTURE_FOLDER
         try:
             pickle.dump(dict(job), stdin, protocol=pickle.HIGHEST_PROTOCOL)
             stdin.flush()
@@ -158,13 +164,18 @@ class _Worker:
     def stop(self) -> None:
         """End the worker and reap it (no zombie): one that answered exits at its end of file
         (waited for, a second at most); any other is killed at once (a run that failed, or was
-        interrupted while the worker drew, does not wait for it)."""
+        interrupted while the worker drew, does not wait for it), and the temporary of the
+        picture it was drawing is removed (a picture is whole or absent)."""
         self.finish()
         try:
             self.process.wait(timeout=1.0 if self.answered else 0.0)
         except subprocess.TimeoutExpired:
             self.process.kill()
             self.process.wait()
+        if self.pictures is not None and not self.answered:
+            from dolfinx_nnqem.io.safe_io import remove_temporaries_of
+
+            remove_temporaries_of(self.pictures, self.process.pid)
 
 
 class PictureWorkers:

@@ -49,9 +49,11 @@ def read_pairs(folder: str | os.PathLike) -> list[dict]:
 
 
 def _h5py_usable_here() -> bool:
+    if sys.modules.get("dolfinx") is None:  # not loaded, or blocked (a picture worker, which
+        return True  # cannot import compat: it imports DOLFINx)
     from dolfinx_nnqem import compat
 
-    return compat.H5PY_BEFORE_DOLFINX or "dolfinx" not in sys.modules
+    return compat.H5PY_BEFORE_DOLFINX
 
 
 def read_fields(folder: str | os.PathLike, last_only: bool = False) -> list[dict]:

@@ -42,7 +42,7 @@ import os
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
-from collections.abc import Collection, Mapping
+from collections.abc import Callable, Collection, Mapping
 from typing import Any, Protocol
 
 import numpy as np
@@ -53,8 +53,8 @@ from dolfinx_nnqem.io.live_fields import LINEAR_VTK_CELLS
 from dolfinx_nnqem.io.offscreen import PictureUnavailable, offscreen_plotter
 from dolfinx_nnqem.io.reader import read_pairs, read_summary, start_reading_fields
 
-__all__ = ["CONTACT_PICTURE", "PICTURE_FOLDER", "PICTURES", "PictureDrawer", "draw_job", "draw_live_pictures", "draw_run_pictures",
-           "pictures_enabled"]
+__all__ = ["ALL_PICTURES", "CONTACT_PICTURE", "PICTURE_FOLDER", "PICTURES", "PictureDrawer", "draw_job", "draw_live_pictures",
+           "draw_run_pictures", "missing_pictures", "pictures_enabled"]
 
 PICTURE_FOLDER = "pictures"
 PICTURES = ("deformed.png", "pair_pressure.png", "load_curve.png", "convergence.png")
@@ -70,6 +70,28 @@ def pictures_enabled(flag: bool | None = None) -> bool:
     if flag is not None:
         return bool(flag)
     return os.environ.get(ENV_SWITCH, "1").strip().lower() not in ("0", "false", "no", "off")
+
+
+def _whole_picture(path: Path, draw: Callable[[Path], object]) -> Path:
+    """``draw(temporary)`` beside ``path``, then the rename: a picture is whole or absent.
+
+    A SIGKILL or SIGTERM while a picture was drawn left a 0-byte PNG under its name. The
+    temporary (``.NAME.tmp-PID.png``: pyvista and matplotlib read the format from the suffix) is
+    removed on any error or interrupt; a killed process leaves it, and the next run in the
+    folder removes it (:func:`~dolfinx_nnqem.io.safe_io.remove_stale_temporaries`). Errors are
+    raised as the drawing raised them (the reason a picture is not drawn)."""
+    # safe_io's naming (.NAME.tmp-PID), the suffix kept; safe_io itself imports MPI, which a
+    # picture worker cannot
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}{path.suffix}")
+    try:
+        draw(tmp)
+        with open(tmp, "rb+") as fh:  # whole on disk before its name says it is there
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return path
 
 
 def _matplotlib():
@@ -391,7 +413,7 @@ def draw_run_pictures(folder: str | os.PathLike, *, out: str | os.PathLike | Non
 
     def attempt(name, draw, *args, **kwargs):
         try:
-            done[name] = draw(*args, out / name, **kwargs)
+            done[name] = _whole_picture(out / name, lambda path: draw(*args, path, **kwargs))
         except (ValueError, KeyError, OSError, IndexError, PictureUnavailable) as error:  # data missing, no VTK
             done[name] = f"not drawn: {error}"
 
@@ -433,6 +455,16 @@ def draw_run_pictures(folder: str | os.PathLike, *, out: str | os.PathLike | Non
 CONTACT_PICTURE = "contact_pressure.png"
 """The picture of the contact pressure on the deformed bodies' surface (the live problem's)."""
 
+ALL_PICTURES = (*PICTURES, CONTACT_PICTURE)
+"""Every picture the end of a run draws, in their order."""
+
+
+def missing_pictures(folder: str | os.PathLike) -> tuple[str, ...]:
+    """The pictures of :data:`ALL_PICTURES` that ``folder/pictures`` does not hold (a picture
+    there is whole: each is written to a temporary and renamed)."""
+    pictures = Path(folder) / PICTURE_FOLDER
+    return tuple(name for name in ALL_PICTURES if not (pictures / name).is_file())
+
 
 def draw_job(job: Mapping[str, Any]) -> dict[str, Path | str]:
     """Draw the end-of-run pictures a job names, in this process; never raises for a picture.
@@ -469,8 +501,7 @@ def draw_job(job: Mapping[str, Any]) -> dict[str, Path | str]:
         path = folder / PICTURE_FOLDER / CONTACT_PICTURE
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
-            plots.draw_contact_pressure(contact, path)
-            done[CONTACT_PICTURE] = path
+            done[CONTACT_PICTURE] = _whole_picture(path, lambda tmp: plots.draw_contact_pressure(contact, tmp))
         except Exception as error:  # noqa: BLE001  (as above: a picture never ends the run)
             done[CONTACT_PICTURE] = f"not drawn: {type(error).__name__}: {error}"
     return done
@@ -486,7 +517,8 @@ class PictureDrawer(Protocol):
 
 
 def draw_live_pictures(problem, folder: str | os.PathLike, *, completed: bool,
-                       step: dict | None = None, worker: PictureDrawer | None = None) -> dict[str, Path | str]:
+                       step: dict | None = None, worker: PictureDrawer | None = None,
+                       names: Collection[str] = ALL_PICTURES) -> dict[str, Path | str]:
     """The end of a run: :func:`draw_run_pictures` on rank 0 (with the run's last ``step`` of
     the fields, from memory, where it has one), and :data:`CONTACT_PICTURE` of the live problem.
 
@@ -500,18 +532,22 @@ def draw_live_pictures(problem, folder: str | os.PathLike, *, completed: bool,
     rank 0's; None elsewhere): they draw the pictures, with their libraries imported already;
     what a worker could not draw (it died, it could not start) is drawn here. Without one,
     everything is drawn in this process (:func:`draw_job`).
+
+    ``names``: the pictures to draw, of :data:`ALL_PICTURES` (the same on every rank; a restart
+    of a run that had completed draws the missing ones).
     """
 
     folder = Path(folder)
     contact: dict | str | None = None  # rank 0: the data of contact_pressure.png, or why not
-    if problem.has_contact and completed:
+    if CONTACT_PICTURE in names and problem.has_contact and completed:
         try:  # the gathers inside are reached on every rank before anything can fail
             contact = plots.contact_pressure_data(problem)
         except Exception as error:  # noqa: BLE001  (a picture never ends the run)
             contact = f"not drawn: {type(error).__name__}: {error}"
     done: dict[str, Path | str] = {}
     if problem.comm.rank == 0:
-        job = {"folder": folder, "names": PICTURES, "step": step, "contact": contact}
+        job = {"folder": folder, "names": tuple(name for name in PICTURES if name in names), "step": step,
+               "contact": contact}
         done = worker.draw(job) if worker is not None else draw_job(job)
     done = problem.comm.bcast(done, root=0)
     for name, result in done.items():

@@ -27,7 +27,7 @@ from dolfinx_nnqem import interrupts
 from dolfinx_nnqem.collective import agree, on_rank0
 
 __all__ = ["OutputError", "StagedFiles", "atomic_write", "atomic_write_text", "commit", "fsync_directory",
-           "remove_stale_temporaries", "sync_file_system"]
+           "remove_stale_temporaries", "remove_temporaries_of", "sync_file_system"]
 
 
 class OutputError(OSError):
@@ -188,6 +188,21 @@ def commit(comm, folder: str | os.PathLike, *staged: StagedFiles) -> None:
             files.replace_all()
 
     on_rank0(comm, replace)
+
+
+def remove_temporaries_of(folder: str | os.PathLike, pid: int) -> list[Path]:
+    """Remove the temporaries that process ``pid`` left in ``folder`` (not below it): a picture
+    worker the run killed while it drew (:mod:`dolfinx_nnqem.io.picture_worker`)."""
+    removed: list[Path] = []
+    folder = Path(folder)
+    for pattern in (f".*.tmp-{pid}", f".*.tmp-{pid}.*", f".*.tmp-{pid}-staged"):
+        for tmp in folder.glob(pattern):
+            try:
+                tmp.unlink()
+                removed.append(tmp)
+            except OSError:  # a folder of that name, or gone meanwhile
+                pass
+    return removed
 
 
 def remove_stale_temporaries(folder: str | os.PathLike) -> list[Path]:
