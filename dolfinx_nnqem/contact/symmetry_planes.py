@@ -122,6 +122,9 @@ def overconstraining(R: np.ndarray, candidates: np.ndarray, rows: tuple[np.ndarr
                      free: np.ndarray) -> np.ndarray:
     """(n, 3) bool: the ``candidates`` directions whose rows, on the free dofs, are dependent.
 
+    Each connected group of candidate rows (rows sharing a free dof) whose matrix has rank below
+    its number of rows (:data:`DEPENDENT`) is returned whole.
+
     Parameters
     ----------
     R
@@ -133,9 +136,6 @@ def overconstraining(R: np.ndarray, candidates: np.ndarray, rows: tuple[np.ndarr
         direction d of pair j is Σ_i coefficient_i R[j, d] ⊗ e_node_i.
     free
         (nodes, 3) bool: the free dofs of every node ``rows`` names.
-
-    Each connected group of candidate rows (rows sharing a free dof) whose matrix has rank below
-    its number of rows (:data:`DEPENDENT`) is returned whole.
     """
     pair, direction = np.nonzero(candidates)
     out = np.zeros_like(candidates)
