@@ -9,6 +9,7 @@ reported with their scaled Jacobian s and Jacobian ratio ρ.
 """
 
 import logging
+import re
 import sys
 from pathlib import Path
 
@@ -54,6 +55,18 @@ def _node_near(mesh, ct, point, *, vertex: bool, inside: bool = True) -> int:
     return int(nodes[np.argmin(np.linalg.norm(x[nodes] - point, axis=1))])
 
 
+def _named_cells(message: str) -> tuple[int, list[int]]:
+    """The count and the input indices a refusal names."""
+    count = int(re.search(r"has (\d+) inverted cell\(s\)", message).group(1))
+    return count, [int(i) for i in re.findall(r"input cell (\d+)", message)]
+
+
+def _holding(mesh, node: int) -> np.ndarray:
+    """The input indices of the cells whose geometry holds ``node``."""
+    cells = np.flatnonzero(np.any(compat.geometry_dofmap(mesh) == node, axis=1))
+    return mesh.topology.original_cell_index[cells]
+
+
 # -- the measures on reference cells ----------------------------------------------------------------
 @pytest.mark.parametrize("cell", ["tetrahedron", "hexahedron"])
 def test_a_mid_edge_node_moving_to_the_quarter_point(cell):
@@ -79,15 +92,15 @@ def test_a_mid_edge_node_moving_to_the_quarter_point(cell):
 
 
 # -- refused: inverted cells ------------------------------------------------------------------------
-@pytest.mark.parametrize("cell_type, order, point, shift, cells", [
-    ("tetrahedron", 2, (0.5, 0.75, 0.5), 0.3, 3), ("hexahedron", 2, (0.5, 0.75, 0.5), 0.3, 2),
-    ("tetrahedron", 1, (1.0, 0.75, 0.5), -0.5, None), ("hexahedron", 1, (0.5, 0.75, 0.5), 0.5, None)])
-def test_inverted_cells_are_refused_naming_them(cell_type, order, point, shift, cells):
+@pytest.mark.parametrize("cell_type, order, point, shift", [
+    ("tetrahedron", 2, (0.5, 0.75, 0.5), 0.3), ("hexahedron", 2, (0.5, 0.75, 0.5), 0.3),
+    ("tetrahedron", 1, (1.0, 0.75, 0.5), -0.5), ("hexahedron", 1, (0.5, 0.75, 0.5), 0.5)])
+def test_inverted_cells_are_refused_naming_them(cell_type, order, point, shift):
     """A node of body 2 moved along x across its cells (they are 1/3 wide): an interior mid-edge
     (tetrahedra) or mid-face (hexahedra) node of a second-order mesh, a vertex of a first-order
     one (for the unstructured tetrahedra, which have no interior vertex here, one on the face
-    x = 1, moved 0.5 into the body). It used to be accepted (the second-order tetrahedra solved to
-    the end with a changed contact force)."""
+    x = 1, moved 0.5 into the body). Every cell named holds the moved node. It used to be accepted
+    (the second-order tetrahedra solved to the end with a changed contact force)."""
     mesh, ct, ft = blocks(cell_type, order)
     k = _node_near(mesh, ct, point, vertex=order == 1, inside=point[0] < 1.0)
     mesh.geometry.x[k, 0] += shift
@@ -95,9 +108,9 @@ def test_inverted_cells_are_refused_naming_them(cell_type, order, point, shift, 
         pressed_blocks(mesh, ct, ft)
     message = str(error.value)
     print(f"\n  {cell_type}, order {order}: {message}")
-    assert "inverted cell(s)" in message and "input cell" in message and "cell tag 2" in message
-    if cells is not None:
-        assert f"has {cells} inverted cell(s)" in message
+    count, named = _named_cells(message)
+    assert "cell tag 2" in message and 1 <= len(named) == min(count, 5)
+    assert set(named) <= set(_holding(mesh, k).tolist()) and count <= len(_holding(mesh, k))
 
 
 @pytest.mark.parametrize("cell_type", ["tetrahedron", "hexahedron"])
@@ -115,7 +128,9 @@ def test_an_inverted_cell_on_a_contact_surface_is_named_not_the_other_body(cell_
         pressed_blocks(mesh, ct, ft)
     message = str(error.value)
     print(f"\n  {cell_type}: {message}")
-    assert "inverted cell(s)" in message and "cell tag 2" in message and "overlapping" not in message
+    count, named = _named_cells(message)
+    assert "cell tag 2" in message and "overlapping" not in message
+    assert 1 <= count and set(named) <= set(_holding(mesh, k).tolist())
 
 
 # -- reported: badly shaped cells --------------------------------------------------------------------
@@ -192,7 +207,7 @@ def test_the_command_line_refuses_an_inverted_cell_with_exit_3(tmp_path, capsys)
     err = capsys.readouterr().err.strip()
     print(f"\n  undistorted: exit {good}; distorted: exit {code}: {err}")
     assert good == EXIT_OK and code == EXIT_BAD_INPUT
-    assert "bad input: the mesh has 3 inverted cell(s)" in err and "Traceback" not in err
+    assert "bad input: the mesh has" in err and "inverted cell(s)" in err and "Traceback" not in err
 
 
 @pytest.mark.mpi
@@ -208,4 +223,4 @@ def test_two_ranks_refuse_an_inverted_cell_alike(tmp_path, capsys):
     print(f"\n  2 ranks: exit {run.returncode}: {lines}")
     assert serial == EXIT_BAD_INPUT
     assert run.returncode == EXIT_BAD_INPUT and len(lines) == 1
-    assert "the mesh has 3 inverted cell(s)" in lines[0] and lines[0] == serial_line
+    assert "inverted cell(s)" in lines[0] and lines[0] == serial_line
