@@ -77,7 +77,7 @@ def discretise(V, facet_tags, surface1: int, surface2: int, discretisation: str 
         Node-to-node only.
     supported
         Node-to-surface and mortar: V's local dofs, non-zero at prescribed ones; slave normals on
-        symmetry planes are moved into the plane (:func:`~dolfinx_nnqem.contact.surfaces.symmetry_normals`).
+        symmetry planes of the interface are moved into the plane (:mod:`~dolfinx_nnqem.contact.symmetry_planes`).
     """
     if discretisation not in DISCRETISATIONS:
         raise ValueError(f"discretisation = {discretisation!r}; expected one of {', '.join(DISCRETISATIONS)}")

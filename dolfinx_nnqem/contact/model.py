@@ -42,7 +42,8 @@ from dolfinx_nnqem.contact.geometric_stiffness import GeometricTerms, no_terms, 
 from dolfinx_nnqem.contact.discretisation import DISCRETISATIONS, OBSTACLE_DISCRETISATIONS, discretise
 from dolfinx_nnqem.contact.pairset import PairRows, PairSet, rows_matrix
 from dolfinx_nnqem.contact.slip_check import Slip, facet_size_of, slipped_interfaces
-from dolfinx_nnqem.contact.surfaces import ContactPairError, NoPairsError, mesh_tolerance, owned_supports, space_degree
+from dolfinx_nnqem.contact.surface_pairs import SurfacePairs
+from dolfinx_nnqem.contact.surfaces import ContactPairError, NoPairsError, mesh_tolerance, space_degree
 from dolfinx_nnqem.contact.current_geometry import (GEOMETRIES, MortarTracker, ObstacleTracker, SurfaceTracker,
                                                     remapper, surface_tracker)
 from dolfinx_nnqem.numerics.ranges import check_magnitude
@@ -563,30 +564,27 @@ class ContactModel:
         out = y.getArray(readonly=True).reshape(-1, 3) == 0.0
         for obj in (M, free, y):
             obj.destroy()
-        with constrained_dofs.localForm() as c:
-            supported = c.array
-            for interface in self.interfaces:
-                if interface.pairs.pins_supported_slave_tangents:
-                    out[interface.local] |= self._supported_slave_tangents(interface.pairs, supported)
+        for interface in self.interfaces:
+            if interface.pairs.pins_supported_slave_tangents:
+                out[interface.local] |= self._supported_slave_tangents(interface.pairs)
         return out
 
-    def _supported_slave_tangents(self, pairs: PairSet, supported: np.ndarray) -> np.ndarray:
-        """(num_local, 3) bool: tangential directions t1, t2 lying in the span of the slave node's
-        prescribed components.
+    def _supported_slave_tangents(self, pairs: PairSet) -> np.ndarray:
+        """(num_local, 3) bool: the pair directions a support holds (node-to-surface and mortar).
 
-        Node-to-surface and mortar rows couple a slave node to several master nodes, so the
-        friction forces of slave nodes held tangentially by a support (a symmetry plane crossing
-        the interface) may combine into forces that act on the supports alone: a null space of the
-        multipliers and a singular Newton matrix. The support carries those components; the
-        contact force there is pinned to zero (``docs/theory.md``). The normal direction is never
-        pinned this way: a supported slave node still keeps the master out.
+        Such rows couple a slave node to several master nodes, so the friction forces of slave
+        nodes held tangentially by a symmetry plane crossing the interface may combine into forces
+        that act on the supports alone: a null space of the multipliers and a singular Newton
+        matrix. The support carries those components; the contact force there is pinned to zero
+        (``docs/theory.md``). Which directions: :mod:`~dolfinx_nnqem.contact.symmetry_planes` (the
+        symmetry planes of the interface, and supports of the slave side alone only where their
+        rows would over-constrain the master). The normal direction is never pinned this way: a
+        supported slave node still keeps the master out.
         """
-        flags = owned_supports(self.V, supported, pairs.slave_blocks)  # (n, 3) owned slaves
-        # a direction t lies in the span of the prescribed axes when its free components vanish
-        free_part = np.abs(pairs.R[:, 1:, :]) * ~flags[:, None, :]
-        out = np.zeros((pairs.num_local, 3), dtype=bool)
-        out[:, 1:] = np.all(free_part <= 1e-12, axis=2) & np.any(flags, axis=1)[:, None]
-        return out
+        assert isinstance(pairs, SurfacePairs)  # the one pair set that pins supported slave tangents
+        if pairs.support_pinned is None:  # built without knowing the supports
+            return np.zeros((pairs.num_local, 3), dtype=bool)
+        return pairs.support_pinned
 
     # -- sizes and parallel helpers ------------------------------------------------------------
     @property

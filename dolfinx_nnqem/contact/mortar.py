@@ -35,9 +35,11 @@ Documented choices:
   is fully covered.
 * Crosspoints and slave nodes on supported edges keep their pairs like any other node; a pair
   direction whose every dof is prescribed is pinned by the contact model (``ContactLaw.pin``).
-  The averaged normal of a slave node on a symmetry plane is moved into the plane (the facets
-  on the plane's other side are not modelled; :func:`~dolfinx_nnqem.contact.surfaces.symmetry_normals`),
-  so that its frame holds the supported axis exactly and that friction direction is pinned.
+  The averaged normal of a slave node on a symmetry plane of the interface (the master held on
+  it too) is moved into the plane (the facets on the plane's other side are not modelled;
+  :mod:`~dolfinx_nnqem.contact.symmetry_planes`), so that its frame holds the supported axis
+  exactly and that friction direction is pinned; a support of the slave side alone changes
+  neither.
 * A master surface that overlaps itself in projection (coverage > 1, a folded or two-sided
   master) is refused.
 """

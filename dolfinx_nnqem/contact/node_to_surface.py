@@ -67,7 +67,7 @@ def node_to_surface_pairs(V, surfaces: GatheredSurfaces, *, tolerance: float, se
         Extra words for the pair set's ``describe``.
     supported
         Laid out like V's local dofs, non-zero at prescribed ones (None: no support is known): the
-        normals of slave nodes on symmetry planes lie in the plane (:func:`surface_pairs`).
+        normals of slave nodes on symmetry planes of the interface lie in the plane (:func:`surface_pairs`).
     edge_allowance
         Slave nodes whose closest point lies up to this far beyond the master's boundary still get
         a pair (default: ``tolerance``). The current geometry allows a fraction of the facet size,

@@ -30,7 +30,8 @@ from mpi4py import MPI
 from dolfinx_nnqem.contact.pairs import owned_by_slave
 from dolfinx_nnqem.contact.pairset import PairRows
 from dolfinx_nnqem.contact.surfaces import (ContactPairError, Facets, GatheredSurfaces, first_by_position,
-                                            format_point, local_frames, owned_supports, symmetry_normals)
+                                            format_point, local_frames)
+from dolfinx_nnqem.contact.symmetry_planes import IN_PLANE, support_rules
 
 __all__ = ["MAX_INTERFERENCE", "SurfacePairs", "facet_size", "surface_pairs"]
 
@@ -92,6 +93,9 @@ class SurfacePairs:
     note: str = ""
     pins_supported_slave_tangents: bool = True  #: see ContactModel._supported_slave_tangents
     master_facet: np.ndarray | None = None  #: node-to-surface: (num_local,) the gathered master facet of each pair
+    support_pinned: np.ndarray | None = None
+    """(num_local, 3) bool: pair directions a support holds, pinned by the contact model
+    (:mod:`~dolfinx_nnqem.contact.symmetry_planes`); None: no support was known."""
 
     def motion(self, load_factor: float) -> np.ndarray:
         """Zero: both sides are deformable, their motion is in u."""
@@ -178,7 +182,8 @@ def surface_pairs(V, kind: str, tags: tuple[int, int], slave_index: np.ndarray, 
         See :class:`SurfacePairs`.
     supported
         Laid out like V's local dofs, non-zero at prescribed ones: the normals of slave nodes on
-        symmetry planes are moved into the plane (:func:`~dolfinx_nnqem.contact.surfaces.symmetry_normals`).
+        symmetry planes of the interface are moved into the plane
+        (:mod:`~dolfinx_nnqem.contact.symmetry_planes`, :func:`~dolfinx_nnqem.contact.surfaces.symmetry_normals`).
         None: the normals as given.
     slave_rows
         The slave side of each pair's row as CSR over the p slave nodes (indptr, global dof blocks,
@@ -193,33 +198,52 @@ def surface_pairs(V, kind: str, tags: tuple[int, int], slave_index: np.ndarray, 
     order = np.lexsort((X_slave[:, 2], X_slave[:, 1], X_slave[:, 0]))
     mine, offset, num_global = owned_by_slave(V.mesh.comm, V.dofmap.index_map, slave_index[order])
     local = order[mine]
-    counts = np.diff(master_indptr)[local]
-    indptr = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-    # entries of the kept rows of the CSR arrays, in the new row order
-    take = np.repeat(master_indptr[local] - indptr[:-1], counts) + np.arange(indptr[-1])
+    indptr, take, (nodes_indptr, nodes, coefficients) = _pair_nodes(local, slave_index, slave_rows, master_indptr,
+                                                                     master_index, weights)
     masters, c = master_index[take], weights[take]
-    pair = np.repeat(np.arange(len(local)), counts)
+    pair = np.repeat(np.arange(len(local)), np.diff(indptr))
     X_master = np.zeros((len(local), 3))
     np.add.at(X_master, pair, c[:, None] * X_master_nodes[take])
+    pinned = None
+    if supported is not None:  # every pair, on every rank: the rules look at supported edges as a whole
+        every = np.arange(len(slave_index))
+        rules = support_rules(V, supported, slave_index, X_slave, normal, master_indptr, master_index,
+                              X_master_nodes, _pair_nodes(every, slave_index, slave_rows, master_indptr, master_index,
+                                                          weights)[2], IN_PLANE * master_size)
+        normal, pinned = rules.normal, rules.pinned[local]
+        note += rules.note
     normal = normal[local]
-    if supported is not None:
-        normal = symmetry_normals(normal, owned_supports(V, supported, slave_index[local]))
     R = local_frames(normal) if len(local) else np.zeros((0, 3, 3))
-    if slave_rows is None:
-        # the pair's nodes: the slave node with coefficient 1, then the master nodes with −c_jk
-        nodes_indptr = indptr + np.arange(len(local) + 1)
-        nodes = np.empty(len(take) + len(local), dtype=np.int64)
-        coefficients = np.empty(len(nodes))
-        slave_at = nodes_indptr[:-1]
-        nodes[slave_at], coefficients[slave_at] = slave_index[local], 1.0
-        rest = np.setdiff1d(np.arange(len(nodes)), slave_at)
-        nodes[rest], coefficients[rest] = masters, -c
-    else:
-        nodes_indptr, nodes, coefficients = _joined_rows(slave_rows, local, indptr, masters, c)
     return SurfacePairs(
         comm=V.mesh.comm, kind=kind, master=int(tags[0]), slave=int(tags[1]), num_local=len(local),
         num_global=num_global, offset=offset, slave_blocks=slave_index[local], master_indptr=indptr,
         master_blocks=masters, weights=c, X_slave=X_slave[local], X_master=X_master, R=R, g0=g0[local],
         area=area[local], rows=PairRows.from_weighted_nodes(R, nodes_indptr, nodes, coefficients),
         num_slave_nodes=int(num_slave_nodes), note=note, master_facet=None if facet is None else facet[local],
+        support_pinned=pinned,
     )
+
+
+def _pair_nodes(selection: np.ndarray, slave_index: np.ndarray,
+                slave_rows: tuple[np.ndarray, np.ndarray, np.ndarray] | None, master_indptr: np.ndarray,
+                master_index: np.ndarray, weights: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """The pairs ``selection`` (indices of the slave nodes with a pair), in that order: the CSR
+    pointer of their master entries, those entries' positions in ``master_index`` (``take``), and
+    each pair's nodes as CSR (global dof blocks and coefficients: the slave side, then the master
+    nodes with −c_jk)."""
+    counts = np.diff(master_indptr)[selection]
+    indptr = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    take = np.repeat(master_indptr[selection] - indptr[:-1], counts) + np.arange(indptr[-1])
+    masters, c = master_index[take], weights[take]
+    if slave_rows is not None:
+        return indptr, take, _joined_rows(slave_rows, selection, indptr, masters, c)
+    # the slave node with coefficient 1, then the master nodes with −c_jk
+    nodes_indptr = indptr + np.arange(len(selection) + 1)
+    nodes = np.empty(len(take) + len(selection), dtype=np.int64)
+    coefficients = np.empty(len(nodes))
+    slave_at = nodes_indptr[:-1]
+    nodes[slave_at], coefficients[slave_at] = slave_index[selection], 1.0
+    rest = np.setdiff1d(np.arange(len(nodes)), slave_at)
+    nodes[rest], coefficients[rest] = masters, -c
+    return indptr, take, (nodes_indptr, nodes, coefficients)

@@ -43,6 +43,7 @@ from dolfinx_nnqem.contact.surfaces import ContactPairError
 from dolfinx_nnqem.contact.obstacles import Cylinder, Plane, Sphere  # noqa: F401  (the user's imports)
 from dolfinx_nnqem.material.interface import GaussPointValues
 from dolfinx_nnqem.material.state import material_state
+from dolfinx_nnqem.problem.mesh_quality import check_cells
 from dolfinx_nnqem.problem.validation import check_cell_tag, check_magnitude, check_mesh
 from dolfinx_nnqem.numerics.linalg import vec_norm
 
@@ -129,7 +130,8 @@ class ContactProblem:
     Raises
     ------
     ValueError
-        For unphysical or inconsistent data, and when a body can move rigidly without
+        For unphysical or inconsistent data, inverted cells (the message names them;
+        :mod:`~dolfinx_nnqem.problem.mesh_quality`), and when a body can move rigidly without
         resistance (no support and no contact against some rigid motion; the message names the
         body and the motion).
     """
@@ -161,6 +163,9 @@ class ContactProblem:
                 raise TypeError(f"contact: {c!r} is not a Contact")
         if quadrature_degree is None:
             quadrature_degree = 2 * degree  # 2×2×2 Gauss points for Q1, 3×3×3 for Q2
+        # before anything is built on the mesh: an inverted cell is named as such, not by its symptoms
+        self.mesh_quality = check_cells(mesh, cell_tags, quadrature_degree)
+        """The shape check of every cell (:class:`~dolfinx_nnqem.problem.mesh_quality.CellQuality`)."""
         self.mesh, self.cell_tags, self.facet_tags = mesh, cell_tags, facet_tags
         self.comm = mesh.comm
         self.V = fem.functionspace(mesh, ("Lagrange", degree, (3,)))
