@@ -259,7 +259,7 @@ def _run_adaptive(args, spec, problem, method: str, increments, options, method_
     result = solve_adaptively(problem, run_cycle, method, settings.target_error, max_cycles=settings.max_cycles,
                               fraction=settings.refine_fraction, quantities=settings.quantities,
                               probes=probe_points(spec.output["probes"] or None), options=options,
-                              method_options=method_options, on_cycle=progress)
+                              method_options=method_options, on_cycle=progress, enrichment=settings.enrichment)
     summary = writers[-1].summary
     record_estimates(summary.data, result.cycles[-1].estimates)
     summary.data["adaptivity"] = result.as_dict(settings.target_error)

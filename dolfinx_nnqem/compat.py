@@ -204,15 +204,14 @@ def optimize_tetrahedra() -> str:
 def refine_mesh(mesh, edges: np.ndarray | None = None):
     """Plaza refinement of a simplex mesh -> ``(mesh, parent_cell, parent_facet)``.
 
-    ``edges``: local indices of the edges to split (None: uniform refinement). The refined cells
-    stay on the rank of their parent (no redistribution: the parent maps index this rank's
-    cells). 0.10+ keeps the ghost layer with its default (identity) partitioner; 0.9 takes
-    ``partitioner=None`` for the same.
+    ``edges``: local indices of the edges to split (None: uniform refinement). ``partitioner=None``
+    on both stacks: the refined cells stay on the rank of their parent, without ghost cells, as the
+    package's meshes are made (gmsh's, unghosted), so that the parent maps index every local cell
+    and the tags carry to all of them (0.10+'s default partitioner adds a ghost layer whose cells
+    the parent maps do not cover).
     """
     option = dolfinx.mesh.RefinementOption.parent_cell_and_facet
     mesh.topology.create_entities(1)
-    if _NEW:
-        return dolfinx.mesh.refine(mesh, edges, option=option)
     return dolfinx.mesh.refine(mesh, edges, partitioner=None, option=option)
 
 

@@ -37,8 +37,8 @@ from test_obstacles import A_NOMINAL, E_STAR, R_SPHERE, sphere_problem  # noqa: 
 from test_thick_cylinder import A, MATERIAL, cylinder_problem, limit_pressure  # noqa: E402
 
 TIP = "beam1 x=2.0 y=0.0 z=0.0"
-TIP_CONVERGED = np.array([-1.3950e-3, 5.290e-4])  # (u_y, u_z) m: docs/error-estimates.md, "Two beams"
-CYLINDER_CONVERGED = {"u_inner": 7.107e-3, "max_p": 5.45e-3}  # docs/error-estimates.md, "Thick cylinder"
+TIP_CONVERGED = np.array([-1.3927e-3, 5.286e-4])  # (u_y, u_z) m: docs/error-estimates.md, "Two beams"
+CYLINDER_CONVERGED = {"u_inner": 7.107e-3, "max_p": 5.444e-3}  # docs/error-estimates.md, "Thick cylinder"
 
 
 def solved(problem, method="monolithic", increments=1, options=None):
@@ -52,7 +52,7 @@ def effectivity(estimate: float, value: float, reference: float) -> float:
 
 
 # -- effectivity -------------------------------------------------------------------------------------
-@pytest.mark.parametrize("method, law", [("monolithic", "alart-curnier"), ("nneqm1", "alart-curnier")])
+@pytest.mark.parametrize("method, law", [("monolithic", "alart-curnier"), ("nneqm1", "polar")])
 def test_two_beams_seed_mesh_deflection_effectivity(method, law):
     """The seed mesh's free-end deflection is about 16 % short; degree 2 on the same mesh says by how much."""
     problem = two_beams_problem(law=law)
@@ -67,6 +67,11 @@ def test_two_beams_seed_mesh_deflection_effectivity(method, law):
           f"{est.dofs} -> {est.enriched_dofs} dofs, enriched solver {est.enriched_solver}")
     assert np.all((0.5 <= eff) & (eff <= 2.0))
     assert 0.10 < true[0] / abs(TIP_CONVERGED[0]) < 0.20  # the issue's 16 %
+    if est.note is not None:  # NNEQM1 with the polar law does not converge on the degree-2 beams (measured)
+        print(f"  note: {est.note}")
+        assert est.enriched_solver == "monolithic" and method in est.note
+    else:
+        assert est.enriched_solver == method
 
 
 def test_hertz_contact_radius_and_peak_pressure_effectivity():

@@ -91,7 +91,7 @@ def solve_adaptively(problem: ContactProblem, run: RunCycle, method: str, target
                      max_cycles: int = 6, fraction: float = 0.5, quantities: Sequence[str] | None = None,
                      probes: ProbePoints | None = None, options=None, method_options: dict | None = None,
                      on_cycle: Callable[[AdaptiveCycle], None] | None = None,
-                     extra: Measure | None = None) -> AdaptiveResult:
+                     extra: Measure | None = None, enrichment: str = "auto") -> AdaptiveResult:
     """Refine ``problem``'s tetrahedral mesh until the estimated error is at most ``target_error``.
 
     Parameters
@@ -114,6 +114,8 @@ def solve_adaptively(problem: ContactProblem, run: RunCycle, method: str, target
         Called with each :class:`AdaptiveCycle` (progress lines).
     extra
         Further quantities of the caller's (:data:`~dolfinx_nnqem.estimates.quantities.Measure`).
+    enrichment
+        The enriched solve of each cycle (:data:`~dolfinx_nnqem.estimates.enriched.ENRICHMENTS`).
     """
     target_error = check_target_error(target_error)
     check_refinable(problem.mesh)
@@ -125,7 +127,8 @@ def solve_adaptively(problem: ContactProblem, run: RunCycle, method: str, target
         load_factors = run(problem, index)
         elapsed = time.perf_counter() - t0
         estimates = estimate_errors(problem, method, load_factors, probes=probes, options=options,
-                                    method_options=method_options, run_time_s=elapsed, extra=extra)
+                                    method_options=method_options, run_time_s=elapsed, extra=extra,
+                                    enrichment=enrichment)
         indicator = RecoveryIndicator(problem)
         indicator.update()
         cells = problem.mesh.topology.index_map(3).size_global

@@ -376,7 +376,8 @@ def draw_run_pictures(folder: str | os.PathLike, *, out: str | os.PathLike | Non
     -------
     dict
         Per picture name of ``names`` (in the order of :data:`PICTURES`), its path, or the reason
-        it was not drawn (a string).
+        it was not drawn (a string). The pictures of what the run did not make are left out:
+        ``error_estimates.png`` without an estimate, ``error_indicator.png`` without that field.
     """
 
     unknown = set(names) - set(PICTURES)
@@ -421,7 +422,7 @@ def draw_run_pictures(folder: str | os.PathLike, *, out: str | os.PathLike | Non
             attempt("load_curve.png", draw_load_curve, summary, title=title)
         if "convergence.png" in names:
             attempt("convergence.png", draw_convergence, summary, title=title)
-        if ESTIMATE_PICTURE in names:
+        if ESTIMATE_PICTURE in names and "error_estimates" in summary:  # (a run without estimates: none)
             attempt(ESTIMATE_PICTURE, draw_error_estimates, summary, title=title)
     finally:  # the reading process is waited for whatever happened
         try:
@@ -432,12 +433,13 @@ def draw_run_pictures(folder: str | os.PathLike, *, out: str | os.PathLike | Non
         last = steps[-1] if step is not None else _with_quadratic_displacement(folder, steps[-1])
         if "deformed.png" in names:
             attempt("deformed.png", draw_deformed, last, rows, title=title, scale=scale, field=field, camera=camera)
-        if "error_indicator.png" in names:
+        if "error_indicator.png" in names and "error_indicator" in last:  # (written by the command line)
             attempt("error_indicator.png", draw_deformed, last, rows, title=title, scale=scale,
                     field="error_indicator", camera=camera)
-    for name in ("deformed.png", "error_indicator.png"):
-        done.setdefault(name, "not drawn: no fields (the run was made with fields = false)")
-    return {name: done[name] for name in names}
+    else:
+        for name in ("deformed.png", "error_indicator.png"):
+            done.setdefault(name, "not drawn: no fields (the run was made with fields = false)")
+    return {name: done[name] for name in names if name in done}
 
 
 CONTACT_PICTURE = "contact_pressure.png"
