@@ -128,9 +128,10 @@ if rank0:
         ax.annotate(f"degree {r[0]}, h = 0.2/{r[1]} m\n{100 * r[5]:.2g} %", (r[2], r[3]), textcoords="offset points",
                     xytext=(8, -4), fontsize=8)
     ax.set_xscale("log")
+    ax.set_xlim(min(dofs) / 1.5, 4 * max(dofs))
     ax.set_xlabel("displacement dofs")
     ax.set_ylabel("u_y (mm)")
-    ax.legend(fontsize=8, loc="lower right")
+    ax.legend(fontsize=8, loc="upper right")
     ax.grid(True, alpha=0.3)
     fig.tight_layout()
     fig.savefig(out / "error_bars.png", dpi=120)
