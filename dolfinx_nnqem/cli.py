@@ -238,6 +238,7 @@ def _run_adaptive(args, spec, problem, method: str, increments, options, method_
     from dolfinx_nnqem.estimates.quantities import probe_points
     from dolfinx_nnqem.estimates.report import format_estimates, record_estimates
     from dolfinx_nnqem.io.run_pictures import draw_run_pictures
+    from dolfinx_nnqem.problem_file import check_options
     from dolfinx_nnqem.solvers.registry import make_solver
 
     settings = args.estimate_settings
@@ -259,7 +260,8 @@ def _run_adaptive(args, spec, problem, method: str, increments, options, method_
     result = solve_adaptively(problem, run_cycle, method, settings.target_error, max_cycles=settings.max_cycles,
                               fraction=settings.refine_fraction, quantities=settings.quantities,
                               probes=probe_points(spec.output["probes"] or None), options=options,
-                              method_options=method_options, on_cycle=progress, enrichment=settings.enrichment)
+                              method_options=method_options, on_cycle=progress, enrichment=settings.enrichment,
+                              check=check_options(spec))
     summary = writers[-1].summary
     record_estimates(summary.data, result.cycles[-1].estimates)
     summary.data["adaptivity"] = result.as_dict(settings.target_error)
@@ -327,7 +329,7 @@ def _solve_problem_file(args, spec, problem, solver, method: str, increments, wo
         settings = getattr(args, "estimate_settings", None)
         if estimate is not None and settings is not None and settings.enabled:
             found = estimate_into_writer(writer, problem, method, settings, probes=spec.output["probes"] or None,
-                                         options=estimate[0], method_options=estimate[1])
+                                         options=estimate[0], method_options=estimate[1], check=check_options(spec))
             if found is not None and problem.comm.rank == 0 and not args.quiet:
                 print(format_estimates(found), flush=True)
     except BaseException as error:  # noqa: BLE001  (re-raised: the summary says how the run ended)

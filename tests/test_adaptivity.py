@@ -19,14 +19,21 @@ from dolfinx_nnqem.estimates import read_quantities, rebuild_problem, refine_mes
 from dolfinx_nnqem.estimates.adaptive import solve_adaptively
 from dolfinx_nnqem.problem.meshing import BlockStackTags as T
 from dolfinx_nnqem.solvers import make_solver, solve_load_steps
+from dolfinx_nnqem.solvers.checks import CheckOptions
 
 E_STAR = effective_modulus(HERTZ_MATERIAL.E, HERTZ_MATERIAL.nu)
 HERTZ = hertz_quantities(T.top(1), A_HERTZ)
 
 
-def solve(problem, increments=1):
+def solve(problem, increments=1, check=None):
     with make_solver("monolithic", problem) as solver:
-        return [r.load_factor for r in solve_load_steps(problem, solver, increments)]
+        return [r.load_factor for r in solve_load_steps(problem, solver, increments, check=check)]
+
+
+STEP42_CHECK = CheckOptions(max_strain=None, max_rotation=None)
+"""step-42 is a small-strain model whose strains at the ball's edge pass 10 % on fine meshes (a
+contact edge on a material with 1 % hardening): its setting, not a collapse, so the package's
+small-strain limit is lifted for it."""
 
 
 def hertz_errors(problem) -> tuple[int, float, float]:
@@ -93,17 +100,17 @@ def test_step42_sphere_on_an_elastoplastic_cube_adaptive_and_uniform():
     forces = []
 
     def run(problem, cycle):
-        factors = solve(problem, 4)
+        factors = solve(problem, 4, STEP42_CHECK)
         forces.append((problem.V.dofmap.index_map.size_global * 3,
                        4 * abs(read_quantities(problem)["contact:ball"][1])))
         return factors
 
     result = solve_adaptively(step42_problem(4), run, "monolithic", 0.005, max_cycles=5, quantities=["contact"],
-                              enrichment="refine")
+                              enrichment="refine", check=STEP42_CHECK)
     uniform = []
     problem = step42_problem(4)
     for level in range(3):
-        solve(problem, 4)
+        solve(problem, 4, STEP42_CHECK)
         uniform.append((problem.V.dofmap.index_map.size_global * 3,
                         4 * abs(read_quantities(problem)["contact:ball"][1])))
         if level < 2:

@@ -2,6 +2,7 @@
 ``run --estimate``, ``run --target-error``): what the run prints and writes, and what it refuses."""
 
 import json
+import re
 
 import pytest
 from mpi4py import MPI
@@ -96,9 +97,9 @@ def test_adaptive_run_from_a_problem_file_refines_until_the_target(tmp_path, cap
 
 
 @pytest.mark.parametrize("table, message", [
-    ("target_error = 1.5", "target_error = 1.5: a relative error in (0, 1)"),
+    ("target_error = 1.5", re.escape("target_error = 1.5: a relative error in (0, 1)")),
     ("enrichment = 'p3'", "enrichment = 'p3'"),
-    ("quantities = []", "quantities = \\[\\]"),
+    ("quantities = []", re.escape("quantities = []")),
     ("enabled = 1", "enabled must be true or false"),
     ("max_cycles = 0", "max_cycles = 0"),
     ("refine_fraction = 2.0", "refine_fraction = 2.0"),

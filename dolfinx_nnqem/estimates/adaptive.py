@@ -91,7 +91,7 @@ def solve_adaptively(problem: ContactProblem, run: RunCycle, method: str, target
                      max_cycles: int = 6, fraction: float = 0.5, quantities: Sequence[str] | None = None,
                      probes: ProbePoints | None = None, options=None, method_options: dict | None = None,
                      on_cycle: Callable[[AdaptiveCycle], None] | None = None,
-                     extra: Measure | None = None, enrichment: str = "auto") -> AdaptiveResult:
+                     extra: Measure | None = None, enrichment: str = "auto", check=None) -> AdaptiveResult:
     """Refine ``problem``'s tetrahedral mesh until the estimated error is at most ``target_error``.
 
     Parameters
@@ -116,6 +116,9 @@ def solve_adaptively(problem: ContactProblem, run: RunCycle, method: str, target
         Further quantities of the caller's (:data:`~dolfinx_nnqem.estimates.quantities.Measure`).
     enrichment
         The enriched solve of each cycle (:data:`~dolfinx_nnqem.estimates.enriched.ENRICHMENTS`).
+    check
+        The :class:`~dolfinx_nnqem.solvers.checks.CheckOptions` of the enriched solves (the runs'
+        are ``run``'s own).
     """
     target_error = check_target_error(target_error)
     check_refinable(problem.mesh)
@@ -128,7 +131,7 @@ def solve_adaptively(problem: ContactProblem, run: RunCycle, method: str, target
         elapsed = time.perf_counter() - t0
         estimates = estimate_errors(problem, method, load_factors, probes=probes, options=options,
                                     method_options=method_options, run_time_s=elapsed, extra=extra,
-                                    enrichment=enrichment)
+                                    enrichment=enrichment, check=check)
         indicator = RecoveryIndicator(problem)
         indicator.update()
         cells = problem.mesh.topology.index_map(3).size_global

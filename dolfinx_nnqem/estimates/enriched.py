@@ -206,7 +206,8 @@ def num_dofs(problem: ContactProblem) -> int:
 def estimate_errors(problem: ContactProblem, method: str, load_factors: Sequence[float], *,
                     probes: ProbePoints | None = None, enrichment: str = "auto", options=None,
                     method_options: dict | None = None, run_time_s: float | None = None,
-                    enriched: ContactProblem | None = None, extra: Measure | None = None) -> ErrorEstimates:
+                    enriched: ContactProblem | None = None, extra: Measure | None = None,
+                    check=None) -> ErrorEstimates:
     """Estimate the discretisation error of every quantity of a solved run (collective).
 
     Parameters
@@ -234,6 +235,9 @@ def estimate_errors(problem: ContactProblem, method: str, load_factors: Sequence
     extra
         Further quantities of the caller's, measured alike on both (see
         :data:`~dolfinx_nnqem.estimates.quantities.Measure`).
+    check
+        The run's :class:`~dolfinx_nnqem.solvers.checks.CheckOptions` of the independent check
+        (default: the solver's).
 
     Raises
     ------
@@ -251,7 +255,7 @@ def estimate_errors(problem: ContactProblem, method: str, load_factors: Sequence
     fine_problem = enriched if enriched is not None else enriched_problem(problem, kind)
     try:
         try:
-            _solve_path(fine_problem, method, load_factors, options, method_options)
+            _solve_path(fine_problem, method, load_factors, options, method_options, check)
         except ConvergenceError as error:
             if enriched is not None or method == "monolithic":
                 raise
@@ -263,7 +267,7 @@ def estimate_errors(problem: ContactProblem, method: str, load_factors: Sequence
             fine_problem.destroy()
             fine_problem = enriched_problem(problem, kind)
             solver_used = "monolithic"
-            _solve_path(fine_problem, solver_used, load_factors, options, method_options)
+            _solve_path(fine_problem, solver_used, load_factors, options, method_options, check)
         fine = read_quantities(fine_problem, probes, extra)
         enriched_dofs = num_dofs(fine_problem)
     finally:
@@ -277,10 +281,10 @@ def estimate_errors(problem: ContactProblem, method: str, load_factors: Sequence
 
 
 def _solve_path(problem: ContactProblem, method: str, load_factors: Sequence[float], options,
-                method_options: dict | None) -> None:
+                method_options: dict | None, check) -> None:
     """Solve ``problem`` along ``load_factors`` (no cutback: the run's converged path)."""
     with make_solver(method, problem, options, **(method_options or {})) as solver:
-        solve_load_path(problem, solver, list(load_factors))
+        solve_load_path(problem, solver, list(load_factors), check=check)
 
 
 def _method_text(kind: str, degree: int, enriched_dofs: int) -> str:

@@ -59,7 +59,7 @@ def check_settings(problem, settings: EstimateSettings) -> None:
 
 def estimate_into_writer(writer, problem, method: str, settings: EstimateSettings, *,
                          probes: Mapping[str, Sequence] | None = None, options=None,
-                         method_options: dict | None = None) -> ErrorEstimates | None:
+                         method_options: dict | None = None, check=None) -> ErrorEstimates | None:
     """The estimate of a finished run, recorded in its ``summary.json`` (collective).
 
     ``writer``: the run's :class:`~dolfinx_nnqem.io.output.ResultsWriter`, before it is closed
@@ -70,7 +70,7 @@ def estimate_into_writer(writer, problem, method: str, settings: EstimateSetting
     try:
         estimates = estimate_errors(problem, method, data["load_factors"], probes=probe_points(probes),
                                     enrichment=settings.enrichment, options=options, method_options=method_options,
-                                    run_time_s=float(data.get("wall_time_s") or 0.0) or None)
+                                    run_time_s=float(data.get("wall_time_s") or 0.0) or None, check=check)
     except ConvergenceError as error:  # the run's results stand; the estimate says why it is missing
         _log.warning(f"no error estimate: the enriched solve did not converge ({error})")
         data["error_estimates"] = {"error": f"the enriched solve did not converge: {error}"}
