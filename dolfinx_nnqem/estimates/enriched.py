@@ -12,7 +12,8 @@ run's (one order more in h for smooth solutions; for contact and plasticity, who
 only piecewise smooth, still a fraction of the run's error), so that the effectivity
 e / ‖Q_h − Q‖ is 1 − ε with ε the ratio of the two errors (``docs/error-estimates.md`` gives
 the measured effectivities and the cost). The same load factors are taken because friction and
-plasticity make the solution depend on the load path.
+plasticity make the solution depend on the load path (an increment the enriched solve cannot take
+in one step is halved: the states at the run's load factors are compared).
 
 A hexahedral mesh run at degree 2 has no enrichment here (DOLFINx refines simplices only and
 the package has no degree 3): :func:`choose_enrichment` refuses it with the reason.
@@ -33,7 +34,7 @@ from dolfinx_nnqem.estimates.refinement import refine_mesh_and_tags
 from dolfinx_nnqem.problem.contact_problem import ContactProblem
 from dolfinx_nnqem.solvers.convergence import ConvergenceError
 from dolfinx_nnqem.solvers.registry import make_solver
-from dolfinx_nnqem.solvers.stepping import solve_load_path
+from dolfinx_nnqem.solvers.stepping import solve_load_steps
 
 __all__ = ["ENRICHMENTS", "ErrorEstimates", "QuantityEstimate", "choose_enrichment", "enriched_problem",
            "estimate_errors", "rebuild_problem"]
@@ -280,11 +281,19 @@ def estimate_errors(problem: ContactProblem, method: str, load_factors: Sequence
                                   note=note)
 
 
+MAX_CUTBACKS = 6
+"""Halvings allowed per increment of the enriched solve: a finer space may need smaller steps than
+the run took; the converged states are still those at the run's load factors."""
+
+
 def _solve_path(problem: ContactProblem, method: str, load_factors: Sequence[float], options,
                 method_options: dict | None, check) -> None:
-    """Solve ``problem`` along ``load_factors`` (no cutback: the run's converged path)."""
+    """Solve ``problem`` to each of the run's ``load_factors`` in turn, each in one increment or,
+    where that does not converge, in halved ones (:data:`MAX_CUTBACKS`)."""
     with make_solver(method, problem, options, **(method_options or {})) as solver:
-        solve_load_path(problem, solver, list(load_factors), check=check)
+        for target in load_factors:
+            solve_load_steps(problem, solver, 1, final_load_factor=float(target), max_cutbacks=MAX_CUTBACKS,
+                             check=check)
 
 
 def _method_text(kind: str, degree: int, enriched_dofs: int) -> str:
