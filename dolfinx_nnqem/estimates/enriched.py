@@ -262,7 +262,8 @@ def estimate_errors(problem: ContactProblem, method: str, load_factors: Sequence
                 raise
             # the enriched problem is the same discrete problem whichever method solves it: where the
             # run's method fails on it, the monolithic solver makes the estimate, and the estimate says so
-            note = (f"{method} did not converge on the enriched problem ({str(error).split(':')[0]}); "
+            reason = str(error).splitlines()[0] if str(error) else type(error).__name__
+            note = (f"{method} did not converge on the enriched problem ({reason[:200]}); "
                     "the monolithic solver solved it")
             _log.warning(f"error estimate: {note}")
             fine_problem.destroy()
