@@ -46,12 +46,13 @@ STEP42_MATERIAL = VonMises(E=_E, nu=_NU, sigma_y0=math.sqrt(1.5) * _SIGMA0, H=3 
 STEP42_PUBLISHED = ((0, 512, 2187, 37.3058), (3, 14652, 52497, 56.794))
 """(cycle, active cells, dofs, contact force) of step-42's published adaptive run with
 ``p1_adaptive.prm`` (degree 1, 3 initial global refinements, Kelly indicator, 30 % of the
-cells refined per cycle; its results page prints cycles 0 and 3 of the whole cube)."""
+cells refined and 3 % coarsened per cycle; its results page prints cycles 0 and 3 of the whole cube)."""
 
 
 def hertz_tetrahedra_problem(divisions: int = 6, comm: MPI.Comm = MPI.COMM_WORLD, *, R: float = R_HERTZ,
                              a: float = A_HERTZ, block: float = BLOCK_HERTZ) -> ContactProblem:
-    """The Hertz quarter model on ``divisions``³ cubes of tetrahedra (see the module)."""
+    """The Hertz quarter model on ``divisions`` × ``divisions`` × ``divisions`` cubes of tetrahedra
+    (see the module)."""
     mesh, cell_tags, facet_tags = build_block_stack(comm, block, block, [block], [(divisions,) * 3],
                                                     cell_type="tetrahedron", structured=True)
     sphere = Sphere(centre=(0.0, block + R, 0.0), radius=R, motion=(0.0, -a * a / R, 0.0))
@@ -62,7 +63,8 @@ def hertz_tetrahedra_problem(divisions: int = 6, comm: MPI.Comm = MPI.COMM_WORLD
 
 
 def step42_problem(divisions: int = 4, comm: MPI.Comm = MPI.COMM_WORLD) -> ContactProblem:
-    """The step-42 quarter model on ``divisions``³ cubes of tetrahedra (see the module)."""
+    """The step-42 quarter model on ``divisions`` × ``divisions`` × ``divisions`` cubes of tetrahedra
+    (see the module)."""
     mesh, cell_tags, facet_tags = build_block_stack(comm, 0.5, 0.5, [1.0], [(divisions,) * 3], y0=0.0,
                                                     cell_type="tetrahedron", structured=True)
     mesh.geometry.x[:, 0] += 0.5  # x, z in [0.5, 1]: the quarter next to the cube's corner (1, 1)

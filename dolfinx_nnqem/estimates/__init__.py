@@ -18,6 +18,7 @@ from dolfinx_nnqem.estimates.indicators import INDICATOR_NAME, RecoveryIndicator
 from dolfinx_nnqem.estimates.quantities import ProbePoints, probe_points, read_quantities
 from dolfinx_nnqem.estimates.refinement import check_refinable, mark_bulk, refine_mesh_and_tags
 
-__all__ = ["ENRICHMENTS", "INDICATOR_NAME", "AdaptiveCycle", "AdaptiveResult", "ErrorEstimates", "ProbePoints", "QuantityEstimate", "RecoveryIndicator",
+__all__ = ["ENRICHMENTS", "INDICATOR_NAME", "AdaptiveCycle", "AdaptiveResult", "ErrorEstimates", "ProbePoints",
+           "QuantityEstimate", "RecoveryIndicator",
            "check_refinable", "choose_enrichment", "enriched_problem", "estimate_errors", "mark_bulk", "probe_points",
            "read_quantities", "rebuild_problem", "refine_mesh_and_tags", "solve_adaptively"]
