@@ -10,7 +10,8 @@ Effectivity = estimate / true error, in [0.5, 2]:
 * a rigid plane pressed into an elastoplastic cube on rollers: the discrete solution is exact, so
   every estimate must be round-off;
 * a thick cylinder under internal pressure at 0.9 p_lim (plastic): the inner radius's displacement
-  and the largest plastic strain against a converged reference (degree 2, 16 × 48 cells).
+  and the largest plastic strain against a converged reference (extrapolated from degree-2 meshes
+  of 4 × 12, 8 × 24 and 16 × 48 cells: ``benchmarks/estimate_references.py cylinder``).
 """
 
 import math
