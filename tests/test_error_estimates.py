@@ -68,7 +68,7 @@ def test_two_beams_seed_mesh_deflection_effectivity(method, law):
           f"{est.dofs} -> {est.enriched_dofs} dofs, enriched solver {est.enriched_solver}")
     assert np.all((0.5 <= eff) & (eff <= 2.0))
     assert 0.10 < true[0] / abs(TIP_CONVERGED[0]) < 0.20  # the issue's 16 %
-    if est.note is not None:  # NNEQM1 with the polar law does not converge on the degree-2 beams (measured)
+    if est.note is not None:  # (where the run's method fails on the enriched problem: the monolithic solver)
         print(f"  note: {est.note}")
         assert est.enriched_solver == "monolithic" and method in est.note
     else:
@@ -196,3 +196,34 @@ def test_quantities_of_the_two_beams_close_the_equilibrium():
     print(f"\n  {sorted(q)}; beam 1: clamp + contact + weight = {total} N")
     assert np.abs(total).max() < 1e-8 * np.abs(q["reaction:11"]).max()
     assert math.isclose(q["max_p"][0], MPI.COMM_WORLD.allreduce(problem.state.p_n.x.array.max(), op=MPI.MAX))
+
+
+def test_the_monolithic_solver_takes_over_where_the_runs_method_fails(monkeypatch):
+    """The enriched problem is the same discrete problem whichever method solves it: where the run's
+    method does not converge on it (forced here), the monolithic solver solves it and the estimate
+    says so; a failure of the monolithic solver itself is raised."""
+    from dolfinx_nnqem.estimates import enriched
+    from dolfinx_nnqem.solvers.convergence import ConvergenceError
+
+    solve_path = enriched._solve_path
+
+    def failing(problem, method, *args):
+        if method == "nneqm1":
+            raise ConvergenceError(f"{method}: the increment to load factor 1 did not converge (forced)")
+        return solve_path(problem, method, *args)
+
+    monkeypatch.setattr(enriched, "_solve_path", failing)
+    mesh, ct, ft = build_block_stack(MPI.COMM_WORLD, 1.0, 1.0, [1.0], [(2, 2, 2)])
+    plane = Plane(point=(0.0, 1.0, 0.0), normal=(0.0, -1.0, 0.0), motion=(0.0, -1e-3, 0.0))
+    problem = ContactProblem(mesh, ct, ft, materials=VonMises(E=1.0e9, nu=0.3),
+                             dirichlet=[Dirichlet(T.bottom(1), 0.0, [1]), Dirichlet(T.xmin(1), 0.0, [0]),
+                                        Dirichlet(T.zmin(1), 0.0, [2])],
+                             contact=Contact(plane, T.top(1), mu_f=0.0))
+    factors = solved(problem, "nneqm1")
+    est = estimate_errors(problem, "nneqm1", factors)
+    print(f"\n  note: {est.note}")
+    assert est.enriched_solver == "monolithic" and "nneqm1 did not converge on the enriched problem" in est.note
+    assert "(forced)" in est.note and est.max_relative() < 1e-9
+    with pytest.raises(ConvergenceError, match="forced"):
+        monkeypatch.setattr(enriched, "_solve_path", lambda problem, method, *args: failing(problem, "nneqm1"))
+        estimate_errors(problem, "monolithic", factors)
