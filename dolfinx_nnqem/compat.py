@@ -199,3 +199,27 @@ def optimize_tetrahedra() -> str:
         return "Netgen"
     gmsh.model.mesh.optimize("")
     return "gmsh"
+
+
+def refine_mesh(mesh, edges: np.ndarray | None = None):
+    """Plaza refinement of a simplex mesh -> ``(mesh, parent_cell, parent_facet)``.
+
+    ``edges``: local indices of the edges to split (None: uniform refinement). ``partitioner=None``
+    on both stacks: the refined cells stay on the rank of their parent, without ghost cells, as the
+    package's meshes are made (gmsh's, unghosted), so that the parent maps index every local cell
+    and the tags carry to all of them (0.10+'s default partitioner adds a ghost layer whose cells
+    the parent maps do not cover).
+    """
+    option = dolfinx.mesh.RefinementOption.parent_cell_and_facet
+    mesh.topology.create_entities(1)
+    return dolfinx.mesh.refine(mesh, edges, partitioner=None, option=option)
+
+
+def transfer_meshtag(tags, mesh, parent_cell: np.ndarray, parent_facet: np.ndarray | None = None):
+    """Tags of a parent mesh carried to the refined ``mesh`` (cells: ``parent_cell``; facets:
+    both maps); the children of a tagged entity get its tag."""
+    mesh.topology.create_entities(tags.dim)
+    mesh.topology.create_connectivity(tags.dim, mesh.topology.dim)
+    if tags.dim == mesh.topology.dim:
+        return dolfinx.mesh.transfer_meshtag(tags, mesh, parent_cell)
+    return dolfinx.mesh.transfer_meshtag(tags, mesh, parent_cell, parent_facet)

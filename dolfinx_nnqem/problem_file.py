@@ -89,6 +89,16 @@ A problem file names a mesh with physical tags and everything :class:`ContactPro
     [output.probes]
     "tip" = [2.0, 0.0, 0.0]
 
+    [estimate]                            # discretisation-error estimates (off by default)
+    enabled = true                        # value ± estimate of every contact resultant, reaction,
+                                          # probe displacement and the largest plastic strain
+    enrichment = "auto"                   # "degree-2", "refine" (tetrahedra): the enriched solve
+    target_error = 0.01                   # adaptive refinement until every estimate is <= 1 %
+                                          # (tetrahedra only; implies enabled)
+    max_cycles = 6
+    refine_fraction = 0.5                 # Dörfler: refine the cells holding 50 % of sum eta_K^2
+    quantities = ["u", "contact"]         # what target_error applies to (default: all)
+
 Every load ([[traction]], [[pressure]], [[body_force]], [gravity]) and [[dirichlet]] entry takes
 an optional ``amplitude`` table like the one above (default a(ℓ) = ℓ).
 An XDMF mesh takes ``file = "mesh.xdmf"``, ``mesh_name = "mesh"``, ``cell_tags = "cell_tags"``
@@ -133,6 +143,7 @@ KEYS: dict[str, frozenset[str]] = {
                               "shrink", "load_factors"}),
     "checks": frozenset({"rtol", "max_strain", "max_rotation"}),
     "output": frozenset({"folder", "fields", "pictures", "probes", "checkpoint_every"}),
+    "estimate": frozenset({"enabled", "enrichment", "target_error", "max_cycles", "refine_fraction", "quantities"}),
 }
 """Every key a problem file may hold, by section (the one list the checks below use;
 ``docs/problem-file.md`` documents each, and ``tests/test_problem_file_doc.py`` compares the two)."""
@@ -156,6 +167,7 @@ class ProblemSpec:
     solver: dict
     output: dict = field(default_factory=dict)
     checks: dict = field(default_factory=dict)
+    estimate: dict = field(default_factory=dict)
 
 
 def load_problem_file(path: str | Path) -> ProblemSpec:
@@ -187,12 +199,13 @@ def load_problem_file(path: str | Path) -> ProblemSpec:
     solver = _solver_section(data.get("solver", {}), where)
     output = _output_section(data.get("output", {}), where)
     checks = _checks_section(data.get("checks", {}), where)
+    estimate = _estimate_section(_table(data, "estimate", where), where)
     if not dirichlet:
         raise ProblemFileError(f"{where}: no [[dirichlet]] entry; a quasi-static problem needs supports")
     if solver["method"] != "monolithic" and not contact:
         raise ProblemFileError(f"{where}: solver.method = {solver['method']!r} needs a [contact] section")
     return ProblemSpec(path, mesh, materials, contact, dirichlet, traction, pressure, body_force,
-                       gravity, solver, output, checks)
+                       gravity, solver, output, checks, estimate)
 
 
 # -- sections ---------------------------------------------------------------------------------
@@ -545,6 +558,32 @@ def _output_section(output: dict, where: str) -> dict:
         raise ProblemFileError(f"{w}.probes must be a table name = [x, y, z]")
     output["probes"] = {name: _vector(x, f"{w}.probes.{name}") for name, x in probes.items()}
     return output
+
+
+def _estimate_section(estimate: dict, where: str) -> dict:
+    """[estimate]: discretisation-error estimates (off by default) and adaptive refinement."""
+    w = f"{where}: [estimate]"
+    estimate = _checked_keys(estimate, KEYS["estimate"], set(), w)
+    if not isinstance(estimate.setdefault("enabled", "target_error" in estimate), bool):
+        raise ProblemFileError(f"{w}.enabled must be true or false")
+    if estimate.setdefault("enrichment", "auto") not in ("auto", "degree-2", "refine"):
+        raise ProblemFileError(f"{w}.enrichment = {estimate['enrichment']!r}: expected \"auto\", \"degree-2\" or "
+                               "\"refine\"")
+    if "target_error" in estimate:
+        target = _number(estimate["target_error"], f"{w}.target_error", positive=True)
+        if target >= 1.0:
+            raise ProblemFileError(f"{w}.target_error = {target!r}: a relative error in (0, 1), e.g. 0.01 for 1 %")
+        estimate["target_error"] = float(target)
+    estimate["max_cycles"] = int(_number(estimate.get("max_cycles", 6), f"{w}.max_cycles", positive=True,
+                                         integer=True))
+    estimate["refine_fraction"] = float(_number(estimate.get("refine_fraction", 0.5), f"{w}.refine_fraction",
+                                                positive=True, high=1.0))
+    quantities = estimate.setdefault("quantities", None)
+    if quantities is not None and (not isinstance(quantities, list) or not quantities
+                                   or not all(isinstance(q, str) for q in quantities)):
+        raise ProblemFileError(f"{w}.quantities = {quantities!r}: expected a list of quantity names or kinds "
+                               "(\"contact\", \"reaction\", \"u\", \"max_p\", \"u:tip\", ...)")
+    return estimate
 
 
 def _checks_section(checks: dict, where: str) -> dict:

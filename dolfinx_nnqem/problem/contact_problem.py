@@ -104,6 +104,21 @@ class Gravity:
 
 
 # -- the problem ------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class ProblemDefinition:
+    """What a :class:`ContactProblem` was built from, apart from its mesh: the same problem can be
+    built again on another mesh or degree (``dolfinx_nnqem.estimates``: the enriched solve, adaptive
+    refinement). Tags name the bodies and surfaces, so they carry over to a refined mesh."""
+
+    materials: object
+    dirichlet: tuple
+    tractions: tuple
+    body_forces: tuple
+    contact: tuple
+    degree: int
+    quadrature_degree: int | None  #: as given (None: 2·degree)
+
+
 class ContactProblem:
     """Quasi-static small-strain elastoplastic problem, with or without contact.
 
@@ -161,6 +176,8 @@ class ContactProblem:
         for c in contacts:
             if not isinstance(c, Contact):
                 raise TypeError(f"contact: {c!r} is not a Contact")
+        self.definition = ProblemDefinition(materials, tuple(dirichlet), tuple(tractions), tuple(body_forces),
+                                            tuple(contacts), degree, quadrature_degree)
         if quadrature_degree is None:
             quadrature_degree = 2 * degree  # 2×2×2 Gauss points for Q1, 3×3×3 for Q2
         # before anything is built on the mesh: an inverted cell is named as such, not by its symptoms
