@@ -28,7 +28,7 @@ from dolfinx_nnqem.solvers.checks import CheckOptions, StateCheck, check_state, 
 from dolfinx_nnqem.solvers.convergence import ConvergenceError, SolveReport, logger
 from dolfinx_nnqem.numerics.linalg import free_dropped_objects
 from dolfinx_nnqem.solvers.step_control import AutomaticIncrements, as_step_control
-from dolfinx_nnqem.problem.validation import check_stepping_arguments
+from dolfinx_nnqem.problem.validation import check_load_factors, check_stepping_arguments
 
 
 @dataclass
@@ -120,6 +120,8 @@ def solve_load_steps(
     else:
         schedule = _Schedule(resume.start, final_load_factor, resume.step, resume.cutbacks, equal, control)
         index0 = resume.index
+    if control is not None:
+        check_load_factors(control.load_factors, schedule.start, final_load_factor)
     results: list[IncrementResult] = []
     ell = problem.load_factor_n
     while not schedule.reached(ell):
