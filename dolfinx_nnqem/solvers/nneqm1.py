@@ -122,7 +122,7 @@ class NNEQM1Solver(ReleasesPETSc):
             lifted = system.lifted_step(delta_bc)
             if not lifted:  # its contact solve failed: the plain start, from the moved boundary
                 p.apply_prescribed_displacements(load_factor)
-                system.inner_failure = None
+                system.inner_failure, report.inner_states = None, None
         outcome = solve(system, FULL_STEPS, self.options.max_iterations, first_iteration=1 if lifted else 0,
                         first_kind="lifted" if lifted else "", first_step_length=1.0 if lifted else math.nan)
         report.iterations, report.converged = outcome.iterations, outcome.converged
@@ -299,6 +299,9 @@ class _OuterSystem:
         self.inner_iterations = result.iterations
         if not result.converged:
             self.inner_failure = f"inner nonsmooth solve failed at outer iteration {self.steps}: {result.message}"
+            # where its pairs were (slipping, say): the outer iterate keeps the states it started from
+            states = np.bincount(system.pair_rows(result.x).state.astype(np.int64), minlength=3)[:3]
+            self.report.inner_states = (int(states[0]), int(states[1]), int(states[2]))  # gathered: every rank's
             return self.inner_failure
         z_new = system.pair_unknowns(result.x)
         lam_new, _ = self.laws.force(z_new)
