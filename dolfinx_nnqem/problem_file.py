@@ -335,9 +335,15 @@ def _one_table_per_pair(contacts: list, where: str) -> None:
         pair = frozenset((c["surface1"], c["surface2"]))
         if pair in seen:
             a, b = sorted(pair)
-            raise ProblemFileError(f"{where}: contact[{seen[pair]}] and contact[{i}] both join the surfaces {a} and "
-                                   f"{b}; give one [[contact]] table per pair of surfaces")
+            raise ProblemFileError(f"{where}: {_table_name(contacts, seen[pair])} and {_table_name(contacts, i)} both "
+                                   f"join the surfaces {a} and {b}; give one [[contact]] table per pair of surfaces")
         seen[pair] = i
+
+
+def _table_name(contacts: list, i: int) -> str:
+    """``contact[1]``, with its name if it has one: ``contact[1] ("upper")``."""
+    name = contacts[i].get("name")
+    return f"contact[{i}]" if name is None else f'contact[{i}] ("{name}")'
 
 
 
