@@ -4,8 +4,9 @@ that can be reached, instead of "a local minimum, a plateau or a cycle of the me
 * the dense driver on x² = 2, which no double solves: |H| stops at 4.4e-16, the floor of rounding x;
   and on x² = −1 (no solution: a true local minimum of Ψ), where the merit function is still blamed;
 * stiff blocks (E = 2e11) pressed 1e-6 onto each other and slid 0.4 in the current geometry: with
-  rtol = 1e-10, |R|/F stalls at 1.4–2.4e-10 (the displacements carry the slide, the forces come from
-  strains of 2e-6); the monolithic solver and NNEQM1 now say so, and the rtol they name converges.
+  rtol = 1e-10, |R|/F stalls at 1.0–2.4e-10 (the displacements carry the slide, the forces come from
+  strains of 2e-6); the monolithic solver and NNEQM1 now say so, and the rtol they name converges
+  the increment that failed.
 """
 
 import re
@@ -36,7 +37,7 @@ def test_the_dense_driver_names_a_floor_it_cannot_pass():
     print(f"\n  x² = 2: |H| = {abs(out.x[0] ** 2 - 2.0):.1e}, floor {floor:.1e}; {out.message}")
     assert not out.converged and abs(out.x[0] ** 2 - 2.0) <= ROUNDOFF_MARGIN * floor
     assert "round-off: tol 1.0e-20 is at or below the round-off floor ~2.6e-16" in out.message
-    assert "the smallest reachable tol is about 8e-16" in out.message and "local minimum" not in out.message
+    assert "the smallest reachable tol here is about 8e-16" in out.message and "local minimum" not in out.message
 
 
 def test_a_true_local_minimum_is_still_named_so():
@@ -60,15 +61,18 @@ def _stiff_blocks_sliding() -> ContactProblem:
 
 @pytest.mark.parametrize("method", ["monolithic", "nneqm1"])
 def test_a_tolerance_below_the_round_off_floor_is_named(method):
+    """rtol 3e-11, a quarter of the floor (the issue's 1e-10 is within the residual's scatter about
+    it: on Debian 13 the monolithic solver stopped at |R|/F = 1.04e-10, and could meet it)."""
     problem = _stiff_blocks_sliding()
     with pytest.raises(ConvergenceError) as error:
-        solve_load_steps(problem, make_solver(method, problem, SolverOptions(rtol=1e-10)), 8, max_cutbacks=1)
+        solve_load_steps(problem, make_solver(method, problem, SolverOptions(rtol=3e-11)), 8, max_cutbacks=1)
     message = str(error.value).splitlines()[0]
-    print(f"\n  {method}, rtol 1e-10: {message}")
-    assert "round-off: rtol 1.0e-10 is at or below the round-off floor" in message and "local minimum" not in message
-    reachable = float(re.search(r"the smallest reachable rtol is about ([0-9.e+-]+)", message).group(1))
-    problem = _stiff_blocks_sliding()
-    results = solve_load_steps(problem, make_solver(method, problem, SolverOptions(rtol=reachable)), 8,
-                               max_cutbacks=1)
-    print(f"  rtol {reachable:g}, as named: converged, iterations {[r.iterations for r in results]}")
-    assert results[-1].load_factor == 1.0
+    print(f"\n  {method}, rtol 3e-11: {message}")
+    assert "round-off: rtol 3.0e-11 is at or below the round-off floor" in message and "local minimum" not in message
+    reachable = float(re.search(r"the smallest reachable rtol here is about ([0-9.e+-]+)", message).group(1))
+    target = error.value.failure["load_factor"]  # the increment that failed, from the last converged state
+    results = solve_load_steps(problem, make_solver(method, problem, SolverOptions(rtol=reachable)), 1,
+                               max_cutbacks=0, final_load_factor=target)
+    print(f"  rtol {reachable:g}, as named: the increment to load factor {target:g} converged in "
+          f"{results[-1].iterations} iterations")
+    assert results[-1].load_factor == target

@@ -71,6 +71,7 @@ def floor_note(measure: str, value: float, floor: float, tolerance: float, name:
     reachable = float(f"{REACHABLE_FACTOR * floor:.0e}")  # one significant digit ...
     if reachable < REACHABLE_FACTOR * floor:
         reachable = float(f"{reachable + 10.0 ** math.floor(math.log10(reachable)):.0e}")  # ... rounded up
-    return (f"round-off: {name} {tolerance:.1e} is at or below the round-off floor ~{floor:.1e} of this problem "
-            f"({measure} = {value:.1e} at the last iterate: the unknowns' rounding to double precision, times "
-            f"the Jacobian, is that large); the smallest reachable {name} is about {reachable:.0e}")
+    return (f"round-off: {name} {tolerance:.1e} is at or below the round-off floor ~{floor:.1e} of this problem at "
+            f"this load ({measure} = {value:.1e} at the last iterate: the unknowns' rounding to double precision, "
+            f"times the Jacobian, is that large, and grows with them); the smallest reachable {name} here is about "
+            f"{reachable:.0e}")
