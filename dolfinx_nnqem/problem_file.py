@@ -11,7 +11,7 @@ A problem file names a mesh with physical tags and everything :class:`ContactPro
     # model = "von-mises"                 # or "elastic" (E, nu, density only)
     E = 2.0e10
     nu = 0.17
-    sigma_y0 = 5.0e5                      # omit for an elastic material
+    sigma_y0 = 5.0e5                      # inf, or omit it, for an elastic material
     H = 2.0e10
     density = 2400.0
     # hardening = "voce"                  # "linear" (default: sigma_y0, H), "voce" (sigma_y0, Q, b, H)
@@ -102,7 +102,7 @@ A problem file names a mesh with physical tags and everything :class:`ContactPro
 Every load ([[traction]], [[pressure]], [[body_force]], [gravity]) and [[dirichlet]] entry takes
 an optional ``amplitude`` table like the one above (default a(ℓ) = ℓ).
 An XDMF mesh takes ``file = "mesh.xdmf"``, ``mesh_name = "mesh"``, ``cell_tags = "cell_tags"``
-and ``facet_tags = "facet_tags"`` (the names of the grids in the file).
+and ``facet_tags = "facet_tags"`` (the names of the grids in the file; a gmsh file takes none of them).
 Every key is checked: an unknown or malformed one raises :class:`ProblemFileError` naming it.
 """
 
@@ -148,6 +148,8 @@ KEYS: dict[str, frozenset[str]] = {
 """Every key a problem file may hold, by section (the one list the checks below use;
 ``docs/problem-file.md`` documents each, and ``tests/test_problem_file_doc.py`` compares the two)."""
 SECTIONS = {section.split(".")[0] for section in KEYS}
+XDMF_KEYS = frozenset({"mesh_name", "cell_tags", "facet_tags"})
+"""The [mesh] keys that name the grids of an XDMF file (refused with a gmsh .msh file)."""
 METHODS = ("monolithic", "nneqm1", "nneqm2")
 
 
@@ -282,6 +284,11 @@ def _mesh_section(mesh: dict, folder: Path, where: str) -> dict:
         raise ProblemFileError(f"{where}: mesh.file = {mesh['file']!r}: no such file ({file})")
     if file.suffix not in (".msh", ".xdmf"):
         raise ProblemFileError(f"{where}: mesh.file = {mesh['file']!r}: expected a gmsh .msh or an .xdmf file")
+    xdmf_only = sorted(XDMF_KEYS & set(mesh))
+    if file.suffix == ".msh" and xdmf_only:
+        key = xdmf_only[0]
+        raise ProblemFileError(f"{where}: mesh.{key} = {mesh[key]!r} names a grid of an XDMF file; the gmsh file "
+                               f"{mesh['file']!r} has none (its physical groups are the tags): remove the key")
     mesh["file"] = file
     mesh.setdefault("mesh_name", "mesh")
     mesh.setdefault("cell_tags", "cell_tags")
@@ -315,6 +322,11 @@ def _materials_section(materials: dict, where: str) -> dict:
                 params[name] = _hardening_table(value, f"{w}.table")
             elif name == "kinematic":
                 params[name] = _back_stresses(value, f"{w}.kinematic")
+            elif name == "sigma_y0" and isinstance(value, float) and not math.isfinite(value):
+                if value != math.inf:
+                    raise ProblemFileError(f"{w}.sigma_y0 = {value!r}: expected a yield stress > 0, or inf for an "
+                                           "elastic material")
+                # TOML's inf: an elastic material, as documented
             else:
                 _number(value, f"{w}.{name}")
         try:
@@ -350,7 +362,29 @@ def _contact_tables(contact, where: str) -> list:
     names = [c.get("name") for c in out if c.get("name") is not None]
     if len(set(names)) != len(names):
         raise ProblemFileError(f"{where}: contact names must differ, got {names}")
+    _one_table_per_pair(out, where)
     return out
+
+
+def _one_table_per_pair(contacts: list, where: str) -> None:
+    """Refuse two tables on the same (unordered) pair of deformable surfaces: their pairs would hold
+    the same nodes twice and no equilibrium splits the force between them (the solvers stalled)."""
+    seen: dict[frozenset, int] = {}
+    for i, c in enumerate(contacts):
+        if "surface1" not in c:
+            continue  # an obstacle: several obstacles may touch one surface
+        pair = frozenset((c["surface1"], c["surface2"]))
+        if pair in seen:
+            a, b = sorted(pair)
+            raise ProblemFileError(f"{where}: {_table_name(contacts, seen[pair])} and {_table_name(contacts, i)} both "
+                                   f"join the surfaces {a} and {b}; give one [[contact]] table per pair of surfaces")
+        seen[pair] = i
+
+
+def _table_name(contacts: list, i: int) -> str:
+    """``contact[1]``, with its name if it has one: ``contact[1] ("upper")``."""
+    name = contacts[i].get("name")
+    return f"contact[{i}]" if name is None else f'contact[{i}] ("{name}")'
 
 
 
@@ -424,20 +458,23 @@ def _amplitude_entry(entry: dict, where: str) -> None:
         return
     from dolfinx_nnqem.problem.amplitude import PiecewiseLinear
 
+    # the numbers first: their errors name the row already (a ProblemFileError is a ValueError too, and
+    # caught below it repeated the file and the key)
+    rows = [[float(_number(v, f"{where}.amplitude[{i}]", physical=True)) for v in row]
+            for i, row in enumerate(_rows(entry["amplitude"], f"{where}.amplitude"))]
     try:
-        entry["amplitude"] = PiecewiseLinear([[float(_number(v, f"{where}.amplitude[{i}]", physical=True)) for v in row]
-                                              for i, row in enumerate(_rows(entry["amplitude"], f"{where}.amplitude"))])
-    except ValueError as error:
+        entry["amplitude"] = PiecewiseLinear(rows)
+    except ValueError as error:  # the rows' shape and order: "amplitude: ..."
         raise ProblemFileError(f"{where}.{error}") from None
 
 
 def _path(rows, where: str):
     from dolfinx_nnqem.problem.amplitude import PiecewiseLinearPath
 
+    table = [[float(_number(v, f"{where}[{i}]", physical=True)) for v in row] for i, row in enumerate(_rows(rows, where))]
     try:
-        return PiecewiseLinearPath([[float(_number(v, f"{where}[{i}]", physical=True)) for v in row]
-                                    for i, row in enumerate(_rows(rows, where))])
-    except ValueError as error:
+        return PiecewiseLinearPath(table)
+    except ValueError as error:  # the rows' shape and order: "motion path: ..."
         raise ProblemFileError(f"{where}: {error}") from None
 
 
@@ -456,6 +493,9 @@ def _dirichlet_entry(entry: dict, where: str) -> dict:
         if (not isinstance(components, list) or not components
                 or any(c not in (0, 1, 2) or isinstance(c, bool) for c in components)):
             raise ProblemFileError(f"{where}.components = {components!r}: expected a list of 0, 1, 2")
+        if len(set(components)) != len(components):
+            raise ProblemFileError(f"{where}.components = {components!r}: a component is listed twice; expected "
+                                   "distinct components among 0, 1, 2")
     n = 3 if components is None else len(components)
     value = entry.get("value", 0.0)
     if isinstance(value, list):
@@ -533,10 +573,27 @@ def _automatic_increments(table, where: str):
     if not isinstance(table, dict):
         raise ProblemFileError(f"{where} must be a table")
     table = _checked_keys(table, KEYS["solver.auto"], set(), where)
+    if "load_factors" in table:
+        table["load_factors"] = _load_factors(table["load_factors"], f"{where}.load_factors")
     try:
         return AutomaticIncrements(**table)
     except (TypeError, ValueError) as error:
         raise ProblemFileError(f"{where}: {error}") from None
+
+
+def _load_factors(value, where: str) -> list[float]:
+    """[solver.auto] load_factors: stops on the file's load path, ℓ from 0 to 1, increasing; a stop
+    outside it would never be reached (one above 1 used to be dropped without a word)."""
+    if not isinstance(value, list):
+        raise ProblemFileError(f"{where} = {value!r}: expected a list of load factors, e.g. [0.5, 1.0]")
+    stops = [float(_number(x, f"{where}[{i}]")) for i, x in enumerate(value)]
+    for i, x in enumerate(stops):
+        if not 0.0 < x <= 1.0:
+            raise ProblemFileError(f"{where}[{i}] = {value[i]!r}: expected a load factor in (0, 1] (the load path "
+                                   "runs from 0 to 1: a run never stops outside it)")
+    if any(b <= a for a, b in zip(stops, stops[1:])):
+        raise ProblemFileError(f"{where} = {value!r}: expected increasing load factors (each listed once)")
+    return stops
 
 
 def _output_section(output: dict, where: str) -> dict:

@@ -46,7 +46,7 @@ from dolfinx_nnqem.contact.surface_pairs import SurfacePairs
 from dolfinx_nnqem.contact.surfaces import ContactPairError, NoPairsError, mesh_tolerance, space_degree
 from dolfinx_nnqem.contact.current_geometry import (GEOMETRIES, MortarTracker, ObstacleTracker, SurfaceTracker,
                                                     remapper, surface_tracker)
-from dolfinx_nnqem.numerics.ranges import check_magnitude
+from dolfinx_nnqem.numerics.ranges import check_magnitude, shown
 
 logger = logging.getLogger("dolfinx_nnqem")
 
@@ -92,7 +92,7 @@ def _real(name: str, value, *, positive: bool = False, allow_none: bool = False)
     if value is None and allow_none:
         return None
     if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(float(value)):
-        raise ValueError(f"Contact: {name} = {value!r}; expected a finite number")
+        raise ValueError(f"Contact: {name} = {shown(value)}; expected a finite number")
     value = float(value)
     if positive and value <= 0.0:
         raise ValueError(f"Contact: {name} = {value!r}; expected a value > 0")

@@ -44,7 +44,8 @@ from dolfinx_nnqem.contact.obstacles import Cylinder, Plane, Sphere  # noqa: F40
 from dolfinx_nnqem.material.interface import GaussPointValues
 from dolfinx_nnqem.material.state import material_state
 from dolfinx_nnqem.problem.mesh_quality import check_cells
-from dolfinx_nnqem.problem.validation import check_cell_tag, check_magnitude, check_mesh
+from dolfinx_nnqem.problem.validation import (check_cell_tag, check_components, check_magnitude, check_mesh,
+                                              check_one_contact_per_pair)
 from dolfinx_nnqem.numerics.linalg import vec_norm
 
 
@@ -178,6 +179,7 @@ class ContactProblem:
                 raise TypeError(f"contact: {c!r} is not a Contact")
         self.definition = ProblemDefinition(materials, tuple(dirichlet), tuple(tractions), tuple(body_forces),
                                             tuple(contacts), degree, quadrature_degree)
+        check_one_contact_per_pair(contacts)
         if quadrature_degree is None:
             quadrature_degree = 2 * degree  # 2×2×2 Gauss points for Q1, 3×3×3 for Q2
         # before anything is built on the mesh: an inverted cell is named as such, not by its symptoms
@@ -278,9 +280,7 @@ class ContactProblem:
         self.bc_dofs_by_tag: dict[int, np.ndarray] = {}
         for d in dirichlet:
             facets = self.facet_tags.find(d.tag)
-            components = (0, 1, 2) if d.components is None else tuple(d.components)
-            if any(c not in (0, 1, 2) for c in components):
-                raise ValueError(f"Dirichlet(tag={d.tag}): components {components} must be among 0, 1, 2")
+            components = check_components(d.components, f"Dirichlet(tag={d.tag})")
             _check_finite(f"Dirichlet(tag={d.tag}).value", d.value)
             value = np.broadcast_to(np.asarray(d.value, dtype=float), (len(components),))
             for c, val in zip(components, value):
