@@ -55,11 +55,13 @@ from dolfinx_nnqem.io.offscreen import PictureUnavailable, offscreen_plotter
 from dolfinx_nnqem.io.reader import read_pairs, read_summary, start_reading_fields
 
 __all__ = ["ALL_PICTURES", "CONTACT_PICTURE", "PICTURE_FOLDER", "PICTURES", "PictureDrawer", "draw_job", "draw_live_pictures",
-           "draw_run_pictures", "missing_pictures", "pictures_enabled"]
+           "draw_run_pictures", "missing_pictures", "pictures_enabled", "pictures_of_run"]
 
 PICTURE_FOLDER = "pictures"
 PICTURES = ("deformed.png", "pair_pressure.png", "load_curve.png", "convergence.png", "error_indicator.png",
             ESTIMATE_PICTURE)
+INDICATOR_FIELD = "error_indicator"
+"""The cell field of the error indicator (:data:`dolfinx_nnqem.estimates.INDICATOR_NAME`)."""
 ENV_SWITCH = "DOLFINX_NNQEM_PICTURES"
 """Environment variable: ``0`` turns the end-of-run pictures off where no flag decides."""
 
@@ -471,11 +473,40 @@ ALL_PICTURES = (*PICTURES, CONTACT_PICTURE)
 """Every picture the end of a run draws, in their order."""
 
 
+def pictures_of_run(folder: str | os.PathLike) -> tuple[str, ...]:
+    """The pictures of :data:`ALL_PICTURES` that the run in ``folder`` makes.
+
+    ``error_estimates.png`` only where ``summary.json`` holds an estimate, and
+    ``error_indicator.png`` only where ``fields.xdmf`` holds that cell field (a command-line run
+    writes it, a Python run with its own writers may not); without ``fields.xdmf`` neither
+    ``deformed.png`` nor ``error_indicator.png``. Otherwise a restart would look for a picture
+    the run never draws, and draw "the rest" again on every restart.
+    """
+    folder = Path(folder)
+    try:
+        summary = read_summary(folder)
+    except (OSError, ValueError):
+        summary = {}
+    fields = folder / "fields.xdmf"
+    try:
+        fields_text = fields.read_text(errors="replace") if fields.is_file() else None
+    except OSError:
+        fields_text = None
+    left_out = set()
+    if "error_estimates" not in summary:
+        left_out.add(ESTIMATE_PICTURE)
+    if fields_text is None:
+        left_out.update(("deformed.png", "error_indicator.png"))
+    elif f'Name="{INDICATOR_FIELD}"' not in fields_text:
+        left_out.add("error_indicator.png")
+    return tuple(name for name in ALL_PICTURES if name not in left_out)
+
+
 def missing_pictures(folder: str | os.PathLike) -> tuple[str, ...]:
-    """The pictures of :data:`ALL_PICTURES` that ``folder/pictures`` does not hold (a picture
+    """The pictures of :func:`pictures_of_run` that ``folder/pictures`` does not hold (a picture
     there is whole: each is written to a temporary and renamed)."""
     pictures = Path(folder) / PICTURE_FOLDER
-    return tuple(name for name in ALL_PICTURES if not (pictures / name).is_file())
+    return tuple(name for name in pictures_of_run(folder) if not (pictures / name).is_file())
 
 
 def draw_job(job: Mapping[str, Any]) -> dict[str, Path | str]:
