@@ -263,9 +263,10 @@ def test_a_stiffness_contrast_converges(law):
     r = 999 times that (where the stiffer body's put it before), the monolithic solver and NNEQM2
     stalled at the drag onset after 5 cutbacks. Every method takes the 6 increments without a
     cutback, except NNEQM2 with the polar law, which with the PyPI packages of a venv made on
-    2026-11-28 needs one at the drag onset, as the code of the day before does there (the same code
-    took none with the packages CI installed a day earlier): the case is at the edge of NNEQM2's
-    globalisation, which has no Levenberg–Marquardt variant (docs/robustness.md)."""
+    2026-11-28 needs one at the drag onset, as the code of the day before does there (with Debian
+    13's packages, and with the PyPI packages CI installed a day earlier, it took none): the case
+    is at the edge of NNEQM2's globalisation, which has no Levenberg–Marquardt variant
+    (docs/robustness.md)."""
     import numpy as np
 
     from dolfinx_nnqem.cases.pressed_blocks import pressed_blocks_problem
@@ -285,5 +286,7 @@ def test_a_stiffness_contrast_converges(law):
         error = np.abs(forces - reference).max() / np.abs(reference).max()
         print(f"\n  {law}/{method}: iterations {iterations}; pair forces against the monolithic solver on the same "
               f"path {error:.1e} (tolerance 1e-6)")
-        assert len(path) == (7 if (method, law) == ("nneqm2", "polar") else 6), method  # cutbacks
+        # cutbacks: NNEQM2 with the polar law takes one or none by the packages (PyPI: one; Debian 13:
+        # none, 24 iterations at the drag onset)
+        assert len(path) <= 7 if (method, law) == ("nneqm2", "polar") else len(path) == 6, method
         assert error < 1e-6, method
