@@ -347,7 +347,7 @@ class DruckerPragerPart(QuadraturePart):
         return drucker_prager_return(sigma_n, deps, internal["p"], self.cone.subset(self.points))
 
     def at_points(self, points: np.ndarray) -> DruckerPragerAtPoints:
-        """The cone, λ and E at the local Gauss points ``points``."""
+        """The material at the local Gauss points ``points``: the cone, λ and E there."""
         return DruckerPragerAtPoints(self.cone.subset(points), self.lmbda[points], self.E[points])
 
 

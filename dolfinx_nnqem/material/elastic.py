@@ -109,7 +109,7 @@ class ElasticPart:
         return {}
 
     def at_points(self, points: np.ndarray) -> ElasticAtPoints:
-        """μ, λ and E at the local Gauss points ``points``."""
+        """The material at the owned Gauss points ``points``: μ, λ and E there."""
         st = self.space
         if self._material_expressions is None:
             self._material_expressions = tuple(jit.expression(e, st._points) for e in (st.mu, st.lmbda, st.E))

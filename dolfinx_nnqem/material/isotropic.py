@@ -150,7 +150,7 @@ class IsotropicHardeningPart(QuadraturePart):
                                 self.hardening.subset(pts))
 
     def at_points(self, points: np.ndarray) -> IsotropicAtPoints:
-        """μ, λ, E and the hardening laws at the local Gauss points ``points``."""
+        """The material at the local Gauss points ``points``: μ, λ, E and the hardening laws there."""
         return IsotropicAtPoints(self.mu[points], self.lmbda[points], self.E[points], self.hardening.subset(points))
 
 

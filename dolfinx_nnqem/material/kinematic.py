@@ -251,7 +251,7 @@ class KinematicHardeningPart(QuadraturePart):
         return {name: deviator_tensors(alpha[:, k]) for k, name in enumerate(self.internal_variables)}
 
     def at_points(self, points: np.ndarray) -> KinematicAtPoints:
-        """μ, λ, E, the hardening laws, C_k and γ_k at the local Gauss points ``points``."""
+        """The material at the local Gauss points ``points``: μ, λ, E, the hardening laws, C_k and γ_k there."""
         return KinematicAtPoints(self.mu[points], self.lmbda[points], self.E[points], self.hardening.subset(points),
                                  self.C[points], self.gamma[points], tuple(self.internal_variables))
 
