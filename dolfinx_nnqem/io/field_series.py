@@ -67,8 +67,8 @@ class CellMeans:
 
     @property
     def fields(self) -> tuple[fem.Function, ...]:
-        """The DG 0 functions written: q, p, plastic, yield_function (and back_stress where a material
-        has back-stresses)."""
+        """The DG 0 functions written: von_mises (q), p, plastic, yield_function, and back_stress where a
+        material has back-stresses."""
         if self.back_stress is not None:
             return self.q, self.p, self.plastic, self.yield_function, self.back_stress
         return self.q, self.p, self.plastic, self.yield_function
@@ -245,7 +245,7 @@ class FieldSeriesWriter:
         on_rank0(self.comm, tidy)
 
     def close(self) -> None:
-        """Nothing: each step's files are complete when written."""
+        """Nothing to close: each step's files are written and closed with that step."""
         pass
 
 

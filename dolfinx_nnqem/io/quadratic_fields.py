@@ -138,5 +138,5 @@ class QuadraticFieldWriter:
         on_rank0(self.comm, tidy)
 
     def close(self) -> None:
-        """Nothing: each step's files are complete when written."""
+        """Nothing to close: each step's files are written and closed with that step."""
         pass
