@@ -17,6 +17,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable
+from typing import Any
 
 from mpi4py import MPI
 
@@ -64,7 +65,7 @@ def rebuild(description: tuple) -> BaseException:
     return CollectiveError(f"{name}: {message}")
 
 
-def agree(comm, fn: Callable, *args, **kwargs):
+def agree(comm: MPI.Comm | None, fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
     """``fn(*args, **kwargs)`` on every rank; if it raised on any rank, raise on every rank.
 
     Every rank raises the exception of the lowest rank that failed (its type, message, errno
@@ -90,7 +91,7 @@ def agree(comm, fn: Callable, *args, **kwargs):
     raise rebuild(first) from error
 
 
-def on_rank0(comm, fn: Callable, *args, **kwargs):
+def on_rank0(comm: MPI.Comm | None, fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
     """``fn`` on rank 0 only (files of a gathered result); its failure is raised on every rank.
     Returns fn's result on rank 0, None elsewhere."""
     rank = 0 if comm is None else comm.rank
@@ -100,7 +101,7 @@ def on_rank0(comm, fn: Callable, *args, **kwargs):
 _ERROR_COMM = None
 
 
-def error_comm():
+def error_comm() -> MPI.Comm | None:
     """A private duplicate of COMM_WORLD used only by :func:`finish_collectively` (created
     collectively at start-up by :func:`init`)."""
     return _ERROR_COMM

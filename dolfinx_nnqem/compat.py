@@ -16,6 +16,8 @@ from __future__ import annotations
 import os
 import shutil
 import sys
+from collections.abc import Iterable
+from typing import TYPE_CHECKING
 
 H5PY_BEFORE_DOLFINX: bool = "h5py" in sys.modules and "dolfinx" not in sys.modules
 """h5py was imported before DOLFINx: only then can it share the process with the PyPI wheel,
@@ -33,6 +35,10 @@ import dolfinx.io
 import numpy as np
 from petsc4py import PETSc
 
+if TYPE_CHECKING:  # types of the arguments only: gmsh is imported where it is used (its import costs)
+    import gmsh
+    from mpi4py import MPI
+
 from dolfinx_nnqem.pyvista_compat import extract_outer_surface, import_pyvista, vtk_render_problem  # noqa: F401  (their home: no DOLFINx)
 
 _major, _minor = dolfinx.__version__.split(".")[:2]
@@ -47,14 +53,15 @@ if DOLFINX_VERSION < (0, 9):
 _NEW = DOLFINX_VERSION >= (0, 10)
 
 
-def assemble_matrix(a, bcs=(), diagonal: float = 1.0) -> PETSc.Mat:
+def assemble_matrix(a: dolfinx.fem.Form, bcs: Iterable[dolfinx.fem.DirichletBC] = (),
+                    diagonal: float = 1.0) -> PETSc.Mat:
     """Assemble a bilinear form into a new PETSc AIJ matrix (``diag``/``diagonal`` keyword)."""
     if _NEW:
         return dolfinx.fem.petsc.assemble_matrix(a, bcs=list(bcs), diag=diagonal)
     return dolfinx.fem.petsc.assemble_matrix(a, bcs=list(bcs), diagonal=diagonal)
 
 
-def create_vector(V) -> PETSc.Vec:
+def create_vector(V: dolfinx.fem.FunctionSpace) -> PETSc.Vec:
     """A ghosted PETSc vector for the function space ``V``."""
     if _NEW:
         return dolfinx.fem.petsc.create_vector(V)
@@ -62,8 +69,13 @@ def create_vector(V) -> PETSc.Vec:
     return dolfinx.la.create_petsc_vector(V.dofmap.index_map, V.dofmap.index_map_bs)
 
 
-def model_to_mesh(model, comm, rank: int = 0, gdim: int = 3):
-    """gmsh model -> ``(mesh, cell_tags, facet_tags)`` (``io.gmshio`` in 0.9, ``io.gmsh`` after)."""
+def model_to_mesh(model: type[gmsh.model] | None, comm: MPI.Comm, rank: int = 0, gdim: int = 3
+                  ) -> tuple[dolfinx.mesh.Mesh, dolfinx.mesh.MeshTags | None, dolfinx.mesh.MeshTags | None]:
+    """gmsh model -> ``(mesh, cell_tags, facet_tags)`` (``io.gmshio`` in 0.9, ``io.gmsh`` after).
+
+    ``model``: ``gmsh.model`` on the rank ``rank`` that holds it (None on the others). A tag is None
+    from DOLFINx 0.10 when the model has no physical group of that dimension.
+    """
     if _NEW:
         data = dolfinx.io.gmsh.model_to_mesh(model, comm, rank, gdim=gdim)
         return data.mesh, data.cell_tags, data.facet_tags
@@ -71,7 +83,8 @@ def model_to_mesh(model, comm, rank: int = 0, gdim: int = 3):
     return mesh, cell_tags, facet_tags
 
 
-def read_from_msh(filename: str, comm, rank: int = 0, gdim: int = 3):
+def read_from_msh(filename: str, comm: MPI.Comm, rank: int = 0, gdim: int = 3
+                  ) -> tuple[dolfinx.mesh.Mesh, dolfinx.mesh.MeshTags | None, dolfinx.mesh.MeshTags | None]:
     """Read a gmsh ``.msh`` file -> ``(mesh, cell_tags, facet_tags)``."""
     if _NEW:
         data = dolfinx.io.gmsh.read_from_msh(filename, comm, rank, gdim=gdim)
@@ -80,13 +93,13 @@ def read_from_msh(filename: str, comm, rank: int = 0, gdim: int = 3):
     return mesh, cell_tags, facet_tags
 
 
-def interpolation_points(V) -> np.ndarray:
+def interpolation_points(V: dolfinx.fem.FunctionSpace) -> np.ndarray:
     """Reference interpolation points of the element of ``V`` (a method in 0.9, a property after)."""
     points = V.element.interpolation_points
     return points() if callable(points) else points
 
 
-def interpolate_expression(f, expression) -> None:
+def interpolate_expression(f: dolfinx.fem.Function, expression: dolfinx.fem.Expression) -> None:
     """``f`` ← the compiled ``expression`` (``dolfinx.fem.Expression``) at ``f``'s interpolation points,
     on every cell of the mesh (owned and ghost), as ``f.interpolate(expression)`` does.
 
@@ -106,7 +119,7 @@ def interpolate_expression(f, expression) -> None:
     cpp.interpolate(expression._cpp_object, all_cells, np.arange(0, dtype=np.int32))
 
 
-def create_vector_wrap(x) -> PETSc.Vec:
+def create_vector_wrap(x: dolfinx.la.Vector) -> PETSc.Vec:
     """Wrap a ``dolfinx.la.Vector`` as a PETSc vector sharing its memory."""
     if _NEW:
         import dolfinx.la.petsc
@@ -141,7 +154,7 @@ def mpi_environment() -> dict[str, str]:
     return env
 
 
-def geometry_dofmap(mesh) -> np.ndarray:
+def geometry_dofmap(mesh: dolfinx.mesh.Mesh) -> np.ndarray:
     """Cell -> geometry node array ``(num_cells, nodes_per_cell)`` of a single-cell-type mesh.
 
     ``geometry.dofmap`` in 0.9; deprecated in favour of the list ``geometry.dofmaps[0]`` after.
@@ -151,7 +164,7 @@ def geometry_dofmap(mesh) -> np.ndarray:
     return mesh.geometry.dofmap
 
 
-def coordinate_element(mesh):
+def coordinate_element(mesh: dolfinx.mesh.Mesh) -> dolfinx.fem.CoordinateElement:
     """The coordinate element of a single-cell-type mesh (its ``degree``, ``create_dof_layout()``).
 
     ``geometry.cmap`` in 0.9; deprecated in favour of the list ``geometry.cmaps[0]`` after.
@@ -161,7 +174,7 @@ def coordinate_element(mesh):
     return mesh.geometry.cmap
 
 
-def entities_to_geometry(mesh, dim: int, entities: np.ndarray) -> np.ndarray:
+def entities_to_geometry(mesh: dolfinx.mesh.Mesh, dim: int, entities: np.ndarray) -> np.ndarray:
     """Geometry nodes of the given mesh entities, ``(len(entities), nodes per entity)``.
 
     DOLFINx 0.9 dies with an integer division by zero (SIGFPE) when asked for no entities (a rank
@@ -201,7 +214,8 @@ def optimize_tetrahedra() -> str:
     return "gmsh"
 
 
-def refine_mesh(mesh, edges: np.ndarray | None = None):
+def refine_mesh(mesh: dolfinx.mesh.Mesh, edges: np.ndarray | None = None
+                ) -> tuple[dolfinx.mesh.Mesh, np.ndarray, np.ndarray]:
     """Plaza refinement of a simplex mesh -> ``(mesh, parent_cell, parent_facet)``.
 
     ``edges``: local indices of the edges to split (None: uniform refinement). ``partitioner=None``
@@ -215,7 +229,8 @@ def refine_mesh(mesh, edges: np.ndarray | None = None):
     return dolfinx.mesh.refine(mesh, edges, partitioner=None, option=option)
 
 
-def transfer_meshtag(tags, mesh, parent_cell: np.ndarray, parent_facet: np.ndarray | None = None):
+def transfer_meshtag(tags: dolfinx.mesh.MeshTags, mesh: dolfinx.mesh.Mesh, parent_cell: np.ndarray,
+                     parent_facet: np.ndarray | None = None) -> dolfinx.mesh.MeshTags:
     """Tags of a parent mesh carried to the refined ``mesh`` (cells: ``parent_cell``; facets:
     both maps); the children of a tagged entity get its tag."""
     mesh.topology.create_entities(tags.dim)

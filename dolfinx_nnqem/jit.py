@@ -17,7 +17,13 @@ DOLFINx's own options instead (its defaults, or ``dolfinx_jit_options.json``).
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import dolfinx.fem as fem
+
+if TYPE_CHECKING:
+    import numpy as np
+    import ufl
 
 KERNEL_COMPILE_ARGS: list[str] | None = [
     "-O3", "-g0", "-fno-math-errno", "-fno-trapping-math", "-fno-signed-zeros", "-fassociative-math",
@@ -32,12 +38,12 @@ def jit_options() -> dict:
     return {"cffi_extra_compile_args": list(KERNEL_COMPILE_ARGS)}
 
 
-def form(ufl_form) -> fem.Form:
+def form(ufl_form: ufl.Form) -> fem.Form:
     """``dolfinx.fem.form`` with the package's compiler flags (see :func:`_compile`)."""
     return _compile(lambda: fem.form(ufl_form, jit_options=jit_options()), ufl_form)
 
 
-def expression(expr, points) -> fem.Expression:
+def expression(expr: ufl.core.expr.Expr, points: np.ndarray) -> fem.Expression:
     """``dolfinx.fem.Expression`` at reference ``points`` with the package's compiler flags."""
     return _compile(lambda: fem.Expression(expr, points, jit_options=jit_options()), expr)
 

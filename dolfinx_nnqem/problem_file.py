@@ -113,6 +113,15 @@ import sys
 from collections.abc import Set
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # the command line imports MPI, DOLFINx and the solvers once it has read its arguments
+    import dolfinx.mesh
+    from mpi4py import MPI
+
+    from dolfinx_nnqem.problem.contact_problem import ContactProblem
+    from dolfinx_nnqem.solvers.checks import CheckOptions
+    from dolfinx_nnqem.solvers.options import MonolithicOptions, SolverOptions
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -662,7 +671,7 @@ def _checks_section(checks: dict, where: str) -> dict:
     return checks
 
 
-def check_options(spec: ProblemSpec):
+def check_options(spec: ProblemSpec) -> CheckOptions:
     """The :class:`~dolfinx_nnqem.solvers.checks.CheckOptions` of the [checks] section."""
     from dolfinx_nnqem.solvers.checks import CheckOptions
 
@@ -670,7 +679,8 @@ def check_options(spec: ProblemSpec):
 
 
 # -- building ---------------------------------------------------------------------------------
-def read_mesh(spec: ProblemSpec, comm):
+def read_mesh(spec: ProblemSpec, comm: MPI.Comm
+              ) -> tuple[dolfinx.mesh.Mesh, dolfinx.mesh.MeshTags | None, dolfinx.mesh.MeshTags | None]:
     """The mesh and its tags from ``spec.mesh`` (gmsh .msh or XDMF)."""
 
     file = spec.mesh["file"]
@@ -764,7 +774,7 @@ def _check_xdmf(file: Path, names: dict) -> None:
                 raise ProblemFileError(f"{file}: its data file {h5} is missing")
 
 
-def build_problem(spec: ProblemSpec, comm):
+def build_problem(spec: ProblemSpec, comm: MPI.Comm) -> ContactProblem:
     """The :class:`ContactProblem` of a checked problem file."""
     from dolfinx_nnqem.contact.obstacles import Cylinder, Plane, Sphere
     from dolfinx_nnqem.problem.contact_problem import (BodyForce, Contact, ContactProblem, Dirichlet, Gravity, Pressure,
@@ -794,7 +804,8 @@ def build_problem(spec: ProblemSpec, comm):
     )
 
 
-def solver_options(spec: ProblemSpec, method: str | None = None):
+def solver_options(spec: ProblemSpec, method: str | None = None
+                   ) -> tuple[SolverOptions, dict[str, MonolithicOptions]]:
     """(SolverOptions, {method: its own options}) from the [solver] section (``method`` overrides its method)."""
     from dolfinx_nnqem.solvers.options import MonolithicOptions, SolverOptions
 

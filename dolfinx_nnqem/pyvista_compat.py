@@ -9,11 +9,15 @@ from __future__ import annotations
 
 import os
 import sys
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:  # pyvista is imported where it is used (its import costs)
+    import pyvista
 
 __all__ = ["extract_outer_surface", "import_pyvista", "vtk_render_problem"]
 
 
-def extract_outer_surface(dataset):
+def extract_outer_surface(dataset: pyvista.DataSet) -> pyvista.PolyData:
     """The outer surface of a pyvista dataset as PolyData, by VTK's dataset surface filter.
 
     pyvista 0.49 asks which algorithm to use (``algorithm="dataset_surface"``, the filter older
@@ -27,7 +31,7 @@ def extract_outer_surface(dataset):
     return dataset.extract_surface()
 
 
-def import_pyvista():
+def import_pyvista() -> Any:  # the pyvista module (pyvista is typed as Any here: pyproject.toml)
     """``import pyvista``, without the mypy plugin pyvista loads where mypy is installed.
 
     Recent pyvista (0.49 here) imports ``mypy.nodes`` for its typing plugin whenever it finds

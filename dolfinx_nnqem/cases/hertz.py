@@ -27,6 +27,7 @@ the y axis through x = z = 0; the contact surface lies in a plane y = const.
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import dolfinx.fem as fem
 import numpy as np
@@ -37,6 +38,9 @@ from scipy.optimize import minimize_scalar
 from dolfinx_nnqem import jit
 from dolfinx_nnqem.problem.contact_problem import assemble_vector
 from dolfinx_nnqem.io.results import values_at_blocks
+
+if TYPE_CHECKING:
+    from dolfinx_nnqem.estimates.quantities import Measure
 
 __all__ = ["NodalLoads", "effective_modulus", "fit_hertz_profile", "hertz_contact", "hertz_quantities", "measure_hertz"]
 
@@ -160,7 +164,7 @@ def fit_hertz_profile(loads: NodalLoads, p_n: np.ndarray, a_guess: float) -> tup
     return a, best_p0(a)
 
 
-def hertz_quantities(facet_tag: int, a_guess: float):
+def hertz_quantities(facet_tag: int, a_guess: float) -> Measure:
     """A quantity measure (:data:`dolfinx_nnqem.estimates.quantities.Measure`) of a Hertz contact:
     ``hertz:a`` and ``hertz:p0``, the contact radius and peak pressure of the Hertz profile that
     best fits the pair forces (:func:`fit_hertz_profile`; F not imposed), on the slave surface

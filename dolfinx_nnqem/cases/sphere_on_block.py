@@ -16,6 +16,8 @@ Units: mm, N, MPa. ``docs/nonmatching-hertz.md`` gives the measured figures.
 
 from __future__ import annotations
 
+from typing import Any
+
 from mpi4py import MPI
 
 from dolfinx_nnqem.cases.hertz import NodalLoads, effective_modulus, fit_hertz_profile, measure_hertz
@@ -42,7 +44,7 @@ SYMMETRY = 4  # quarter model
 
 def sphere_on_block_problem(h: float, comm: MPI.Comm = MPI.COMM_WORLD, *, mu_f: float = 0.0,
                             law: str = "alart-curnier", approach: float = APPROACH, R: float = R_SPHERE,
-                            block: float = BLOCK, **mesh_options) -> ContactProblem:
+                            block: float = BLOCK, **mesh_options: Any) -> ContactProblem:
     """The quarter model with the element size ``h`` at the contact (see the module).
 
     ``mesh_options`` go to :func:`~dolfinx_nnqem.problem.meshing.build_sphere_on_block` (``h_max``,

@@ -11,6 +11,7 @@ Traction (1e5, −1e5, 0.5e5) Pa on beam 2's top and self-weight, all × ℓ, �
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -25,7 +26,7 @@ from dolfinx_nnqem.io.output import ResultsWriter
 from dolfinx_nnqem.solvers.contract import contact_model
 from dolfinx_nnqem.solvers.options import SolverOptions
 from dolfinx_nnqem.solvers.registry import make_solver
-from dolfinx_nnqem.solvers.stepping import solve_load_steps
+from dolfinx_nnqem.solvers.stepping import IncrementResult, solve_load_steps
 
 MATERIAL = VonMises(E=2.0e10, nu=0.17, sigma_y0=5.0e5, H=2.0e10, density=2400.0)
 MU_F = 0.5
@@ -73,7 +74,8 @@ def two_beams_problem(comm: MPI.Comm = MPI.COMM_WORLD, *, law: str = "alart-curn
 
 def run_two_beams(method: str = "monolithic", increments: int = 15, out: str | Path = "results/two_beams",
                   *, law: str | None = None, refine: int = 1, options: SolverOptions | None = None,
-                  fields: bool = True, comm: MPI.Comm = MPI.COMM_WORLD, progress=None,
+                  fields: bool = True, comm: MPI.Comm = MPI.COMM_WORLD,
+                  progress: Callable[[IncrementResult], None] | None = None,
                   method_options: dict | None = None) -> dict:
     """Solve the benchmark with ``method`` and write ``out``/summary.json (+ fields, pairs).
 

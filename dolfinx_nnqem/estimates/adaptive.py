@@ -19,6 +19,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -27,6 +28,10 @@ from dolfinx_nnqem.estimates.indicators import RecoveryIndicator
 from dolfinx_nnqem.estimates.quantities import Measure, ProbePoints
 from dolfinx_nnqem.estimates.refinement import check_refinable, mark_bulk, refine_mesh_and_tags
 from dolfinx_nnqem.problem.contact_problem import ContactProblem
+
+if TYPE_CHECKING:
+    from dolfinx_nnqem.solvers.checks import CheckOptions
+    from dolfinx_nnqem.solvers.options import SolverOptions
 
 __all__ = ["AdaptiveCycle", "AdaptiveResult", "check_target_error", "selected_relative", "solve_adaptively"]
 
@@ -48,6 +53,7 @@ class AdaptiveCycle:
     run_time_s: float
 
     def as_dict(self) -> dict:
+        """This cycle's entry in the ``cycles`` of ``summary.json``'s ``adaptivity`` (``docs/outputs.md``)."""
         return {"cycle": self.index, "dofs": self.dofs, "cells": self.cells,
                 "relative_error": float(self.relative_error) if np.isfinite(self.relative_error) else None,
                 "indicator": list(self.indicator), "run_time_s": self.run_time_s,
@@ -89,9 +95,11 @@ def selected_relative(estimates: ErrorEstimates, quantities: Sequence[str] | Non
 
 def solve_adaptively(problem: ContactProblem, run: RunCycle, method: str, target_error: float, *,
                      max_cycles: int = 6, fraction: float = 0.5, quantities: Sequence[str] | None = None,
-                     probes: ProbePoints | None = None, options=None, method_options: dict | None = None,
+                     probes: ProbePoints | None = None, options: SolverOptions | None = None,
+                     method_options: dict | None = None,
                      on_cycle: Callable[[AdaptiveCycle], None] | None = None,
-                     extra: Measure | None = None, enrichment: str = "auto", check=None) -> AdaptiveResult:
+                     extra: Measure | None = None, enrichment: str = "auto",
+                     check: CheckOptions | None = None) -> AdaptiveResult:
     """Refine ``problem``'s tetrahedral mesh until the estimated error is at most ``target_error``.
 
     Parameters

@@ -25,6 +25,7 @@ import logging
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from mpi4py import MPI
@@ -35,6 +36,12 @@ from dolfinx_nnqem.problem.contact_problem import ContactProblem
 from dolfinx_nnqem.solvers.convergence import ConvergenceError
 from dolfinx_nnqem.solvers.registry import make_solver
 from dolfinx_nnqem.solvers.stepping import solve_load_steps
+
+if TYPE_CHECKING:
+    import dolfinx.mesh
+
+    from dolfinx_nnqem.solvers.checks import CheckOptions
+    from dolfinx_nnqem.solvers.options import SolverOptions
 
 __all__ = ["ENRICHMENTS", "ErrorEstimates", "QuantityEstimate", "choose_enrichment", "enriched_problem",
            "estimate_errors", "rebuild_problem"]
@@ -72,7 +79,8 @@ def choose_enrichment(problem: ContactProblem, enrichment: str = "auto") -> str:
     return enrichment
 
 
-def rebuild_problem(problem: ContactProblem, mesh, cell_tags, facet_tags, degree: int) -> ContactProblem:
+def rebuild_problem(problem: ContactProblem, mesh: dolfinx.mesh.Mesh, cell_tags: dolfinx.mesh.MeshTags | None,
+                    facet_tags: dolfinx.mesh.MeshTags | None, degree: int) -> ContactProblem:
     """``problem``'s definition (materials, supports, loads, contact) on another mesh or degree."""
     d = problem.definition
     return ContactProblem(
@@ -103,6 +111,8 @@ class QuantityEstimate:
     reference: float  #: ‖Q_enriched‖, or its family's largest where that is round-off (:data:`NEGLIGIBLE`)
 
     def as_dict(self) -> dict:
+        """This quantity's entry in the ``quantities`` of ``summary.json``'s ``error_estimates``
+        (``docs/outputs.md``)."""
         return {"name": self.name, "value": self.value.tolist(), "enriched": self.enriched.tolist(),
                 "estimate": float(self.estimate), "estimate_components": self.components.tolist(),
                 "relative": self.relative, "reference": self.reference}
@@ -156,7 +166,7 @@ class ErrorEstimates:
     note: str | None = None  #: why that is not the run's method, when it is not
 
     @classmethod
-    def compare(cls, coarse: Quantities, fine: Quantities, **fields) -> ErrorEstimates:
+    def compare(cls, coarse: Quantities, fine: Quantities, **fields: Any) -> ErrorEstimates:
         """The estimates from the run's quantities and the enriched solve's (same names)."""
         items = []
         references = _references(fine)
@@ -200,15 +210,16 @@ def _finite(value: float) -> float | None:
 
 
 def num_dofs(problem: ContactProblem) -> int:
+    """Number of displacement dofs of ``problem`` over all ranks."""
     imap = problem.V.dofmap.index_map
     return int(imap.size_global * problem.V.dofmap.index_map_bs)
 
 
 def estimate_errors(problem: ContactProblem, method: str, load_factors: Sequence[float], *,
-                    probes: ProbePoints | None = None, enrichment: str = "auto", options=None,
+                    probes: ProbePoints | None = None, enrichment: str = "auto", options: SolverOptions | None = None,
                     method_options: dict | None = None, run_time_s: float | None = None,
                     enriched: ContactProblem | None = None, extra: Measure | None = None,
-                    check=None) -> ErrorEstimates:
+                    check: CheckOptions | None = None) -> ErrorEstimates:
     """Estimate the discretisation error of every quantity of a solved run (collective).
 
     Parameters

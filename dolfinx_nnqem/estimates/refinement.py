@@ -21,7 +21,7 @@ from dolfinx_nnqem import compat
 __all__ = ["check_refinable", "mark_bulk", "refine_mesh_and_tags"]
 
 
-def check_refinable(mesh) -> None:
+def check_refinable(mesh: dolfinx.mesh.Mesh) -> None:
     """Raise ValueError unless ``mesh`` is tetrahedral (naming the reason)."""
     cell = mesh.topology.cell_name()
     if cell != "tetrahedron":
@@ -30,7 +30,9 @@ def check_refinable(mesh) -> None:
                          "available; for adaptivity mesh the bodies with tetrahedra")
 
 
-def refine_mesh_and_tags(mesh, cell_tags, facet_tags, cells: np.ndarray | None = None):
+def refine_mesh_and_tags(mesh: dolfinx.mesh.Mesh, cell_tags: dolfinx.mesh.MeshTags | None,
+                         facet_tags: dolfinx.mesh.MeshTags | None, cells: np.ndarray | None = None
+                         ) -> tuple[dolfinx.mesh.Mesh, dolfinx.mesh.MeshTags | None, dolfinx.mesh.MeshTags | None]:
     """The refined mesh and its tags: ``cells`` (local indices) refined, or every cell when None.
 
     Returns

@@ -12,6 +12,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from dolfinx_nnqem.estimates.adaptive import check_target_error
 from dolfinx_nnqem.estimates.enriched import ErrorEstimates, choose_enrichment, estimate_errors
@@ -19,6 +20,12 @@ from dolfinx_nnqem.estimates.quantities import probe_points
 from dolfinx_nnqem.estimates.refinement import check_refinable
 from dolfinx_nnqem.estimates.report import record_estimates
 from dolfinx_nnqem.solvers.convergence import ConvergenceError
+
+if TYPE_CHECKING:
+    from dolfinx_nnqem.io.output import ResultsWriter
+    from dolfinx_nnqem.problem.contact_problem import ContactProblem
+    from dolfinx_nnqem.solvers.checks import CheckOptions
+    from dolfinx_nnqem.solvers.options import SolverOptions
 
 __all__ = ["EstimateSettings", "check_settings", "estimate_into_writer"]
 
@@ -47,7 +54,7 @@ class EstimateSettings:
                    quantities=None if quantities is None else tuple(quantities))
 
 
-def check_settings(problem, settings: EstimateSettings) -> None:
+def check_settings(problem: ContactProblem, settings: EstimateSettings) -> None:
     """Raise ValueError, before solving, for what the settings ask and the problem cannot give."""
     if not settings.enabled:
         return
@@ -57,9 +64,10 @@ def check_settings(problem, settings: EstimateSettings) -> None:
     choose_enrichment(problem, settings.enrichment)
 
 
-def estimate_into_writer(writer, problem, method: str, settings: EstimateSettings, *,
-                         probes: Mapping[str, Sequence] | None = None, options=None,
-                         method_options: dict | None = None, check=None) -> ErrorEstimates | None:
+def estimate_into_writer(writer: ResultsWriter, problem: ContactProblem, method: str, settings: EstimateSettings, *,
+                         probes: Mapping[str, Sequence] | None = None, options: SolverOptions | None = None,
+                         method_options: dict | None = None, check: CheckOptions | None = None
+                         ) -> ErrorEstimates | None:
     """The estimate of a finished run, recorded in its ``summary.json`` (collective).
 
     ``writer``: the run's :class:`~dolfinx_nnqem.io.output.ResultsWriter`, before it is closed

@@ -152,6 +152,7 @@ def _import_h5py():
 
 if TYPE_CHECKING:
     import h5py
+    from mpi4py import MPI
 else:
     h5py = _import_h5py()
 
@@ -198,6 +199,7 @@ class CSCMatrix:
 
     @property
     def nzmax(self) -> int:
+        """Number of stored entries (FCLIB's ``nzmax``)."""
         return int(self.x.size)
 
     nz = -1
@@ -362,10 +364,11 @@ def _solution_pair(W: np.ndarray, q: np.ndarray, value) -> tuple[np.ndarray, np.
 
 def write_fclib_problem(path: str | Path, W: npt.ArrayLike, q: npt.ArrayLike, mu: npt.ArrayLike, *,
                         title: str = DEFAULT_TITLE, description: str = "",
-                        math_info: str = DEFAULT_MATH_INFO, solution=None,
+                        math_info: str = DEFAULT_MATH_INFO,
+                        solution: npt.ArrayLike | Mapping[str, npt.ArrayLike] | None = None,
                         guesses: Sequence | None = None, matrix_info: bool = True,
                         number_of_dofs: int | None = None, extra: Mapping[str, Any] | None = None,
-                        overwrite: bool = True, comm=None) -> Path:
+                        overwrite: bool = True, comm: MPI.Comm | None = None) -> Path:
     """Write an FCLIB local problem FC(W, q, μ) (spacedim 3) to ``path``.
 
     Parameters
@@ -459,9 +462,9 @@ def _write(path, W, q, mu, title, description, math_info, solution, guesses, mat
 def write_fclib_local(path: str | Path, C: npt.ArrayLike, w_free: npt.ArrayLike, mu_f: npt.ArrayLike, *,
                       w_m: npt.ArrayLike, lam_m: npt.ArrayLike, g0: npt.ArrayLike, w_prev: npt.ArrayLike,
                       title: str = DEFAULT_TITLE, description: str | None = None,
-                      math_info: str = DEFAULT_MATH_INFO, solution=None, guesses: Sequence | None = None,
-                      r: float | None = None,
-                      **kwargs) -> Path:
+                      math_info: str = DEFAULT_MATH_INFO,
+                      solution: npt.ArrayLike | Mapping[str, npt.ArrayLike] | None = None,
+                      guesses: Sequence | None = None, r: float | None = None, **kwargs: Any) -> Path:
     """Write NNEQM1's condensed problem (C, w_free, μ_f, …) as an FCLIB local problem.
 
     W = C and q from :func:`fclib_local_from_condensed`; ``solution`` / ``guesses`` are
@@ -490,8 +493,9 @@ def _flat(value):
     return np.asarray(value, dtype=np.float64).reshape(-1)
 
 
-def write_condensed_problem(path: str | Path, condensed: Mapping[str, Any], *, solution=None,
-                            include_start_guess: bool = True, **kwargs) -> Path:
+def write_condensed_problem(path: str | Path, condensed: Mapping[str, Any], *,
+                            solution: npt.ArrayLike | Mapping[str, npt.ArrayLike] | None = None,
+                            include_start_guess: bool = True, **kwargs: Any) -> Path:
     """Write a condensed problem (``NNEQM1Solver.last_condensed.as_dict()``) as an FCLIB local problem (collective).
 
     ``solution``: the contact forces λ solving this inner problem, if known. With

@@ -67,6 +67,8 @@ class CellMeans:
 
     @property
     def fields(self) -> tuple[fem.Function, ...]:
+        """The DG 0 functions written: von_mises (q), p, plastic, yield_function, and back_stress where a
+        material has back-stresses."""
         if self.back_stress is not None:
             return self.q, self.p, self.plastic, self.yield_function, self.back_stress
         return self.q, self.p, self.plastic, self.yield_function
@@ -95,7 +97,9 @@ class CellField(Protocol):
 
     function: fem.Function
 
-    def update(self) -> None: ...
+    def update(self) -> None:
+        """Refresh ``function`` from the converged state (collective)."""
+        ...
 
 
 class FieldSeriesWriter:
@@ -221,6 +225,7 @@ class FieldSeriesWriter:
 
     # -- restart -------------------------------------------------------------------------------------
     def state(self) -> dict:
+        """What a restart needs (:meth:`resume`): the steps written, as [index, load factor] pairs."""
         return {"steps": [list(s) for s in self.steps]}
 
     def resume(self, state: dict) -> None:
@@ -240,6 +245,7 @@ class FieldSeriesWriter:
         on_rank0(self.comm, tidy)
 
     def close(self) -> None:
+        """Nothing to close: each step's files are written and closed with that step."""
         pass
 
 

@@ -17,9 +17,12 @@ quadratic displacement is drawn on its own Lagrange cells.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    import dolfinx.fem
 
 __all__ = ["LINEAR_VTK_CELLS", "gather_field_step"]
 
@@ -28,8 +31,8 @@ LINEAR_VTK_CELLS = {10: (10, 4), 71: (10, 4), 24: (10, 4), 12: (12, 8), 72: (12,
 Lagrange or quadratic. VTK lists a higher-order cell's corners first, in the first-order order."""
 
 
-def gather_field_step(space, u_values: np.ndarray, cell_fields: Mapping[str, Any], time: float, *,
-                      whole_cells: bool) -> dict | None:
+def gather_field_step(space: dolfinx.fem.FunctionSpace, u_values: np.ndarray, cell_fields: Mapping[str, Any],
+                      time: float, *, whole_cells: bool) -> dict | None:
     """The displacement ``u_values`` of ``space`` and cell fields as one picture step, on rank 0.
 
     Collective. Every rank sends its owned cells (with the nodes they use, ghosts included);

@@ -42,6 +42,8 @@ class OutputLock:
         self._info_bytes = 0
 
     def acquire(self) -> OutputLock:
+        """Take the lock, creating the folder, and write this process's id, host and start time into
+        the lock file; this lock. Raises :class:`FolderInUse` naming the run that holds it."""
         self.folder.mkdir(parents=True, exist_ok=True)
         for _ in range(100):
             fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
@@ -96,6 +98,7 @@ class OutputLock:
                               "to finish or choose another folder", str(self.folder)) from None
 
     def release(self) -> None:
+        """Remove the lock file and let the lock go (nothing if it is not held)."""
         if self._fd is not None:
             try:
                 os.unlink(self.path)  # still ours: nobody else can hold it while we do

@@ -7,8 +7,13 @@ instead of losing the process to VTK's abort.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from dolfinx_nnqem import pyvista_compat
 from dolfinx_nnqem.chatter import apply_vtk_options
+
+if TYPE_CHECKING:  # pyvista is imported where it is used (its import costs)
+    import pyvista
 
 __all__ = ["PictureUnavailable", "offscreen_plotter"]
 
@@ -17,7 +22,7 @@ class PictureUnavailable(RuntimeError):
     """VTK cannot render here (the message says why and what to do)."""
 
 
-def offscreen_plotter(window_size: tuple[int, int]):
+def offscreen_plotter(window_size: tuple[int, int]) -> pyvista.Plotter:
     """A ``pyvista.Plotter(off_screen=True)`` of ``window_size`` pixels.
 
     Raises

@@ -12,11 +12,16 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
+import numpy.typing as npt
 
 from dolfinx_nnqem import pyvista_compat
 from dolfinx_nnqem.io.offscreen import offscreen_plotter
+
+if TYPE_CHECKING:
+    from dolfinx_nnqem.problem.contact_problem import ContactProblem
 
 STATE_COLOURS = {0: "white", 1: "royalblue", 2: "crimson"}  # open, stick, slip
 
@@ -30,8 +35,8 @@ def _matplotlib():
     return plt
 
 
-def plot_curve(x, y, path: str | os.PathLike, *, xlabel: str, ylabel: str, label: str = "FE",
-               reference: dict[str, float] | None = None, title: str = "") -> None:
+def plot_curve(x: npt.ArrayLike, y: npt.ArrayLike, path: str | os.PathLike, *, xlabel: str, ylabel: str,
+               label: str = "FE", reference: dict[str, float] | None = None, title: str = "") -> None:
     """A curve with optional horizontal reference lines (e.g. an analytical limit load)."""
     plt = _matplotlib()
     fig, ax = plt.subplots(figsize=(6, 4))
@@ -105,8 +110,9 @@ def _gather_grid(problem, field: str):
             np.concatenate(us), np.concatenate(vals))
 
 
-def plot_deformed(problem, path: str | os.PathLike, *, field: str = "von_mises", scale: float | None = None,
-                  show_pairs: bool = True, title: str = "", camera: str | Sequence[float] | None = "iso",
+def plot_deformed(problem: ContactProblem, path: str | os.PathLike, *, field: str = "von_mises",
+                  scale: float | None = None, show_pairs: bool = True, title: str = "",
+                  camera: str | Sequence[float] | None = "iso",
                   focus: Sequence[float] | None = None, zoom: float = 1.0) -> None:
     """Deformed shape (displacements × ``scale``) coloured by a Gauss-point field (cell means).
 
@@ -212,7 +218,8 @@ def contact_pressure_data(problem) -> dict | None:
             "triangles": triangles}
 
 
-def plot_contact_pressure(problem_or_table, path: str | os.PathLike, *, problem=None, title: str = "",
+def plot_contact_pressure(problem_or_table: ContactProblem | dict, path: str | os.PathLike, *,
+                          problem: ContactProblem | None = None, title: str = "",
                           unit: str = "MPa", camera: str | Sequence[float] = "bottom", point_size: float = 12.0,
                           interface: int | None = None, circle: float | None = None) -> None:
     """The contact pressure on the slave surface: its facets interpolated, with a scalar bar.

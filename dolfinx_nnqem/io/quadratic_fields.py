@@ -24,6 +24,7 @@ from __future__ import annotations
 import os
 import xml.etree.ElementTree as ET
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from dolfinx.io import VTKFile
@@ -31,13 +32,16 @@ from dolfinx.io import VTKFile
 from dolfinx_nnqem.collective import on_rank0
 from dolfinx_nnqem.io.safe_io import atomic_write_text
 
+if TYPE_CHECKING:
+    from dolfinx_nnqem.problem.contact_problem import ContactProblem
+
 __all__ = ["INDEX", "QuadraticFieldWriter", "writes_quadratic_fields"]
 
 INDEX = "fields_p2.pvd"
 FOLDER = "fields"
 
 
-def writes_quadratic_fields(problem) -> bool:
+def writes_quadratic_fields(problem: ContactProblem) -> bool:
     """Whether a run of ``problem`` writes ``fields_p2.pvd``: its displacement is of degree 2."""
     return problem.V.ufl_element().embedded_superdegree >= 2
 
@@ -134,4 +138,5 @@ class QuadraticFieldWriter:
         on_rank0(self.comm, tidy)
 
     def close(self) -> None:
+        """Nothing to close: each step's files are written and closed with that step."""
         pass

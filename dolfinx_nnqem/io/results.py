@@ -17,8 +17,10 @@ from dolfinx_nnqem.contact.laws import STATE_NAMES
 if TYPE_CHECKING:
     from petsc4py import PETSc
 
+    from dolfinx_nnqem.problem.contact_problem import ContactProblem
 
-def values_at_blocks(problem, blocks: np.ndarray, vec=None) -> np.ndarray:
+
+def values_at_blocks(problem: ContactProblem, blocks: np.ndarray, vec: PETSc.Vec | None = None) -> np.ndarray:
     """Values of a blocked (3 per node) vector at global dof-block indices, on every rank.
 
     Parameters
@@ -42,7 +44,7 @@ def values_at_blocks(problem, blocks: np.ndarray, vec=None) -> np.ndarray:
     return total
 
 
-def node_blocks_at_points(problem, points: np.ndarray, cell_tag: int | None = None,
+def node_blocks_at_points(problem: ContactProblem, points: np.ndarray, cell_tag: int | None = None,
                           tol: float = 1e-8) -> np.ndarray:
     """Global dof-block indices of the mesh nodes at ``points`` (n,3).
 
@@ -121,7 +123,7 @@ def pair_table(problem) -> dict[str, np.ndarray]:
     return table
 
 
-def reactions(problem, R=None) -> dict[int, np.ndarray]:
+def reactions(problem: ContactProblem, R: PETSc.Vec | None = None) -> dict[int, np.ndarray]:
     """Support reaction (force of the support on the body, N) summed per Dirichlet tag.
 
     At constrained dofs the residual R = F_int − F_ext(ℓ) − Bᵀλ is exactly the support force.
@@ -146,7 +148,7 @@ def reactions(problem, R=None) -> dict[int, np.ndarray]:
     return out
 
 
-def applied_load(problem, F_ext: PETSc.Vec | None = None) -> np.ndarray:
+def applied_load(problem: ContactProblem, F_ext: PETSc.Vec | None = None) -> np.ndarray:
     """Resultant of the applied loads F_ext(ℓ) (N), global frame (``F_ext``: if the caller has it)."""
     if F_ext is None:
         F_ext = problem.external_force()

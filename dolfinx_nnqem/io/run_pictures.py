@@ -43,7 +43,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 from collections.abc import Callable, Collection, Mapping
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
@@ -53,6 +53,9 @@ from dolfinx_nnqem.io.estimate_pictures import ESTIMATE_PICTURE, draw_error_esti
 from dolfinx_nnqem.io.live_fields import LINEAR_VTK_CELLS
 from dolfinx_nnqem.io.offscreen import PictureUnavailable, offscreen_plotter
 from dolfinx_nnqem.io.reader import read_pairs, read_summary, start_reading_fields
+
+if TYPE_CHECKING:
+    from dolfinx_nnqem.problem.contact_problem import ContactProblem
 
 __all__ = ["ALL_PICTURES", "CONTACT_PICTURE", "PICTURE_FOLDER", "PICTURES", "PictureDrawer", "draw_job", "draw_live_pictures",
            "draw_run_pictures", "missing_pictures", "pictures_enabled", "pictures_of_run"]
@@ -559,7 +562,7 @@ class PictureDrawer(Protocol):
         ...
 
 
-def draw_live_pictures(problem, folder: str | os.PathLike, *, completed: bool,
+def draw_live_pictures(problem: ContactProblem, folder: str | os.PathLike, *, completed: bool,
                        step: dict | None = None, worker: PictureDrawer | None = None,
                        names: Collection[str] = ALL_PICTURES) -> dict[str, Path | str]:
     """The end of a run: :func:`draw_run_pictures` on rank 0 (with the run's last ``step`` of

@@ -22,9 +22,13 @@ import functools
 import os
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from dolfinx_nnqem import interrupts
 from dolfinx_nnqem.collective import agree, on_rank0
+
+if TYPE_CHECKING:
+    from mpi4py import MPI
 
 __all__ = ["OutputError", "StagedFiles", "atomic_write", "atomic_write_text", "commit", "fsync_directory",
            "remove_stale_temporaries", "remove_temporaries_of", "sync_file_system"]
@@ -178,7 +182,7 @@ class StagedFiles:
                     pass
 
 
-def commit(comm, folder: str | os.PathLike, *staged: StagedFiles) -> None:
+def commit(comm: MPI.Comm | None, folder: str | os.PathLike, *staged: StagedFiles) -> None:
     """The durable commit point of an increment (collective): every rank syncs the file system
     of ``folder`` (its own new files, a checkpoint's rank file among them), then rank 0 renames
     the staged files into place. A failure on any rank is raised on every rank."""

@@ -53,56 +53,72 @@ class CompositeAtPoints:
 
     @property
     def mu(self) -> np.ndarray:
+        """Shear modulus (n,), each point's from its part."""
         return self._scattered([p.mu for p in self.parts])
 
     @property
     def lmbda(self) -> np.ndarray:
+        """Lamé's λ (n,), each point's from its part."""
         return self._scattered([p.lmbda for p in self.parts])
 
     @property
     def stress_unit(self) -> np.ndarray:
+        """σ_u (n,), each point's from its part."""
         return self._scattered([p.stress_unit for p in self.parts])
 
     @property
     def yields(self) -> np.ndarray:
+        """(n,) bool: the points whose part's material can yield."""
         return self._scattered([p.yields for p in self.parts])
 
     @property
     def yield_criterion(self) -> str:
+        """The criterion shared by every part with yielding points here ("none" if there is none);
+        "mixed" where they differ."""
         criteria = {p.yield_criterion for p, mask in zip(self.parts, self._masks)
                     if np.any(p.yields) and np.any(mask)} or {"none"}
         return criteria.pop() if len(criteria) == 1 else "mixed"
 
     @property
     def deviatoric_flow(self) -> bool:
+        """Every part's plastic strain is deviatoric."""
         return all(p.deviatoric_flow for p in self.parts)
 
     # -- the return map -------------------------------------------------------------------------------------
     def plastic_strain(self, t: np.ndarray, internal: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        """(Δε_p (n, 5), Δp (n,)) of each part's return map at its points."""
         pairs = self._each("plastic_strain", t, internal=internal)
         return self._scattered([e for e, _ in pairs]), self._scattered([dp for _, dp in pairs])
 
     def plastic_strain_tangent(self, t: np.ndarray, internal: Mapping[str, np.ndarray]) -> np.ndarray:
+        """∂Δε_p/∂e (n, 5, 5), each part's at its points."""
         return self._scattered(self._each("plastic_strain_tangent", t, internal=internal))
 
     def yield_value(self, s: np.ndarray, internal: Mapping[str, np.ndarray]) -> np.ndarray:
+        """f (n,), each part's at its points."""
         return self._scattered(self._each("yield_value", s, internal=internal))
 
     def flow_direction(self, s: np.ndarray, internal: Mapping[str, np.ndarray]) -> np.ndarray:
+        """N (the shape of s), each part's at its points."""
         return self._scattered(self._each("flow_direction", s, internal=internal))
 
     def flow_direction_of(self, s: np.ndarray, deps_p: np.ndarray, dp: np.ndarray,
                           internal: Mapping[str, np.ndarray]) -> np.ndarray:
+        """The flow direction that Δε_p is checked against, each part's at its points."""
         return self._scattered(self._each("flow_direction_of", s, deps_p, dp, internal=internal))
 
     def hardening(self, internal: Mapping[str, np.ndarray]) -> np.ndarray:
+        """dσ_y/dp (n,), each part's at its points."""
         return self._scattered(self._each("hardening", internal=internal))
 
     def yield_stress(self, internal: Mapping[str, np.ndarray]) -> np.ndarray:
+        """The size of the elastic domain (n,), each part's at its points."""
         return self._scattered(self._each("yield_stress", internal=internal))
 
     # -- selections ------------------------------------------------------------------------------------------
-    def subset(self, index) -> CompositeAtPoints:
+    def subset(self, index: slice | np.ndarray) -> CompositeAtPoints:
+        """The composite at the points ``index`` selects (a slice, a boolean mask or indices), each part
+        at its own of them."""
         owner = self.owner[index]
         parts = []
         for k, (mask, part) in enumerate(zip(self._masks, self.parts)):
@@ -111,4 +127,5 @@ class CompositeAtPoints:
         return CompositeAtPoints(owner, parts)
 
     def gathered(self, gather: Callable[[np.ndarray], np.ndarray]) -> CompositeAtPoints:
+        """The composite with the owners and every part's arrays passed through ``gather``."""
         return CompositeAtPoints(gather(self.owner), [part.gathered(gather) for part in self.parts])

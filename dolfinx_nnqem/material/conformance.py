@@ -21,20 +21,24 @@ __all__ = ["as_material", "as_material_part", "as_material_state", "as_pointwise
 
 
 def as_material(material: VonMises | Elastic | DruckerPrager) -> Material:
+    """``material`` as the :class:`~dolfinx_nnqem.material.interface.Material` Protocol."""
     return material
 
 
 def as_material_part(part: VonMisesPart | IsotropicHardeningPart | KinematicHardeningPart | DruckerPragerPart
                      | ElasticPart) -> MaterialPart:
+    """``part`` as the :class:`~dolfinx_nnqem.material.interface.MaterialPart` Protocol."""
     return part
 
 
 def as_material_state(state: GaussPointState) -> MaterialState:
+    """``state`` as the :class:`~dolfinx_nnqem.material.interface.MaterialState` Protocol."""
     return state
 
 
 def as_pointwise_material(points: VonMisesAtPoints | IsotropicAtPoints | KinematicAtPoints | DruckerPragerAtPoints
                           | ElasticAtPoints | CompositeAtPoints) -> PointwiseMaterial:
+    """``points`` as the :class:`~dolfinx_nnqem.material.interface.PointwiseMaterial` Protocol."""
     return points
 
 

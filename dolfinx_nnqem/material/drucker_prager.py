@@ -41,6 +41,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -49,6 +50,9 @@ from dolfinx_nnqem.material.interface import MaterialPart
 from dolfinx_nnqem.material.kinematics import coordinate_tangent, symmetric_coordinates, symmetric_tensors
 from dolfinx_nnqem.material.parameters import HIGH, LOW, check_parameters, elastic_checks, lame
 from dolfinx_nnqem.material.quadrature_part import QuadraturePart
+
+if TYPE_CHECKING:
+    from dolfinx_nnqem.material.state import GaussPointState
 
 __all__ = ["MATCHES", "DruckerPrager", "DruckerPragerAtPoints", "DruckerPragerPart", "cone_coefficients",
            "drucker_prager_plastic_strain", "drucker_prager_return", "drucker_prager_tangent"]
@@ -136,10 +140,12 @@ class DruckerPrager:
 
     @property
     def mu(self) -> float:
+        """Shear modulus μ = E / (2(1 + ν))."""
         return lame(self.E, self.nu)[0]
 
     @property
     def lmbda(self) -> float:
+        """Lamé's λ = E ν / ((1 + ν)(1 − 2ν))."""
         return lame(self.E, self.nu)[1]
 
     @property
@@ -156,7 +162,8 @@ class DruckerPrager:
 
     part_kind = "drucker-prager"
 
-    def make_part(self, space, members: Mapping) -> MaterialPart:
+    def make_part(self, space: GaussPointState, members: Mapping[int | None, DruckerPrager]) -> MaterialPart:
+        """The part of the Drucker–Prager bodies ``members`` ({cell tag: material}) in ``space``."""
         return DruckerPragerPart(space, members)
 
 
@@ -334,10 +341,13 @@ class DruckerPragerPart(QuadraturePart):
         self.cone = _Cone(self.mu, self.lmbda + 2.0 * self.mu / 3.0, eta, xi, eta_bar,
                           HardeningAtPoints(law_index, [m.cohesion_law for m in members.values()]))
 
-    def pointwise_return_map(self, sigma_n, deps, internal):
+    def pointwise_return_map(self, sigma_n: np.ndarray, deps: np.ndarray, internal: Mapping[str, np.ndarray]
+                             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(σ, Δp̄, Δε_p, C_alg) of the cone's return at the part's points (:func:`drucker_prager_return`)."""
         return drucker_prager_return(sigma_n, deps, internal["p"], self.cone.subset(self.points))
 
     def at_points(self, points: np.ndarray) -> DruckerPragerAtPoints:
+        """The material at the local Gauss points ``points``: the cone, λ and E there."""
         return DruckerPragerAtPoints(self.cone.subset(points), self.lmbda[points], self.E[points])
 
 
@@ -357,6 +367,7 @@ class DruckerPragerAtPoints:
 
     @property
     def mu(self) -> np.ndarray:
+        """Shear modulus (n,)."""
         return self.cone.mu
 
     @property
@@ -366,6 +377,7 @@ class DruckerPragerAtPoints:
 
     @property
     def yields(self) -> np.ndarray:
+        """All True: every point of this material can yield."""
         return np.ones(self.mu.size, dtype=bool)
 
     @staticmethod
@@ -423,10 +435,12 @@ class DruckerPragerAtPoints:
         """ξ c(p̄): the cone's √J2 where p_h = 0 (the unit of the output f/σ_y)."""
         return self.cone.xi * self.cone.law.yield_stress(internal["p"])
 
-    def subset(self, index) -> DruckerPragerAtPoints:
+    def subset(self, index: slice | np.ndarray) -> DruckerPragerAtPoints:
+        """The material at the points ``index`` selects (a slice, a boolean mask or indices)."""
         return DruckerPragerAtPoints(self.cone.subset(index), self.lmbda[index], self.E[index])
 
     def gathered(self, gather: Callable[[np.ndarray], np.ndarray]) -> DruckerPragerAtPoints:
+        """The material with every per-point array of the cone, λ and E passed through ``gather``."""
         c = self.cone
         return DruckerPragerAtPoints(_Cone(gather(c.mu), gather(c.kappa), gather(c.eta), gather(c.xi),
                                            gather(c.eta_bar), c.law.gathered(gather)), gather(self.lmbda),

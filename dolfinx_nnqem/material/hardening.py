@@ -31,13 +31,16 @@ class IsotropicHardening:
     """The base of the hardening laws: σ_y(p) and H'(p) on arrays."""
 
     def yield_stress(self, p: np.ndarray) -> np.ndarray:  # pragma: no cover - every law defines it
+        """σ_y(p), the shape of p."""
         raise NotImplementedError
 
     def slope(self, p: np.ndarray) -> np.ndarray:  # pragma: no cover - every law defines it
+        """H'(p) = dσ_y/dp, the shape of p."""
         raise NotImplementedError
 
     @property
     def initial_yield_stress(self) -> float:
+        """σ_y(0)."""
         return float(self.yield_stress(np.zeros(1))[0])
 
 
@@ -56,9 +59,11 @@ class LinearHardening(IsotropicHardening):
         ])
 
     def yield_stress(self, p: np.ndarray) -> np.ndarray:
+        """σ_y0 + H p."""
         return self.sigma_y0 + self.H * p
 
     def slope(self, p: np.ndarray) -> np.ndarray:
+        """H, the shape of p."""
         return np.full(np.shape(p), float(self.H))
 
 
@@ -82,9 +87,11 @@ class VoceHardening(IsotropicHardening):
         ])
 
     def yield_stress(self, p: np.ndarray) -> np.ndarray:
+        """σ_0 + Q (1 − e^{−b p}) + H p."""
         return self.sigma_0 + self.Q * (1.0 - np.exp(-self.b * p)) + self.H * p
 
     def slope(self, p: np.ndarray) -> np.ndarray:
+        """Q b e^{−b p} + H."""
         return self.Q * self.b * np.exp(-self.b * p) + self.H
 
 
@@ -105,10 +112,12 @@ class TabulatedHardening(IsotropicHardening):
 
     @property
     def stresses(self) -> np.ndarray:
+        """The table's σ_y column."""
         return np.array([s for s, _ in self.table])
 
     @property
     def strains(self) -> np.ndarray:
+        """The table's p column."""
         return np.array([p for _, p in self.table])
 
     def _segment(self, p: np.ndarray) -> np.ndarray:
@@ -116,12 +125,14 @@ class TabulatedHardening(IsotropicHardening):
         return np.searchsorted(self.strains, p, side="right") - 1
 
     def yield_stress(self, p: np.ndarray) -> np.ndarray:
+        """σ_y(p), linear between the rows and the last row's beyond it."""
         p = np.asarray(p, dtype=float)
         k = np.clip(self._segment(p), 0, len(self.table) - 1)
         slope = self.slope(p)
         return self.stresses[k] + slope * (p - self.strains[k])
 
     def slope(self, p: np.ndarray) -> np.ndarray:
+        """The slope of the segment that holds p (the next segment's at a row), 0 beyond the last row."""
         p = np.asarray(p, dtype=float)
         k = self._segment(p)
         s, e = self.stresses, self.strains
@@ -186,9 +197,11 @@ class HardeningAtPoints:
         """H'(p) = dσ_y/dp (n,)."""
         return self._each(p, lambda law, q: law.slope(q))
 
-    def subset(self, index) -> HardeningAtPoints:
+    def subset(self, index: slice | np.ndarray) -> HardeningAtPoints:
+        """The laws of the points ``index`` selects (a slice, a boolean mask or indices)."""
         return HardeningAtPoints(self.law_index[index], self.laws)
 
     def gathered(self, gather: Callable[[np.ndarray], np.ndarray]) -> HardeningAtPoints:
+        """The laws with ``law_index`` passed through ``gather``."""
         return HardeningAtPoints(gather(self.law_index), self.laws)
 

@@ -32,9 +32,13 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
+
+if TYPE_CHECKING:  # the FEniCS types only name arguments here: no import cost for the interface
+    import dolfinx.fem as fem
+    import ufl
 
 __all__ = ["GaussPointValues", "Material", "MaterialPart", "MaterialState", "PointwiseMaterial",
            "PointwisePlasticity", "ReturnMapValues"]
@@ -101,10 +105,14 @@ class Material(Protocol):
         ...
 
     @property
-    def mu(self) -> float: ...
+    def mu(self) -> float:
+        """Shear modulus μ = E / (2(1 + ν))."""
+        ...
 
     @property
-    def lmbda(self) -> float: ...
+    def lmbda(self) -> float:
+        """Lamé's λ = E ν / ((1 + ν)(1 − 2ν))."""
+        ...
 
     @property
     def part_kind(self) -> str:
@@ -130,24 +138,24 @@ class MaterialPart(Protocol):
     """The consistent tangent is symmetric (False: non-associated flow, Armstrong–Frederick's
     back-stresses): the linear solvers must not assume a symmetric matrix (no Cholesky, no CG)."""
 
-    def stress(self, u) -> Any:
+    def stress(self, u: fem.Function) -> ufl.core.expr.Expr:
         """UFL: σ at ``u`` by the return map from the converged state (the internal force reads it)."""
         ...
 
-    def tangent(self, u, eps_du) -> Any:
+    def tangent(self, u: fem.Function, eps_du: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
         """UFL: C_alg : ``eps_du``, the consistent tangent at ``u``."""
         ...
 
-    def evaluate(self, u) -> None:
+    def evaluate(self, u: fem.Function) -> None:
         """Bring what :meth:`stress` and :meth:`tangent` read to ``u`` (a return map evaluated on
         arrays at the Gauss points); nothing for a return map written in UFL."""
         ...
 
-    def return_map(self, u) -> ReturnMapValues:
+    def return_map(self, u: fem.Function) -> ReturnMapValues:
         """The return map's σ, Δp and Δε_p at ``u`` on every local Gauss point."""
         ...
 
-    def trial_dp(self, u) -> np.ndarray:
+    def trial_dp(self, u: fem.Function) -> np.ndarray:
         """Δp of the return map at ``u`` on every local Gauss point (counting the plastic points)."""
         ...
 
@@ -175,8 +183,8 @@ class MaterialState(Protocol):
     dp_n: Any  #: its increment in the last converged increment
     u_n: Any  #: converged displacement
     E: Any  #: Young's modulus per cell
-    mu: Any
-    lmbda: Any
+    mu: Any  #: shear modulus per cell, E / (2(1 + ν)) in UFL
+    lmbda: Any  #: Lamé's λ per cell, E ν / ((1 + ν)(1 − 2ν)) in UFL
     density: Any  #: mass density per cell
 
     @property
@@ -189,30 +197,37 @@ class MaterialState(Protocol):
         """Every part's consistent tangent is symmetric."""
         ...
 
-    def evaluate(self, u) -> None:
+    def evaluate(self, u: fem.Function) -> None:
         """Bring the quadrature data the forms read to ``u``: call before assembling the internal
         force or the tangent at a new iterate (:class:`~dolfinx_nnqem.problem.ContactProblem` does)."""
         ...
 
-    def elastic_stress(self, eps) -> Any:
+    def elastic_stress(self, eps: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
         """UFL: C : ε."""
         ...
 
-    def internal_force_form(self, u, v) -> Any: ...
+    def internal_force_form(self, u: fem.Function, v: ufl.Argument) -> ufl.Form:
+        """UFL: F_int(u)[v] = ∫ σ(u) : ε(v) dx, σ(u) the parts' stresses."""
+        ...
 
-    def tangent_form(self, u, du, v) -> Any: ...
+    def tangent_form(self, u: fem.Function, du: ufl.core.expr.Expr, v: ufl.Argument) -> ufl.Form:
+        """UFL: K_t(u)[du, v] = ∫ (C_alg : ε(du)) : ε(v) dx, the consistent tangent at ``u`` (``du`` a
+        trial function, or a function for the tangent's action)."""
+        ...
 
-    def elastic_stiffness_form(self, du, v) -> Any: ...
+    def elastic_stiffness_form(self, du: ufl.core.expr.Expr, v: ufl.Argument) -> ufl.Form:
+        """UFL: K_e[du, v] = ∫ (C : ε(du)) : ε(v) dx."""
+        ...
 
-    def return_map_values(self, u) -> GaussPointValues:
+    def return_map_values(self, u: fem.Function) -> GaussPointValues:
         """The return map's values at ``u`` at this rank's owned Gauss points."""
         ...
 
-    def commit(self, u) -> None:
+    def commit(self, u: fem.Function) -> None:
         """Accept ``u``: the state from the return map."""
         ...
 
-    def commit_values(self, u, values: GaussPointValues) -> None:
+    def commit_values(self, u: fem.Function, values: GaussPointValues) -> None:
         """Accept ``u`` with Gauss-point values a solver computed itself."""
         ...
 
@@ -220,17 +235,30 @@ class MaterialState(Protocol):
         """The internal variables at the owned Gauss points: converged, or after ``values``."""
         ...
 
-    def values_at_points(self, expr) -> np.ndarray: ...
+    def values_at_points(self, expr: ufl.core.expr.Expr) -> np.ndarray:
+        """A scalar UFL expression (e.g. a material field) at this rank's owned Gauss points (n,)."""
+        ...
 
-    def owned_at_points(self, compiled, tensor: bool = False) -> np.ndarray: ...
+    def owned_at_points(self, compiled: fem.Expression, tensor: bool = False) -> np.ndarray:
+        """A compiled expression at this rank's owned Gauss points: (n,), or (n, 3, 3) for a ``tensor``."""
+        ...
 
-    def count_plastic_points(self) -> int: ...
+    def count_plastic_points(self) -> int:
+        """Number of Gauss points (over all ranks) with Δp > 0 in the last converged increment."""
+        ...
 
-    def count_trial_plastic_points(self, u) -> int: ...
+    def count_trial_plastic_points(self, u: fem.Function) -> int:
+        """Number of Gauss points (over all ranks) where the return map at ``u`` is plastic."""
+        ...
 
-    def num_gauss_points(self) -> int: ...
+    def num_gauss_points(self) -> int:
+        """Number of Gauss points over all ranks."""
+        ...
 
-    def plastic_strain_of(self, u, sigma: np.ndarray) -> np.ndarray: ...
+    def plastic_strain_of(self, u: fem.Function, sigma: np.ndarray) -> np.ndarray:
+        """Δε_p = dev Δε − dev(σ − σ_n)/(2μ) (n, 3, 3) at the owned Gauss points, for the stresses
+        ``sigma`` (n, 3, 3) at ``u`` (Δε = ε(u) − ε(u_n))."""
+        ...
 
     def at_points(self) -> PointwiseMaterial:
         """The material at this rank's owned Gauss points (:class:`PointwiseMaterial`)."""
@@ -324,7 +352,7 @@ class PointwiseMaterial(Protocol):
         nothing yields (the unit of the output f/σ_y)."""
         ...
 
-    def subset(self, index) -> PointwiseMaterial:
+    def subset(self, index: slice | np.ndarray) -> PointwiseMaterial:
         """The material at the points ``index`` selects (a slice, a boolean mask or indices)."""
         ...
 

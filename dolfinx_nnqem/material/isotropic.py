@@ -142,12 +142,15 @@ class IsotropicHardeningPart(QuadraturePart):
         self.lmbda = self.values_at_local_points(space.lmbda)
         self.E = self.values_at_local_points(space.E)
 
-    def pointwise_return_map(self, sigma_n, deps, internal):
+    def pointwise_return_map(self, sigma_n: np.ndarray, deps: np.ndarray, internal: Mapping[str, np.ndarray]
+                             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(σ, Δp, Δε_p, C_alg) of the radial return at the part's points (:func:`isotropic_return`)."""
         pts = self.points
         return isotropic_return(sigma_n, deps, internal["p"], self.mu[pts], self.lmbda[pts],
                                 self.hardening.subset(pts))
 
     def at_points(self, points: np.ndarray) -> IsotropicAtPoints:
+        """The material at the local Gauss points ``points``: μ, λ, E and the hardening laws there."""
         return IsotropicAtPoints(self.mu[points], self.lmbda[points], self.E[points], self.hardening.subset(points))
 
 
@@ -172,6 +175,7 @@ class IsotropicAtPoints:
 
     @property
     def yields(self) -> np.ndarray:
+        """All True: every point of this material can yield."""
         return np.ones(self.mu.size, dtype=bool)
 
     def plastic_strain(self, t: np.ndarray, internal: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
@@ -182,10 +186,12 @@ class IsotropicAtPoints:
         return (1.5 * dp / q_safe)[:, None] * t, dp
 
     def plastic_strain_tangent(self, t: np.ndarray, internal: Mapping[str, np.ndarray]) -> np.ndarray:
+        """∂Δε_p/∂e (n, 5, 5) of the radial return, with the slope H'(p_n + Δp) (:func:`radial_tangent`)."""
         _, dp = self.plastic_strain(t, internal)
         return radial_tangent(t, self.mu, dp, self.law.slope(internal["p"] + dp))
 
     def yield_value(self, s: np.ndarray, internal: Mapping[str, np.ndarray]) -> np.ndarray:
+        """f = q(s) − σ_y(p) (n,)."""
         return equivalent_stress(s) - self.law.yield_stress(internal["p"])
 
     def flow_direction(self, s: np.ndarray, internal: Mapping[str, np.ndarray]) -> np.ndarray:
@@ -197,16 +203,21 @@ class IsotropicAtPoints:
 
     def flow_direction_of(self, s: np.ndarray, deps_p: np.ndarray, dp: np.ndarray,
                           internal: Mapping[str, np.ndarray]) -> np.ndarray:
+        """N = (3/2) s / q (:meth:`flow_direction`): unique wherever q > 0."""
         return self.flow_direction(s, internal)
 
     def hardening(self, internal: Mapping[str, np.ndarray]) -> np.ndarray:
+        """H'(p) = dσ_y/dp (n,)."""
         return self.law.slope(internal["p"])
 
     def yield_stress(self, internal: Mapping[str, np.ndarray]) -> np.ndarray:
+        """σ_y(p) (n,)."""
         return self.law.yield_stress(internal["p"])
 
-    def subset(self, index) -> IsotropicAtPoints:
+    def subset(self, index: slice | np.ndarray) -> IsotropicAtPoints:
+        """The material at the points ``index`` selects (a slice, a boolean mask or indices)."""
         return IsotropicAtPoints(self.mu[index], self.lmbda[index], self.E[index], self.law.subset(index))
 
     def gathered(self, gather: Callable[[np.ndarray], np.ndarray]) -> IsotropicAtPoints:
+        """The material with μ, λ, E and the law indices passed through ``gather``."""
         return IsotropicAtPoints(gather(self.mu), gather(self.lmbda), gather(self.E), self.law.gathered(gather))

@@ -234,17 +234,24 @@ class KinematicHardeningPart(QuadraturePart):
         """The back-stresses of ``internal`` as coordinates (m, K, 5)."""
         return np.stack([deviator_coordinates(internal[name]) for name in self.internal_variables], axis=1)
 
-    def pointwise_return_map(self, sigma_n, deps, internal):
+    def pointwise_return_map(self, sigma_n: np.ndarray, deps: np.ndarray, internal: Mapping[str, np.ndarray]
+                             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(σ, Δp, Δε_p, C_alg) of the return with back-stresses at the part's points (:func:`kinematic_return`)."""
         pts = self.points
         return kinematic_return(sigma_n, deps, self._alpha(internal), internal["p"], self.mu[pts], self.lmbda[pts],
                                 self.C[pts], self.gamma[pts], self.hardening.subset(pts))
 
-    def updated_internal(self, points, deps_p, dp, internal_n) -> dict[str, np.ndarray]:
+    def updated_internal(self, points: np.ndarray, deps_p: np.ndarray, dp: np.ndarray,
+                         internal_n: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """The back-stresses α_k at the end of the increment at the local Gauss points ``points``, by
+        name, (m, 3, 3) each, from Δε_p (m, 3, 3), Δp (m,) and the converged ``internal_n``
+        (:func:`back_stresses`)."""
         alpha = back_stresses(self._alpha(internal_n), deviator_coordinates(deps_p), dp, self.C[points],
                               self.gamma[points])
         return {name: deviator_tensors(alpha[:, k]) for k, name in enumerate(self.internal_variables)}
 
     def at_points(self, points: np.ndarray) -> KinematicAtPoints:
+        """The material at the local Gauss points ``points``: μ, λ, E, the hardening laws, C_k and γ_k there."""
         return KinematicAtPoints(self.mu[points], self.lmbda[points], self.E[points], self.hardening.subset(points),
                                  self.C[points], self.gamma[points], tuple(self.internal_variables))
 
@@ -273,6 +280,7 @@ class KinematicAtPoints:
 
     @property
     def yields(self) -> np.ndarray:
+        """All True: every point of this material can yield."""
         return np.ones(self.mu.size, dtype=bool)
 
     def back_stress(self, internal: Mapping[str, np.ndarray]) -> np.ndarray:
@@ -283,9 +291,11 @@ class KinematicAtPoints:
         return np.stack([deviator_coordinates(internal[name]) for name in self.names], axis=1)
 
     def plastic_strain(self, t: np.ndarray, internal: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        """(Δε_p (n, 5), Δp (n,)) of the return with back-stresses (:func:`kinematic_plastic_strain`)."""
         return kinematic_plastic_strain(t, self._alpha(internal), internal["p"], self.mu, self.C, self.gamma, self.law)
 
     def plastic_strain_tangent(self, t: np.ndarray, internal: Mapping[str, np.ndarray]) -> np.ndarray:
+        """∂Δε_p/∂e (n, 5, 5) at the return's Δp (:func:`kinematic_tangent`)."""
         _, dp = self.plastic_strain(t, internal)
         return kinematic_tangent(t, self._alpha(internal), internal["p"], self.mu, self.C, self.gamma, self.law, dp)
 
@@ -303,6 +313,7 @@ class KinematicAtPoints:
 
     def flow_direction_of(self, s: np.ndarray, deps_p: np.ndarray, dp: np.ndarray,
                           internal: Mapping[str, np.ndarray]) -> np.ndarray:
+        """N = (3/2)(s − α)/q(s − α) (:meth:`flow_direction`): unique wherever q > 0."""
         return self.flow_direction(s, internal)
 
     def hardening(self, internal: Mapping[str, np.ndarray]) -> np.ndarray:
@@ -310,13 +321,16 @@ class KinematicAtPoints:
         return self.law.slope(internal["p"]) + self.C.sum(axis=1)
 
     def yield_stress(self, internal: Mapping[str, np.ndarray]) -> np.ndarray:
+        """σ_y(p) (n,), the isotropic part: the size of the elastic domain around α."""
         return self.law.yield_stress(internal["p"])
 
-    def subset(self, index) -> KinematicAtPoints:
+    def subset(self, index: slice | np.ndarray) -> KinematicAtPoints:
+        """The material at the points ``index`` selects (a slice, a boolean mask or indices)."""
         return KinematicAtPoints(self.mu[index], self.lmbda[index], self.E[index], self.law.subset(index),
                                  self.C[index], self.gamma[index], self.names)
 
     def gathered(self, gather: Callable[[np.ndarray], np.ndarray]) -> KinematicAtPoints:
+        """The material with every per-point array passed through ``gather``."""
         return KinematicAtPoints(gather(self.mu), gather(self.lmbda), gather(self.E), self.law.gathered(gather),
                                  gather(self.C), gather(self.gamma), self.names)
 

@@ -24,7 +24,7 @@ __all__ = ["DEVIATORIC_BASIS", "coordinate_tangent", "deviator", "deviator_coord
            "symmetric_tensors", "von_mises_stress"]
 
 
-def strain(u) -> ufl.core.expr.Expr:
+def strain(u: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
     """Small-strain tensor ε(u) = sym(∇u)."""
     return ufl.sym(ufl.grad(u))
 

@@ -20,8 +20,9 @@ Check = tuple[str, object, Callable[[float], bool], str]
 """(parameter name, value, test, what is expected)."""
 
 
-def elastic_checks(E, nu, density) -> list[Check]:
-    """The checks of Young's modulus, Poisson's ratio and the density."""
+def elastic_checks(E: object, nu: object, density: object) -> list[Check]:
+    """The checks of Young's modulus, Poisson's ratio and the density (any object: a value that is
+    not a number is refused by :func:`check_parameters`)."""
     nu_low, nu_high = NU_RANGE
     return [
         ("E", E, lambda v: LOW <= v <= HIGH, f"a value in [{LOW:g}, {HIGH:g}] (the supported range)"),

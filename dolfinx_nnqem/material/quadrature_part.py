@@ -19,6 +19,7 @@ unrolled Newton iteration in UFL.
 from __future__ import annotations
 
 from collections.abc import Mapping
+from typing import TYPE_CHECKING
 
 import basix.ufl
 import dolfinx.fem as fem
@@ -26,8 +27,11 @@ import numpy as np
 import ufl
 
 from dolfinx_nnqem import compat, jit
-from dolfinx_nnqem.material.interface import ReturnMapValues
+from dolfinx_nnqem.material.interface import Material, ReturnMapValues
 from dolfinx_nnqem.material.kinematics import strain
+
+if TYPE_CHECKING:
+    from dolfinx_nnqem.material.state import GaussPointState
 
 __all__ = ["QuadraturePart"]
 
@@ -49,7 +53,7 @@ class QuadraturePart:
     internal_variables: Mapping[str, tuple[int, ...]] = {}
     symmetric_tangent = True
 
-    def __init__(self, space, members: Mapping):
+    def __init__(self, space: GaussPointState, members: Mapping[int | None, Material]):
         self.space = space
         self.points = np.unique(np.concatenate([space.points_of(space.cells_of(tag)) for tag in members]))
         """The part's local Gauss points (owned and ghost), indices into the quadrature spaces."""
@@ -63,7 +67,7 @@ class QuadraturePart:
         self._increment: tuple[fem.Function, fem.Expression, fem.Function] | None = None
         self._evaluated: tuple[fem.Function, np.ndarray, int] | None = None
 
-    def values_at_local_points(self, expr) -> np.ndarray:
+    def values_at_local_points(self, expr: ufl.core.expr.Expr) -> np.ndarray:
         """A scalar UFL expression (a material field) at every local Gauss point."""
         f = fem.Function(self.space.W_scalar)
         compat.interpolate_expression(f, jit.expression(expr, self.space._points))
@@ -81,10 +85,12 @@ class QuadraturePart:
         return {}
 
     # -- the forms --------------------------------------------------------------------------------------
-    def stress(self, u) -> ufl.core.expr.Expr:
+    def stress(self, u: fem.Function) -> ufl.core.expr.Expr:
+        """UFL: σ_q, the return map's stress at the last ``u`` evaluated (:meth:`evaluate`)."""
         return self.sigma_q
 
-    def tangent(self, u, eps_du) -> ufl.core.expr.Expr:
+    def tangent(self, u: fem.Function, eps_du: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
+        """UFL: C_q : ``eps_du``, the consistent tangent at the last ``u`` evaluated (:meth:`evaluate`)."""
         i, j, k, l = ufl.indices(4)
         return ufl.as_tensor(self.C_q[i, j, k, l] * eps_du[k, l], (i, j))
 
@@ -115,10 +121,12 @@ class QuadraturePart:
 
     # -- the values ----------------------------------------------------------------------------------------
     def return_map(self, u: fem.Function) -> ReturnMapValues:
+        """σ, Δp and Δε_p of the return map at ``u`` on every local Gauss point (copies)."""
         self.evaluate(u)
         return ReturnMapValues(self.sigma_q.x.array.reshape(-1, 3, 3).copy(), self.dp_q.x.array.copy(),
                                self.deps_p_q.x.array.reshape(-1, 3, 3).copy())
 
     def trial_dp(self, u: fem.Function) -> np.ndarray:
+        """Δp of the return map at ``u`` on every local Gauss point (a copy)."""
         self.evaluate(u)
         return self.dp_q.x.array.copy()

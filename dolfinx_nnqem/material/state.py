@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import functools
 import operator
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 
 import basix.ufl
 import dolfinx.fem as fem
@@ -33,7 +33,8 @@ from dolfinx_nnqem.material.kinematics import strain, symmetric_coordinates
 __all__ = ["GaussPointState", "material_state"]
 
 
-def material_state(V: fem.FunctionSpace, materials, cell_tags=None, quadrature_degree: int = 2) -> GaussPointState:
+def material_state(V: fem.FunctionSpace, materials: Material | dict[int, Material],
+                   cell_tags: dolfinx.mesh.MeshTags | None = None, quadrature_degree: int = 2) -> GaussPointState:
     """The Gauss-point state of the mesh of ``V`` for one material or ``{cell_tag: material}``."""
     return GaussPointState(V, materials, cell_tags, quadrature_degree)
 
@@ -112,7 +113,7 @@ class GaussPointState:
         return np.sort(self.W_scalar.dofmap.list[cells].reshape(-1))
 
     def fill_cellwise(self, fields: Mapping[str, fem.Function], default: Mapping[str, float] | None = None,
-                      tags=None) -> None:
+                      tags: Iterable[int | None] | None = None) -> None:
         """Set cell-wise (DG 0) ``fields`` from the materials' attributes of the same names (of the
         bodies ``tags``, all by default; the other cells get ``default``)."""
         tags = list(self.materials) if tags is None else list(tags)
@@ -162,7 +163,7 @@ class GaussPointState:
         return ufl.Measure("dx", domain=self.mesh, subdomain_data=tags, metadata=metadata)
 
     # -- the forms ----------------------------------------------------------------------------------------
-    def elastic_stress(self, eps) -> ufl.core.expr.Expr:
+    def elastic_stress(self, eps: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
         """σ = λ tr(ε) I + 2μ ε."""
         return self.lmbda * ufl.tr(eps) * ufl.Identity(3) + 2 * self.mu * eps
 
@@ -173,15 +174,15 @@ class GaussPointState:
         dx = self._dx_parts
         return functools.reduce(operator.add, (integrand(part) * dx(k) for k, part in enumerate(self.parts)))
 
-    def internal_force_form(self, u, v) -> ufl.Form:
+    def internal_force_form(self, u: fem.Function, v: ufl.Argument) -> ufl.Form:
         """F_int(u)[v] = ∫ σ(u) : ε(v) dx."""
         return self._integral(lambda part: ufl.inner(part.stress(u), strain(v)))
 
-    def tangent_form(self, u, du, v) -> ufl.Form:
+    def tangent_form(self, u: fem.Function, du: ufl.core.expr.Expr, v: ufl.Argument) -> ufl.Form:
         """K_t(u)[du, v] = ∫ (C_alg : ε(du)) : ε(v) dx."""
         return self._integral(lambda part: ufl.inner(part.tangent(u, strain(du)), strain(v)))
 
-    def elastic_stiffness_form(self, du, v) -> ufl.Form:
+    def elastic_stiffness_form(self, du: ufl.core.expr.Expr, v: ufl.Argument) -> ufl.Form:
         """K_e[du, v] = ∫ (C : ε(du)) : ε(v) dx."""
         return ufl.inner(self.elastic_stress(strain(du)), strain(v)) * self.dx
 
@@ -215,6 +216,7 @@ class GaussPointState:
         return GaussPointValues(u.x.array.copy(), rm.sigma[:n], rm.dp[:n], rm.deps_p[:n], "backward-euler")
 
     def num_owned_points(self) -> int:
+        """Number of Gauss points this rank owns."""
         return self.W_scalar.dofmap.index_map.size_local
 
     # -- commit ---------------------------------------------------------------------------------------------
@@ -371,7 +373,7 @@ class GaussPointState:
         dev_dsigma = dsigma - np.trace(dsigma, axis1=1, axis2=2)[:, None, None] * np.eye(3) / 3.0
         return dev_increment - dev_dsigma / (2.0 * mu[:, None, None])
 
-    def values_at_points(self, expr) -> np.ndarray:
+    def values_at_points(self, expr: ufl.core.expr.Expr) -> np.ndarray:
         """A scalar UFL expression (e.g. a material field) at this rank's owned Gauss points."""
         return self.owned_at_points(jit.expression(expr, self._points)).copy()
 

@@ -29,6 +29,7 @@ from typing import NamedTuple
 
 import dolfinx.fem as fem
 import numpy as np
+import numpy.typing as npt
 import ufl
 
 from dolfinx_nnqem import compat, jit
@@ -129,8 +130,8 @@ class VonMises:
         """Uniaxial elastoplastic modulus E_t = E H / (E + H) (linear hardening)."""
         return self.E * self.H / (self.E + self.H)
 
-    def yield_stress(self, p):
-        """σ_y(p): σ_y0 + H p, or the hardening law's."""
+    def yield_stress(self, p: npt.ArrayLike) -> np.ndarray | float:
+        """σ_y(p): σ_y0 + H p, or the hardening law's (the shape of p; a float for a scalar p)."""
         if self.hardening is not None:
             return self.hardening.yield_stress(np.asarray(p, dtype=float))
         return self.sigma_y0 + self.H * np.asarray(p, dtype=float)
@@ -149,6 +150,8 @@ class VonMises:
         return "von-mises" if self.hardening is None else "von-mises-isotropic"
 
     def make_part(self, space: GaussPointState, members: Mapping[int | None, VonMises]) -> MaterialPart:
+        """The part of the bodies ``members`` ({cell tag: material}, all of this kind) in ``space``:
+        closed-form UFL for linear hardening, a return map on arrays for another law or back-stresses."""
         if self.kinematic:
             return KinematicHardeningPart(space, members)
         if self.hardening is None:
@@ -199,7 +202,7 @@ class VonMisesPart:
         self._material_expressions: tuple[fem.Expression, ...] | None = None
 
     # -- the return map in UFL ---------------------------------------------------------------------
-    def ufl_return_map(self, u) -> ReturnMap:
+    def ufl_return_map(self, u: fem.Function) -> ReturnMap:
         """Radial return from the converged state for the displacement ``u``."""
         st = self.space
         deps = strain(u) - strain(st.u_n)
@@ -214,10 +217,11 @@ class VonMisesPart:
         deps_p = 1.5 * dp / q_safe * s_tr  # so that σ = σ_tr − 2μ Δε_p
         return ReturnMap(sigma=sigma, dp=dp, deps_p=deps_p, f_tr=f_tr, q_tr=q_tr, s_tr=s_tr)
 
-    def stress(self, u) -> ufl.core.expr.Expr:
+    def stress(self, u: fem.Function) -> ufl.core.expr.Expr:
+        """UFL: σ of the radial return at ``u``."""
         return self.ufl_return_map(u).sigma
 
-    def tangent(self, u, eps_du) -> ufl.core.expr.Expr:
+    def tangent(self, u: fem.Function, eps_du: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
         """C_alg : ε(du), the consistent tangent at ``u`` applied to the strain ``eps_du``."""
         rm = self.ufl_return_map(u)
         mu = self.space.mu
@@ -233,7 +237,7 @@ class VonMisesPart:
             - 2 * mu * theta2 * ufl.inner(n, eps_du) * n
         )
 
-    def evaluate(self, u) -> None:
+    def evaluate(self, u: fem.Function) -> None:
         """Nothing: the forms evaluate the closed form at u themselves."""
 
     # -- its values at the Gauss points --------------------------------------------------------------
@@ -254,6 +258,7 @@ class VonMisesPart:
         return self._return_map_expressions
 
     def return_map(self, u: fem.Function) -> ReturnMapValues:
+        """The radial return's σ, Δp and Δε_p at ``u`` on every local Gauss point."""
         st = self.space
         e_sigma, e_dp, e_deps = self.return_map_expressions(u)
         values = []
@@ -264,6 +269,7 @@ class VonMisesPart:
         return ReturnMapValues(values[0].reshape(-1, 3, 3), values[1], values[2].reshape(-1, 3, 3))
 
     def trial_dp(self, u: fem.Function) -> np.ndarray:
+        """Δp of the radial return at ``u`` on every local Gauss point."""
         if self._trial_dp is None:
             self._trial_dp = fem.Function(self.space.W_scalar)
         compat.interpolate_expression(self._trial_dp, self.return_map_expressions(u)[1])
@@ -357,15 +363,20 @@ class VonMisesAtPoints:
 
     @property
     def yields(self) -> np.ndarray:
+        """(n,) bool: σ_y0 is a real yield stress (not an elastic material's)."""
         return can_yield(self.sigma_y0)
 
     def plastic_strain(self, t: np.ndarray, internal: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        """(Δε_p (n, 5), Δp (n,)) of the radial return from p_n = ``internal["p"]``
+        (:func:`return_map_plastic_strain`)."""
         return return_map_plastic_strain(t, self.mu, self.sigma_y0, self.H, internal["p"])
 
     def plastic_strain_tangent(self, t: np.ndarray, internal: Mapping[str, np.ndarray]) -> np.ndarray:
+        """∂Δε_p/∂e (n, 5, 5) of the radial return (:func:`return_map_tangent`)."""
         return return_map_tangent(t, self.mu, self.sigma_y0, self.H, internal["p"])
 
     def yield_value(self, s: np.ndarray, internal: Mapping[str, np.ndarray]) -> np.ndarray:
+        """f = q(s) − σ_y0 − H p (n,)."""
         return yield_function(equivalent_stress(s), self.sigma_y0, self.H, internal["p"])
 
     def flow_direction(self, s: np.ndarray, internal: Mapping[str, np.ndarray]) -> np.ndarray:
@@ -377,18 +388,23 @@ class VonMisesAtPoints:
 
     def flow_direction_of(self, s: np.ndarray, deps_p: np.ndarray, dp: np.ndarray,
                           internal: Mapping[str, np.ndarray]) -> np.ndarray:
+        """N = (3/2) s / q (:meth:`flow_direction`): unique wherever q > 0."""
         return self.flow_direction(s, internal)
 
     def hardening(self, internal: Mapping[str, np.ndarray]) -> np.ndarray:
+        """H (n,)."""
         return self.H
 
     def yield_stress(self, internal: Mapping[str, np.ndarray]) -> np.ndarray:
+        """σ_y0 + H p (n,), inf where the material is elastic."""
         return np.where(self.yields, self.sigma_y0 + self.H * internal["p"], np.inf)
 
-    def subset(self, index) -> VonMisesAtPoints:
+    def subset(self, index: slice | np.ndarray) -> VonMisesAtPoints:
+        """The material at the points ``index`` selects (a slice, a boolean mask or indices)."""
         return VonMisesAtPoints(self.mu[index], self.lmbda[index], self.sigma_y0[index], self.H[index], self.E[index])
 
     def gathered(self, gather: Callable[[np.ndarray], np.ndarray]) -> VonMisesAtPoints:
+        """The material with μ, λ, σ_y0, H and E passed through ``gather``."""
         return VonMisesAtPoints(gather(self.mu), gather(self.lmbda), gather(self.sigma_y0), gather(self.H),
                                 gather(self.E))
 

@@ -3,12 +3,16 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
+from typing import TYPE_CHECKING
 
 import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
+
+if TYPE_CHECKING:
+    import dolfinx.fem as fem
 
 DIRECT_SOLVER_OPTIONS = {
     "ksp_type": "preonly",
@@ -18,7 +22,7 @@ DIRECT_SOLVER_OPTIONS = {
 """Default: MUMPS LU. User ``petsc_options`` are merged over these."""
 
 
-def free_dropped_objects(comms) -> None:
+def free_dropped_objects(comms: Iterable[MPI.Comm | PETSc.Comm]) -> None:
     """Destroy the PETSc objects dropped on each of ``comms`` since the last call (collective).
 
     On more than one rank, petsc4py does not destroy a Vec or Mat when its last Python reference
@@ -36,10 +40,10 @@ def free_dropped_objects(comms) -> None:
     """
     for comm in comms:
         if comm.size > 1:
-            PETSc.garbage_cleanup(comm)
+            PETSc.garbage_cleanup(comm)  # type: ignore[arg-type]  # the stub asks a PETSc.Comm; mpi4py's is taken too
 
 
-def create_ksp(comm, prefix: str, options: dict) -> PETSc.KSP:
+def create_ksp(comm: MPI.Comm, prefix: str, options: dict) -> PETSc.KSP:
     """A KSP configured from ``options`` under ``prefix`` (``setFromOptions``).
 
     The options stay in PETSc's database until :func:`clear_options` is called: sub-solvers
@@ -49,7 +53,7 @@ def create_ksp(comm, prefix: str, options: dict) -> PETSc.KSP:
     opts = PETSc.Options()
     for key, value in options.items():
         opts.setValue(prefix + key, value)  # what opts[name] = value calls (petsc4py's stub has no __setitem__)
-    ksp = PETSc.KSP().create(comm)
+    ksp = PETSc.KSP().create(comm)  # type: ignore[arg-type]  # the stub asks a PETSc.Comm; mpi4py's is taken too
     ksp.setOptionsPrefix(prefix)
     ksp.setFromOptions()
     return ksp
@@ -133,7 +137,7 @@ def vec_norm(vec: PETSc.Vec) -> float:
     return vec.norm()  # type: ignore[return-value]  # the 2-norm is a float (see above)
 
 
-def global_norm(array: np.ndarray, comm) -> float:
+def global_norm(array: np.ndarray, comm: MPI.Comm) -> float:
     """2-norm of an array distributed over ``comm`` (each rank holds its own rows)."""
     return math.sqrt(comm.allreduce(float(np.sum(np.asarray(array) ** 2)), op=MPI.SUM))
 
@@ -184,7 +188,7 @@ refused for an unsymmetric tangent (:func:`dolfinx_nnqem.solvers.registry.make_s
 then factorises with its unsymmetric LU (the default ``pc_type = "lu"``)."""
 
 
-def rigid_body_modes(V) -> PETSc.NullSpace:
+def rigid_body_modes(V: fem.FunctionSpace) -> PETSc.NullSpace:
     """The six rigid-body displacements of a 3D vector space, as an orthonormal PETSc near-nullspace.
 
     Built from the dof coordinates (translations and infinitesimal rotations about the centroid),

@@ -140,6 +140,7 @@ class Merit:
 
     @property
     def finite(self) -> bool:
+        """Ψ is finite (no overflow in the residual)."""
         return math.isfinite(self.psi)
 
 

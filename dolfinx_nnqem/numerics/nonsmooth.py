@@ -148,10 +148,13 @@ class DenseSystem:
         return Merit(0.5 * norm * norm, norm <= self.tol)
 
     def evaluate(self) -> Merit:
+        """Evaluate D H and D J at the current iterate; its merit Ψ = ½|D H|²."""
         self.F, self.A = self._evaluate_at(self.x)
         return self._merit()
 
     def record(self, iteration: int, step_length: float, kind: str) -> None:
+        """Append |D H| at the current iterate to :attr:`norms` and pass it to ``log`` (``kind``: "" for
+        the initial iterate, "lm" or a Newton step's)."""
         norm = float(np.linalg.norm(self.F))
         self.norms.append(norm)
         self._iteration = iteration + 1
@@ -162,14 +165,17 @@ class DenseSystem:
                 self.log(iteration, norm, step_length, "lm" if kind == "lm" else "newton")
 
     def snapshot(self) -> tuple:
+        """(x, D H, D J, chart) at the current iterate, for :meth:`restore`."""
         return self.x, self.F, self.A, self.chart
 
     def restore(self, snapshot) -> Merit:
+        """Return to a :meth:`snapshot`; its merit."""
         self.x, self.F, self.A, self.chart = snapshot
         return self._merit()
 
     # -- steps ------------------------------------------------------------------------------------
     def start_step(self) -> None:
+        """The current iterate and its evaluation become the step's start x_0."""
         self._x0, self._F0, self._A0, self._chart0 = self.x, self.F, self.A, self.chart
 
     def newton_direction(self, merit: Merit) -> str | None:
@@ -218,9 +224,11 @@ class DenseSystem:
                 nu *= 10.0
 
     def slope(self) -> float:
+        """∇Ψ(x_0) · d = (D J)ᵀ D H · d at the step's start, for the current direction d."""
         return float((self._A0.T @ self._F0) @ self.dx)
 
     def move(self, step_length: float) -> Merit:
+        """x = x_0 + step_length d (or ``advance``'s step), evaluated; its merit."""
         if self.advance is None:
             self.x = self._x0 + step_length * self.dx
         else:

@@ -11,6 +11,7 @@ import math
 import numbers
 
 import numpy as np
+import numpy.typing as npt
 
 __all__ = ["MAX_MAGNITUDE", "MIN_MODULUS", "check_integer", "check_magnitude", "check_real", "shown"]
 
@@ -25,7 +26,7 @@ MIN_MODULUS = 1e-20
 """Smallest Young's modulus and yield stress: E = 1e-300 made the displacements overflow."""
 
 
-def shown(value) -> str:
+def shown(value: object) -> str:
     """A user's value as a message shows it: numpy scalars as the Python numbers they hold, numpy
     arrays as lists, in lists and tuples too (numpy 2 writes ``repr(np.float64(nan))`` as
     "np.float64(nan)", which is no input anyone typed)."""
@@ -42,7 +43,7 @@ def _plain(value):
     return value
 
 
-def check_magnitude(name: str, values, limit: float = MAX_MAGNITUDE) -> None:
+def check_magnitude(name: str, values: npt.ArrayLike, limit: float = MAX_MAGNITUDE) -> None:
     """Raise ValueError naming ``name`` when a component of ``values`` exceeds ``limit`` in
     magnitude (the values are finite numbers already)."""
     array = np.abs(np.atleast_1d(np.asarray(values, dtype=float)))
@@ -52,7 +53,7 @@ def check_magnitude(name: str, values, limit: float = MAX_MAGNITUDE) -> None:
                          "'Supported ranges')")
 
 
-def check_real(name: str, value, *, low: float = -math.inf, high: float = math.inf,
+def check_real(name: str, value: object, *, low: float = -math.inf, high: float = math.inf,
                low_inclusive: bool = False) -> float:
     """``value`` as a float: a finite real (not a bool) in (low, high] (or [low, high])."""
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
@@ -66,7 +67,7 @@ def check_real(name: str, value, *, low: float = -math.inf, high: float = math.i
     return x
 
 
-def check_integer(name: str, value, *, low: int, high: int) -> int:
+def check_integer(name: str, value: object, *, low: int, high: int) -> int:
     """``value`` as an int: an integer (Python or numpy, not a bool) in [low, high]."""
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral):
         raise TypeError(f"{name} = {shown(value)}: expected an integer")

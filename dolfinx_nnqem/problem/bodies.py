@@ -16,7 +16,9 @@ contact rows.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, NoReturn
 
 from dolfinx_nnqem import compat  # noqa: I001  (first: loads MPI/PETSc for the PyPI wheel)
 
@@ -27,6 +29,9 @@ from petsc4py import PETSc
 
 from dolfinx_nnqem.contact.laws import STICK
 from dolfinx_nnqem.numerics.graphs import connected_components
+
+if TYPE_CHECKING:
+    from dolfinx_nnqem.contact.model import ContactModel
 
 __all__ = ["Bodies", "FrictionHeld", "RigidModes", "check_rigid_modes", "find_bodies", "free_rigid_modes",
            "friction_held_motions"]
@@ -86,7 +91,7 @@ def _lexicographically_smaller(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return out
 
 
-def find_bodies(V: dolfinx.fem.FunctionSpace, cell_tags=None) -> Bodies:
+def find_bodies(V: dolfinx.fem.FunctionSpace, cell_tags: dolfinx.mesh.MeshTags | None = None) -> Bodies:
     """The connected bodies of V's mesh (collective).
 
     Components are found on each rank, then merged across ranks through the dof blocks that
@@ -171,6 +176,7 @@ class RigidModes:
 
     @property
     def count(self) -> int:
+        """Number of free rigid modes."""
         return len(self.vectors)
 
     def local_array(self) -> np.ndarray:
@@ -180,6 +186,7 @@ class RigidModes:
         return np.column_stack([v.getArray(readonly=True) for v in self.vectors])
 
     def destroy(self) -> None:
+        """Destroy the modes' PETSc vectors."""
         for v in self.vectors:
             v.destroy()
 
@@ -287,7 +294,7 @@ def free_rigid_modes(V: dolfinx.fem.FunctionSpace, bodies: Bodies, constrained_d
     return RigidModes(bodies, vectors, mode_body, description, coefficients, centre, size)
 
 
-def check_rigid_modes(modes: RigidModes, contact=None) -> None:
+def check_rigid_modes(modes: RigidModes, contact: ContactModel | None = None) -> None:
     """Raise ValueError naming every body that could drift: free modes no contact can hold.
 
     A mode is held when a pair's normal row of B sees it, or a tangential row of an interface
@@ -346,7 +353,7 @@ class FrictionHeld:
         return not bool(np.any(np.asarray(states)[self.pairs] == STICK))
 
 
-def friction_held_motions(modes: RigidModes, contact=None) -> FrictionHeld:
+def friction_held_motions(modes: RigidModes, contact: ContactModel | None = None) -> FrictionHeld:
     """The free rigid motions that only friction holds, and the pairs that hold them (collective).
 
     Such a motion meets no support and no contact normal (no pair's normal row of B sees it);
@@ -378,13 +385,14 @@ def _describe_combination(modes: RigidModes, c: np.ndarray) -> str:
                      for b, motion in by_body.items())
 
 
-def _raise_drifting(modes: RigidModes, combinations: np.ndarray, why: str) -> None:
+def _raise_drifting(modes: RigidModes, combinations: np.ndarray, why: str) -> NoReturn:
     lines = ["  - " + _describe_combination(modes, c) for c in _row_echelon(np.atleast_2d(combinations))]
     raise ValueError("a body can move rigidly without resistance (" + why + "):\n" + "\n".join(lines)
                      + "\nAdd a support (Dirichlet condition) against that motion, or contact that holds it.")
 
 
-def tags_sharing_nodes(V: dolfinx.fem.FunctionSpace, cell_tags, facet_tags, surfaces) -> list[tuple[int, int, int]]:
+def tags_sharing_nodes(V: dolfinx.fem.FunctionSpace, cell_tags: dolfinx.mesh.MeshTags | None,
+                       facet_tags: dolfinx.mesh.MeshTags | None, surfaces: Iterable[int]) -> list[tuple[int, int, int]]:
     """The cell tags on either side of the facets tagged ``surfaces`` that share nodes, as
     (tag a, tag b, number of common nodes) (collective).
 

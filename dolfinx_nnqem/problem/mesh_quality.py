@@ -37,12 +37,16 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import basix
 import numpy as np
 from mpi4py import MPI
 
 from dolfinx_nnqem import collective, compat
+
+if TYPE_CHECKING:
+    import dolfinx.mesh
 
 __all__ = ["INVERTED", "POOR_RATIO", "POOR_SCALED", "CellQuality", "cell_measures", "check_cells", "folded_facets",
            "jacobians", "sample_points"]
@@ -103,7 +107,7 @@ class CellQuality:
     num_poor: int
 
 
-def sample_points(mesh, quadrature_degree: int) -> np.ndarray:
+def sample_points(mesh: dolfinx.mesh.Mesh, quadrature_degree: int) -> np.ndarray:
     """(n, 3) reference points where a cell is checked: the Gauss points of the rule of
     ``quadrature_degree`` (basix's default, the one the forms use) and the reference vertices;
     for first-order tetrahedra, whose J is constant, the reference centroid alone."""
@@ -114,7 +118,7 @@ def sample_points(mesh, quadrature_degree: int) -> np.ndarray:
     return np.concatenate([gauss, basix.geometry(cell)])
 
 
-def cell_measures(mesh, points: np.ndarray, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def cell_measures(mesh: dolfinx.mesh.Mesh, points: np.ndarray, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The smallest s and the Jacobian ratio ρ = min o det J / max o det J of ``cells`` (local
     indices) over the reference ``points``, each (len(cells),), o the cell's orientation (the sign
     of det J at the reference centroid)."""
@@ -137,7 +141,7 @@ def cell_measures(mesh, points: np.ndarray, cells: np.ndarray) -> tuple[np.ndarr
     return s, ratio
 
 
-def folded_facets(mesh) -> np.ndarray:
+def folded_facets(mesh: dolfinx.mesh.Mesh) -> np.ndarray:
     """(m, 2) local cells of the interior facets whose two cells lie on the same side of the facet
     (a first-order tetrahedron turned over onto its neighbour), of every local facet (owned and
     ghost: a cell's owner sees its neighbours as ghosts, so each folded cell is found by its owner).
@@ -240,7 +244,8 @@ def _gathered(parts: list[tuple], worst_first: bool) -> tuple[int, tuple[str, ..
                              for i in order[:NAMED])
 
 
-def check_cells(mesh, cell_tags=None, quadrature_degree: int = 2) -> CellQuality:
+def check_cells(mesh: dolfinx.mesh.Mesh, cell_tags: dolfinx.mesh.MeshTags | None = None,
+                quadrature_degree: int = 2) -> CellQuality:
     """Check the shape of every cell (collective; see the module).
 
     Parameters

@@ -7,11 +7,18 @@ are collective and give the same answer on every rank.
 
 from __future__ import annotations
 
+import os
+from collections.abc import Iterable
+from typing import TYPE_CHECKING
+
 import numpy as np
 from mpi4py import MPI
 
 from dolfinx_nnqem.numerics.ranges import (MAX_MAGNITUDE, MIN_MODULUS, check_integer,  # noqa: F401  (re-exported)
                                            check_magnitude, check_real, shown)
+
+if TYPE_CHECKING:
+    import dolfinx.mesh
 
 __all__ = ["MAX_CUTBACKS", "MAX_INCREMENTS", "MAX_MAGNITUDE", "MIN_MODULUS", "check_cell_tag", "check_components",
            "check_integer", "check_load_factors", "check_magnitude", "check_mesh", "check_one_contact_per_pair",
@@ -23,7 +30,8 @@ MAX_CUTBACKS = 50
 """Largest number of halvings in a row (2⁻⁵⁰ of an increment is below any meaning)."""
 
 
-def check_stepping_arguments(increments, max_cutbacks, final_load_factor, max_displacement) -> tuple:
+def check_stepping_arguments(increments: object, max_cutbacks: object, final_load_factor: object,
+                             max_displacement: object) -> tuple[int | None, int, float, float | None]:
     """The arguments of :func:`~dolfinx_nnqem.solvers.stepping.solve_load_steps`, checked
     (``increments`` None: automatic incrementation, nothing to check)."""
     if increments is not None:
@@ -35,7 +43,7 @@ def check_stepping_arguments(increments, max_cutbacks, final_load_factor, max_di
     return increments, max_cutbacks, final_load_factor, max_displacement
 
 
-def check_load_factors(load_factors, start: float, final: float) -> None:
+def check_load_factors(load_factors: Iterable[float], start: float, final: float) -> None:
     """The load factors automatic incrementation must stop at lie on the path from ``start`` to
     ``final``: one outside it is never reached (one above 1 used to be dropped without a word)."""
     low, high = min(start, final), max(start, final)
@@ -45,7 +53,7 @@ def check_load_factors(load_factors, start: float, final: float) -> None:
                          f"{final:g}; a run never stops there")
 
 
-def check_components(components, what: str) -> tuple[int, ...]:
+def check_components(components: Iterable[int] | None, what: str) -> tuple[int, ...]:
     """A Dirichlet condition's components: distinct, among 0, 1, 2 (None: all three)."""
     if components is None:
         return (0, 1, 2)
@@ -73,7 +81,7 @@ def check_one_contact_per_pair(contacts) -> None:
         seen[pair] = contact.label
 
 
-def check_mesh(mesh) -> None:
+def check_mesh(mesh: dolfinx.mesh.Mesh) -> None:
     """A 3D mesh of one cell type whose cells are 3D (collective)."""
     gdim, tdim = mesh.geometry.dim, mesh.topology.dim
     if gdim != 3 or tdim != 3:
@@ -88,7 +96,7 @@ def check_mesh(mesh) -> None:
         raise ValueError("the mesh has no cells")
 
 
-def check_cell_tag(tag, cell_tags, comm, what: str) -> None:
+def check_cell_tag(tag: int, cell_tags: dolfinx.mesh.MeshTags | None, comm: MPI.Comm, what: str) -> None:
     """``tag`` names at least one cell (collective)."""
     if cell_tags is None:
         raise ValueError(f"{what}: cell tag {tag} is used but no cell_tags were given")
@@ -98,7 +106,7 @@ def check_cell_tag(tag, cell_tags, comm, what: str) -> None:
         raise ValueError(f"{what}: cell tag {tag} has no cells; the mesh's cell tags are {present}")
 
 
-def check_output_folder(folder) -> None:
+def check_output_folder(folder: str | os.PathLike | None) -> None:
     """An output folder must be named (an empty name would write into the current directory)."""
     if folder is None or str(folder).strip() == "" or str(folder) == ".":
         raise ValueError(f"output folder {str(folder)!r}: give a folder name (an empty name or '.' would mix the "
