@@ -21,13 +21,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from dolfinx_nnqem import interrupts
+from dolfinx_nnqem.names import LAW_NAMES, METHODS
 
 if TYPE_CHECKING:
     from dolfinx_nnqem.io.picture_worker import PictureWorkers
 
-METHODS = ("monolithic", "nneqm1", "nneqm2")
-"""The methods by name: :data:`dolfinx_nnqem.solvers.options.METHODS` (``tests/test_cli.py`` holds
-them equal), written out here so that reading the command line imports neither MPI nor DOLFINx."""
 
 EXIT_OK, EXIT_DIVERGED, EXIT_USAGE, EXIT_BAD_INPUT = 0, 1, 2, 3
 EXIT_IO, EXIT_PETSC, EXIT_INTERNAL = 4, 5, 70
@@ -61,7 +59,7 @@ def _parser() -> argparse.ArgumentParser:
     tb.add_argument("--method", default="monolithic", choices=(*METHODS, "all"),
                     help="solver (default monolithic); 'all' runs the three and compares them")
     tb.add_argument("--increments", type=int, default=15, help="equal load increments (default 15)")
-    tb.add_argument("--law", choices=("polar", "alart-curnier"), default=None,
+    tb.add_argument("--law", choices=LAW_NAMES, default=None,
                     help="pair law (default: polar for nneqm1/nneqm2, alart-curnier for monolithic)")
     tb.add_argument("--refine", type=int, default=1, help="divide the 0.2 m elements by this factor")
     tb.add_argument("--out", default="results/two_beams",

@@ -115,7 +115,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-if TYPE_CHECKING:  # the command line imports MPI, DOLFINx and the solvers once it has read its arguments
+from dolfinx_nnqem.contact.obstacles import OBSTACLES, obstacle_parameters
+from dolfinx_nnqem.names import LAW_ALIASES, LAW_NAMES, METHODS
+
+if TYPE_CHECKING:  # the command line imports this module (and so MPI and DOLFINx) once it has read its arguments
     import dolfinx.mesh
     from mpi4py import MPI
 
@@ -133,7 +136,7 @@ class ProblemFileError(ValueError):
     """A problem file is malformed or inconsistent; the message names the key."""
 
 
-OBSTACLE_KEYS = {"plane": {"point", "normal"}, "sphere": {"centre", "radius"}, "cylinder": {"point", "axis", "radius"}}
+OBSTACLE_KEYS = {kind: obstacle_parameters(kind) for kind in OBSTACLES}
 KEYS: dict[str, frozenset[str]] = {
     "mesh": frozenset({"file", "mesh_name", "cell_tags", "facet_tags", "degree"}),
     "materials.TAG": frozenset({"model", "E", "nu", "sigma_y0", "H", "density", "hardening", "Q", "b", "table",
@@ -159,8 +162,6 @@ KEYS: dict[str, frozenset[str]] = {
 SECTIONS = {section.split(".")[0] for section in KEYS}
 XDMF_KEYS = frozenset({"mesh_name", "cell_tags", "facet_tags"})
 """The [mesh] keys that name the grids of an XDMF file (refused with a gmsh .msh file)."""
-METHODS = ("monolithic", "nneqm1", "nneqm2")
-
 
 @dataclass
 class ProblemSpec:
@@ -423,8 +424,8 @@ def _contact_section(contact: dict, w: str) -> dict:
         if contact["slave"] not in sides:
             raise ProblemFileError(f"{w}.slave = {contact['slave']}: expected one of the surfaces' tags {sides}")
     contact["mu_f"] = float(_number(contact["mu_f"], f"{w}.mu_f", nonnegative=True, physical=True))
-    if contact.get("law", "alart-curnier") not in ("alart-curnier", "cartesian", "polar", "seed"):
-        raise ProblemFileError(f"{w}.law = {contact['law']!r}: expected 'alart-curnier' or 'polar'")
+    if contact.get("law", "alart-curnier") not in (*LAW_NAMES, *LAW_ALIASES):
+        raise ProblemFileError(f"{w}.law = {contact['law']!r}: expected {' or '.join(map(repr, LAW_NAMES))}")
     for key in ("r", "tolerance", "search_distance"):
         if key in contact:
             contact[key] = float(_number(contact[key], f"{w}.{key}", positive=True, physical=True))
@@ -776,19 +777,17 @@ def _check_xdmf(file: Path, names: dict) -> None:
 
 def build_problem(spec: ProblemSpec, comm: MPI.Comm) -> ContactProblem:
     """The :class:`ContactProblem` of a checked problem file."""
-    from dolfinx_nnqem.contact.obstacles import Cylinder, Plane, Sphere
     from dolfinx_nnqem.problem.contact_problem import (BodyForce, Contact, ContactProblem, Dirichlet, Gravity, Pressure,
                                        Traction)
 
     mesh, cell_tags, facet_tags = read_mesh(spec, comm)
-    obstacle_classes = {"plane": Plane, "sphere": Sphere, "cylinder": Cylinder}
     contact = []
     for entry in spec.contact:
         entry = dict(entry)
         obstacle = entry.pop("obstacle", None)
         if obstacle is not None:
             obstacle = dict(obstacle)
-            entry["surface1"] = obstacle_classes[obstacle.pop("type")](**obstacle)
+            entry["surface1"] = OBSTACLES[obstacle.pop("type")](**obstacle)
         contact.append(Contact(**entry))
     loads: list[Traction | Pressure] = [Traction(e["tag"], e["value"], e.get("amplitude")) for e in spec.traction]
     loads += [Pressure(e["tag"], e["p"], e.get("amplitude")) for e in spec.pressure]

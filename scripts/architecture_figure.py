@@ -27,7 +27,7 @@ LAYERS = [
     ("solvers", ["solvers"]),
     ("problem", ["problem"]),
     ("physics", ["material", "contact"]),
-    ("ground", ["numerics", "compat", "pyvista_compat", "jit", "collective", "chatter", "interrupts", "_moved"]),
+    ("ground", ["numerics", "compat", "pyvista_compat", "jit", "collective", "chatter", "interrupts", "names", "_moved"]),
 ]
 
 

@@ -197,16 +197,19 @@ def test_a_picture_vtk_cannot_render_is_skipped_with_the_reason(tmp_path, monkey
 
 def test_the_command_line_reads_its_arguments_before_the_heavy_imports():
     """Issue 32: ``--help`` and a bad command line import neither MPI nor PETSc nor DOLFINx (they
-    took 1 s before), and the command line's list of methods is the solvers' own."""
+    took 1 s before). Issue 42: the command line's methods and laws are the solvers' and the laws'
+    own list (``dolfinx_nnqem.names``), not a copy."""
     import subprocess
     import sys
 
     from reliability_helpers import env
 
-    from dolfinx_nnqem.cli import METHODS
-    from dolfinx_nnqem.solvers.options import METHODS as SOLVER_METHODS
+    from dolfinx_nnqem import cli, names, problem_file
+    from dolfinx_nnqem.contact import laws
+    from dolfinx_nnqem.solvers import options
 
-    assert METHODS == SOLVER_METHODS
+    assert cli.METHODS is options.METHODS is problem_file.METHODS is names.METHODS
+    assert cli.LAW_NAMES is problem_file.LAW_NAMES is laws.LAW_NAMES is names.LAW_NAMES
     for args in (["--help"], ["run", "--help"], ["run", "--increments", "0", "p.toml"]):
         run = subprocess.run([sys.executable, "-X", "importtime", "-m", "dolfinx_nnqem", *args], env=env(),
                              capture_output=True, text=True, timeout=120)

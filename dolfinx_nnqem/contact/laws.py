@@ -57,11 +57,15 @@ from typing import NamedTuple, Protocol
 import numpy as np
 import numpy.typing as npt
 
+from dolfinx_nnqem.names import LAW_ALIASES, LAW_NAMES
+
 __all__ = [
     "OPEN",
     "STICK",
     "SLIP",
     "STATE_NAMES",
+    "LAW_ALIASES",
+    "LAW_NAMES",
     "LawEvaluation",
     "Linearisation",
     "ContactLaw",
@@ -827,12 +831,8 @@ class PolarLaw:
         return "PolarLaw()"
 
 
-_LAWS: dict[str, type] = {
-    "alart-curnier": AlartCurnierLaw,
-    "cartesian": AlartCurnierLaw,
-    "polar": PolarLaw,
-    "seed": PolarLaw,
-}
+_LAWS: dict[str, type] = dict(zip(LAW_NAMES, (AlartCurnierLaw, PolarLaw), strict=True))
+_LAWS.update({alias: _LAWS[name] for alias, name in LAW_ALIASES.items()})
 
 
 def get_law(name: str | ContactLaw) -> ContactLaw:

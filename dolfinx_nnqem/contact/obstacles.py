@@ -22,6 +22,7 @@ d̂_s = Σ_i t_si u_i and its gap is Σ_i t_si g0_i, the transformed nodal dista
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Sequence
@@ -40,8 +41,8 @@ from dolfinx_nnqem.contact.surfaces import (ContactPairError, first_by_position,
                                             gather_surfaces, local_frames, mesh_tolerance)
 from dolfinx_nnqem.numerics.ranges import check_magnitude, shown
 
-__all__ = ["Cylinder", "ObstaclePairs", "Plane", "RigidObstacle", "Sphere", "obstacle_pairs",
-           "obstacle_reaction"]
+__all__ = ["OBSTACLES", "Cylinder", "ObstaclePairs", "Plane", "RigidObstacle", "Sphere", "obstacle_pairs",
+           "obstacle_parameters", "obstacle_reaction"]
 
 
 def _vector3(name: str, value, unit: bool = False) -> np.ndarray:
@@ -216,6 +217,17 @@ class Cylinder(RigidObstacle):
     def describe(self) -> str:
         return (f"rigid cylinder of radius {self.radius:g} about the axis through {format_point(self.point)} "
                 f"along {format_point(self.axis)}")
+
+
+OBSTACLES: dict[str, type[RigidObstacle]] = {"plane": Plane, "sphere": Sphere, "cylinder": Cylinder}
+"""The obstacle types by the name a problem file gives them (``[contact.obstacle] type``): the one list."""
+
+
+def obstacle_parameters(kind: str) -> frozenset[str]:
+    """The parameters of the obstacle type ``kind`` of :data:`OBSTACLES` that place it (its
+    dataclass fields besides the ``motion`` and ``amplitude`` every obstacle has)."""
+    common = {"motion", "amplitude"}
+    return frozenset(f.name for f in dataclasses.fields(OBSTACLES[kind]) if f.name not in common)
 
 
 def _check_off_axis(distance: np.ndarray, x: np.ndarray, what: str) -> None:

@@ -8,13 +8,11 @@ import math
 import numbers
 from dataclasses import dataclass, field
 
+from dolfinx_nnqem.names import METHODS
 from dolfinx_nnqem.numerics.newton import Globalisation
 from dolfinx_nnqem.numerics.ranges import shown
 
 __all__ = ["FLOW_DIRECTIONS", "METHODS", "STALL_WINDOW", "MonolithicOptions", "NNEQM1Options", "NNEQM2Options", "SolverOptions"]
-
-METHODS = ("monolithic", "nneqm1", "nneqm2")
-"""The solvers by name (:func:`~dolfinx_nnqem.solvers.registry.make_solver`)."""
 
 FLOW_DIRECTIONS = ("return-map", "frozen")
 """NNEQM2's two variants (:class:`NNEQM2Options`)."""
