@@ -15,7 +15,7 @@ ENV DEBIAN_FRONTEND=noninteractive LANG=C.UTF-8
 # h5py, pytest, Sphinx + MyST (the docs test); FFCx's JIT compiler toolchain comes with them.
 RUN apt-get update \
  && apt-get install -y --no-install-recommends \
-        python3-dolfinx-real python3-pytest python3-numba python3-pyvista python3-gmsh python3-scipy \
+        python3-dolfinx-real python3-pytest python3-pytest-xdist python3-numba python3-pyvista python3-gmsh python3-scipy \
         python3-matplotlib python3-h5py python3-sphinx python3-myst-parser \
         python3-venv python3-pip python3-setuptools xvfb xauth \
  && rm -rf /var/lib/apt/lists/*

@@ -37,7 +37,15 @@ def box_factory():
 
 
 def pytest_collection_modifyitems(config, items):
-    """Tests marked ``slow`` run only when asked for (``-m slow``); the default run deselects them."""
+    """Tests marked ``slow`` run only when asked for (``-m slow``); the default run deselects them.
+
+    With pytest-xdist (``scripts/run-tests`` on several cores) the tests marked ``mpi`` share one
+    worker, one after another: two ``mpiexec -n 2`` jobs at once would put four busy-polling ranks
+    on a 2-core machine."""
+    if config.pluginmanager.hasplugin("xdist"):
+        for item in items:
+            if "mpi" in item.keywords:
+                item.add_marker(pytest.mark.xdist_group("mpi"))
     if "slow" in (config.getoption("markexpr") or ""):
         return
     slow = [item for item in items if "slow" in item.keywords]
