@@ -1,9 +1,15 @@
-"""Deprecated module paths of release 0.1, kept importable until release 0.2.
+"""Deprecated module paths and names, kept importable until release 0.2.
 
 The package's modules moved into subpackages by layer (``docs/architecture.md``). An old path
 still imports, as the same module object under its old name, with a ``DeprecationWarning`` that
 names the new path: ``import dolfinx_nnqem.stepping`` gives ``dolfinx_nnqem.solvers.stepping``.
-The table below is the whole mechanism: a finder on ``sys.meta_path`` answers for these names only.
+The table :data:`MOVED` is the whole mechanism: a finder on ``sys.meta_path`` answers for these
+names only.
+
+Names that moved out of a module that stays (``contact/model.py`` split by idea) are in
+:data:`MOVED_NAMES`; the old module's ``__getattr__`` hands them out through :func:`moved_name`,
+with the same warning: ``from dolfinx_nnqem.contact.model import PairLaws`` gives
+``dolfinx_nnqem.contact.pair_laws.PairLaws``.
 """
 
 from __future__ import annotations
@@ -14,7 +20,7 @@ import importlib.machinery
 import sys
 import warnings
 
-__all__ = ["MOVED", "REMOVED_IN"]
+__all__ = ["MOVED", "MOVED_NAMES", "REMOVED_IN", "moved_name"]
 
 REMOVED_IN = "0.2"
 """The release in which the old paths stop importing."""
@@ -34,6 +40,23 @@ MOVED: dict[str, str] = {
     "solver": "solvers",
 }
 """Old module name (under ``dolfinx_nnqem.``) → its new path (under ``dolfinx_nnqem.``)."""
+
+MOVED_NAMES: dict[str, dict[str, str]] = {
+    "contact.model": {"LawGroup": "contact.pair_laws", "PairLaws": "contact.pair_laws"},
+}
+"""Module (under ``dolfinx_nnqem.``) → its names that moved → the module they are in now."""
+
+
+def moved_name(module: str, name: str):
+    """``name`` of the module ``module`` (a full name) from the module it moved to, with a
+    ``DeprecationWarning`` naming the new path; :class:`AttributeError` for any other name (what a
+    module-level ``__getattr__`` returns)."""
+    new = MOVED_NAMES.get(module.removeprefix("dolfinx_nnqem."), {}).get(name)
+    if new is None:
+        raise AttributeError(f"module {module!r} has no attribute {name!r}")
+    warnings.warn(f"{module}.{name} is deprecated and will be removed in dolfinx_nnqem {REMOVED_IN}; "
+                  f"import it from dolfinx_nnqem.{new} instead", DeprecationWarning, stacklevel=3)
+    return getattr(importlib.import_module(f"dolfinx_nnqem.{new}"), name)
 
 
 class _Alias(importlib.abc.Loader):

@@ -223,6 +223,22 @@ def test_an_old_module_path_imports_the_same_module_with_a_warning(old):
     assert module is new and module.__spec__.name == new.__name__
 
 
+MOVED_NAMES = [(module, name) for module, names in sorted(_moved.MOVED_NAMES.items()) for name in sorted(names)]
+
+
+@pytest.mark.parametrize("module, name", MOVED_NAMES)
+def test_a_moved_name_imports_from_its_old_module_with_a_warning(module, name):
+    """contact/model.py split by idea (issue 42): its old names import from it, as the same objects,
+    with a DeprecationWarning naming the new path."""
+    new = _moved.MOVED_NAMES[module][name]
+    old_module = importlib.import_module(f"dolfinx_nnqem.{module}")
+    with pytest.warns(DeprecationWarning, match=f"dolfinx_nnqem.{module}.{name} is deprecated.*dolfinx_nnqem.{new}"):
+        old = getattr(old_module, name)
+    assert old is getattr(importlib.import_module(f"dolfinx_nnqem.{new}"), name)
+    with pytest.raises(AttributeError, match="no attribute 'no_such_name'"):
+        getattr(old_module, "no_such_name")
+
+
 def test_the_public_names_of_the_user_guide_import_from_their_packages():
     with warnings.catch_warnings():
         warnings.simplefilter("error")

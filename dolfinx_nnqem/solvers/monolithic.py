@@ -129,7 +129,7 @@ class MonolithicSolver(ReleasesPETSc):
         model = self.problem.contact
         if not self.iterative or model is None or self._mask is None:  # the mask: with contact
             return None
-        return AugmentedSystem(model, self._mask, max(i.r for i in model.interfaces), self.settings.augmentation)
+        return AugmentedSystem(model, self._mask, model.r_max, self.settings.augmentation)
 
     def _follow_geometry(self) -> None:
         """After the contact geometry changed (B's rows, the number of pairs): the pieces built on

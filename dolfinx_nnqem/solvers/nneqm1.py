@@ -46,7 +46,7 @@ from petsc4py import PETSc
 from dolfinx_nnqem.solvers.condensation import Condensation, check_dense_memory
 from dolfinx_nnqem.solvers.condensed import CondensedProblem, CondensedSystem, newton_step, rigid_start
 from dolfinx_nnqem.contact.laws import LawEvaluation
-from dolfinx_nnqem.contact.model import PairLaws
+from dolfinx_nnqem.contact.pair_laws import PairLaws
 from dolfinx_nnqem.solvers.contract import ReleasesPETSc, contact_model
 from dolfinx_nnqem.solvers.convergence import IterationRecord, SolveReport, count_states, iteration_log_on, logger
 from dolfinx_nnqem.numerics.linalg import free_dropped_objects, global_norm, vec_norm
@@ -289,7 +289,7 @@ class _OuterSystem:
         cond = CondensedProblem(
             C=self._C, w_free=model.gather(model.B_times(x_r)).reshape(-1), w_m=model.gather(w).reshape(-1),
             lam_m=lam_m.reshape(-1), mu_f=self.laws.mu_f, g0=self.laws.g0, w_prev=self.w_prev,
-            r=max(group.r for group in self.laws.groups), BN=cond_solver.mode_coupling(),
+            r=self.laws.r_max, BN=cond_solver.mode_coupling(),
             e=cond_solver.mode_loads(r))
         s.last_condensed = cond
         opts = s.options
