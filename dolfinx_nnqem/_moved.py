@@ -8,8 +8,8 @@ names only.
 
 Names that moved out of a module that stays (``contact/model.py`` split by idea) are in
 :data:`MOVED_NAMES`; the old module's ``__getattr__`` hands them out through :func:`moved_name`,
-with the same warning: ``from dolfinx_nnqem.contact.model import PairLaws`` gives
-``dolfinx_nnqem.contact.pair_laws.PairLaws``.
+with the same warning: ``from dolfinx_nnqem.contact.model import Contact`` gives
+``dolfinx_nnqem.contact.specification.Contact``.
 """
 
 from __future__ import annotations
@@ -42,7 +42,11 @@ MOVED: dict[str, str] = {
 """Old module name (under ``dolfinx_nnqem.``) → its new path (under ``dolfinx_nnqem.``)."""
 
 MOVED_NAMES: dict[str, dict[str, str]] = {
-    "contact.model": {"LawGroup": "contact.pair_laws", "PairLaws": "contact.pair_laws"},
+    "contact.model": {
+        "Contact": "contact.specification", "R_RANGE": "contact.specification",
+        "zero_displacement": "contact.geometry_tracking",
+        "LawGroup": "contact.pair_laws", "PairLaws": "contact.pair_laws",
+    },
 }
 """Module (under ``dolfinx_nnqem.``) → its names that moved → the module they are in now."""
 

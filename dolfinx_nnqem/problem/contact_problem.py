@@ -38,7 +38,8 @@ from petsc4py import PETSc
 from dolfinx_nnqem import compat, jit
 from dolfinx_nnqem.problem.bodies import (check_rigid_modes, find_bodies, free_rigid_modes, friction_held_motions,
                                           tags_sharing_nodes)
-from dolfinx_nnqem.contact.model import Contact, ContactModel
+from dolfinx_nnqem.contact.model import ContactModel
+from dolfinx_nnqem.contact.specification import Contact
 from dolfinx_nnqem.contact.surfaces import ContactPairError
 from dolfinx_nnqem.contact.obstacles import Cylinder, Plane, Sphere  # noqa: F401  (the user's imports)
 from dolfinx_nnqem.material.interface import GaussPointValues

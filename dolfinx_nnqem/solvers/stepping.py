@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 from mpi4py import MPI
 
-from dolfinx_nnqem.contact.model import LostContactError
+from dolfinx_nnqem.contact.geometry_tracking import LostContactError
 from dolfinx_nnqem.contact.slip_check import stale_message, switch_message
 from dolfinx_nnqem.material.interface import GaussPointValues
 from dolfinx_nnqem.solvers.checks import CheckOptions, StateCheck, check_state, failure_details, values_to_commit
