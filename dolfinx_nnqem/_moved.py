@@ -44,6 +44,7 @@ MOVED: dict[str, str] = {
 MOVED_NAMES: dict[str, dict[str, str]] = {
     "contact.model": {
         "Contact": "contact.specification", "R_RANGE": "contact.specification",
+        "GeometryTracker": "contact.geometry_tracking", "LostContactError": "contact.geometry_tracking",
         "zero_displacement": "contact.geometry_tracking",
         "LawGroup": "contact.pair_laws", "PairLaws": "contact.pair_laws",
     },

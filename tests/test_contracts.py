@@ -164,6 +164,24 @@ def test_the_layers_have_no_circle_and_import_only_downwards():
         assert not (edges[solver] & (solvers - {solver})), f"{solver} imports another solver"
 
 
+CONTACT_INTERNALS = {"groups", "force_unit", "trackers", "_trackers"}
+"""Attributes of the contact layer's insides: the law groups of the pair laws and the geometry
+trackers. Solvers read the contact scale (``ContactModel.r_max``, ``PairLaws.r_max``) and the
+geometry through ``ContactModel.geometry`` instead (issue 42)."""
+
+
+def test_no_module_outside_contact_reads_the_law_groups_or_the_trackers():
+    found = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        if path.relative_to(PACKAGE).parts[0] == "contact":
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Attribute) and node.attr in CONTACT_INTERNALS:
+                found.append(f"{path.relative_to(PACKAGE)}:{node.lineno}: .{node.attr}")
+    print(f"\n  reads of the contact layer's insides outside contact/: {found}")
+    assert found == [], found
+
+
 MATERIAL_DOOR = {"dolfinx_nnqem.material.interface", "dolfinx_nnqem.material.kinematics",
                  "dolfinx_nnqem.material.state", "dolfinx_nnqem.material.conformance"}
 """What the package outside ``material/`` may import of it: the interface, the kinematics, the

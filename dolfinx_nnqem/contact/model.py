@@ -7,13 +7,18 @@ supports fix. Solvers use only what it exposes:
 
 * w = B u + m(ℓ) (:meth:`ContactModel.relative_displacement`), B's action and Bᵀλ;
 * H(w, z) with its generalized Jacobian blocks ∂H/∂w, ∂H/∂z (:meth:`ContactModel.evaluate`),
-  the force λ(z) and ∂λ/∂z, the scale of the unknowns;
+  the force λ(z) and ∂λ/∂z, the scale of the unknowns, the contact scale r
+  (:attr:`ContactModel.r_max`);
 * blockdiag(D) B in B's sparsity, refilled in place (:meth:`ContactModel.scaled_B`);
 * the same laws on all pairs gathered on every rank, for the dense methods
-  (:meth:`ContactModel.gathered_laws`).
+  (:meth:`ContactModel.gathered_laws`);
+* where the pairs come from and when they move (``model.geometry``, a
+  :class:`~dolfinx_nnqem.contact.geometry_tracking.ContactGeometry`).
 
-Solvers never ask which law a pair follows: :class:`~dolfinx_nnqem.contact.pair_laws.PairLaws`
-applies each interface's law to its pairs, and everything law-specific is a method of the law.
+It composes the user's specification of each interface
+(:class:`~dolfinx_nnqem.contact.specification.Contact`), the pair laws
+(:class:`~dolfinx_nnqem.contact.pair_laws.PairLaws`: solvers never ask which law a pair follows,
+everything law-specific is a method of the law) and the geometry tracking.
 
 All interfaces' pairs are concatenated: this rank's pairs are those of interface 0, then of
 interface 1, ...; the global pair order is by rank, then in that local order (for a single
@@ -22,8 +27,7 @@ interface, the pair set's own global order).
 
 from __future__ import annotations
 
-import logging
-from collections.abc import Callable, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
@@ -37,24 +41,19 @@ from petsc4py import PETSc
 
 from dolfinx_nnqem.contact.laws import ContactLaw, LawEvaluation, Linearisation, get_law
 from dolfinx_nnqem.contact import pair_laws
-from dolfinx_nnqem.contact.obstacles import ObstaclePairs
-from dolfinx_nnqem.contact.geometric_stiffness import GeometricTerms, no_terms, obstacle_terms
 from dolfinx_nnqem.contact.pairset import PairRows, PairSet, rows_matrix
-from dolfinx_nnqem.contact.slip_check import Slip, facet_size_of, slipped_interfaces
 from dolfinx_nnqem.contact.surface_pairs import SurfacePairs
-from dolfinx_nnqem.contact.surfaces import ContactPairError, NoPairsError, space_degree
-from dolfinx_nnqem.contact.current_geometry import MortarTracker, ObstacleTracker, SurfaceTracker, remapper
-from dolfinx_nnqem.contact.geometry_tracking import (GeometryTracker, LostContactError, starting_pairs,
-                                                     tracker_of)
+from dolfinx_nnqem.contact.surfaces import ContactPairError
+from dolfinx_nnqem.contact.current_geometry import remapper
+from dolfinx_nnqem.contact.geometry_tracking import ContactGeometry, Remap, starting_pairs
 from dolfinx_nnqem.contact.specification import interface_r
 
 if TYPE_CHECKING:
     from dolfinx_nnqem.contact.pair_laws import PairLaws
     from dolfinx_nnqem.contact.specification import Contact
 
-logger = logging.getLogger("dolfinx_nnqem")
-
 __all__ = ["ContactModel", "Interface"]
+
 
 PREDICTED_PRESSURE = 1e-12
 """Starting active set: touching pairs start with p_n = this × r h (see :meth:`ContactModel.predict`)."""
@@ -84,15 +83,21 @@ class ContactModel:
         The interfaces.
     E, h
         Young's modulus at each interface (one per contact; a single value for all) and element
-        size: the default r = E h and the reference of its supported range (:data:`~dolfinx_nnqem.contact.specification.R_RANGE`).
-        The problem passes the softer body's modulus at each interface
-        (:meth:`~dolfinx_nnqem.problem.ContactProblem.interface_moduli`).
+        size: the default r = E h and the reference of its supported range
+        (:func:`~dolfinx_nnqem.contact.specification.interface_r`). The problem passes the softer
+        body's modulus at each interface (:meth:`~dolfinx_nnqem.problem.ContactProblem.interface_moduli`).
     constrained_dofs
         A vector laid out like V, 1 at constrained dofs and 0 elsewhere: pair directions whose
         every involved dof is constrained are pinned (:meth:`ContactLaw.pin`).
 
     Attributes
     ----------
+    interfaces
+        The interfaces in pair order (:class:`Interface`).
+    laws
+        The pair laws of this rank's pairs (:class:`~dolfinx_nnqem.contact.pair_laws.PairLaws`).
+    geometry
+        Where the pairs come from (:class:`~dolfinx_nnqem.contact.geometry_tracking.ContactGeometry`).
     z, z_n
         (num_local, 3) the pair unknowns (current iterate, last converged increment).
     w_n
@@ -114,14 +119,9 @@ class ContactModel:
         labels = [c.label for c in contacts]
         if len(set(labels)) != len(labels):
             raise ValueError(f"contact interfaces need distinct names, got {labels}")
-        self.trackers: list[GeometryTracker | None] = []  #: per interface: re-evaluates current-geometry pairs
         # kept for re-pinning the pairs of a new geometry (the caller may free its vector)
         self._constrained_dofs = constrained_dofs.copy()
-        self.geometry_version = 0  #: counts :meth:`update_geometry` calls (solvers rebuild what uses B)
-        self._refreshed_at: np.ndarray | None = None  # where refresh_obstacle_geometry last evaluated
-        self._facet_tags = facet_tags  # for the trackers of interfaces that start following the bodies
-        self._facet_sizes: list[float] | None = None  # of the interfaces' slave surfaces, at the first slip check
-        interfaces = []
+        interfaces, trackers = [], []
         for contact, E_interface in zip(contacts, moduli):
             r = interface_r(contact, E_interface, h)
             with constrained_dofs.localForm() as c:
@@ -129,8 +129,9 @@ class ContactModel:
             if pairs.num_global == 0:
                 raise ContactPairError(f"contact {contact.label}: no pairs found")
             interfaces.append(Interface(contact, pairs, get_law(contact.law), r, slice(0, 0)))
-            self.trackers.append(tracker)
+            trackers.append(tracker)
         self._assemble(interfaces)
+        self.geometry = ContactGeometry(self, V, facet_tags, trackers, self._constrained_dofs)
 
         n = self.num_local
         self.z = self.laws.initial_unknowns()
@@ -384,207 +385,52 @@ class ContactModel:
         """Back to the last converged increment's unknowns."""
         self.z = self.z_n.copy()
 
-    # -- current geometry (issue 27) -----------------------------------------------------------------
-    @property
-    def current_geometry(self) -> bool:
-        """True if some interface re-evaluates its pairs in the current configuration."""
-        return any(t is not None for t in self.trackers)
-
+    # -- a new geometry (geometry_tracking) ---------------------------------------------------------
     def pair_keys(self) -> np.ndarray:
         """(num_local,) what names a local pair across geometry updates: interface and slave node."""
         blocks = np.concatenate([i.pairs.slave_blocks for i in self.interfaces]).astype(np.int64)
         return self.interface_index.astype(np.int64) * (self.V.dofmap.index_map.size_global + 1) + blocks
 
-    def update_geometry(self, u, load_factor: float, u_n, load_factor_n: float) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
-        """Re-evaluate the current-geometry interfaces at (u, ℓ) (collective).
+    def replace_pairs(self, pairs: Sequence[PairSet], u_n, load_factor_n: float) -> Remap:
+        """The model on new pair sets of its interfaces, one per interface (collective; what
+        :meth:`~dolfinx_nnqem.contact.geometry_tracking.ContactGeometry.update` evaluated).
 
-        The pair unknowns z, z_n and the states follow their slave node; new pairs start
-        force-free. w_n is measured again with the new rows, w_n = B u_n + m(ℓ_n): the slip of an
-        increment is the relative displacement increment of the slave node and the master point
-        now under it, in the current tangent plane (``docs/theory.md``).
-
-        Parameters
-        ----------
-        u, u_n
-            DOLFINx functions: where the geometry is evaluated, and the last converged displacement.
-        load_factor, load_factor_n
-            ℓ of the obstacles' position, and of the last converged increment.
-
-        Returns
-        -------
-        The remap of per-pair arrays: ``remap(old, fill)`` gives the rows of ``old`` (laid out like
-        the pairs before the update) in the new layout, and for new pairs those of ``fill`` (one
-        row, or an array in the new layout).
+        B, the frames, gaps and laws are those of the new pairs. The pair unknowns z, z_n and the
+        states follow their slave node (:meth:`pair_keys`); new pairs start force-free. w_n is
+        measured again with the new rows, w_n = B u_n + m(ℓ_n). Returns the remap of per-pair arrays
+        (:data:`~dolfinx_nnqem.contact.geometry_tracking.Remap`).
         """
         old_keys = self.pair_keys()
-        # every interface evaluated before anything changes: if one has lost its pairs, the model stays
-        interfaces = [i if t is None else replace(i, pairs=self._pairs_or_lost(i, t, u, load_factor))
-                      for i, t in zip(self.interfaces, self.trackers)]
-        self._refreshed_at = None
         for obj in (self.B, self._w):
             obj.destroy()
-        self._assemble(interfaces)
+        self._assemble([replace(i, pairs=p) for i, p in zip(self.interfaces, pairs)])
         remap = remapper(old_keys, self.pair_keys())
         fresh = self.laws.initial_unknowns()
         self.z, self.z_n = remap(self.z, fresh), remap(self.z_n, fresh)
         self.state_n = remap(self.state_n, np.zeros((), dtype=np.int8))
         self.slip_n = remap(self.slip_n, np.zeros(2))
         self.w_n = self.relative_displacement(u_n.x.petsc_vec, load_factor_n)
-        self.geometry_version += 1
         return remap
 
-    @staticmethod
-    def _pairs_or_lost(interface: Interface, tracker: GeometryTracker, u, load_factor: float) -> PairSet:
-        """The tracker's pairs at (u, ℓ); :class:`LostContactError` naming the interface if there are none."""
-        lost = (f"contact {interface.contact.label}: no pairs in the current geometry at load factor "
-                f"{load_factor:.6g}: no slave node faces the master surface any more (the bodies slid apart)")
-        try:
-            pairs: PairSet = tracker.pairs_at(u, load_factor)
-        except NoPairsError as error:  # node-to-surface and mortar alike: one outcome, one message
-            raise LostContactError(lost) from error
-        if pairs.num_global == 0:
-            raise LostContactError(lost)
-        return pairs
-
-    @property
-    def obstacle_geometry(self) -> bool:
-        """True if some interface is a rigid obstacle in the current geometry (whose pairs
-        :meth:`refresh_obstacle_geometry` re-evaluates in place)."""
-        return any(isinstance(t, ObstacleTracker) for t in self.trackers)
-
-    @property
-    def surface_geometry(self) -> bool:
-        """True if some interface is node-to-surface or mortar in the current geometry (its pairs may
-        change; it is re-evaluated between solves, not within one)."""
-        return any(isinstance(t, (SurfaceTracker, MortarTracker)) for t in self.trackers)
-
-    def refresh_obstacle_geometry(self, u, load_factor: float, u_n, load_factor_n: float) -> None:
-        """Re-evaluate the current-geometry obstacle interfaces at (u, ℓ) in place (collective).
-
-        An obstacle keeps one pair per slave node and B keeps its pattern (the slave node's three
-        columns): only the frames R, the gaps g0 (rebased as in :meth:`update_geometry`) and B's
-        values change, and w_n is measured again with the new rows. The pairs, their unknowns and
-        the solvers' matrices stay; this is what the monolithic solver calls at every Newton iterate
-        (:mod:`~dolfinx_nnqem.contact.geometric_stiffness`). Nothing is done when the slave nodes,
-        ℓ and u_n are where the last refresh had them.
-        """
-        key = self._refresh_key(u, load_factor, u_n, load_factor_n)
-        same = (self._refreshed_at is not None and len(key) == len(self._refreshed_at)
-                and bool(np.array_equal(key, self._refreshed_at)))
-        # agreed by every rank: a rank whose own slave nodes did not move must still join B's
-        # assembly and the measure of w_n below (collective) when another rank's did
-        if self.comm.allreduce(same, op=MPI.LAND):
-            return
-        for k, (interface, tracker) in enumerate(zip(self.interfaces, self.trackers)):
-            if not isinstance(tracker, ObstacleTracker):
-                continue
-            pairs = tracker.pairs_at(u, load_factor)
+    def refill_pairs(self, pairs: Mapping[int, PairSet], u_n, load_factor_n: float) -> None:
+        """New values of the pair sets of some interfaces (interface index → pairs), in place: the
+        same pairs in the same order with B's pattern (what
+        :meth:`~dolfinx_nnqem.contact.geometry_tracking.ContactGeometry.refresh_obstacles` evaluated).
+        The frames, gaps, B's values and the pinned directions follow; w_n is measured again,
+        w_n = B u_n + m(ℓ_n). The unknowns stay (collective)."""
+        for k, new in pairs.items():
+            interface = self.interfaces[k]
             local = interface.local
-            self.interfaces[k] = replace(interface, pairs=pairs)
-            self.R[local] = pairs.R
-            self.g0[local] = pairs.g0  # the laws hold this array
+            self.interfaces[k] = replace(interface, pairs=new)
+            self.R[local] = new.R
+            self.g0[local] = new.g0  # the laws hold this array
             start = self.rows.indptr[3 * local.start]
-            self.rows.values[start:start + len(pairs.rows.values)] = pairs.rows.values
+            self.rows.values[start:start + len(new.rows.values)] = new.rows.values
         self.B.setValuesCSR(self.rows.indptr, self.rows.columns, self.rows.values)  # type: ignore[arg-type]  # as in scaled_B
         self.B.assemble()
         self.laws = replace(self.laws, constrained=self._constrained_directions(self._constrained_dofs))
         self._gathered_laws = None
         self.w_n = self.relative_displacement(u_n.x.petsc_vec, load_factor_n)
-        self._refreshed_at = key
-
-    def _refresh_key(self, u, load_factor: float, u_n, load_factor_n: float) -> np.ndarray:
-        """What an obstacle refresh depends on: the slave nodes' u and u_n, ℓ and ℓ_n."""
-        start = u.function_space.dofmap.index_map.local_range[0]
-        parts = [np.array([load_factor, load_factor_n])]
-        for interface, tracker in zip(self.interfaces, self.trackers):
-            if isinstance(tracker, ObstacleTracker):
-                blocks = interface.pairs.slave_blocks - start
-                parts += [u.x.array.reshape(-1, 3)[blocks].ravel(), u_n.x.array.reshape(-1, 3)[blocks].ravel()]
-        return np.concatenate(parts)
-
-    def geometric_terms(self, u, load_factor: float, u_n, load_factor_n: float,
-                        lam: np.ndarray | None = None) -> GeometricTerms:
-        """The geometric blocks K_s, W_s of the current-geometry obstacle pairs at (u, ℓ) and the forces
-        ``lam`` (default: λ(z)), their geometry refreshed there first
-        (:mod:`~dolfinx_nnqem.contact.geometric_stiffness`)."""
-        lam = self.force() if lam is None else lam
-        start = u.function_space.dofmap.index_map.local_range[0]
-        pairs_, blocks, Ks, Ws = [], [], [], []
-        for interface, tracker in zip(self.interfaces, self.trackers):
-            if not isinstance(tracker, ObstacleTracker):
-                continue
-            pairs = interface.pairs
-            assert isinstance(pairs, ObstaclePairs)  # an obstacle tracker's pairs
-            index = pairs.slave_blocks - start
-            K, W = obstacle_terms(pairs, u.x.array.reshape(-1, 3)[index], u_n.x.array.reshape(-1, 3)[index],
-                                  pairs.obstacle.displacement(load_factor), pairs.obstacle.displacement(load_factor_n),
-                                  lam[interface.local])
-            pairs_.append(np.arange(interface.local.start, interface.local.stop))
-            blocks.append(pairs.slave_blocks)
-            Ks.append(K)
-            Ws.append(W)
-        if not pairs_:
-            return no_terms()
-        return GeometricTerms(np.concatenate(pairs_), np.concatenate(blocks).astype(np.int64), np.concatenate(Ks),
-                              np.concatenate(Ws))
-
-    def geometry_state(self) -> list[np.ndarray | None]:
-        """Per interface, what its next evaluation depends on besides u (for checkpoints): the master
-        facet of every slave node (node-to-surface in current geometry), or None."""
-        return [t.facets if isinstance(t, SurfaceTracker) else None for t in self.trackers]
-
-    def set_geometry_state(self, state: Sequence[np.ndarray | None]) -> None:
-        """Restore :meth:`geometry_state`."""
-        for tracker, facets in zip(self.trackers, state):
-            if isinstance(tracker, SurfaceTracker) and facets is not None:
-                tracker.facets = np.asarray(facets, dtype=np.int64).copy()
-
-    def slipped(self, w: np.ndarray) -> list[Slip]:
-        """The reference-geometry interfaces whose surfaces slid past
-        :data:`~dolfinx_nnqem.contact.slip_check.SLIP_LIMIT` × their facet size at the relative
-        displacement ``w`` (collective; :func:`~dolfinx_nnqem.contact.slip_check.slipped_interfaces`)."""
-        if self._facet_sizes is None:  # a reference-geometry interface's areas never change: measured once
-            self._facet_sizes = [facet_size_of(self.comm, i.pairs.area) for i in self.interfaces]
-        sizes = [None if t is not None else size for size, t in zip(self._facet_sizes, self.trackers)]
-        return slipped_interfaces(self.comm, self.interfaces, sizes, w)
-
-    def why_not_current(self, k: int) -> str | None:
-        """None if interface ``k`` (in the reference geometry) can be re-evaluated in the current
-        configuration from now on (``geometry = "auto"``); else the reason it cannot."""
-        interface = self.interfaces[k]
-        if interface.contact.geometry == "reference":
-            return "geometry = 'reference' was chosen for it (use 'auto' or 'current' for large sliding)"
-        if interface.pairs.kind == "node-to-node":
-            return ("node-to-node pairs join nodes that faced each other in the reference configuration (use "
-                    "discretisation = 'node-to-surface' or 'mortar' for large sliding)")
-        if space_degree(self.V) != 1:
-            return (f"the current geometry takes degree-1 displacements in this version (its closest points and "
-                    f"pair rows are those of linear facets); the displacements here have degree {space_degree(self.V)} "
-                    "(use degree 1 for large sliding)")
-        return None
-
-    def follow_bodies(self, k: int) -> None:
-        """Re-evaluate interface ``k`` in the current configuration from now on (collective): its tracker
-        is made, and the next :meth:`update_geometry` evaluates its pairs where the bodies are.
-
-        For ``geometry = "auto"`` past the slip limit (:meth:`why_not_current` must be None).
-        """
-        if self.trackers[k] is not None:
-            return
-        interface = self.interfaces[k]
-        with self._constrained_dofs.localForm() as c:
-            self.trackers[k] = tracker_of(interface.contact, self.V, self._facet_tags, supported=c.array.copy(),
-                                          reference=interface.pairs)
-
-    @property
-    def pairs_may_change(self) -> bool:
-        """True if some interface's pairs depend on u: in the current geometry, or ``geometry = "auto"``
-        and able to move there (:meth:`why_not_current`)."""
-        return any(t is not None or self.why_not_current(k) is None for k, t in enumerate(self.trackers))
-
-    def following_bodies(self) -> list[bool]:
-        """Per interface: True where its pairs are re-evaluated in the current configuration."""
-        return [t is not None for t in self.trackers]
 
     # -- reporting ----------------------------------------------------------------------------------
     def obstacle_reactions(self, lam: np.ndarray | None = None) -> dict[str, np.ndarray]:

@@ -576,10 +576,11 @@ class ContactProblem:
 
     def update_contact_geometry(self, load_factor: float) -> None:
         """Re-evaluate the current-geometry contact interfaces at u and ℓ (collective; see
-        :meth:`ContactModel.update_geometry`); the secant predictor's pair unknowns follow the pairs."""
-        if self.contact is None or not self.contact.current_geometry:
+        :meth:`~dolfinx_nnqem.contact.geometry_tracking.ContactGeometry.update`); the secant predictor's
+        pair unknowns follow the pairs."""
+        if self.contact is None or not self.contact.geometry.follows_bodies:
             return
-        remap = self.contact.update_geometry(self.u, load_factor, self.state.u_n, self.load_factor_n)
+        remap = self.contact.geometry.update(self.u, load_factor, self.state.u_n, self.load_factor_n)
         if self._previous is not None:
             ell, u_prev, z_prev = self._previous
             if z_prev is not None:  # a new pair: no change to extrapolate

@@ -88,7 +88,7 @@ class NNEQM1Solver(ReleasesPETSc):
         self.condensation = Condensation(problem, self.name, self.options.petsc_options)
         self._timings: dict[str, float] = {}
         self.last_condensed: CondensedProblem | None = None  #: the latest outer iteration's dense problem
-        self._geometry_version = contact_model(problem).geometry_version
+        self._geometry_version = contact_model(problem).geometry.version
 
     @property
     def timings(self) -> dict[str, float]:
@@ -101,10 +101,10 @@ class NNEQM1Solver(ReleasesPETSc):
     def solve_increment(self, load_factor: float) -> SolveReport:
         p = self.problem
         model = contact_model(p)
-        if model.geometry_version != self._geometry_version:
+        if model.geometry.version != self._geometry_version:
             # the contact geometry changed (current geometry): the flexibility C = B G Bᵀ is rebuilt
             # from the new B at the next factorisation, whether the pairing or only the rows changed
-            self._geometry_version = model.geometry_version
+            self._geometry_version = model.geometry.version
             self.condensation.pairs_changed()
         # the outer iteration starts where the monolithic solver's Newton does: from the secant
         # extrapolation of the last two increments (u and the pair unknowns) while the load path

@@ -261,7 +261,7 @@ def _solve(problem, solver, target: float) -> SolveReport:
     The report counts the Newton iterations of every pass.
     """
     model = problem.contact
-    if model is None or not model.current_geometry:
+    if model is None or not model.geometry.follows_bodies:
         return solver.solve_increment(target)
     lost = _update_geometry(problem, target)
     if lost is not None:
@@ -315,12 +315,12 @@ def _moved_to_current_geometry(problem, solver, report: SolveReport, target: flo
     model = problem.contact
     if model is None:
         return False
-    slips = model.slipped(problem.relative_displacement())
+    slips = model.geometry.slipped(problem.relative_displacement())
     if not slips:
         return False
     stale = []
     for slip in slips:
-        why_not = model.why_not_current(slip.index)
+        why_not = model.geometry.why_not_current(slip.index)
         if why_not is None and not solver.follows_contact_geometry:
             why_not = (f"{solver.name} solves contact in the reference geometry only (use the monolithic solver or "
                        "NNEQM1 for large sliding)")
@@ -337,7 +337,7 @@ def _moved_to_current_geometry(problem, solver, report: SolveReport, target: flo
                              "committed: the contact geometry is stale"] + [f"  {line}" for line in stale])
         _give_up(message, failure, callbacks)
     for slip in slips:
-        model.follow_bodies(slip.index)
+        model.geometry.start_following(slip.index)
         message = switch_message(slip, target)
         problem.slip_warnings.append(message)
         logger.warning(f"[{solver.name}] {message}")
@@ -418,7 +418,7 @@ def _stale_geometry(problem) -> list[str]:
         return []
     return [f"  likely cause: {slip.describe()} at the last iterate: the pairs, normals and gaps found in the "
             "reference configuration no longer describe the surfaces"
-            for slip in model.slipped(problem.relative_displacement())]
+            for slip in model.geometry.slipped(problem.relative_displacement())]
 
 
 def _sliding_bodies(problem, report: SolveReport) -> list[str]:
