@@ -4,7 +4,8 @@ same statically: ``dolfinx_nnqem/solvers/conformance.py``, run by ``.ci/run``).
 * every solver, pair set, material and the problem satisfy their Protocols;
 * the layers: no import circle, at most 15 modules at the package root, no solver imports another,
   and the lower layers import nothing from the upper ones;
-* old module paths of release 0.1 still import, as the same objects, with a DeprecationWarning;
+* old module paths, names and ContactModel members of release 0.1 still import (or read), as the same
+  objects, with a DeprecationWarning;
 * wrong argument types end in a TypeError that names the argument;
 * solvers free their PETSc objects as context managers;
 * every ``type: ignore`` of the package names its error code and says why.
@@ -14,6 +15,7 @@ from __future__ import annotations
 
 import ast
 import importlib
+import operator
 import re
 import warnings
 from pathlib import Path
@@ -255,6 +257,29 @@ def test_a_moved_name_imports_from_its_old_module_with_a_warning(module, name):
     assert old is getattr(importlib.import_module(f"dolfinx_nnqem.{new}"), name)
     with pytest.raises(AttributeError, match="no attribute 'no_such_name'"):
         getattr(old_module, "no_such_name")
+
+
+MOVED_MEMBERS = [(owner, old, new) for owner, members in sorted(_moved.MOVED_MEMBERS.items())
+                 for old, new in sorted(members.items())]
+
+
+@pytest.fixture(scope="module")
+def sliding_contact():
+    """A contact model in the current geometry (its trackers made), for the moved members."""
+    from dolfinx_nnqem.cases.large_sliding import sliding_blocks
+    return sliding_blocks(slide=0.4).contact
+
+
+@pytest.mark.parametrize("owner, old, new", MOVED_MEMBERS)
+def test_a_moved_member_reads_its_new_path_with_a_warning(sliding_contact, owner, old, new):
+    """ContactModel's geometry moved to ContactModel.geometry (issue 42): its old members still read,
+    as the new ones, with a DeprecationWarning naming the new path."""
+    assert owner == "contact.model.ContactModel"
+    name = old.removesuffix("()")
+    with pytest.warns(DeprecationWarning, match=rf"ContactModel\.{name} is deprecated.*ContactModel\.{new} instead"):
+        member = getattr(sliding_contact, name)
+    value = member() if old.endswith("()") else member  # a method whose value is now an attribute
+    assert value == operator.attrgetter(new)(sliding_contact)
 
 
 def test_the_public_names_of_the_user_guide_import_from_their_packages():

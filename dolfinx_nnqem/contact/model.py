@@ -464,3 +464,5 @@ if not TYPE_CHECKING:  # for the type checker the moved names are gone: the pack
     def __getattr__(name: str):
         """The names that moved out of this module, with a DeprecationWarning naming where they went."""
         return _moved.moved_name(__name__, name)
+
+    _moved.install_members(ContactModel)  # its old geometry members: now those of ContactModel.geometry
