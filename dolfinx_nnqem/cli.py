@@ -81,6 +81,12 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--check", action="store_true", help="only check the file and build the problem")
     run.add_argument("--no-pictures", action="store_true",
                      help="do not draw the PNG pictures into OUT/pictures at the end of the run")
+    run.add_argument("--estimate", action="store_true",
+                     help="estimate the discretisation error of the results (an enriched solve after the run; "
+                          "docs/error-estimates.md)")
+    run.add_argument("--target-error", type=float, default=None, metavar="REL",
+                     help="refine the tetrahedral mesh adaptively until every estimate is at most REL "
+                          "(e.g. 0.01; overrides [estimate].target_error)")
     mode = run.add_mutually_exclusive_group()
     mode.add_argument("--restart", action="store_true",
                       help="continue the run in the output folder from its last complete checkpoint")
@@ -96,7 +102,7 @@ def _parser() -> argparse.ArgumentParser:
     plot.add_argument("--scale", type=float, default=None,
                       help="displacement magnification of deformed.png (default: largest displacement "
                            "drawn as 10%% of the model size)")
-    plot.add_argument("--field", choices=("von_mises", "p"), default="von_mises",
+    plot.add_argument("--field", choices=("von_mises", "p", "error_indicator"), default="von_mises",
                       help="colour of deformed.png: von Mises stress or equivalent plastic strain p")
     plot.add_argument("--camera", choices=("iso", "xy", "xz", "yz"), default="iso", help="view of deformed.png")
     return parser
@@ -188,6 +194,7 @@ def _run(args, workers: PictureWorkers | None = None) -> int:
     from mpi4py import MPI
 
     from dolfinx_nnqem.collective import agree
+    from dolfinx_nnqem.estimates.runs import EstimateSettings, check_settings
     from dolfinx_nnqem.problem_file import build_problem, load_problem_file, solver_options
     from dolfinx_nnqem.solvers.registry import make_solver
 
@@ -200,17 +207,25 @@ def _run(args, workers: PictureWorkers | None = None) -> int:
         workers.close()  # or no pictures after all)
         workers = None
     problem = build_problem(spec, comm)
+    args.estimate_settings = settings = EstimateSettings.from_table(spec.estimate, estimate=args.estimate,
+                                                                    target_error=args.target_error)
+    check_settings(problem, settings)  # a refusal (no enrichment, adaptivity on hexahedra) before solving
+    if settings.target_error is not None and args.restart:
+        raise ValueError("--restart with a target error: an adaptive run solves every mesh from the start")
     if rank0 and not args.quiet:
         _print_header(args.problem, problem, method, increments)
     if args.check:
         return EXIT_OK
     options, method_options = solver_options(spec, method)
+    if settings.target_error is not None:
+        return _run_adaptive(args, spec, problem, method, increments, options, method_options)
     if method != "monolithic" or spec.solver["linear_solver"] == "direct":
         from dolfinx_nnqem.solvers.preflight import check_direct_solver
 
         check_direct_solver(comm, options.petsc_options)  # an unknown solver package is reported as such
     with make_solver(method, problem, options, **method_options) as solver:  # frees PETSc's objects
-        writer = _solve_problem_file(args, spec, problem, solver, method, increments, workers)
+        writer = _solve_problem_file(args, spec, problem, solver, method, increments, workers,
+                                     estimate=(options, method_options))
     if rank0 and not args.quiet:
         s = writer.summary.data
         print(f"converged: {s['converged']}; iterations {s['iterations']}; global equilibrium "
@@ -221,6 +236,50 @@ def _run(args, workers: PictureWorkers | None = None) -> int:
 
             print("nothing to do" + (f": every picture is in {writer.folder}/pictures/"
                                      if pictures_enabled(writer.pictures) else ""), flush=True)
+    return EXIT_OK
+
+
+def _run_adaptive(args, spec, problem, method: str, increments, options, method_options) -> int:
+    """``run --target-error``: adaptive cycles, each solved into the output folder (the last one's
+    results stay), the sequence in ``summary.json`` (``adaptivity``), the pictures at the end."""
+    from dolfinx_nnqem.estimates.adaptive import solve_adaptively
+    from dolfinx_nnqem.estimates.quantities import probe_points
+    from dolfinx_nnqem.estimates.report import format_estimates, record_estimates
+    from dolfinx_nnqem.io.run_pictures import draw_run_pictures
+    from dolfinx_nnqem.problem_file import check_options
+    from dolfinx_nnqem.solvers.registry import make_solver
+
+    settings = args.estimate_settings
+    pictures = spec.output["pictures"] and not args.no_pictures
+    args.no_pictures, writers = True, []  # the pictures of the last cycle only, at the end
+    rank0 = problem.comm.rank == 0
+
+    def run_cycle(cycle_problem, index):
+        args.overwrite = args.overwrite or index > 1  # each cycle replaces the one before
+        with make_solver(method, cycle_problem, options, **method_options) as solver:
+            writers.append(_solve_problem_file(args, spec, cycle_problem, solver, method, increments, None))
+        return writers[-1].summary.data["load_factors"]
+
+    def progress(cycle):
+        if rank0 and not args.quiet:
+            print(f"cycle {cycle.index}: {cycle.dofs} dofs, largest relative estimate "
+                  f"{100 * cycle.relative_error:.3g} % (target {100 * settings.target_error:g} %)", flush=True)
+
+    result = solve_adaptively(problem, run_cycle, method, settings.target_error, max_cycles=settings.max_cycles,
+                              fraction=settings.refine_fraction, quantities=settings.quantities,
+                              probes=probe_points(spec.output["probes"] or None), options=options,
+                              method_options=method_options, on_cycle=progress, enrichment=settings.enrichment,
+                              check=check_options(spec))
+    summary = writers[-1].summary
+    record_estimates(summary.data, result.cycles[-1].estimates)
+    summary.data["adaptivity"] = result.as_dict(settings.target_error)
+    summary.write()
+    if rank0 and pictures:
+        draw_run_pictures(writers[-1].folder)
+    if rank0 and not args.quiet:
+        print(format_estimates(result.cycles[-1].estimates), flush=True)
+        print(f"target {'reached' if result.reached else 'NOT reached'} after {len(result.cycles)} cycles; "
+              f"results of the last mesh in {writers[-1].folder}/", flush=True)
     return EXIT_OK
 
 
@@ -235,12 +294,17 @@ def _print_header(path: str, problem, method: str, increments) -> None:
         print(f"  held by friction only: {motion}", flush=True)
 
 
-def _solve_problem_file(args, spec, problem, solver, method: str, increments, workers: PictureWorkers | None):
+def _solve_problem_file(args, spec, problem, solver, method: str, increments, workers: PictureWorkers | None,
+                        estimate: tuple | None = None):
     """Solve the load steps of ``run`` with its writers, checkpoints and progress lines; returns
     the :class:`~dolfinx_nnqem.io.output.ResultsWriter` (closed). ``summary.json`` records how a
-    run that started solving ended."""
+    run that started solving ended. ``estimate``: (options, method_options) of the enriched solve
+    when ``args.estimate_settings`` asks for the error estimates."""
     import hashlib
 
+    from dolfinx_nnqem.estimates import RecoveryIndicator
+    from dolfinx_nnqem.estimates.report import format_estimates
+    from dolfinx_nnqem.estimates.runs import estimate_into_writer
     from dolfinx_nnqem.io import checkpoint
     from dolfinx_nnqem.io.output import ResultsWriter
     from dolfinx_nnqem.problem_file import check_options
@@ -254,7 +318,7 @@ def _solve_problem_file(args, spec, problem, solver, method: str, increments, wo
     writer = ResultsWriter(problem, method, out, increments, probes=spec.output["probes"] or None,
                            fields=spec.output["fields"], extra={"problem_file": str(args.problem)},
                            overwrite=args.overwrite, resume=args.restart, pictures=None if pictures else False,
-                           picture_worker=workers)
+                           picture_worker=workers, cell_fields=[RecoveryIndicator(problem)])
     args.writer, args.checkpoints = writer, bool(spec.output["checkpoint_every"])  # (for the restart hint)
     solving = False  # summary.json records how a run ended only once it has started solving (or resumed)
     try:
@@ -271,6 +335,12 @@ def _solve_problem_file(args, spec, problem, solver, method: str, increments, wo
         solve_load_steps(problem, solver, increments, max_cutbacks=spec.solver["max_cutbacks"],
                          callbacks=[writer] + _progress_callbacks(args, increments, method, problem.comm.rank),
                          check=check_options(spec), checkpoint=ckpt, resume=resume)
+        settings = getattr(args, "estimate_settings", None)
+        if estimate is not None and settings is not None and settings.enabled:
+            found = estimate_into_writer(writer, problem, method, settings, probes=spec.output["probes"] or None,
+                                         options=estimate[0], method_options=estimate[1], check=check_options(spec))
+            if found is not None and problem.comm.rank == 0 and not args.quiet:
+                print(format_estimates(found), flush=True)
     except BaseException as error:  # noqa: BLE001  (re-raised: the summary says how the run ended)
         if solving:
             writer.record_end(error)

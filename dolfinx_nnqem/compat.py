@@ -199,3 +199,44 @@ def optimize_tetrahedra() -> str:
         return "Netgen"
     gmsh.model.mesh.optimize("")
     return "gmsh"
+
+
+def refine_mesh(mesh, edges: np.ndarray | None = None):
+    """Plaza refinement of a simplex mesh -> ``(mesh, parent_cell, parent_facet)``.
+
+    ``edges``: local indices of the edges to split (None: uniform refinement). ``partitioner=None``
+    on both stacks: the refined cells stay on the rank of their parent, without ghost cells, as the
+    package's meshes are made (gmsh's, unghosted), so that the parent maps index every local cell
+    and the tags carry to all of them (0.10+'s default partitioner adds a ghost layer whose cells
+    the parent maps do not cover).
+    """
+    option = dolfinx.mesh.RefinementOption.parent_cell_and_facet
+    mesh.topology.create_entities(1)
+    return dolfinx.mesh.refine(mesh, edges, partitioner=None, option=option)
+
+
+def transfer_meshtag(tags, mesh, parent_cell: np.ndarray, parent_facet: np.ndarray | None = None):
+    """Tags of a parent mesh carried to the refined ``mesh`` (cells: ``parent_cell``; facets:
+    both maps); the children of a tagged entity get its tag."""
+    mesh.topology.create_entities(tags.dim)
+    mesh.topology.create_connectivity(tags.dim, mesh.topology.dim)
+    if tags.dim == mesh.topology.dim:
+        return dolfinx.mesh.transfer_meshtag(tags, mesh, parent_cell)
+    return dolfinx.mesh.transfer_meshtag(tags, mesh, parent_cell, parent_facet)
+
+
+def parallel_mumps_ordering() -> dict[str, int]:
+    """MUMPS's fill-reducing ordering for a factorisation on more than one rank, by what this
+    PETSc has: METIS (ICNTL(7) = 5) where PETSc was built with it (the PyPI wheel), PORD
+    (ICNTL(7) = 4, MUMPS's own nested dissection) otherwise (Debian 13's PETSc has no METIS).
+
+    The monolithic Newton matrix is a badly scaled saddle-point matrix (zero diagonal entries
+    where pairs are closed). MUMPS's maximum-transversal permutation, which makes it safe on one
+    rank, needs a centralised matrix, and PETSc passes a distributed one; MUMPS's automatic
+    ordering then returns solutions with residuals of order one for it (on Debian 13 every time).
+    One rank keeps MUMPS's own choice. The residuals of every ordering on both
+    stacks: ``benchmarks/parallel_direct_orderings.py``, ``docs/theory.md`` ("Every direct solve
+    is checked"). PORD is built into MUMPS and its fill stays close to METIS's as the mesh grows
+    (AMD and QAMD, as accurate here, fill more).
+    """
+    return {"mat_mumps_icntl_7": 5 if PETSc.Sys.hasExternalPackage("metis") else 4}

@@ -11,7 +11,7 @@ A problem file names a mesh with physical tags and everything :class:`ContactPro
     # model = "von-mises"                 # or "elastic" (E, nu, density only)
     E = 2.0e10
     nu = 0.17
-    sigma_y0 = 5.0e5                      # omit for an elastic material
+    sigma_y0 = 5.0e5                      # inf, or omit it, for an elastic material
     H = 2.0e10
     density = 2400.0
     # hardening = "voce"                  # "linear" (default: sigma_y0, H), "voce" (sigma_y0, Q, b, H)
@@ -89,10 +89,20 @@ A problem file names a mesh with physical tags and everything :class:`ContactPro
     [output.probes]
     "tip" = [2.0, 0.0, 0.0]
 
+    [estimate]                            # discretisation-error estimates (off by default)
+    enabled = true                        # value ± estimate of every contact resultant, reaction,
+                                          # probe displacement and the largest plastic strain
+    enrichment = "auto"                   # "degree-2", "refine" (tetrahedra): the enriched solve
+    target_error = 0.01                   # adaptive refinement until every estimate is <= 1 %
+                                          # (tetrahedra only; implies enabled)
+    max_cycles = 6
+    refine_fraction = 0.5                 # Dörfler: refine the cells holding 50 % of sum eta_K^2
+    quantities = ["u", "contact"]         # what target_error applies to (default: all)
+
 Every load ([[traction]], [[pressure]], [[body_force]], [gravity]) and [[dirichlet]] entry takes
 an optional ``amplitude`` table like the one above (default a(ℓ) = ℓ).
 An XDMF mesh takes ``file = "mesh.xdmf"``, ``mesh_name = "mesh"``, ``cell_tags = "cell_tags"``
-and ``facet_tags = "facet_tags"`` (the names of the grids in the file).
+and ``facet_tags = "facet_tags"`` (the names of the grids in the file; a gmsh file takes none of them).
 Every key is checked: an unknown or malformed one raises :class:`ProblemFileError` naming it.
 """
 
@@ -133,10 +143,13 @@ KEYS: dict[str, frozenset[str]] = {
                               "shrink", "load_factors"}),
     "checks": frozenset({"rtol", "max_strain", "max_rotation"}),
     "output": frozenset({"folder", "fields", "pictures", "probes", "checkpoint_every"}),
+    "estimate": frozenset({"enabled", "enrichment", "target_error", "max_cycles", "refine_fraction", "quantities"}),
 }
 """Every key a problem file may hold, by section (the one list the checks below use;
 ``docs/problem-file.md`` documents each, and ``tests/test_problem_file_doc.py`` compares the two)."""
 SECTIONS = {section.split(".")[0] for section in KEYS}
+XDMF_KEYS = frozenset({"mesh_name", "cell_tags", "facet_tags"})
+"""The [mesh] keys that name the grids of an XDMF file (refused with a gmsh .msh file)."""
 METHODS = ("monolithic", "nneqm1", "nneqm2")
 
 
@@ -156,6 +169,7 @@ class ProblemSpec:
     solver: dict
     output: dict = field(default_factory=dict)
     checks: dict = field(default_factory=dict)
+    estimate: dict = field(default_factory=dict)
 
 
 def load_problem_file(path: str | Path) -> ProblemSpec:
@@ -187,12 +201,13 @@ def load_problem_file(path: str | Path) -> ProblemSpec:
     solver = _solver_section(data.get("solver", {}), where)
     output = _output_section(data.get("output", {}), where)
     checks = _checks_section(data.get("checks", {}), where)
+    estimate = _estimate_section(_table(data, "estimate", where), where)
     if not dirichlet:
         raise ProblemFileError(f"{where}: no [[dirichlet]] entry; a quasi-static problem needs supports")
     if solver["method"] != "monolithic" and not contact:
         raise ProblemFileError(f"{where}: solver.method = {solver['method']!r} needs a [contact] section")
     return ProblemSpec(path, mesh, materials, contact, dirichlet, traction, pressure, body_force,
-                       gravity, solver, output, checks)
+                       gravity, solver, output, checks, estimate)
 
 
 # -- sections ---------------------------------------------------------------------------------
@@ -269,6 +284,11 @@ def _mesh_section(mesh: dict, folder: Path, where: str) -> dict:
         raise ProblemFileError(f"{where}: mesh.file = {mesh['file']!r}: no such file ({file})")
     if file.suffix not in (".msh", ".xdmf"):
         raise ProblemFileError(f"{where}: mesh.file = {mesh['file']!r}: expected a gmsh .msh or an .xdmf file")
+    xdmf_only = sorted(XDMF_KEYS & set(mesh))
+    if file.suffix == ".msh" and xdmf_only:
+        key = xdmf_only[0]
+        raise ProblemFileError(f"{where}: mesh.{key} = {mesh[key]!r} names a grid of an XDMF file; the gmsh file "
+                               f"{mesh['file']!r} has none (its physical groups are the tags): remove the key")
     mesh["file"] = file
     mesh.setdefault("mesh_name", "mesh")
     mesh.setdefault("cell_tags", "cell_tags")
@@ -302,6 +322,11 @@ def _materials_section(materials: dict, where: str) -> dict:
                 params[name] = _hardening_table(value, f"{w}.table")
             elif name == "kinematic":
                 params[name] = _back_stresses(value, f"{w}.kinematic")
+            elif name == "sigma_y0" and isinstance(value, float) and not math.isfinite(value):
+                if value != math.inf:
+                    raise ProblemFileError(f"{w}.sigma_y0 = {value!r}: expected a yield stress > 0, or inf for an "
+                                           "elastic material")
+                # TOML's inf: an elastic material, as documented
             else:
                 _number(value, f"{w}.{name}")
         try:
@@ -337,7 +362,29 @@ def _contact_tables(contact, where: str) -> list:
     names = [c.get("name") for c in out if c.get("name") is not None]
     if len(set(names)) != len(names):
         raise ProblemFileError(f"{where}: contact names must differ, got {names}")
+    _one_table_per_pair(out, where)
     return out
+
+
+def _one_table_per_pair(contacts: list, where: str) -> None:
+    """Refuse two tables on the same (unordered) pair of deformable surfaces: their pairs would hold
+    the same nodes twice and no equilibrium splits the force between them (the solvers stalled)."""
+    seen: dict[frozenset, int] = {}
+    for i, c in enumerate(contacts):
+        if "surface1" not in c:
+            continue  # an obstacle: several obstacles may touch one surface
+        pair = frozenset((c["surface1"], c["surface2"]))
+        if pair in seen:
+            a, b = sorted(pair)
+            raise ProblemFileError(f"{where}: {_table_name(contacts, seen[pair])} and {_table_name(contacts, i)} both "
+                                   f"join the surfaces {a} and {b}; give one [[contact]] table per pair of surfaces")
+        seen[pair] = i
+
+
+def _table_name(contacts: list, i: int) -> str:
+    """``contact[1]``, with its name if it has one: ``contact[1] ("upper")``."""
+    name = contacts[i].get("name")
+    return f"contact[{i}]" if name is None else f'contact[{i}] ("{name}")'
 
 
 
@@ -411,20 +458,23 @@ def _amplitude_entry(entry: dict, where: str) -> None:
         return
     from dolfinx_nnqem.problem.amplitude import PiecewiseLinear
 
+    # the numbers first: their errors name the row already (a ProblemFileError is a ValueError too, and
+    # caught below it repeated the file and the key)
+    rows = [[float(_number(v, f"{where}.amplitude[{i}]", physical=True)) for v in row]
+            for i, row in enumerate(_rows(entry["amplitude"], f"{where}.amplitude"))]
     try:
-        entry["amplitude"] = PiecewiseLinear([[float(_number(v, f"{where}.amplitude[{i}]", physical=True)) for v in row]
-                                              for i, row in enumerate(_rows(entry["amplitude"], f"{where}.amplitude"))])
-    except ValueError as error:
+        entry["amplitude"] = PiecewiseLinear(rows)
+    except ValueError as error:  # the rows' shape and order: "amplitude: ..."
         raise ProblemFileError(f"{where}.{error}") from None
 
 
 def _path(rows, where: str):
     from dolfinx_nnqem.problem.amplitude import PiecewiseLinearPath
 
+    table = [[float(_number(v, f"{where}[{i}]", physical=True)) for v in row] for i, row in enumerate(_rows(rows, where))]
     try:
-        return PiecewiseLinearPath([[float(_number(v, f"{where}[{i}]", physical=True)) for v in row]
-                                    for i, row in enumerate(_rows(rows, where))])
-    except ValueError as error:
+        return PiecewiseLinearPath(table)
+    except ValueError as error:  # the rows' shape and order: "motion path: ..."
         raise ProblemFileError(f"{where}: {error}") from None
 
 
@@ -443,6 +493,9 @@ def _dirichlet_entry(entry: dict, where: str) -> dict:
         if (not isinstance(components, list) or not components
                 or any(c not in (0, 1, 2) or isinstance(c, bool) for c in components)):
             raise ProblemFileError(f"{where}.components = {components!r}: expected a list of 0, 1, 2")
+        if len(set(components)) != len(components):
+            raise ProblemFileError(f"{where}.components = {components!r}: a component is listed twice; expected "
+                                   "distinct components among 0, 1, 2")
     n = 3 if components is None else len(components)
     value = entry.get("value", 0.0)
     if isinstance(value, list):
@@ -520,10 +573,27 @@ def _automatic_increments(table, where: str):
     if not isinstance(table, dict):
         raise ProblemFileError(f"{where} must be a table")
     table = _checked_keys(table, KEYS["solver.auto"], set(), where)
+    if "load_factors" in table:
+        table["load_factors"] = _load_factors(table["load_factors"], f"{where}.load_factors")
     try:
         return AutomaticIncrements(**table)
     except (TypeError, ValueError) as error:
         raise ProblemFileError(f"{where}: {error}") from None
+
+
+def _load_factors(value, where: str) -> list[float]:
+    """[solver.auto] load_factors: stops on the file's load path, ℓ from 0 to 1, increasing; a stop
+    outside it would never be reached (one above 1 used to be dropped without a word)."""
+    if not isinstance(value, list):
+        raise ProblemFileError(f"{where} = {value!r}: expected a list of load factors, e.g. [0.5, 1.0]")
+    stops = [float(_number(x, f"{where}[{i}]")) for i, x in enumerate(value)]
+    for i, x in enumerate(stops):
+        if not 0.0 < x <= 1.0:
+            raise ProblemFileError(f"{where}[{i}] = {value[i]!r}: expected a load factor in (0, 1] (the load path "
+                                   "runs from 0 to 1: a run never stops outside it)")
+    if any(b <= a for a, b in zip(stops, stops[1:])):
+        raise ProblemFileError(f"{where} = {value!r}: expected increasing load factors (each listed once)")
+    return stops
 
 
 def _output_section(output: dict, where: str) -> dict:
@@ -545,6 +615,32 @@ def _output_section(output: dict, where: str) -> dict:
         raise ProblemFileError(f"{w}.probes must be a table name = [x, y, z]")
     output["probes"] = {name: _vector(x, f"{w}.probes.{name}") for name, x in probes.items()}
     return output
+
+
+def _estimate_section(estimate: dict, where: str) -> dict:
+    """[estimate]: discretisation-error estimates (off by default) and adaptive refinement."""
+    w = f"{where}: [estimate]"
+    estimate = _checked_keys(estimate, KEYS["estimate"], set(), w)
+    if not isinstance(estimate.setdefault("enabled", "target_error" in estimate), bool):
+        raise ProblemFileError(f"{w}.enabled must be true or false")
+    if estimate.setdefault("enrichment", "auto") not in ("auto", "degree-2", "refine"):
+        raise ProblemFileError(f"{w}.enrichment = {estimate['enrichment']!r}: expected \"auto\", \"degree-2\" or "
+                               "\"refine\"")
+    if "target_error" in estimate:
+        target = _number(estimate["target_error"], f"{w}.target_error", positive=True)
+        if target >= 1.0:
+            raise ProblemFileError(f"{w}.target_error = {target!r}: a relative error in (0, 1), e.g. 0.01 for 1 %")
+        estimate["target_error"] = float(target)
+    estimate["max_cycles"] = int(_number(estimate.get("max_cycles", 6), f"{w}.max_cycles", positive=True,
+                                         integer=True))
+    estimate["refine_fraction"] = float(_number(estimate.get("refine_fraction", 0.5), f"{w}.refine_fraction",
+                                                positive=True, high=1.0))
+    quantities = estimate.setdefault("quantities", None)
+    if quantities is not None and (not isinstance(quantities, list) or not quantities
+                                   or not all(isinstance(q, str) for q in quantities)):
+        raise ProblemFileError(f"{w}.quantities = {quantities!r}: expected a list of quantity names or kinds "
+                               "(\"contact\", \"reaction\", \"u\", \"max_p\", \"u:tip\", ...)")
+    return estimate
 
 
 def _checks_section(checks: dict, where: str) -> dict:

@@ -23,7 +23,7 @@ LISTING = ROOT / "docs" / "figures" / "architecture.json"  # the modules the fig
 # top to bottom as drawn; each imports only from the rows below it (and the ground)
 LAYERS = [
     ("front end", ["cli", "problem_file", "__main__"]),
-    ("io / cases", ["io", "cases"]),
+    ("io / estimates / cases", ["io", "estimates", "cases"]),
     ("solvers", ["solvers"]),
     ("problem", ["problem"]),
     ("physics", ["material", "contact"]),

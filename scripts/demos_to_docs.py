@@ -40,6 +40,7 @@ TUTORIALS = [
      {"forces.png": "ironing_forces.png", "plastic_zone.png": "ironing_plastic_zone.png"}),
     ("your own gmsh mesh", "own_gmsh_mesh.py",
      {"deformed.png": "own_mesh_deformed.png", "pair_pressure.png": "own_mesh_pair_pressure.png"}),
+    ("error bars", "error_bars.py", {"error_bars.png": "two_beams_error_bars.png"}),
 ]
 
 

@@ -59,3 +59,22 @@ def test_entities_to_geometry_of_no_entities():
     assert compat.entities_to_geometry(mesh, 2, np.zeros(0, dtype=np.int32)).shape == (0, 0)
     nodes = compat.entities_to_geometry(mesh, 2, np.array([0, 1], dtype=np.int32))
     assert nodes.shape == (2, 3) and np.all(nodes >= 0)
+
+
+def test_parallel_mumps_ordering_is_chosen_by_what_petsc_has():
+    """Issue 39, item 13: on several ranks the monolithic solver's MUMPS factorisation takes METIS
+    where PETSc has it and PORD where it has not (Debian 13: MUMPS's automatic choice returned
+    residuals of order one for the pressed blocks); one rank, another package and the user's own
+    ordering are left alone."""
+    from petsc4py import PETSc
+
+    from dolfinx_nnqem.numerics.linalg import direct_options
+
+    expected = 5 if PETSc.Sys.hasExternalPackage("metis") else 4
+    print(f"\n  METIS in PETSc: {PETSc.Sys.hasExternalPackage('metis')}; ICNTL(7) on 2 ranks: "
+          f"{direct_options({}, 2).get('mat_mumps_icntl_7')}")
+    assert compat.parallel_mumps_ordering() == {"mat_mumps_icntl_7": expected}
+    assert direct_options({}, 2)["mat_mumps_icntl_7"] == expected
+    assert "mat_mumps_icntl_7" not in direct_options({}, 1)
+    assert direct_options({"mat_mumps_icntl_7": 0}, 2)["mat_mumps_icntl_7"] == 0
+    assert "mat_mumps_icntl_7" not in direct_options({"pc_factor_mat_solver_type": "superlu_dist"}, 2)

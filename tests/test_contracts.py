@@ -137,7 +137,7 @@ def _cycles(edges: dict[str, set[str]]) -> list[list[str]]:
     return out
 
 
-LAYERS = ["numerics", "material", "contact", "problem", "solvers", "io", "cases"]
+LAYERS = ["numerics", "material", "contact", "problem", "solvers", "io", "estimates", "cases"]
 """Lower to upper; a subpackage imports only from its own layer and those before it (the root's
 ground modules compat, jit, collective, chatter, interrupts from anywhere; the front end cli and problem_file
 from nowhere in the package but each other)."""

@@ -103,15 +103,13 @@ def test_iterative_solver_on_two_ranks_matches_serial(direct, tmp_path):
 
 
 @pytest.mark.mpi
-@pytest.mark.xfail(not PETSc.Sys.hasExternalPackage("metis"), strict=False,
-                   reason="a PETSc without METIS (Debian 13's): MUMPS's automatic ordering and SuperLU_dist both return "
-                          "solutions with residuals of 5 to 12 (or inf) for this matrix on 2 ranks; the residual check "
-                          "turns them into failed solves, and the run ends with a ConvergenceError instead of an answer")
 def test_direct_solver_on_two_ranks_matches_serial_on_a_saddle_point_matrix_mumps_failed(tmp_path):
     """Level 1 on 2 ranks: under MUMPS's automatic ordering the first Newton matrix (65 zero
     diagonal entries of 525, condition 2.8e10) came back with solutions whose residuals ranged
-    from 2.9 to 96, and about half the runs failed every increment; on several ranks the direct
-    solver asks for METIS (numerics/linalg.PARALLEL_MUMPS_OPTIONS) and checks ‖J x − b‖ / ‖b‖."""
+    from 2.9 to 96, and about half the runs failed every increment (every run on Debian 13, whose
+    PETSc has no METIS: this test was an expected failure there); on several ranks the direct
+    solver asks for METIS, or PORD without it (compat.parallel_mumps_ordering), and checks
+    ‖J x − b‖ / ‖b‖."""
     from dolfinx_nnqem.solvers import MonolithicOptions, solve_load_steps
     from dolfinx_nnqem.solvers.monolithic import MonolithicSolver
     from dolfinx_nnqem.io import pair_table

@@ -277,7 +277,7 @@ def test_problem_files_take_every_model_and_law(tmp_path):
      r"materials\.1.*'table' takes no key.*'H'"),
     ('E = -1e9\nnu = 0.3', r"materials\.1.*E = -1"),
     ('E = 1e9\nnu = 0.3\nhardening = "voce"\nsigma_y0 = 1e6\nQ = -1e5\nb = 3.0', r"materials\.1.*Q = .*softening"),
-    ('E = 1e9\nnu = 0.3\nsigma_y0 = inf', r"materials\.1\]\.sigma_y0 = inf: expected a finite"),
+    ('E = 1e9\nnu = 0.3\nsigma_y0 = -inf', r"materials\.1\]\.sigma_y0 = -inf: expected a yield stress > 0, or inf"),
 ])
 def test_problem_files_refuse_bad_materials_naming_the_key(tmp_path, table, match):
     from dolfinx_nnqem.problem_file import ProblemFileError, load_problem_file

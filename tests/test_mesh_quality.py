@@ -61,9 +61,17 @@ def _named_cells(message: str) -> tuple[int, list[int]]:
     return count, [int(i) for i in re.findall(r"input cell (\d+)", message)]
 
 
-def _holding(mesh, node: int) -> np.ndarray:
-    """The input indices of the cells whose geometry holds ``node``."""
+def _holding(mesh, node: int, with_neighbours: bool = False) -> np.ndarray:
+    """The input indices of the cells whose geometry holds ``node`` (and of the cells that share a
+    facet with them)."""
     cells = np.flatnonzero(np.any(compat.geometry_dofmap(mesh) == node, axis=1))
+    if with_neighbours:
+        tdim = mesh.topology.dim
+        for a, b in ((tdim, tdim - 1), (tdim - 1, tdim)):
+            mesh.topology.create_connectivity(a, b)
+        c2f, f2c = mesh.topology.connectivity(tdim, tdim - 1), mesh.topology.connectivity(tdim - 1, tdim)
+        facets = np.unique(np.concatenate([c2f.links(c) for c in cells]))
+        cells = np.unique(np.concatenate([cells, *(f2c.links(f) for f in facets)]))
     return mesh.topology.original_cell_index[cells]
 
 
@@ -100,7 +108,9 @@ def test_inverted_cells_are_refused_naming_them(cell_type, order, point, shift):
     (tetrahedra) or mid-face (hexahedra) node of a second-order mesh, a vertex of a first-order
     one (for the unstructured tetrahedra, which have no interior vertex here, one on the face
     x = 1, moved 0.5 into the body). Every cell named holds the moved node. It used to be accepted
-    (the second-order tetrahedra solved to the end with a changed contact force)."""
+    (the second-order tetrahedra solved to the end with a changed contact force). A first-order
+    tetrahedron cannot fold within itself: turned over, it lies on the same side of a face as its
+    neighbour, and both are named."""
     mesh, ct, ft = blocks(cell_type, order)
     k = _node_near(mesh, ct, point, vertex=order == 1, inside=point[0] < 1.0)
     mesh.geometry.x[k, 0] += shift
@@ -109,8 +119,32 @@ def test_inverted_cells_are_refused_naming_them(cell_type, order, point, shift):
     message = str(error.value)
     print(f"\n  {cell_type}, order {order}: {message}")
     count, named = _named_cells(message)
+    suspects = _holding(mesh, k, with_neighbours=(cell_type, order) == ("tetrahedron", 1))
     assert "cell tag 2" in message and 1 <= len(named) == min(count, 5)
-    assert set(named) <= set(_holding(mesh, k).tolist()) and count <= len(_holding(mesh, k))
+    assert set(named) <= set(suspects.tolist()) and count <= len(suspects)
+
+
+def test_cells_numbered_against_the_reference_orientation_are_accepted():
+    """DOLFINx's ``refine`` numbers half of the children against the reference orientation (det J < 0
+    throughout: DOLFINx integrates with |det J|): not inverted. The check used to refuse them all,
+    which stopped every adaptive run on tetrahedra."""
+    import dolfinx
+
+    from dolfinx_nnqem.problem.mesh_quality import check_cells
+
+    coarse = dolfinx.mesh.create_box(MPI.COMM_WORLD, [np.zeros(3), np.ones(3)], [2, 2, 2],
+                                     dolfinx.mesh.CellType.tetrahedron)
+    coarse.topology.create_entities(1)
+    refined = dolfinx.mesh.refine(coarse)
+    mesh = refined[0] if isinstance(refined, tuple) else refined
+    x, dofmap = mesh.geometry.x, compat.geometry_dofmap(mesh)
+    v = x[dofmap[:, :4]]
+    det = np.einsum("ij,ij->i", np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), v[:, 3] - v[:, 0])
+    negative = MPI.COMM_WORLD.allreduce(int(np.count_nonzero(det < 0.0)), op=MPI.SUM)
+    quality = check_cells(mesh)
+    print(f"\n  refined box: {quality.num_cells} cells, {negative} numbered against the reference; "
+          f"inverted {quality.num_inverted}, smallest s {quality.min_scaled_jacobian:.3g}")
+    assert negative > 0 and quality.num_inverted == 0 and quality.min_scaled_jacobian > 0.3
 
 
 @pytest.mark.parametrize("cell_type", ["tetrahedron", "hexahedron"])

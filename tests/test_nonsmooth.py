@@ -321,6 +321,9 @@ class _CreepingCycle:
     def slope(self):
         return -2.0 * self._merit(self._x0).psi
 
+    def roundoff_note(self):
+        return None
+
     def move(self, step_length):
         kind, k = self._x0
         if step_length < 1.0:

@@ -112,6 +112,34 @@ def test_press_then_slide(method, law):
     assert equilibrium_check(problem)["global_imbalance"] < 1e-10
 
 
+
+@pytest.mark.parametrize("method", METHODS)
+def test_obstacle_that_left_the_body_reports_a_small_imbalance(tmp_path, method):
+    """Issue 39, item 8: the plane presses the block by δ, then rises δ above it. With no load left,
+    the summary's relative imbalances used to divide rounding errors by rounding errors (0/0: 1.0 and
+    0.9); the force floor of the solvers' scale F now divides them (docs/outputs.md)."""
+    from dolfinx_nnqem.io import ResultsWriter
+
+    delta = 1.0e-3
+    path = PiecewiseLinearPath([[0.0, 0.0, 0.0, 0.0], [0.5, 0.0, -delta, 0.0], [1.0, 0.0, delta, 0.0]])
+    problem = punch_problem(mu_f=0.3, motion=path)
+    writer = ResultsWriter(problem, method, tmp_path / "out", 4, fields=False, pictures=False)
+    figures = []
+
+    def record(result):
+        summary = writer.summary.data
+        figures.append((result.load_factor, summary["equilibrium_residual"], summary["free_dof_residual"],
+                        float(np.linalg.norm(summary["applied_load"]))))
+
+    solve_load_steps(problem, make_solver(method, problem, SolverOptions()), 4, callbacks=[writer, record])
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    print(f"\n  {method}: (ℓ, equilibrium_residual, free_dof_residual, |applied|) = "
+          + ", ".join(f"({ell:.2f}, {g:.1e}, {r:.1e}, {a:.0f})" for ell, g, r, a in figures)
+          + f"; obstacle force at ℓ = 1: {summary['obstacle_forces']['plane-201']}")
+    assert max(abs(f) for f in summary["obstacle_forces"]["plane-201"]) < 1e-6  # it has left: no force
+    assert all(g < 1e-8 and r < 1e-8 for _, g, r, _ in figures)
+    assert summary["equilibrium_residual"] < 1e-8 and summary["free_dof_residual"] < 1e-8
+
 # -- a rigid sphere: Hertz -----------------------------------------------------------------------------
 E, NU = 210e3, 0.3  # MPa
 R_SPHERE = 50.0  # mm

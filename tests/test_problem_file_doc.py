@@ -71,7 +71,7 @@ def test_documented_defaults_are_the_readers(tmp_path):
     from dolfinx_nnqem.contact.specification import Contact
 
     contact_defaults = {f.name: f.default for f in dataclasses.fields(Contact)}
-    actual = {"solver": spec.solver, "output": spec.output, "checks": spec.checks,
+    actual = {"solver": spec.solver, "output": spec.output, "checks": spec.checks, "estimate": spec.estimate,
               "mesh": spec.mesh, "materials.TAG": vars(spec.materials[1]) if hasattr(spec.materials[1], "__dict__")
               else dataclasses.asdict(spec.materials[1]), "contact": contact_defaults}
     compared = 0

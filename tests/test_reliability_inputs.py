@@ -2,6 +2,7 @@
 Python API (ValueError/TypeError naming the value), before anything is solved."""
 
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -13,6 +14,7 @@ from dolfinx_nnqem.material import VonMises
 from dolfinx_nnqem.problem.meshing import build_two_beams
 from dolfinx_nnqem.problem import BodyForce, Contact, ContactProblem, Dirichlet, Gravity, Pressure, Traction
 from dolfinx_nnqem.solvers import SolverOptions
+from dolfinx_nnqem.solvers.step_control import AutomaticIncrements  # noqa: F401  (the "steps:" cases evaluate it)
 
 ROOT = Path(__file__).resolve().parents[1]
 MESH = (ROOT / "meshes" / "two_beams.msh").as_posix()
@@ -113,6 +115,18 @@ CASES = {
     # issue 31, item 8: a load vector that is not numbers names the parameter, not numpy's words
     "gravity not a vector": (("[solver]", '[gravity]\ng = "down"\n[solver]'),
                              lambda b: _api(b, body_forces=[Gravity("down")]), ".g = 'down'"),
+    # issue 39, item 9: keys that were accepted and then stalled, or silently dropped
+    "two contacts on one pair of surfaces": (
+        ("[contact]\nsurface1 = 21\nsurface2 = 22\nmu_f = 0.3",
+         '[[contact]]\nname = "a"\nsurface1 = 21\nsurface2 = 22\nmu_f = 0.3\n'
+         '[[contact]]\nname = "b"\nsurface1 = 21\nsurface2 = 22\nmu_f = 0.3'),
+        lambda b: _api(b, contact=[Contact(21, 22, mu_f=0.3), Contact(22, 21, mu_f=0.3)]), "both join"),
+    "dirichlet component twice": (("tag = 12", "tag = 12\ncomponents = [0, 0]"),
+                                  lambda b: _api(b, dirichlet=[Dirichlet(11), Dirichlet(12, 0.0, [0, 0])]), "twice"),
+    "load factor above 1": (("increments = 2", 'increments = "auto"\n[solver.auto]\nload_factors = [0.5, 1.5]'),
+                            "steps:increments=AutomaticIncrements(load_factors=(0.5, 1.5))", "1.5"),
+    "load factor below 0": (("increments = 2", 'increments = "auto"\n[solver.auto]\nload_factors = [-0.5]'),
+                            "steps:increments=AutomaticIncrements(load_factors=(-0.5,))", "-0.5"),
 }
 
 
@@ -152,7 +166,7 @@ def _api_call(spec, beams, tmp_path):
     problem = _api(beams)
     if kind == "writer":
         ResultsWriter(problem, "monolithic", "", 2)
-    key, value = arg.split("=")
+    key, value = arg.split("=", 1)
     solve_load_steps(problem, make_solver("monolithic", problem), **{"increments": 2, key: eval(value)})
 
 
@@ -272,3 +286,100 @@ def test_xdmf_grid_without_a_name(tmp_path):
     file.write_text('<Xdmf><Domain><Grid Name="mesh"/><Grid GridType="Collection"/></Domain></Xdmf>')
     with pytest.raises(ProblemFileError, match=r"no grid named 'tags' \(mesh.cell_tags\); the file has \['mesh'\]"):
         _check_xdmf(file, {"mesh_name": "mesh", "cell_tags": "tags", "facet_tags": "tags"})
+
+
+def _file_check(tmp_path, capsys, text: str) -> tuple[int, str]:
+    path = tmp_path / "p.toml"
+    path.write_text(text)
+    code = main(["-q", "run", str(path), "--check"])
+    err = capsys.readouterr().err.strip()
+    print(f"\n  exit {code}: {err}")
+    return code, err
+
+
+def test_both_contacts_on_one_pair_are_named_from_python(beams):
+    """Issue 39, item 9: two Contacts on the same surfaces, in either order, are refused with both
+    names (they used to be accepted, and the solvers stalled)."""
+    for first, second in ((Contact(21, 22, mu_f=0.3, name="upper"), Contact(21, 22, mu_f=0.3, name="lower")),
+                          (Contact(21, 22, mu_f=0.3), Contact(22, 21, mu_f=0.1))):
+        with pytest.raises(ValueError) as error:
+            _api(beams, contact=[first, second])
+        print(f"\n  {error.value}")
+        assert f"{first.label!r} and {second.label!r} both join the facet tags 21 and 22" in str(error.value)
+
+
+@pytest.mark.parametrize("key, value", [("mesh_name", '"mesh"'), ("cell_tags", '"cell_tags"'),
+                                        ("facet_tags", '"tags"')])
+def test_xdmf_keys_on_a_gmsh_mesh_are_refused(tmp_path, capsys, key, value):
+    """Issue 39, item 9: mesh_name (and the other grid names) on a .msh mesh were ignored."""
+    code, err = _file_check(tmp_path, capsys, GOOD.replace(f'file = "{MESH}"', f'file = "{MESH}"\n{key} = {value}'))
+    assert code == EXIT_BAD_INPUT and f"mesh.{key} = {value.replace(chr(34), chr(39))}" in err and "XDMF" in err
+
+
+@pytest.mark.parametrize("stops, words", [("[0.7, 0.5]", "increasing"), ("[0.5, 0.5]", "increasing"),
+                                          ("[0.0]", "(0, 1]"), ("0.5", "expected a list")])
+def test_load_factors_off_the_path_are_refused(tmp_path, capsys, stops, words):
+    """Issue 39, item 9: [solver.auto] load_factors are stops on the path from 0 to 1, increasing."""
+    text = GOOD.replace("increments = 2", f'increments = "auto"\n[solver.auto]\nload_factors = {stops}')
+    code, err = _file_check(tmp_path, capsys, text)
+    assert code == EXIT_BAD_INPUT and "solver].auto.load_factors" in err and words in err
+
+
+def test_load_factors_on_the_path_are_honoured(tmp_path, capsys):
+    from dolfinx_nnqem.problem_file import load_problem_file
+
+    path = tmp_path / "p.toml"
+    path.write_text(GOOD.replace("increments = 2", 'increments = "auto"\n[solver.auto]\nload_factors = [0.25, 1.0]'))
+    assert load_problem_file(path).solver["increments"].load_factors == (0.25, 1.0)
+
+
+def test_an_infinite_yield_stress_is_an_elastic_material(tmp_path, capsys):
+    """Issue 39, item 9: sigma_y0 = inf (TOML's infinity; docs/problem-file.md: "∞ (elastic)") was
+    refused as "expected a finite number"; -inf and nan still are."""
+    from dolfinx_nnqem.problem_file import load_problem_file
+
+    text = GOOD.replace("nu = 0.3", "nu = 0.3\nsigma_y0 = inf", 1)
+    path = tmp_path / "p.toml"
+    path.write_text(text)
+    assert load_problem_file(path).materials[1].sigma_y0 == math.inf
+    assert main(["-q", "run", str(path), "--check"]) == EXIT_OK
+    for value in ("-inf", "nan"):
+        code, err = _file_check(tmp_path, capsys, GOOD.replace("nu = 0.3", f"nu = 0.3\nsigma_y0 = {value}", 1))
+        assert code == EXIT_BAD_INPUT and f"sigma_y0 = {value}" in err
+
+
+@pytest.mark.parametrize("edit", [
+    ("tag = 12", 'tag = 12\nvalue = 0.001\ncomponents = [0]\namplitude = [[0.0, 0.0], [1.0, "x"]]'),
+    ("[solver]", '[gravity]\ng = [0.0, -9.81, 0.0]\namplitude = [[0.0, 0.0], [1.0, 1e300]]\n[solver]'),
+    ("[solver]", "[[contact]]\nsurface2 = 13\nmu_f = 0.0\n[contact.obstacle]\ntype = \"plane\"\n"
+                 "point = [0.0, 0.8, 0.0]\nnormal = [0.0, -1.0, 0.0]\nmotion = [[0.0, 0, 0, 0], [1.0, 0, \"x\", 0]]"
+                 "\n[solver]"),
+])
+def test_amplitude_errors_name_the_file_once(tmp_path, capsys, edit):
+    """Issue 39, item 12: an amplitude row's error repeated the file and the key inside the key
+    ("p.toml: dirichlet[1]./…/p.toml: dirichlet[1].amplitude[1] = 'x'")."""
+    text = GOOD.replace(*edit, 1)
+    if "[[contact]]" in edit[1]:  # an obstacle table next to the [contact] table: all as [[contact]]
+        text = text.replace("[contact]\nsurface1", "[[contact]]\nsurface1")
+    code, err = _file_check(tmp_path, capsys, text)
+    assert code == EXIT_BAD_INPUT and err.count("p.toml") == 1
+    assert re.search(r"(amplitude|motion)\[1\] = ('x'|1e\+300)", err)
+
+
+def test_numpy_values_are_shown_as_numbers():
+    """Issue 39, item 12: a message printed "np.float64(nan)" (numpy 2's repr) for a numpy input."""
+    from dolfinx_nnqem.contact.obstacles import Plane, Sphere
+    from dolfinx_nnqem.solvers.options import MonolithicOptions
+
+    nan = np.float64("nan")
+    calls = [lambda: SolverOptions(rtol=nan), lambda: SolverOptions(atol=nan),
+             lambda: SolverOptions(max_iterations=np.int64(0)), lambda: Contact(21, 22, mu_f=nan),
+             lambda: Contact(21, 22, mu_f=0.3, r=nan), lambda: Plane(point=(0.0, 0.0, nan), normal=(0.0, 1.0, 0.0)),
+             lambda: Sphere(centre=(0.0, 0.0, 0.0), radius=nan), lambda: AutomaticIncrements(initial_step=nan),
+             lambda: MonolithicOptions(auto_iterative_dofs=np.int64(-1))]
+    for call in calls:
+        with pytest.raises((ValueError, TypeError)) as error:
+            call()
+        print(f"\n  {error.value}", end="")
+        assert "np." not in str(error.value) and ("nan" in str(error.value) or "= 0" in str(error.value)
+                                                 or "= -1" in str(error.value))

@@ -5,9 +5,12 @@ minutes on it (it took 347 s to fail with yielding blocks: timed by the slow tes
 asserted; the tests check what each method reached instead)."""
 
 import json
+import math
 import time
 
+import numpy as np
 import pytest
+from mpi4py import MPI
 
 from dolfinx_nnqem.cli import EXIT_DIVERGED, EXIT_OK, main
 
@@ -81,3 +84,56 @@ def test_every_method_stops_at_the_same_load_on_a_sliding_elastoplastic_body(tmp
     print("\n" + "\n".join(lines))  # after the last readouterr, which would swallow it
     assert reached["nneqm1"] == pytest.approx(reached["monolithic"], rel=1e-12)
     assert reached["nneqm2"] == pytest.approx(reached["monolithic"], rel=1e-12)
+
+
+
+INCLINE = math.radians(30.0)
+ALONG_THE_INCLINE = "body 1 (cells tagged 2): translation along (0.866, 0.5, 0)"
+
+
+def _block_on_an_incline(mu_f: float = 0.2):
+    """Two blocks stacked along y, turned by 30° about z: the upper one (cells tagged 2; body 1,
+    its smallest node comes first once turned) rests on the lower, clamped one, held in z by its z
+    faces and along the incline by friction alone (μ_f = 0.2 < tan 30°: its weight pulls it down
+    the incline at any load)."""
+    from dolfinx_nnqem.material import VonMises
+    from dolfinx_nnqem.problem import BodyForce, Contact, ContactProblem, Dirichlet
+    from dolfinx_nnqem.problem.meshing import BlockStackTags as T
+    from dolfinx_nnqem.problem.meshing import build_block_stack
+
+    mesh, cell_tags, facet_tags = build_block_stack(MPI.COMM_WORLD, 1.0, 1.0, [0.5, 0.5], [(2, 1, 2), (2, 1, 2)])
+    c, s = math.cos(INCLINE), math.sin(INCLINE)
+    mesh.geometry.x[:, :2] = mesh.geometry.x[:, :2] @ np.array([[c, s], [-s, c]])  # (x, y) turned by +30°
+    material = VonMises(E=1.0e9, nu=0.3)
+    dirichlet = [Dirichlet(T.bottom(1))] + [Dirichlet(tag, 0.0, [2]) for tag in (T.zmin(2), T.zmax(2))]
+    return ContactProblem(mesh, cell_tags, facet_tags, materials={1: material, 2: material}, dirichlet=dirichlet,
+                          body_forces=[BodyForce((0.0, -1.0e6, 0.0), cell_tag=2)],
+                          contact=Contact(T.top(1), T.bottom(2), mu_f=mu_f))
+
+
+def test_the_motion_friction_holds_is_named_along_the_incline():
+    """Issue 39, item 11: the free motion of a block on an incline is the translation along the
+    incline's tangent (cos 30°, sin 30°, 0), which no contact normal sees; it was described by the
+    free modes it is made of, "translation along (1, 0, 0) / translation along (0, 1, 0)"."""
+    problem = _block_on_an_incline()
+    print(f"\n  held by friction only: {problem.friction_held.motions}")
+    assert problem.friction_held.motions == (ALONG_THE_INCLINE,)
+    normals = problem.contact.gather(problem.contact.R)[:, 0, :]  # every pair's normal
+    tangent = np.array([math.cos(INCLINE), math.sin(INCLINE), 0.0])
+    assert np.abs(normals @ tangent).max() < 1e-12
+
+
+@pytest.mark.parametrize("method", ["monolithic", "nneqm1", "nneqm2"])
+def test_every_solver_names_the_block_that_slides_down_the_incline(method):
+    """Issue 39, item 10: from Python, every method's ConvergenceError names the body and the
+    motion only friction holds. NNEQM1's did not: its failed inner contact solve left the outer
+    iterate's pair states (all sticking), and the cause is named only where pairs slip."""
+    from dolfinx_nnqem.solvers import ConvergenceError, SolverOptions, make_solver, solve_load_steps
+
+    problem = _block_on_an_incline()
+    with pytest.raises(ConvergenceError) as error:
+        solve_load_steps(problem, make_solver(method, problem, SolverOptions()), 2, max_cutbacks=1)
+    message = str(error.value)
+    print(f"\n  {method}: " + "\n  ".join(message.splitlines()[1:]))
+    assert "likely cause: friction alone holds this rigid motion" in message and ALONG_THE_INCLINE in message
+    assert error.value.failure["friction_held"] == [ALONG_THE_INCLINE]

@@ -15,11 +15,14 @@ import pytest
 
 from dolfinx_nnqem.cli import EXIT_INTERRUPTED, EXIT_OK, EXIT_TERMINATED, main
 from dolfinx_nnqem.io import run_pictures
-from dolfinx_nnqem.io.run_pictures import CONTACT_PICTURE, ENV_SWITCH, PICTURES
+from dolfinx_nnqem.estimates import INDICATOR_NAME
+from dolfinx_nnqem.io.estimate_pictures import ESTIMATE_PICTURE
+from dolfinx_nnqem.io.run_pictures import CONTACT_PICTURE, ENV_SWITCH, INDICATOR_FIELD, PICTURES, pictures_of_run
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "demos" / "two_beams.toml"
-ALL_PICTURES = (*PICTURES, CONTACT_PICTURE)
+ALL_PICTURES = tuple(name for name in (*PICTURES, CONTACT_PICTURE) if name != ESTIMATE_PICTURE)
+"""The pictures of the example's run: it has no [estimate], so no error_estimates.png."""
 PNG_START, PNG_END = b"\x89PNG\r\n\x1a\n", b"\x00\x00\x00\x00IEND\xaeB`\x82"
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="signals a process group")
@@ -212,3 +215,19 @@ def test_a_signal_after_the_pictures_keeps_the_outcome(tmp_path, sig, code):
           f"stderr {stderr.strip()!r}")
     assert (run.returncode, status) in ((EXIT_OK, "completed"), (code, "interrupted")), stderr
     assert "Traceback" not in stderr and not _broken(out) and not _temporaries(out)
+
+
+def test_a_restart_looks_only_for_the_pictures_the_run_makes(completed, tmp_path):
+    """``error_estimates.png`` belongs to a run with an estimate, ``deformed.png`` and
+    ``error_indicator.png`` to one with fields: a restart looked for the estimate's picture
+    of every run, and so drew "the rest" again on each restart, never "nothing to do"."""
+    assert INDICATOR_FIELD == INDICATOR_NAME
+    out = tmp_path / "out"
+    shutil.copytree(completed, out)
+    assert pictures_of_run(out) == ALL_PICTURES
+    summary = _summary(out)
+    summary["error_estimates"] = {}
+    (out / "summary.json").write_text(json.dumps(summary))
+    assert ESTIMATE_PICTURE in pictures_of_run(out)
+    (out / "fields.xdmf").unlink()
+    assert not {"deformed.png", "error_indicator.png"} & set(pictures_of_run(out))

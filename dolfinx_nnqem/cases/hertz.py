@@ -38,7 +38,7 @@ from dolfinx_nnqem import jit
 from dolfinx_nnqem.problem.contact_problem import assemble_vector
 from dolfinx_nnqem.io.results import values_at_blocks
 
-__all__ = ["NodalLoads", "effective_modulus", "fit_hertz_profile", "hertz_contact", "measure_hertz"]
+__all__ = ["NodalLoads", "effective_modulus", "fit_hertz_profile", "hertz_contact", "hertz_quantities", "measure_hertz"]
 
 
 def effective_modulus(E1: float, nu1: float, E2: float | None = None, nu2: float | None = None) -> float:
@@ -158,3 +158,19 @@ def fit_hertz_profile(loads: NodalLoads, p_n: np.ndarray, a_guess: float) -> tup
                           options={"xatol": 1e-6 * a_guess})
     a = float(fit.x)
     return a, best_p0(a)
+
+
+def hertz_quantities(facet_tag: int, a_guess: float):
+    """A quantity measure (:data:`dolfinx_nnqem.estimates.quantities.Measure`) of a Hertz contact:
+    ``hertz:a`` and ``hertz:p0``, the contact radius and peak pressure of the Hertz profile that
+    best fits the pair forces (:func:`fit_hertz_profile`; F not imposed), on the slave surface
+    ``facet_tag`` of the problem's one interface (collective)."""
+    from dolfinx_nnqem.io.results import pair_table
+
+    def measure(problem) -> dict[str, np.ndarray]:
+        table = pair_table(problem)
+        loads = NodalLoads(problem, facet_tag, table["slave_block"])
+        a, p0 = fit_hertz_profile(loads, -table["force_local_body1"][:, 0], a_guess)
+        return {"hertz:a": np.array([a]), "hertz:p0": np.array([p0])}
+
+    return measure

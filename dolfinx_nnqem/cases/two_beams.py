@@ -20,6 +20,7 @@ from dolfinx_nnqem.material.von_mises import VonMises
 from dolfinx_nnqem.problem.meshing import TwoBeamsTags as T
 from dolfinx_nnqem.problem.meshing import build_two_beams
 from dolfinx_nnqem.problem.contact_problem import Contact, ContactProblem, Dirichlet, Gravity, Traction
+from dolfinx_nnqem.estimates.indicators import RecoveryIndicator
 from dolfinx_nnqem.io.output import ResultsWriter
 from dolfinx_nnqem.solvers.contract import contact_model
 from dolfinx_nnqem.solvers.options import SolverOptions
@@ -86,7 +87,7 @@ def run_two_beams(method: str = "monolithic", increments: int = 15, out: str | P
     extra = {"law": law, "refine": refine, "r": contact_model(problem).r_max,
              "model": "two overlapping cantilevers (benchmark-two-beams.md)"}
     writer = ResultsWriter(problem, method, out, increments, probes=FREE_END_CORNERS, extra=extra,
-                           fields=fields)
+                           fields=fields, cell_fields=[RecoveryIndicator(problem)])
     callbacks = [writer] + ([progress] if progress is not None else [])
     try:
         with make_solver(method, problem, options, **(method_options or {})) as solver:

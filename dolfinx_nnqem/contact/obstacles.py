@@ -38,7 +38,7 @@ from dolfinx_nnqem.contact.pairs import owned_by_slave
 from dolfinx_nnqem.contact.pairset import PairRows
 from dolfinx_nnqem.contact.surfaces import (ContactPairError, first_by_position, format_point,
                                             gather_surfaces, local_frames, mesh_tolerance)
-from dolfinx_nnqem.numerics.ranges import check_magnitude
+from dolfinx_nnqem.numerics.ranges import check_magnitude, shown
 
 __all__ = ["Cylinder", "ObstaclePairs", "Plane", "RigidObstacle", "Sphere", "obstacle_pairs",
            "obstacle_reaction"]
@@ -48,14 +48,14 @@ def _vector3(name: str, value, unit: bool = False) -> np.ndarray:
     try:
         v = np.asarray(value, dtype=np.float64).reshape(-1)
     except (TypeError, ValueError):
-        raise ValueError(f"{name} = {value!r}: expected 3 numbers") from None
+        raise ValueError(f"{name} = {shown(value)}: expected 3 numbers") from None
     if v.shape != (3,) or not np.all(np.isfinite(v)):
-        raise ValueError(f"{name} = {value!r}: expected 3 finite numbers")
+        raise ValueError(f"{name} = {shown(value)}: expected 3 finite numbers")
     check_magnitude(name, v)
     if unit:
         length = float(np.linalg.norm(v))
         if length == 0.0:
-            raise ValueError(f"{name} = {value!r}: a direction must not be zero")
+            raise ValueError(f"{name} = {shown(value)}: a direction must not be zero")
         v = v / length
     return v
 
@@ -64,9 +64,9 @@ def _positive(name: str, value) -> float:
     try:
         v = float(value)
     except (TypeError, ValueError):
-        raise ValueError(f"{name} = {value!r}: expected a number") from None
+        raise ValueError(f"{name} = {shown(value)}: expected a number") from None
     if not (math.isfinite(v) and v > 0.0):
-        raise ValueError(f"{name} = {value!r}: expected a finite value > 0")
+        raise ValueError(f"{name} = {shown(value)}: expected a finite value > 0")
     check_magnitude(name, v)
     return v
 

@@ -18,7 +18,7 @@ from dolfinx_nnqem.contact.current_geometry import GEOMETRIES
 from dolfinx_nnqem.contact.discretisation import DISCRETISATIONS, OBSTACLE_DISCRETISATIONS
 from dolfinx_nnqem.contact.laws import default_r, get_law
 from dolfinx_nnqem.contact.obstacles import RigidObstacle
-from dolfinx_nnqem.numerics.ranges import check_magnitude
+from dolfinx_nnqem.numerics.ranges import check_magnitude, shown
 
 __all__ = ["R_RANGE", "Contact", "interface_r"]
 
@@ -64,7 +64,7 @@ def _real(name: str, value, *, positive: bool = False, allow_none: bool = False)
     if value is None and allow_none:
         return None
     if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(float(value)):
-        raise ValueError(f"Contact: {name} = {value!r}; expected a finite number")
+        raise ValueError(f"Contact: {name} = {shown(value)}; expected a finite number")
     value = float(value)
     if positive and value <= 0.0:
         raise ValueError(f"Contact: {name} = {value!r}; expected a value > 0")

@@ -23,7 +23,9 @@ from __future__ import annotations
 
 import os
 import xml.etree.ElementTree as ET
+from collections.abc import Sequence
 from pathlib import Path
+from typing import Protocol
 
 import dolfinx.fem as fem
 import numpy as np
@@ -35,7 +37,7 @@ from dolfinx_nnqem.io.safe_io import OutputError, StagedFiles, atomic_write_text
 from dolfinx_nnqem.io.xdmf_steps import child, data_path, read_field_index
 from dolfinx_nnqem.material.kinematics import von_mises_stress
 
-__all__ = ["CellMeans", "FieldSeriesWriter", "read_field_index"]
+__all__ = ["CellField", "CellMeans", "FieldSeriesWriter", "read_field_index"]
 
 INDEX = "fields.xdmf"
 FOLDER = "fields"
@@ -87,6 +89,15 @@ class CellMeans:
             self.back_stress.x.array[dg] = back_stress[qdofs].mean(axis=1)
 
 
+class CellField(Protocol):
+    """A per-cell field the writer adds to each step: a DG0 ``function`` refreshed by ``update()``
+    (collective) from the converged state."""
+
+    function: fem.Function
+
+    def update(self) -> None: ...
+
+
 class FieldSeriesWriter:
     """The displacement and cell means of the Gauss-point state, one file per increment.
 
@@ -102,11 +113,16 @@ class FieldSeriesWriter:
     keep_last
         Keep the displacement values of the last increment written (:attr:`last_written`): the
         run's pictures are drawn from them, not read back from the file.
+    cell_fields
+        Further per-cell fields written with the cell means (:class:`CellField`: e.g. the error
+        indicator of :mod:`dolfinx_nnqem.estimates.indicators`), updated before each increment is
+        written.
     """
 
     def __init__(self, problem, folder: str | os.PathLike, staged: StagedFiles | None = None, *,
-                 keep_last: bool = False):
+                 keep_last: bool = False, cell_fields: Sequence[CellField] = ()):
         self.problem = problem
+        self.cell_fields = list(cell_fields)
         self.keep_last = keep_last
         self.last_written: tuple[float, fem.FunctionSpace, np.ndarray] | None = None
         """(load factor, space, local values) of the displacement last written, with ``keep_last``."""
@@ -128,6 +144,8 @@ class FieldSeriesWriter:
 
     def __call__(self, result) -> None:
         self._means.update()
+        for extra in self.cell_fields:
+            extra.update()
         t = float(result.load_factor)
         u = self.problem.u
         if self.u_out is not None:
@@ -139,7 +157,7 @@ class FieldSeriesWriter:
         # the file nor be left to close it at exit (see _write_step), so a disk without room
         # for the step file is refused here, with the figures
         on_rank0(self.comm, check_free_space, path.with_suffix(".h5"), self._bytes_needed())
-        self._write_step(path, [u, *self._means.fields], t)
+        self._write_step(path, [u, *self._means.fields, *(f.function for f in self.cell_fields)], t)
         if self.keep_last:  # a copy: problem.u moves on in the next increment
             self.last_written = (t, u.function_space, u.x.array.copy())
         self.steps = [s for s in self.steps if s[0] < result.index] + [(result.index, t)]
@@ -147,8 +165,9 @@ class FieldSeriesWriter:
         on_rank0(self.comm, self._write_index)
 
     def cell_means(self) -> dict[str, fem.Function]:
-        """The cell fields as last written, by name (``von_mises``, ``p``, ``plastic``, ``yield_function``)."""
-        return {f.name: f for f in self._means.fields}
+        """The cell fields as last written, by name (``von_mises``, ``p``, ``plastic``, ``yield_function``, and
+        the writer's extra ``cell_fields``, e.g. ``error_indicator``)."""
+        return {f.name: f for f in (*self._means.fields, *(extra.function for extra in self.cell_fields))}
 
     def _bytes_needed(self) -> int:
         """Room a step file needs: 1.25 × the last one's size (every step holds the same

@@ -40,7 +40,7 @@ import dolfinx_nnqem.io.results as res
 from dolfinx_nnqem import interrupts
 from dolfinx_nnqem.collective import on_rank0
 from dolfinx_nnqem.contact.laws import STATE_NAMES
-from dolfinx_nnqem.io.field_series import FieldSeriesWriter
+from dolfinx_nnqem.io.field_series import CellField, FieldSeriesWriter
 from dolfinx_nnqem.io.locking import OutputLock, clear_outputs, previous_outputs
 from dolfinx_nnqem.io.quadratic_fields import QuadraticFieldWriter, writes_quadratic_fields
 from dolfinx_nnqem.io.run_pictures import (ALL_PICTURES, PictureDrawer, draw_live_pictures, missing_pictures,
@@ -391,12 +391,17 @@ class ResultsWriter:
         :class:`~dolfinx_nnqem.io.picture_worker.PictureWorkers` started with the run (rank 0's;
         None elsewhere) that draw the pictures (the caller owns them and closes them); None:
         the pictures are drawn in this process.
+    cell_fields
+        Further per-cell fields for ``fields.xdmf`` and the pictures
+        (:class:`~dolfinx_nnqem.io.field_series.CellField`, e.g.
+        :class:`dolfinx_nnqem.estimates.RecoveryIndicator`).
     """
 
     def __init__(self, problem, method: str, folder: str | os.PathLike, increments: int,
                  probes: Mapping[str, Probe] | None = None, extra: dict | None = None,
                  fields: bool = True, *, overwrite: bool = True, resume: bool = False, lock: bool = True,
-                 pictures: bool | None = None, picture_worker: PictureDrawer | None = None):
+                 pictures: bool | None = None, picture_worker: PictureDrawer | None = None,
+                 cell_fields: Sequence[CellField] = ()):
 
         check_output_folder(folder)
         self.folder = Path(folder)
@@ -431,7 +436,8 @@ class ResultsWriter:
         self.checkpoint_every = 0  #: set by a Checkpointer of this writer: it commits those increments
         self.writers: list[FieldSeriesWriter | QuadraticFieldWriter | PairWriter | SummaryWriter] = []
         keep = pictures_enabled(pictures)  # the pictures are drawn from the last fields written, in memory
-        self.fields = FieldSeriesWriter(problem, self.folder, self.staged, keep_last=keep) if fields else None
+        self.fields = (FieldSeriesWriter(problem, self.folder, self.staged, keep_last=keep, cell_fields=cell_fields)
+                       if fields else None)
         if self.fields is not None:
             self.writers.append(self.fields)
         # degree 2: the displacement at its own nodes too (fields.xdmf holds the mesh's nodes only)

@@ -37,8 +37,8 @@ from typing import IO, Any
 __all__ = ["ROLES", "PictureWorkers", "launcher_rank", "launcher_size", "serve", "worth_starting"]
 
 ROLES: dict[str, tuple[tuple[str, ...], bool]] = {
-    "curves": (("pair_pressure.png", "load_curve.png", "convergence.png"), False),
-    "fields": (("deformed.png",), True),
+    "curves": (("pair_pressure.png", "load_curve.png", "convergence.png", "error_estimates.png"), False),
+    "fields": (("deformed.png", "error_indicator.png"), True),
 }
 """Worker role → (the pictures of :data:`~dolfinx_nnqem.io.run_pictures.PICTURES` it draws,
 whether it draws ``contact_pressure.png``)."""

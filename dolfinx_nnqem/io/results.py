@@ -163,9 +163,12 @@ def equilibrium_check(problem) -> dict:
     Contact forces between deformable bodies are internal; a rigid obstacle is outside the
     model and its force on the body counts like a reaction. Returns the applied load, the
     reactions per tag, the obstacle forces per interface, their sum, the relative global
-    imbalance ‖F_applied + Σ reactions‖ / ‖F_applied‖ (or / Σ‖reactions‖ when nothing is
-    applied), and the relative free-dof residual ‖R_free‖ / F with the problem's force scale
-    F = max(‖F_ext(ℓ)‖, ‖F_int‖, ‖Bᵀλ‖) (meaningful also when only displacements are prescribed).
+    imbalance ‖F_applied + Σ reactions + Σ obstacle forces‖ / max(‖F_applied‖, Σ‖reactions‖,
+    Σ‖obstacle forces‖, F_floor), and the relative free-dof residual ‖R_free‖ / F with
+    F = max(‖F_ext(ℓ)‖, ‖F_int‖, ‖Bᵀλ‖, F_floor) (meaningful also when only displacements are
+    prescribed). F_floor is ``problem.force_floor``, the floor of the solvers' force scale: a
+    state without loads (an obstacle that has left the body, every load back at zero) would
+    otherwise be divided by its own rounding errors (0/0, which read 1.0).
     """
     # each vector assembled once: F_int(u), F_ext(ℓ), Bᵀλ(z), and R from them
     F_int = problem.assemble_internal_force()
@@ -177,10 +180,11 @@ def equilibrium_check(problem) -> dict:
     applied = applied_load(problem, F_ext)
     total_reaction = sum(react.values(), np.zeros(3)) + sum(obstacles.values(), np.zeros(3))
     imbalance = applied + total_reaction
+    floor = max(problem.force_floor, 1e-300)
     scale = max(np.linalg.norm(applied), sum(np.linalg.norm(r) for r in react.values()),
-                sum(np.linalg.norm(r) for r in obstacles.values()), 1e-300)
+                sum(np.linalg.norm(r) for r in obstacles.values()), floor)
     R_free = problem.free_residual(R)
-    F_scale = max(F_ext.norm(), F_int.norm(), 1e-300)
+    F_scale = max(F_ext.norm(), F_int.norm(), floor)
     if contact_force is not None:
         F_scale = max(F_scale, contact_force.norm())
     return {

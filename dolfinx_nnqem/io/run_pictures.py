@@ -49,15 +49,19 @@ import numpy as np
 
 import dolfinx_nnqem.io.plots as plots
 from dolfinx_nnqem import pyvista_compat
+from dolfinx_nnqem.io.estimate_pictures import ESTIMATE_PICTURE, draw_error_estimates
 from dolfinx_nnqem.io.live_fields import LINEAR_VTK_CELLS
 from dolfinx_nnqem.io.offscreen import PictureUnavailable, offscreen_plotter
 from dolfinx_nnqem.io.reader import read_pairs, read_summary, start_reading_fields
 
 __all__ = ["ALL_PICTURES", "CONTACT_PICTURE", "PICTURE_FOLDER", "PICTURES", "PictureDrawer", "draw_job", "draw_live_pictures",
-           "draw_run_pictures", "missing_pictures", "pictures_enabled"]
+           "draw_run_pictures", "missing_pictures", "pictures_enabled", "pictures_of_run"]
 
 PICTURE_FOLDER = "pictures"
-PICTURES = ("deformed.png", "pair_pressure.png", "load_curve.png", "convergence.png")
+PICTURES = ("deformed.png", "pair_pressure.png", "load_curve.png", "convergence.png", "error_indicator.png",
+            ESTIMATE_PICTURE)
+INDICATOR_FIELD = "error_indicator"
+"""The cell field of the error indicator (:data:`dolfinx_nnqem.estimates.INDICATOR_NAME`)."""
 ENV_SWITCH = "DOLFINX_NNQEM_PICTURES"
 """Environment variable: ``0`` turns the end-of-run pictures off where no flag decides."""
 
@@ -151,7 +155,7 @@ def _field_grid(step: dict, scale: float | None):
         umax = np.abs(u).max()
         scale = 0.1 * np.ptp(x, axis=0).max() / umax if umax > 0 else 1.0
     grid.points = x + scale * u
-    for key in ("von_mises", "p", "plastic"):
+    for key in ("von_mises", "p", "plastic", "error_indicator"):
         if key in step:
             grid.cell_data[key] = np.asarray(step[key], dtype=float).reshape(len(topology), -1)[:, 0]
     return grid, scale
@@ -222,7 +226,8 @@ def draw_deformed(step: dict, rows: list[dict], path: Path, *, title: str = "", 
     if field not in grid.cell_data:
         raise ValueError(f"field {field!r}: the results hold {sorted(grid.cell_data)}")
     plotter = offscreen_plotter((1200, 800))
-    label = {"von_mises": "von Mises stress (Pa)", "p": "equivalent plastic strain p"}.get(field, field)
+    label = {"von_mises": "von Mises stress (Pa)", "p": "equivalent plastic strain p",
+             "error_indicator": "error indicator eta_K (sqrt J)"}.get(field, field)
     plotter.add_mesh(grid, scalars=field, show_edges=True, cmap="viridis", scalar_bar_args={"title": label})
     if "p" in grid.cell_data and np.any(grid.cell_data["p"] > 0):
         plastic = grid.extract_cells(np.flatnonzero(grid.cell_data["p"] > 0))
@@ -395,7 +400,8 @@ def draw_run_pictures(folder: str | os.PathLike, *, out: str | os.PathLike | Non
     -------
     dict
         Per picture name of ``names`` (in the order of :data:`PICTURES`), its path, or the reason
-        it was not drawn (a string).
+        it was not drawn (a string). The pictures of what the run did not make are left out:
+        ``error_estimates.png`` without an estimate, ``error_indicator.png`` without that field.
     """
 
     unknown = set(names) - set(PICTURES)
@@ -420,7 +426,7 @@ def draw_run_pictures(folder: str | os.PathLike, *, out: str | os.PathLike | Non
     if not summary.get("load_factors"):
         return {name: "not drawn: no converged increment" for name in names}
     fields = None
-    if "deformed.png" not in names:
+    if "deformed.png" not in names and "error_indicator.png" not in names:
         pass
     elif step is not None:
         fields = lambda: [step]  # noqa: E731  (from memory: nothing to read)
@@ -440,6 +446,8 @@ def draw_run_pictures(folder: str | os.PathLike, *, out: str | os.PathLike | Non
             attempt("load_curve.png", draw_load_curve, summary, title=title)
         if "convergence.png" in names:
             attempt("convergence.png", draw_convergence, summary, title=title)
+        if ESTIMATE_PICTURE in names and "error_estimates" in summary:  # (a run without estimates: none)
+            attempt(ESTIMATE_PICTURE, draw_error_estimates, summary, title=title)
     finally:  # the reading process is waited for whatever happened
         try:
             steps = fields() if fields is not None else []
@@ -447,9 +455,15 @@ def draw_run_pictures(folder: str | os.PathLike, *, out: str | os.PathLike | Non
             steps, done["deformed.png"] = [], f"not drawn: {error}"
     if steps:
         last = steps[-1] if step is not None else _with_quadratic_displacement(folder, steps[-1])
-        attempt("deformed.png", draw_deformed, last, rows, title=title, scale=scale, field=field, camera=camera)
-    done.setdefault("deformed.png", "not drawn: no fields (the run was made with fields = false)")
-    return {name: done[name] for name in names}
+        if "deformed.png" in names:
+            attempt("deformed.png", draw_deformed, last, rows, title=title, scale=scale, field=field, camera=camera)
+        if "error_indicator.png" in names and "error_indicator" in last:  # (written by the command line)
+            attempt("error_indicator.png", draw_deformed, last, rows, title=title, scale=scale,
+                    field="error_indicator", camera=camera)
+    else:
+        for name in ("deformed.png", "error_indicator.png"):
+            done.setdefault(name, "not drawn: no fields (the run was made with fields = false)")
+    return {name: done[name] for name in names if name in done}
 
 
 CONTACT_PICTURE = "contact_pressure.png"
@@ -459,11 +473,40 @@ ALL_PICTURES = (*PICTURES, CONTACT_PICTURE)
 """Every picture the end of a run draws, in their order."""
 
 
+def pictures_of_run(folder: str | os.PathLike) -> tuple[str, ...]:
+    """The pictures of :data:`ALL_PICTURES` that the run in ``folder`` makes.
+
+    ``error_estimates.png`` only where ``summary.json`` holds an estimate, and
+    ``error_indicator.png`` only where ``fields.xdmf`` holds that cell field (a command-line run
+    writes it, a Python run with its own writers may not); without ``fields.xdmf`` neither
+    ``deformed.png`` nor ``error_indicator.png``. Otherwise a restart would look for a picture
+    the run never draws, and draw "the rest" again on every restart.
+    """
+    folder = Path(folder)
+    try:
+        summary = read_summary(folder)
+    except (OSError, ValueError):
+        summary = {}
+    fields = folder / "fields.xdmf"
+    try:
+        fields_text = fields.read_text(errors="replace") if fields.is_file() else None
+    except OSError:
+        fields_text = None
+    left_out = set()
+    if "error_estimates" not in summary:
+        left_out.add(ESTIMATE_PICTURE)
+    if fields_text is None:
+        left_out.update(("deformed.png", "error_indicator.png"))
+    elif f'Name="{INDICATOR_FIELD}"' not in fields_text:
+        left_out.add("error_indicator.png")
+    return tuple(name for name in ALL_PICTURES if name not in left_out)
+
+
 def missing_pictures(folder: str | os.PathLike) -> tuple[str, ...]:
-    """The pictures of :data:`ALL_PICTURES` that ``folder/pictures`` does not hold (a picture
+    """The pictures of :func:`pictures_of_run` that ``folder/pictures`` does not hold (a picture
     there is whole: each is written to a temporary and renamed)."""
     pictures = Path(folder) / PICTURE_FOLDER
-    return tuple(name for name in ALL_PICTURES if not (pictures / name).is_file())
+    return tuple(name for name in pictures_of_run(folder) if not (pictures / name).is_file())
 
 
 def draw_job(job: Mapping[str, Any]) -> dict[str, Path | str]:

@@ -89,18 +89,6 @@ def products_without_intermediates() -> Iterator[None]:
             opts.setValue(key, before)
 
 
-PARALLEL_MUMPS_OPTIONS = {"mat_mumps_icntl_7": 5}
-"""MUMPS on more than one rank: METIS ordering (ICNTL(7) = 5) instead of MUMPS's automatic choice.
-The monolithic Newton matrix is a badly scaled saddle-point matrix (zero diagonal entries where
-pairs are closed); MUMPS's maximum-transversal permutation, which makes it safe on one rank,
-needs a centralised matrix, and PETSc passes a distributed one. Measured on the pressed blocks,
-level 1, 2 ranks: with the automatic ordering 5 of 11 runs failed every increment (solutions
-with ‖J x − b‖/‖b‖ up to 96, differing from run to run) and a pivot threshold of 0.5 did not
-help; with METIS 5 of 5 took the serial iterations; SuperLU_dist 6 of 6. One rank keeps MUMPS's
-own choice (its results unchanged). Used where PETSc has METIS (Debian 13's has not: there the
-case still fails on 2 ranks, docs/theory.md)."""
-
-
 def relative_residual(J: PETSc.Mat, x: PETSc.Vec, b: PETSc.Vec) -> float:
     """‖J x − b‖ / ‖b‖ (collective; ‖J x‖ for b = 0)."""
     r = b.duplicate()
@@ -113,11 +101,14 @@ def relative_residual(J: PETSc.Mat, x: PETSc.Vec, b: PETSc.Vec) -> float:
 
 
 def direct_options(petsc_options: dict | None, ranks: int = 1) -> dict:
-    """:data:`DIRECT_SOLVER_OPTIONS` (with :data:`PARALLEL_MUMPS_OPTIONS` on more than one rank)
-    updated by the user's ``petsc_options``."""
+    """:data:`DIRECT_SOLVER_OPTIONS` (with MUMPS's ordering of
+    :func:`~dolfinx_nnqem.compat.parallel_mumps_ordering` on more than one rank) updated by the
+    user's ``petsc_options``."""
     options = {**DIRECT_SOLVER_OPTIONS, **(petsc_options or {})}
-    if ranks > 1 and options.get("pc_factor_mat_solver_type") == "mumps" and PETSc.Sys.hasExternalPackage("metis"):
-        options = {**PARALLEL_MUMPS_OPTIONS, **options}  # (Debian's PETSc has no METIS)
+    if ranks > 1 and options.get("pc_factor_mat_solver_type") == "mumps":
+        from dolfinx_nnqem import compat
+
+        options = {**compat.parallel_mumps_ordering(), **options}  # METIS, or PORD where PETSc has no METIS
     return options
 
 

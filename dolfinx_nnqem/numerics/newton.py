@@ -21,7 +21,11 @@ backend so that they are comparable),
   times its value ``stall_window`` iterations earlier, the driver stops and says so. A system
   with no solution near the start (a local minimum of Ψ with Ψ > 0, where damped steps crawl
   along a plateau and watchdog steps cycle) otherwise runs to the iteration limit before the
-  caller can try something else.
+  caller can try something else;
+* when it stops without converging, the backend is asked whether round-off explains it (a
+  tolerance below the residual's round-off floor, :mod:`dolfinx_nnqem.numerics.roundoff`): the
+  message then says so, with the tolerance that can be reached, instead of blaming the merit
+  function.
 
 The driver makes every one of these decisions; what a system *is* lives in a backend
 (:class:`NewtonSystem`): the dense arrays of NNEQM1's and NNEQM2's contact systems
@@ -174,6 +178,12 @@ class NewtonSystem(Protocol):
     def move(self, step_length: float) -> Merit:
         """x = x_0 + step_length · d, evaluated."""
 
+    def roundoff_note(self) -> str | None:
+        """Why the residual cannot fall further at the current iterate when round-off sets its
+        floor there (:func:`dolfinx_nnqem.numerics.roundoff.floor_note`), else None. Asked only when
+        the iteration stops without converging; the failure message then gives it instead of "a
+        local minimum, a plateau or a cycle of the merit function"."""
+
 
 @dataclass
 class NewtonResult:
@@ -253,9 +263,10 @@ def solve(system: NewtonSystem, globalisation: Globalisation, max_iterations: in
             break
         lowest.append(min(merit.psi, lowest[-1]) if lowest else merit.psi)
         if _stalled(lowest, g):
+            why = _why_stuck(system, "a local minimum, a plateau or a cycle of the merit function")
             result.message = (f"stopped at iteration {iteration}: stalled, the lowest |H| fell by less than "
                               f"{1.0 - math.sqrt(g.stall_progress):.0%} in the last {g.stall_window} iterations "
-                              "(a local minimum, a plateau or a cycle of the merit function)")
+                              f"({why})")
             return result
         if g.line_search and watchdog > 0:
             if best is None or merit.psi < progress * progress_psi:
@@ -289,9 +300,9 @@ def solve(system: NewtonSystem, globalisation: Globalisation, max_iterations: in
             step, rejected = _take_step(system, merit, g, allow_increase=False)
             result.line_search_steps += rejected
             if step is None:
+                why = _why_stuck(system, "a local minimum or a kink of the merit function")
                 result.message = (f"stopped at iteration {iteration + 1}: {why_not}, and the Levenberg–Marquardt "
-                                  f"direction failed it down to step length {g.min_step:.1e} "
-                                  "(a local minimum or a kink of the merit function)")
+                                  f"direction failed it down to step length {g.min_step:.1e} ({why})")
                 return result
             kind = "lm"
             result.lm_steps += 1
@@ -300,8 +311,16 @@ def solve(system: NewtonSystem, globalisation: Globalisation, max_iterations: in
             return result
         step_length, merit = step[0], step[1]
         nonmonotone += 1
-    result.message = f"no convergence in {max_iterations} iterations"
+    note = system.roundoff_note()
+    result.message = f"no convergence in {max_iterations} iterations" + ("" if note is None else f" ({note})")
     return result
+
+
+def _why_stuck(system: NewtonSystem, otherwise: str) -> str:
+    """Why the iteration stopped short: round-off, where the backend finds that it sets the
+    residual's floor at the current iterate, ``otherwise`` the shape of the merit function."""
+    note = system.roundoff_note()
+    return otherwise if note is None else note
 
 
 def _stalled(lowest: list[float], g: Globalisation) -> bool:

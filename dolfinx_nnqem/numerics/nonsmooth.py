@@ -32,6 +32,7 @@ import numpy as np
 import numpy.typing as npt
 
 from dolfinx_nnqem.numerics.newton import Globalisation, Merit, solve
+from dolfinx_nnqem.numerics.roundoff import dense_floor, floor_note
 
 __all__ = ["DenseSystem", "Fallback", "NonsmoothResult", "solve_dense", "solve_nonsmooth"]
 
@@ -226,6 +227,13 @@ class DenseSystem:
             self.x = self.advance(self._x0, self.dx, step_length, self._chart0)
         self.F, self.A = self._evaluate_at(self.x)
         return self._merit()
+
+    def roundoff_note(self) -> str | None:
+        """Round-off, when |D H| stopped at the floor that rounding x to double precision gives it
+        (:func:`~dolfinx_nnqem.numerics.roundoff.dense_floor`; the caller's other inputs round too,
+        so this floor is a lower estimate and round-off is named only where it suffices)."""
+        return floor_note("|H|", float(np.linalg.norm(self.F)), dense_floor(self.A, self.x), self.tol,
+                          name="tol")
 
 
 def _check_positive(name: str, value: float) -> float:

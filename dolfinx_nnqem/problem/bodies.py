@@ -151,13 +151,23 @@ class RigidModes:
     body
         The body of each mode.
     description
-        Each mode in words, e.g. ``"translation y"`` or ``"0.71 rotation about x + 0.71 rotation about z"``.
+        Each mode in words, e.g. ``"translation along (0, 1, 0)"``.
+    coefficients
+        Each mode as a combination of its body's six unit motions (translations along x, y, z;
+        rotations about x, y, z through the body's centre, scaled by its size), with the mode's
+        scaling: the vector is that combination of the unit motions. What a combination of modes
+        moves is described from these (the one rigid motion each body makes).
+    centres, sizes
+        Every body's centre (bodies, 3) and size (bodies,): the rotations' centre and scale.
     """
 
     bodies: Bodies
     vectors: list[PETSc.Vec]
     body: list[int]
     description: list[str]
+    coefficients: list[np.ndarray]
+    centres: np.ndarray
+    sizes: np.ndarray
 
     @property
     def count(self) -> int:
@@ -258,7 +268,7 @@ def free_rigid_modes(V: dolfinx.fem.FunctionSpace, bodies: Bodies, constrained_d
     np.add.at(gram, body[node], values[:, :, None] * values[:, None, :])
     comm.Allreduce(MPI.IN_PLACE, gram, op=MPI.SUM)
 
-    vectors, mode_body, description = [], [], []
+    vectors, mode_body, description, coefficients = [], [], [], []
     for b in range(bodies.count):
         eigenvalues, eigenvectors = np.linalg.eigh(gram[b])
         free = eigenvectors[:, eigenvalues <= FREE_MODE_TOLERANCE].T
@@ -273,7 +283,8 @@ def free_rigid_modes(V: dolfinx.fem.FunctionSpace, bodies: Bodies, constrained_d
             vectors.append(v)
             mode_body.append(b)
             description.append(_describe(c, centre[b], size[b]))
-    return RigidModes(bodies, vectors, mode_body, description)
+            coefficients.append(c / largest)
+    return RigidModes(bodies, vectors, mode_body, description, coefficients, centre, size)
 
 
 def check_rigid_modes(modes: RigidModes, contact=None) -> None:
@@ -357,11 +368,14 @@ def friction_held_motions(modes: RigidModes, contact=None) -> FrictionHeld:
 
 
 def _describe_combination(modes: RigidModes, c: np.ndarray) -> str:
-    """A combination of free modes in words, body by body."""
-    by_body: dict[int, list[str]] = {}
+    """A combination of free modes in words, body by body: the one rigid motion it gives each body
+    (a translation along the tangent of an incline, say), not the modes it is made of."""
+    by_body: dict[int, np.ndarray] = {}
     for k in np.flatnonzero(np.abs(c) > 1e-8):
-        by_body.setdefault(modes.body[k], []).append(modes.description[k])
-    return "; ".join(f"{modes.bodies.name(b)}: {' / '.join(d)}" for b, d in by_body.items())
+        b = modes.body[k]
+        by_body[b] = by_body.get(b, np.zeros(6)) + c[k] * modes.coefficients[k]
+    return "; ".join(f"{modes.bodies.name(b)}: {_describe(motion, modes.centres[b], modes.sizes[b])}"
+                     for b, motion in by_body.items())
 
 
 def _raise_drifting(modes: RigidModes, combinations: np.ndarray, why: str) -> None:

@@ -45,7 +45,8 @@ from dolfinx_nnqem.contact.obstacles import Cylinder, Plane, Sphere  # noqa: F40
 from dolfinx_nnqem.material.interface import GaussPointValues
 from dolfinx_nnqem.material.state import material_state
 from dolfinx_nnqem.problem.mesh_quality import check_cells
-from dolfinx_nnqem.problem.validation import check_cell_tag, check_magnitude, check_mesh
+from dolfinx_nnqem.problem.validation import (check_cell_tag, check_components, check_magnitude, check_mesh,
+                                              check_one_contact_per_pair)
 from dolfinx_nnqem.numerics.linalg import vec_norm
 
 
@@ -105,6 +106,21 @@ class Gravity:
 
 
 # -- the problem ------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class ProblemDefinition:
+    """What a :class:`ContactProblem` was built from, apart from its mesh: the same problem can be
+    built again on another mesh or degree (``dolfinx_nnqem.estimates``: the enriched solve, adaptive
+    refinement). Tags name the bodies and surfaces, so they carry over to a refined mesh."""
+
+    materials: object
+    dirichlet: tuple
+    tractions: tuple
+    body_forces: tuple
+    contact: tuple
+    degree: int
+    quadrature_degree: int | None  #: as given (None: 2·degree)
+
+
 class ContactProblem:
     """Quasi-static small-strain elastoplastic problem, with or without contact.
 
@@ -162,6 +178,9 @@ class ContactProblem:
         for c in contacts:
             if not isinstance(c, Contact):
                 raise TypeError(f"contact: {c!r} is not a Contact")
+        self.definition = ProblemDefinition(materials, tuple(dirichlet), tuple(tractions), tuple(body_forces),
+                                            tuple(contacts), degree, quadrature_degree)
+        check_one_contact_per_pair(contacts)
         if quadrature_degree is None:
             quadrature_degree = 2 * degree  # 2×2×2 Gauss points for Q1, 3×3×3 for Q2
         # before anything is built on the mesh: an inverted cell is named as such, not by its symptoms
@@ -262,9 +281,7 @@ class ContactProblem:
         self.bc_dofs_by_tag: dict[int, np.ndarray] = {}
         for d in dirichlet:
             facets = self.facet_tags.find(d.tag)
-            components = (0, 1, 2) if d.components is None else tuple(d.components)
-            if any(c not in (0, 1, 2) for c in components):
-                raise ValueError(f"Dirichlet(tag={d.tag}): components {components} must be among 0, 1, 2")
+            components = check_components(d.components, f"Dirichlet(tag={d.tag})")
             _check_finite(f"Dirichlet(tag={d.tag}).value", d.value)
             value = np.broadcast_to(np.asarray(d.value, dtype=float), (len(components),))
             for c, val in zip(components, value):

@@ -1,19 +1,28 @@
 """The shape of every cell, checked where a mesh enters the package (:class:`ContactProblem`).
 
-A cell whose geometry map x(ξ) folds over (det J ≤ 0 somewhere: a node of a second-order cell
-moved across it, vertices numbered against the reference orientation, a flat cell) makes the
-forms integrate with a negative or zero volume weight: a solve may still "converge", to a wrong
-answer. Every cell is therefore checked before anything else is set up, at the Gauss points of
-the rule the forms use and at the reference vertices (where a second-order cell's Jacobian is
-smallest when a mid-edge node moves towards a vertex), with two measures:
+A cell whose geometry map x(ξ) folds over (det J changes sign, or vanishes, somewhere in it: a
+node of a second-order cell moved across it, a flat cell) makes the forms integrate with a
+wrong volume weight: a solve may still "converge", to a wrong answer. A cell's orientation
+itself is free: DOLFINx integrates with |det J|, and its own ``refine`` numbers half of the
+children against the reference orientation (det J < 0 throughout: not inverted). Every cell is
+therefore checked before anything else is set up, at the Gauss points of the rule the forms use
+and at the reference vertices (where a second-order cell's Jacobian is smallest when a mid-edge
+node moves towards a vertex), relative to its own orientation (the sign of det J at its
+reference centroid), with two measures:
 
-* the scaled Jacobian s(ξ) = det J(ξ) / (‖∂x/∂ξ₁‖ ‖∂x/∂ξ₂‖ ‖∂x/∂ξ₃‖), J = ∂x/∂ξ: 1 where the
-  cell has its reference shape (a cube; for a tetrahedron a right-angled corner at vertex 0, a
-  regular tetrahedron has √2/2), sin θ for a parallelepiped of angle θ, towards 0 as the cell
-  flattens, negative where it is inverted. It needs no length scale: it compares det J with the
-  cube of the cell's own lengths there;
-* the Jacobian ratio ρ = min det J / max det J over the cell's points: 1 for an affine cell, and
-  towards 0 as a second-order cell's mid-edge node moves towards the quarter point of its edge.
+* the scaled Jacobian s(ξ) = o det J(ξ) / (‖∂x/∂ξ₁‖ ‖∂x/∂ξ₂‖ ‖∂x/∂ξ₃‖), J = ∂x/∂ξ, o = ±1 the
+  cell's orientation: 1 where the cell has its reference shape (a cube; for a tetrahedron a
+  right-angled corner at vertex 0, a regular tetrahedron has √2/2), sin θ for a parallelepiped
+  of angle θ, towards 0 as the cell flattens, negative where it is inverted. It needs no length
+  scale: it compares det J with the cube of the cell's own lengths there;
+* the Jacobian ratio ρ = min o det J / max o det J over the cell's points: 1 for an affine cell,
+  and towards 0 as a second-order cell's mid-edge node moves towards the quarter point of its edge.
+
+An affine cell (a first-order tetrahedron: J is constant) cannot fold within itself; a vertex
+moved across the opposite face turns it over onto its neighbour instead. For such meshes every
+interior facet is checked too: the cells on either side of it must lie on either side of it
+(their vertices off the facet on opposite sides of its plane); both cells of a facet that fails
+are named.
 
 A cell with s ≤ :data:`INVERTED` at a point is refused (ValueError, on every rank alike), naming
 the cells: the input index (DOLFINx's ``original_cell_index``, the position in the mesh file's
@@ -35,8 +44,8 @@ from mpi4py import MPI
 
 from dolfinx_nnqem import collective, compat
 
-__all__ = ["INVERTED", "POOR_RATIO", "POOR_SCALED", "CellQuality", "cell_measures", "check_cells", "jacobians",
-           "sample_points"]
+__all__ = ["INVERTED", "POOR_RATIO", "POOR_SCALED", "CellQuality", "cell_measures", "check_cells", "folded_facets",
+           "jacobians", "sample_points"]
 
 logger = logging.getLogger("dolfinx_nnqem")
 
@@ -106,22 +115,58 @@ def sample_points(mesh, quadrature_degree: int) -> np.ndarray:
 
 
 def cell_measures(mesh, points: np.ndarray, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The smallest s and the Jacobian ratio ρ = min det J / max det J of ``cells`` (local indices)
-    over the reference ``points``, each (len(cells),)."""
+    """The smallest s and the Jacobian ratio ρ = min o det J / max o det J of ``cells`` (local
+    indices) over the reference ``points``, each (len(cells),), o the cell's orientation (the sign
+    of det J at the reference centroid)."""
     cmap = compat.coordinate_element(mesh)
-    element = basix.create_element(basix.ElementFamily.P, getattr(basix.CellType, mesh.topology.cell_type.name),
-                                   cmap.degree, basix.LagrangeVariant(cmap.variant))
-    dphi = element.tabulate(1, points)[1:4, :, :, 0]  # (3, points, nodes): ∂φ_k/∂ξ_j
+    cell = getattr(basix.CellType, mesh.topology.cell_type.name)
+    element = basix.create_element(basix.ElementFamily.P, cell, cmap.degree, basix.LagrangeVariant(cmap.variant))
+    centroid = basix.geometry(cell).mean(axis=0, keepdims=True)
+    dphi = element.tabulate(1, np.concatenate([centroid, points]))[1:4, :, :, 0]  # (3, 1 + points, nodes)
     dofmap = compat.geometry_dofmap(mesh)
     s, ratio = np.empty(len(cells)), np.empty(len(cells))
     for start in range(0, len(cells), CHUNK):
         block = cells[start:start + CHUNK]
         det, scaled = jacobians(mesh.geometry.x[dofmap[block]], dphi)
+        orientation = np.where(det[0] < 0.0, -1.0, 1.0)  # a cell numbered against the reference is not inverted
+        det, scaled = det[1:] * orientation, scaled[1:] * orientation
         s[start:start + len(block)] = scaled.min(axis=0)
         largest = det.max(axis=0)
         ratio[start:start + len(block)] = np.divide(det.min(axis=0), largest, out=np.full(len(block), -np.inf),
                                                     where=largest > 0.0)
     return s, ratio
+
+
+def folded_facets(mesh) -> np.ndarray:
+    """(m, 2) local cells of the interior facets whose two cells lie on the same side of the facet
+    (a first-order tetrahedron turned over onto its neighbour), of every local facet (owned and
+    ghost: a cell's owner sees its neighbours as ghosts, so each folded cell is found by its owner).
+
+    Each cell's vertex off the facet is tested against the facet's plane: opposite signs of
+    n · (x − x_f) pass. Only for affine cells (first-order tetrahedra), where no fold shows within
+    a cell.
+    """
+    tdim = mesh.topology.dim
+    mesh.topology.create_connectivity(tdim - 1, tdim)
+    mesh.topology.create_connectivity(tdim, tdim - 1)
+    facet_cells = mesh.topology.connectivity(tdim - 1, tdim)
+    facet_map = mesh.topology.index_map(tdim - 1)
+    num_facets = facet_map.size_local + facet_map.num_ghosts
+    counts = np.diff(facet_cells.offsets[:num_facets + 1])
+    facets = np.flatnonzero(counts == 2).astype(np.int32)
+    if len(facets) == 0:
+        return np.zeros((0, 2), dtype=np.int32)
+    pairs = facet_cells.array[facet_cells.offsets[facets][:, None] + np.arange(2)]  # (m, 2)
+    vertices = compat.geometry_dofmap(mesh)[:, :4].astype(np.int64)  # a first-order tetrahedron's nodes are its vertices
+    x = mesh.geometry.x
+    facet_nodes = compat.entities_to_geometry(mesh, tdim - 1, facets).astype(np.int64)  # (m, 3)
+    a, b, c = (x[facet_nodes[:, k]] for k in range(3))
+    normal = np.cross(b - a, c - a)
+    sides = []
+    for k in range(2):
+        opposite = vertices[pairs[:, k]].sum(axis=1) - facet_nodes.sum(axis=1)  # the one node not on the facet
+        sides.append(np.einsum("ij,ij->i", normal, x[opposite] - a))
+    return pairs[sides[0] * sides[1] >= 0.0]
 
 
 def jacobians(X: np.ndarray, dphi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -165,6 +210,9 @@ def _local_cells(mesh, cell_tags, quadrature_degree: int) -> tuple[int, int, dic
         tags[cell_tags.indices[owned]] = cell_tags.values[owned]
     num_vertices = len(basix.geometry(getattr(basix.CellType, mesh.topology.cell_type.name)))
     inverted = s <= INVERTED
+    if len(points) == 1:  # affine cells: a cell turned over shows against its neighbour only
+        folded = folded_facets(mesh).ravel()
+        inverted[folded[folded < num_owned]] = True
     for name, bad in (("inverted", inverted), ("poor", ~inverted & ((s < POOR_SCALED) | (ratio < POOR_RATIO)))):
         chosen = cells[bad]
         vertices = compat.geometry_dofmap(mesh)[chosen][:, :num_vertices]  # a cell's vertices come first
@@ -219,10 +267,11 @@ def check_cells(mesh, cell_tags=None, quadrature_degree: int = 2) -> CellQuality
     more = " and more"
     if num_inverted:
         raise ValueError(
-            f"the mesh has {num_inverted} inverted cell(s): the geometry map folds over (det J ≤ 0; scaled Jacobian "
-            f"s ≤ {INVERTED:g}) at a Gauss point or a vertex of {'; '.join(inverted)}{more * (num_inverted > NAMED)}. "
-            "Is a node of these cells on the wrong side (moved across its cell), or are their vertices numbered "
-            "against the reference orientation?")
+            f"the mesh has {num_inverted} inverted cell(s): the geometry map folds over (det J changes sign or "
+            f"vanishes within the cell: scaled Jacobian s ≤ {INVERTED:g} relative to the cell's orientation, at a "
+            "Gauss point or a vertex; or, for first-order tetrahedra, the cell lies on the same side of an interior "
+            f"face as its neighbour) at {'; '.join(inverted)}{more * (num_inverted > NAMED)}. Is a node of these "
+            "cells on the wrong side (moved across its cell or a neighbour's face)?")
     if num_poor and comm.rank == 0:
         logger.warning(
             f"mesh: {num_poor} of {quality.num_cells} cells are badly shaped (scaled Jacobian s < {POOR_SCALED:g} or "

@@ -11,10 +11,11 @@ import numpy as np
 from mpi4py import MPI
 
 from dolfinx_nnqem.numerics.ranges import (MAX_MAGNITUDE, MIN_MODULUS, check_integer,  # noqa: F401  (re-exported)
-                                           check_magnitude, check_real)
+                                           check_magnitude, check_real, shown)
 
-__all__ = ["MAX_CUTBACKS", "MAX_INCREMENTS", "MAX_MAGNITUDE", "MIN_MODULUS", "check_cell_tag", "check_integer",
-           "check_magnitude", "check_mesh", "check_output_folder", "check_real", "check_stepping_arguments"]
+__all__ = ["MAX_CUTBACKS", "MAX_INCREMENTS", "MAX_MAGNITUDE", "MIN_MODULUS", "check_cell_tag", "check_components",
+           "check_integer", "check_load_factors", "check_magnitude", "check_mesh", "check_one_contact_per_pair",
+           "check_output_folder", "check_real", "check_stepping_arguments"]
 
 MAX_INCREMENTS = 100_000
 """Largest number of load increments accepted (a larger number is a typo, not a plan)."""
@@ -32,6 +33,44 @@ def check_stepping_arguments(increments, max_cutbacks, final_load_factor, max_di
     if max_displacement is not None:
         max_displacement = check_real("max_displacement", max_displacement, low=0.0)
     return increments, max_cutbacks, final_load_factor, max_displacement
+
+
+def check_load_factors(load_factors, start: float, final: float) -> None:
+    """The load factors automatic incrementation must stop at lie on the path from ``start`` to
+    ``final``: one outside it is never reached (one above 1 used to be dropped without a word)."""
+    low, high = min(start, final), max(start, final)
+    outside = [float(x) for x in load_factors if not low <= x <= high]
+    if outside:
+        raise ValueError(f"automatic increments: load_factors {outside} lie outside the load path from {start:g} to "
+                         f"{final:g}; a run never stops there")
+
+
+def check_components(components, what: str) -> tuple[int, ...]:
+    """A Dirichlet condition's components: distinct, among 0, 1, 2 (None: all three)."""
+    if components is None:
+        return (0, 1, 2)
+    listed = list(components)
+    if any(isinstance(c, (bool, np.bool_)) or c not in (0, 1, 2) for c in listed):
+        raise ValueError(f"{what}: components {shown(listed)} must be among 0, 1, 2")
+    if len(set(int(c) for c in listed)) != len(listed):
+        raise ValueError(f"{what}: components {[int(c) for c in listed]} list a component twice; give each once")
+    return tuple(int(c) for c in listed)
+
+
+def check_one_contact_per_pair(contacts) -> None:
+    """Refuse two Contacts on the same (unordered) pair of facet tags, naming both: their pairs would
+    hold the same nodes twice and no equilibrium splits the force between them (the solvers
+    stalled). Several obstacles may touch one surface."""
+    seen: dict[frozenset[int], str] = {}  # the pair of facet tags: the first interface's label
+    for contact in contacts:
+        if contact.obstacle is not None:
+            continue
+        pair = frozenset((int(contact.surface1), int(contact.surface2)))
+        if pair in seen:
+            a, b = sorted(pair)
+            raise ValueError(f"contact interfaces {seen[pair]!r} and {contact.label!r} both join the facet tags "
+                             f"{a} and {b}; give one Contact per pair of surfaces")
+        seen[pair] = contact.label
 
 
 def check_mesh(mesh) -> None:

@@ -144,6 +144,11 @@ class Condensation:
         return self._K
 
     @property
+    def factorised(self) -> bool:
+        """A stiffness has been factorised (:attr:`K` exists)."""
+        return self._K is not None
+
+    @property
     def num_modes(self) -> int:
         """Free rigid modes n_r (0 when every body is supported)."""
         return self.modes.count

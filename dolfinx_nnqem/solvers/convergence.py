@@ -52,6 +52,9 @@ class SolveReport:
     gauss_point_values: GaussPointValues | None = None  #: the solver's own state update (NNEQM2), or None
     geometry_passes: int = 1  #: solves of the increment, each in the contact geometry of the last (current geometry)
     geometry_consistent: bool = False  #: every iterate was evaluated in its own contact geometry (no second solve needed)
+    #: open, stick, slip pairs at the last iterate of a nested solve that failed (NNEQM1's condensed
+    #: contact solve), or None: the outer iterate the history ends on keeps the states it started from
+    inner_states: tuple[int, int, int] | None = None
 
     @property
     def final(self) -> IterationRecord | None:

@@ -38,7 +38,7 @@ DIRECT_RESIDUAL_TOL = 1e-6
 """Largest ‖J x − b‖ / ‖b‖ a direct solve may leave; a larger one is a failed solve (the Newton
 driver falls back to Levenberg–Marquardt). MUMPS leaves 1e-15 where it factorises well; on 2
 ranks with its automatic ordering it returned solutions with residuals from 2.9 to 96 for the
-pressed blocks (:data:`dolfinx_nnqem.numerics.linalg.PARALLEL_MUMPS_OPTIONS`), which the Newton
+pressed blocks (:func:`dolfinx_nnqem.compat.parallel_mumps_ordering`), which the Newton
 iteration took as directions."""
 
 

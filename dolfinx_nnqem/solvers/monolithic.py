@@ -39,6 +39,7 @@ from dolfinx_nnqem.numerics.linalg import (clear_options, create_ksp, direct_opt
                                            vec_norm)
 from dolfinx_nnqem.solvers.linear_solver import DirectSolver, IterativeSolver
 from dolfinx_nnqem.numerics.newton import Globalisation, Merit, NewtonResult, solve
+from dolfinx_nnqem.numerics.roundoff import floor_note, residual_floor
 from dolfinx_nnqem.problem.contact_problem import ContactProblem
 from dolfinx_nnqem.solvers.options import MonolithicOptions, SolverOptions
 
@@ -518,3 +519,16 @@ class _NewtonSystem:
         u0, z0, ev = self._start
         self.solver.set_iterate(u0, z0, self._direction, step_length, ev.lin, self.align_sliding)
         return self.evaluate()
+
+    def roundoff_note(self) -> str | None:
+        """Round-off, when the pair laws have converged and |R|/F stopped at its floor: the rounding
+        of u times K_t (stiff bodies that moved far under small strains, docs/robustness.md)."""
+        ev, K = self.current, self.solver._K
+        if ev is None or K is None:  # no Newton matrix yet
+            return None
+        opts = self.solver.options
+        if ev.norm_H > opts.rtol * ev.scale + opts.atol:
+            return None  # the contact rows stop it: not the equilibrium's round-off
+        p = self.problem
+        floor = residual_floor(K, p.u.x.petsc_vec, p.free_residual)
+        return floor_note("|R|/F", ev.norm_R / ev.scale, floor / ev.scale, opts.rtol)

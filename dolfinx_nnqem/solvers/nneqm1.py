@@ -51,6 +51,7 @@ from dolfinx_nnqem.solvers.contract import ReleasesPETSc, contact_model
 from dolfinx_nnqem.solvers.convergence import IterationRecord, SolveReport, count_states, iteration_log_on, logger
 from dolfinx_nnqem.numerics.linalg import free_dropped_objects, global_norm, vec_norm
 from dolfinx_nnqem.numerics.newton import Globalisation, Merit, solve
+from dolfinx_nnqem.numerics.roundoff import floor_note, residual_floor
 from dolfinx_nnqem.numerics.nonsmooth import Fallback, solve_dense
 from dolfinx_nnqem.problem.contact_problem import ContactProblem
 from dolfinx_nnqem.solvers.options import NNEQM1Options, SolverOptions
@@ -123,7 +124,7 @@ class NNEQM1Solver(ReleasesPETSc):
             lifted = system.lifted_step(delta_bc)
             if not lifted:  # its contact solve failed: the plain start, from the moved boundary
                 p.apply_prescribed_displacements(load_factor)
-                system.inner_failure = None
+                system.inner_failure, report.inner_states = None, None
         outcome = solve(system, FULL_STEPS, self.options.max_iterations, first_iteration=1 if lifted else 0,
                         first_kind="lifted" if lifted else "", first_step_length=1.0 if lifted else math.nan)
         report.iterations, report.converged = outcome.iterations, outcome.converged
@@ -134,8 +135,10 @@ class NNEQM1Solver(ReleasesPETSc):
             report.message = system.inner_failure
         else:
             assert final is not None  # the driver recorded the start at least
+            note = system.roundoff_note()
             report.message = (f"no convergence in {self.options.max_iterations} outer iterations "
-                              f"(|R|/F = {final.equilibrium:.3e}, |H|/F = {final.contact:.3e})")
+                              f"(|R|/F = {final.equilibrium:.3e}, |H|/F = {final.contact:.3e})"
+                              + ("" if note is None else f": {note}"))
         return report
 
     def inner_solve(self, cond: CondensedProblem, laws: PairLaws, z_m: np.ndarray, tol: float, scale: float):
@@ -300,6 +303,9 @@ class _OuterSystem:
         self.inner_iterations = result.iterations
         if not result.converged:
             self.inner_failure = f"inner nonsmooth solve failed at outer iteration {self.steps}: {result.message}"
+            # where its pairs were (slipping, say): the outer iterate keeps the states it started from
+            states = np.bincount(system.pair_rows(result.x).state.astype(np.int64), minlength=3)[:3]
+            self.report.inner_states = (int(states[0]), int(states[1]), int(states[2]))  # gathered: every rank's
             return self.inner_failure
         z_new = system.pair_unknowns(result.x)
         lam_new, _ = self.laws.force(z_new)
@@ -315,6 +321,20 @@ class _OuterSystem:
 
     def slope(self) -> float:
         return math.nan  # never asked: the outer iteration takes full steps
+
+    def roundoff_note(self) -> str | None:
+        """Round-off, when the pair laws have converged and |R|/F stopped at its floor: the rounding
+        of u times K_t (as the monolithic solver's, :mod:`dolfinx_nnqem.numerics.roundoff`)."""
+        condensation = self.solver.condensation
+        if self.current is None or not condensation.factorised:
+            return None
+        _, _, _, scale, norm_R, norm_H = self.current
+        opts = self.solver.options
+        if norm_H > opts.rtol * scale + opts.atol:
+            return None  # the contact rows stop it: not the equilibrium's round-off
+        p = self.problem
+        floor = residual_floor(condensation.K, p.u.x.petsc_vec, p.free_residual)
+        return floor_note("|R|/F", norm_R / scale, floor / scale, opts.rtol)
 
     def move(self, step_length: float) -> Merit:
         p = self.problem

@@ -356,6 +356,12 @@ class ReturnMapIncrement:
         """∇Ψ · d = −2Ψ: the step is the exact Newton step of the whole system."""
         return -2.0 * self._psi0
 
+    def roundoff_note(self) -> None:
+        """None: NNEQM2 iterates on the pair and yield rows (its equilibrium holds by construction),
+        whose rounding :mod:`~dolfinx_nnqem.numerics.roundoff` does not estimate; a stop is put down
+        to the merit function."""
+        return None
+
     def move(self, step_length: float) -> Merit:
         assert self._x0 is not None and self._direction is not None  # set by start_step and newton_direction
         x0, (pairs, d_eps, dalpha) = self._x0, self._direction

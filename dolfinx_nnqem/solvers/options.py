@@ -9,6 +9,7 @@ import numbers
 from dataclasses import dataclass, field
 
 from dolfinx_nnqem.numerics.newton import Globalisation
+from dolfinx_nnqem.numerics.ranges import shown
 
 __all__ = ["FLOW_DIRECTIONS", "METHODS", "STALL_WINDOW", "MonolithicOptions", "NNEQM1Options", "NNEQM2Options", "SolverOptions"]
 
@@ -21,13 +22,13 @@ FLOW_DIRECTIONS = ("return-map", "frozen")
 
 def _check_integer(owner: str, name: str, value, lowest: int) -> None:
     if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < lowest:
-        raise ValueError(f"{owner}: {name} = {value!r}; expected an integer >= {lowest}")
+        raise ValueError(f"{owner}: {name} = {shown(value)}; expected an integer >= {lowest}")
 
 
 def _check_real(owner: str, name: str, value, low: float, high: float) -> None:
     if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(float(value)) \
             or not low < float(value) <= high:
-        raise ValueError(f"{owner}: {name} = {value!r}; expected a finite number in ({low:g}, {high:g}]")
+        raise ValueError(f"{owner}: {name} = {shown(value)}; expected a finite number in ({low:g}, {high:g}]")
 
 
 @dataclass
@@ -61,7 +62,7 @@ class SolverOptions:
         _check_real("SolverOptions", "rtol", self.rtol, 0.0, 1e-2)
         if isinstance(self.atol, bool) or not isinstance(self.atol, numbers.Real) \
                 or not (math.isfinite(float(self.atol)) and self.atol >= 0):
-            raise ValueError(f"SolverOptions: atol = {self.atol!r}; expected a finite number >= 0")
+            raise ValueError(f"SolverOptions: atol = {shown(self.atol)}; expected a finite number >= 0")
         _check_integer("SolverOptions", "max_iterations", self.max_iterations, 1)
         if not isinstance(self.petsc_options, dict):
             raise ValueError(f"SolverOptions: petsc_options = {self.petsc_options!r}; expected a dict")
@@ -128,7 +129,7 @@ def _check_memory(owner: str, value) -> None:
     if value is None:
         return
     if isinstance(value, bool) or not isinstance(value, numbers.Real) or not (math.isfinite(value) and float(value) > 0):
-        raise ValueError(f"{owner}: max_memory_gb = {value!r}; expected None or a number of GB > 0")
+        raise ValueError(f"{owner}: max_memory_gb = {shown(value)}; expected None or a number of GB > 0")
 
 
 def _in_turn(inner: Globalisation, retry: Globalisation | None) -> tuple[Globalisation, ...]:

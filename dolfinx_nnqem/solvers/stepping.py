@@ -29,7 +29,7 @@ from dolfinx_nnqem.solvers.checks import CheckOptions, StateCheck, check_state, 
 from dolfinx_nnqem.solvers.convergence import ConvergenceError, SolveReport, logger
 from dolfinx_nnqem.numerics.linalg import free_dropped_objects
 from dolfinx_nnqem.solvers.step_control import AutomaticIncrements, as_step_control
-from dolfinx_nnqem.problem.validation import check_stepping_arguments
+from dolfinx_nnqem.problem.validation import check_load_factors, check_stepping_arguments
 
 
 @dataclass
@@ -121,6 +121,8 @@ def solve_load_steps(
     else:
         schedule = _Schedule(resume.start, final_load_factor, resume.step, resume.cutbacks, equal, control)
         index0 = resume.index
+    if control is not None:
+        check_load_factors(control.load_factors, schedule.start, final_load_factor)
     results: list[IncrementResult] = []
     ell = problem.load_factor_n
     while not schedule.reached(ell):
@@ -405,6 +407,8 @@ def _failure_message(solver, target: float, report: SolveReport, cutbacks: int, 
     if last is not None:
         lines.append(f"  last iterate: |R|/F = {last.equilibrium:.3e}, |H|/F = {last.contact:.3e}, "
                      f"open/stick/slip = {last.states}, plastic Gauss points = {last.plastic_points}")
+    if report.inner_states is not None:
+        lines.append(f"  the failed inner contact solve's last iterate: open/stick/slip = {report.inner_states}")
     lines += _sliding_bodies(problem, report)
     lines += _stale_geometry(problem)
     return "\n".join(lines)
@@ -425,8 +429,7 @@ def _sliding_bodies(problem, report: SolveReport) -> list[str]:
     """The likely cause when the failed iterate slips and some rigid motion only friction holds:
     past the friction limit that body slides without resistance, and no equilibrium exists."""
     held = getattr(problem, "friction_held", None)
-    last = report.final
-    if held is None or not held.motions or last is None or last.states[2] == 0:
+    if held is None or not held.motions or not _slipping(report):
         return []
     return (["  likely cause: friction alone holds "
              + ("this rigid motion" if len(held.motions) == 1 else "these rigid motions")
@@ -435,6 +438,14 @@ def _sliding_bodies(problem, report: SolveReport) -> list[str]:
             + ["  pairs slip at the last iterate: once the load along such a motion exceeds what friction can "
                "carry (mu_f times the contact pressure), the body slides freely and no equilibrium exists; "
                "add a support against that motion, or reduce the load along it"])
+
+
+def _slipping(report: SolveReport) -> bool:
+    """Pairs slip at the failed solve's last iterate: the outer one, or that of a failed nested
+    contact solve (NNEQM1's, whose outer iterate keeps the states it started from)."""
+    last = report.final
+    inner = report.inner_states
+    return (last is not None and last.states[2] > 0) or (inner is not None and inner[2] > 0)
 
 
 def solve_load_path(problem, solver, load_factors: Sequence[float], *,
