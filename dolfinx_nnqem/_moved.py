@@ -1,9 +1,19 @@
-"""Deprecated module paths of release 0.1, kept importable until release 0.2.
+"""Deprecated module paths and names, kept importable until release 0.2.
 
 The package's modules moved into subpackages by layer (``docs/architecture.md``). An old path
 still imports, as the same module object under its old name, with a ``DeprecationWarning`` that
 names the new path: ``import dolfinx_nnqem.stepping`` gives ``dolfinx_nnqem.solvers.stepping``.
-The table below is the whole mechanism: a finder on ``sys.meta_path`` answers for these names only.
+The table :data:`MOVED` is the whole mechanism: a finder on ``sys.meta_path`` answers for these
+names only.
+
+Names that moved out of a module that stays (``contact/model.py`` split by idea) are in
+:data:`MOVED_NAMES`; the old module's ``__getattr__`` hands them out through :func:`moved_name`,
+with the same warning: ``from dolfinx_nnqem.contact.model import Contact`` gives
+``dolfinx_nnqem.contact.specification.Contact``.
+
+Members that moved off a class that stays (the geometry of ``ContactModel``, now
+``ContactModel.geometry``) are in :data:`MOVED_MEMBERS`; :func:`install_members` gives the class a
+descriptor per old name that hands out the new member with the same warning.
 """
 
 from __future__ import annotations
@@ -11,10 +21,11 @@ from __future__ import annotations
 import importlib
 import importlib.abc
 import importlib.machinery
+import operator
 import sys
 import warnings
 
-__all__ = ["MOVED", "REMOVED_IN"]
+__all__ = ["MOVED", "MOVED_MEMBERS", "MOVED_NAMES", "REMOVED_IN", "install_members", "moved_name"]
 
 REMOVED_IN = "0.2"
 """The release in which the old paths stop importing."""
@@ -34,6 +45,71 @@ MOVED: dict[str, str] = {
     "solver": "solvers",
 }
 """Old module name (under ``dolfinx_nnqem.``) → its new path (under ``dolfinx_nnqem.``)."""
+
+MOVED_NAMES: dict[str, dict[str, str]] = {
+    "contact.model": {
+        "Contact": "contact.specification", "R_RANGE": "contact.specification",
+        "GeometryTracker": "contact.geometry_tracking", "LostContactError": "contact.geometry_tracking",
+        "zero_displacement": "contact.geometry_tracking",
+        "LawGroup": "contact.pair_laws", "PairLaws": "contact.pair_laws",
+    },
+}
+"""Module (under ``dolfinx_nnqem.``) → its names that moved → the module they are in now."""
+
+MOVED_MEMBERS: dict[str, dict[str, str]] = {
+    "contact.model.ContactModel": {
+        "current_geometry": "geometry.follows_bodies", "geometry_version": "geometry.version",
+        "update_geometry": "geometry.update", "obstacle_geometry": "geometry.obstacles_follow",
+        "surface_geometry": "geometry.surfaces_follow", "refresh_obstacle_geometry": "geometry.refresh_obstacles",
+        "geometric_terms": "geometry.geometric_terms", "geometry_state": "geometry.state",
+        "set_geometry_state": "geometry.set_state", "slipped": "geometry.slipped",
+        "why_not_current": "geometry.why_not_current", "follow_bodies": "geometry.start_following",
+        "pairs_may_change": "geometry.pairs_may_change", "following_bodies()": "geometry.following",
+    },
+}
+"""Class (module under ``dolfinx_nnqem.``, then its name) → its members that moved → their path on
+an instance. An old name written with ``()`` was a method whose value is now an attribute: the alias
+is still called."""
+
+
+def moved_name(module: str, name: str):
+    """``name`` of the module ``module`` (a full name) from the module it moved to, with a
+    ``DeprecationWarning`` naming the new path; :class:`AttributeError` for any other name (what a
+    module-level ``__getattr__`` returns)."""
+    new = MOVED_NAMES.get(module.removeprefix("dolfinx_nnqem."), {}).get(name)
+    if new is None:
+        raise AttributeError(f"module {module!r} has no attribute {name!r}")
+    warnings.warn(f"{module}.{name} is deprecated and will be removed in dolfinx_nnqem {REMOVED_IN}; "
+                  f"import it from dolfinx_nnqem.{new} instead", DeprecationWarning, stacklevel=3)
+    return getattr(importlib.import_module(f"dolfinx_nnqem.{new}"), name)
+
+
+class _MovedMember:
+    """An old member of a class (:data:`MOVED_MEMBERS`): on an instance, the member at its new path,
+    with a DeprecationWarning naming that path."""
+
+    def __init__(self, owner: str, old: str, new: str):
+        self.owner, self.old, self.new = owner, old.removesuffix("()"), new
+        self.called = old.endswith("()")  # a method whose value is now an attribute
+
+    def __get__(self, instance, owner=None):
+        if instance is None:
+            return self
+        warnings.warn(f"{self.owner}.{self.old} is deprecated and will be removed in dolfinx_nnqem {REMOVED_IN}; "
+                      f"use {self.owner}.{self.new} instead", DeprecationWarning, stacklevel=2)
+        value = operator.attrgetter(self.new)(instance)
+        return (lambda: value) if self.called else value
+
+
+def install_members(cls: type) -> None:
+    """Give ``cls`` the aliases of its members that moved (:data:`MOVED_MEMBERS`). Outside the type
+    checker's view: the package itself must use the new paths."""
+    owner = f"{cls.__module__.removeprefix('dolfinx_nnqem.')}.{cls.__qualname__}"
+    for old, new in MOVED_MEMBERS.get(owner, {}).items():
+        member = _MovedMember(f"dolfinx_nnqem.{owner}", old, new)
+        if member.old in vars(cls):
+            raise RuntimeError(f"{owner}.{member.old} is both a member and a moved name ({new})")
+        setattr(cls, member.old, member)
 
 
 class _Alias(importlib.abc.Loader):

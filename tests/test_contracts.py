@@ -4,7 +4,8 @@ same statically: ``dolfinx_nnqem/solvers/conformance.py``, run by ``.ci/run``).
 * every solver, pair set, material and the problem satisfy their Protocols;
 * the layers: no import circle, at most 15 modules at the package root, no solver imports another,
   and the lower layers import nothing from the upper ones;
-* old module paths of release 0.1 still import, as the same objects, with a DeprecationWarning;
+* old module paths, names and ContactModel members of release 0.1 still import (or read), as the same
+  objects, with a DeprecationWarning;
 * wrong argument types end in a TypeError that names the argument;
 * solvers free their PETSc objects as context managers;
 * every ``type: ignore`` of the package names its error code and says why.
@@ -14,6 +15,7 @@ from __future__ import annotations
 
 import ast
 import importlib
+import operator
 import re
 import warnings
 from pathlib import Path
@@ -164,6 +166,24 @@ def test_the_layers_have_no_circle_and_import_only_downwards():
         assert not (edges[solver] & (solvers - {solver})), f"{solver} imports another solver"
 
 
+CONTACT_INTERNALS = {"groups", "force_unit", "trackers", "_trackers"}
+"""Attributes of the contact layer's insides: the law groups of the pair laws and the geometry
+trackers. Solvers read the contact scale (``ContactModel.r_max``, ``PairLaws.r_max``) and the
+geometry through ``ContactModel.geometry`` instead (issue 42)."""
+
+
+def test_no_module_outside_contact_reads_the_law_groups_or_the_trackers():
+    found = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        if path.relative_to(PACKAGE).parts[0] == "contact":
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Attribute) and node.attr in CONTACT_INTERNALS:
+                found.append(f"{path.relative_to(PACKAGE)}:{node.lineno}: .{node.attr}")
+    print(f"\n  reads of the contact layer's insides outside contact/: {found}")
+    assert found == [], found
+
+
 MATERIAL_DOOR = {"dolfinx_nnqem.material.interface", "dolfinx_nnqem.material.kinematics",
                  "dolfinx_nnqem.material.state", "dolfinx_nnqem.material.conformance"}
 """What the package outside ``material/`` may import of it: the interface, the kinematics, the
@@ -221,6 +241,45 @@ def test_an_old_module_path_imports_the_same_module_with_a_warning(old):
     with pytest.warns(DeprecationWarning, match=f"dolfinx_nnqem.{old} is deprecated.*{_moved.MOVED[old]}"):
         module = importlib.import_module(f"dolfinx_nnqem.{old}")
     assert module is new and module.__spec__.name == new.__name__
+
+
+MOVED_NAMES = [(module, name) for module, names in sorted(_moved.MOVED_NAMES.items()) for name in sorted(names)]
+
+
+@pytest.mark.parametrize("module, name", MOVED_NAMES)
+def test_a_moved_name_imports_from_its_old_module_with_a_warning(module, name):
+    """contact/model.py split by idea (issue 42): its old names import from it, as the same objects,
+    with a DeprecationWarning naming the new path."""
+    new = _moved.MOVED_NAMES[module][name]
+    old_module = importlib.import_module(f"dolfinx_nnqem.{module}")
+    with pytest.warns(DeprecationWarning, match=f"dolfinx_nnqem.{module}.{name} is deprecated.*dolfinx_nnqem.{new}"):
+        old = getattr(old_module, name)
+    assert old is getattr(importlib.import_module(f"dolfinx_nnqem.{new}"), name)
+    with pytest.raises(AttributeError, match="no attribute 'no_such_name'"):
+        getattr(old_module, "no_such_name")
+
+
+MOVED_MEMBERS = [(owner, old, new) for owner, members in sorted(_moved.MOVED_MEMBERS.items())
+                 for old, new in sorted(members.items())]
+
+
+@pytest.fixture(scope="module")
+def sliding_contact():
+    """A contact model in the current geometry (its trackers made), for the moved members."""
+    from dolfinx_nnqem.cases.large_sliding import sliding_blocks
+    return sliding_blocks(slide=0.4).contact
+
+
+@pytest.mark.parametrize("owner, old, new", MOVED_MEMBERS)
+def test_a_moved_member_reads_its_new_path_with_a_warning(sliding_contact, owner, old, new):
+    """ContactModel's geometry moved to ContactModel.geometry (issue 42): its old members still read,
+    as the new ones, with a DeprecationWarning naming the new path."""
+    assert owner == "contact.model.ContactModel"
+    name = old.removesuffix("()")
+    with pytest.warns(DeprecationWarning, match=rf"ContactModel\.{name} is deprecated.*ContactModel\.{new} instead"):
+        member = getattr(sliding_contact, name)
+    value = member() if old.endswith("()") else member  # a method whose value is now an attribute
+    assert value == operator.attrgetter(new)(sliding_contact)
 
 
 def test_the_public_names_of_the_user_guide_import_from_their_packages():

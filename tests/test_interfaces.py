@@ -118,3 +118,21 @@ def test_the_interface_with_the_lower_friction_slips(method, mu_f, slipping):
     closed = states[slipping] != "open"
     assert closed.sum() > 0 and np.all(states[slipping][closed] == "slip")  # the weak interface slides
     assert all(np.any(h[2][1 - slipping] == "stick") for h in history)  # the strong one never does
+
+
+def test_the_contact_scale_is_the_largest_r_of_the_interfaces():
+    """ContactModel.r_max, what the solvers scale with (issue 42: one property instead of each solver's
+    max over the law groups): the largest r of the interfaces, the same on the gathered laws the dense
+    methods use; an interface without r takes E h."""
+    mesh, ct, ft = build_block_stack(MPI.COMM_WORLD, LX, LZ, [0.5, 0.5, 0.5], [(N, 1, N)] * 3)
+    for r_lower in (2.0e9, 5.0e7):  # above E h, below it
+        contact = [Contact(T.top(1), T.bottom(2), mu_f=0.3, r=r_lower, name="lower"),
+                   Contact(T.top(2), T.bottom(3), mu_f=0.3, name="upper")]
+        problem = ContactProblem(mesh, ct, ft, materials={k: ELASTIC for k in (1, 2, 3)},
+                                 dirichlet=[Dirichlet(T.bottom(1))], contact=contact)
+        model = problem.contact
+        Eh = ELASTIC.E * model.h
+        r = [interface.r for interface in model.interfaces]
+        print(f"\n  r of the interfaces {r} (E h = {Eh:.4g}): r_max = {model.r_max:.4g}")
+        assert r == [r_lower, Eh]
+        assert model.r_max == max(r_lower, Eh) == model.gathered_laws().r_max

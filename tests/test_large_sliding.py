@@ -102,7 +102,7 @@ def test_issue_sliding_sphere_reference_geometry_stops_before_a_stale_state():
         with pytest.raises(ConvergenceError) as error:
             solve_load_steps(problem, solver, 20, callbacks=[lambda r: committed.append(r.load_factor)])
     message, failure = str(error.value), error.value.failure
-    slips = problem.contact.slipped(problem.relative_displacement())
+    slips = problem.contact.geometry.slipped(problem.relative_displacement())
     print(f"\n  reference geometry: committed {committed}; {message}")
     assert "converged, but is not committed: the contact geometry is stale" in message
     assert "contact sphere-201 (rigid obstacle, reference geometry): the surfaces slid" in message
@@ -132,7 +132,7 @@ def test_default_geometry_follows_a_dragged_punch(method, law, nx, increments, s
         forces[geometry] = np.array(history)
         if geometry is None:
             switches = problem.slip_warnings
-            following = problem.contact.following_bodies()
+            following = problem.contact.geometry.following
     a, b = forces[None], forces["current"]
     error = (np.abs(a - b).max(axis=1) / np.abs(b).max(axis=1)).max()
     print(f"\n  {method}/{law}, {nx} × {nx // 4} × 2: {len(results)} increments; {switches}; largest difference "
@@ -173,11 +173,11 @@ def test_issue_sliding_sphere_current_geometry():
 def test_block_slid_over_several_facets(method, law):
     slid = sliding_blocks(slide=0.4, law=law)
     assert slid.contact is not None
-    tracker = slid.contact.trackers[0]
-    facets_before = tracker.facets.copy()
+    facets_before = slid.contact.geometry.state()[0].copy()  # every slave node's master facet
     pairs_before = slid.num_pairs
     results = _run(slid, method, 12)
-    moved = np.count_nonzero((tracker.facets != facets_before) & (tracker.facets >= 0))
+    facets = slid.contact.geometry.state()[0]
+    moved = np.count_nonzero((facets != facets_before) & (facets >= 0))
     in_place = sliding_blocks(slide=0.0, offset=0.4, law=law)
     _run(in_place, method, 4)
     f_slid, f_place = slave_force(slid), slave_force(in_place)
@@ -361,10 +361,10 @@ def test_restart_of_a_default_geometry_run(tmp_path, stop):
     with pytest.raises(KeyboardInterrupt):
         with make_solver("monolithic", first, OPTIONS) as solver:
             solve_load_steps(first, solver, n, checkpoint=checkpoint_then_stop)
-    following_at_stop = first.contact.following_bodies()
+    following_at_stop = first.contact.geometry.following
     second = build()
     state, _ = checkpoint.restore(second, out)
-    following_restored = second.contact.following_bodies()
+    following_restored = second.contact.geometry.following
     with make_solver("monolithic", second, OPTIONS) as solver:
         results = solve_load_steps(second, solver, n, resume=state)
     du = np.abs(second.u.x.array - reference.u.x.array).max() / np.abs(reference.u.x.array).max()
@@ -372,7 +372,7 @@ def test_restart_of_a_default_geometry_run(tmp_path, stop):
     print(f"\n  stopped after increment {stop} (current geometry: {following_at_stop}), resumed for {len(results)} "
           f"increments: u {du:.1e}, force {df:.1e} (tolerance 1e-12); switched: {reference.slip_warnings}")
     assert following_at_stop == following_restored == [stop == 6]
-    assert reference.contact.following_bodies() == second.contact.following_bodies() == [True]
+    assert reference.contact.geometry.following == second.contact.geometry.following == [True]
     assert [r.index for r in results] == list(range(stop + 1, n + 1))
     assert du < 1e-12 and df < 1e-12
 

@@ -715,7 +715,7 @@ def test_secant_prediction_extrapolates_the_force_for_both_laws():
     unknowns are exactly z_n + β (z_n − z_prev); the polar angle is taken nearest θ_n (no line
     through the meaningless angle of a pair that had no friction force), a zero force keeps θ_n."""
     from dolfinx_nnqem.contact.laws import AlartCurnierLaw, PolarLaw
-    from dolfinx_nnqem.contact.model import LawGroup, PairLaws
+    from dolfinx_nnqem.contact.pair_laws import LawGroup, PairLaws
 
     n, beta = 4, 0.5
     #                    no friction force before      turning          reversing       open now and before
@@ -747,7 +747,7 @@ def test_polar_follow_slip_with_sliding_pairs_puts_their_friction_force_on_the_s
     vanishes, the friction force's size does not change); pinned pairs and pairs at rest keep θ;
     through PairLaws, only pairs in the slip state with a slip above rounding are sliding."""
     from dolfinx_nnqem.contact.laws import AlartCurnierLaw, PolarLaw
-    from dolfinx_nnqem.contact.model import LawGroup, PairLaws
+    from dolfinx_nnqem.contact.pair_laws import LawGroup, PairLaws
 
     law, r, force_unit = PolarLaw(), 1.0e6, 1.0e5
     w_prev = np.zeros((5, 3))

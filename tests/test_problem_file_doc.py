@@ -68,7 +68,7 @@ def test_documented_defaults_are_the_readers(tmp_path):
         f'[mesh]\nfile = "{mesh}"\n[materials.1]\nE = 1.0\nnu = 0.3\n'
         "[contact]\nsurface1 = 21\nsurface2 = 22\nmu_f = 0.1\n[[dirichlet]]\ntag = 11\n")
     spec = load_problem_file(tmp_path / "p.toml")
-    from dolfinx_nnqem.contact.model import Contact
+    from dolfinx_nnqem.contact.specification import Contact
 
     contact_defaults = {f.name: f.default for f in dataclasses.fields(Contact)}
     actual = {"solver": spec.solver, "output": spec.output, "checks": spec.checks, "estimate": spec.estimate,

@@ -86,7 +86,7 @@ def run_two_beams(method: str = "monolithic", increments: int = 15, out: str | P
     law = law or DEFAULT_LAW.get(method, "alart-curnier")
     t0 = time.perf_counter()
     problem = two_beams_problem(comm, law=law, refine=refine)
-    extra = {"law": law, "refine": refine, "r": contact_model(problem).interfaces[0].r,
+    extra = {"law": law, "refine": refine, "r": contact_model(problem).r_max,
              "model": "two overlapping cantilevers (benchmark-two-beams.md)"}
     writer = ResultsWriter(problem, method, out, increments, probes=FREE_END_CORNERS, extra=extra,
                            fields=fields, cell_fields=[RecoveryIndicator(problem)])

@@ -72,7 +72,7 @@ def discretise(V, facet_tags, surface1: int, surface2: int, discretisation: str 
     slave
         The slave surface's tag (``surface1`` or ``surface2``); default: see the module.
     tolerance, search_distance
-        See :class:`~dolfinx_nnqem.contact.model.Contact`.
+        See :class:`~dolfinx_nnqem.contact.specification.Contact`.
     initial_gap
         Node-to-node only.
     supported

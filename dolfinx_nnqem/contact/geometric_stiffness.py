@@ -2,7 +2,8 @@ r"""The geometric terms of a rigid obstacle's pairs in the current geometry (iss
 that keeps Newton fast").
 
 With ``Contact(obstacle, ..., geometry="current")`` the monolithic solver re-evaluates an obstacle's
-pairs at every Newton iterate (:meth:`ContactModel.refresh_obstacle_geometry`): the frame
+pairs at every Newton iterate
+(:meth:`~dolfinx_nnqem.contact.geometry_tracking.ContactGeometry.refresh_obstacles`): the frame
 R(x) = (n, t1, t2) and the gap g(x) of the slave node at x = X_s + u_s − d(ℓ), the obstacle seen at
 rest. The residuals are then
 

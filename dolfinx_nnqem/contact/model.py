@@ -7,13 +7,18 @@ supports fix. Solvers use only what it exposes:
 
 * w = B u + m(ℓ) (:meth:`ContactModel.relative_displacement`), B's action and Bᵀλ;
 * H(w, z) with its generalized Jacobian blocks ∂H/∂w, ∂H/∂z (:meth:`ContactModel.evaluate`),
-  the force λ(z) and ∂λ/∂z, the scale of the unknowns;
+  the force λ(z) and ∂λ/∂z, the scale of the unknowns, the contact scale r
+  (:attr:`ContactModel.r_max`);
 * blockdiag(D) B in B's sparsity, refilled in place (:meth:`ContactModel.scaled_B`);
 * the same laws on all pairs gathered on every rank, for the dense methods
-  (:meth:`ContactModel.gathered_laws`).
+  (:meth:`ContactModel.gathered_laws`);
+* where the pairs come from and when they move (``model.geometry``, a
+  :class:`~dolfinx_nnqem.contact.geometry_tracking.ContactGeometry`).
 
-Solvers never ask which law a pair follows: :class:`PairLaws` applies each interface's law to
-its pairs, and everything law-specific is a method of the law.
+It composes the user's specification of each interface
+(:class:`~dolfinx_nnqem.contact.specification.Contact`), the pair laws
+(:class:`~dolfinx_nnqem.contact.pair_laws.PairLaws`: solvers never ask which law a pair follows,
+everything law-specific is a method of the law) and the geometry tracking.
 
 All interfaces' pairs are concatenated: this rank's pairs are those of interface 0, then of
 interface 1, ...; the global pair order is by rank, then in that local order (for a single
@@ -22,411 +27,36 @@ interface, the pair set's own global order).
 
 from __future__ import annotations
 
-import logging
-import math
-import numbers
-from collections.abc import Callable, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
 from dolfinx_nnqem import compat  # noqa: F401, I001  (first: loads MPI/PETSc for the PyPI wheel)
+from dolfinx_nnqem import _moved
 
 import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from dolfinx_nnqem.contact.laws import (NO_FORCE, SLIP, ContactLaw, LawEvaluation, Linearisation, default_r,
-                                         get_law)
-from dolfinx_nnqem.contact.obstacles import ObstaclePairs, RigidObstacle, obstacle_pairs
-from dolfinx_nnqem.contact.geometric_stiffness import GeometricTerms, no_terms, obstacle_terms
-from dolfinx_nnqem.contact.discretisation import DISCRETISATIONS, OBSTACLE_DISCRETISATIONS, discretise
+from dolfinx_nnqem.contact.laws import ContactLaw, LawEvaluation, Linearisation, get_law
+from dolfinx_nnqem.contact import pair_laws
 from dolfinx_nnqem.contact.pairset import PairRows, PairSet, rows_matrix
-from dolfinx_nnqem.contact.slip_check import Slip, facet_size_of, slipped_interfaces
 from dolfinx_nnqem.contact.surface_pairs import SurfacePairs
-from dolfinx_nnqem.contact.surfaces import ContactPairError, NoPairsError, mesh_tolerance, space_degree
-from dolfinx_nnqem.contact.current_geometry import (GEOMETRIES, MortarTracker, ObstacleTracker, SurfaceTracker,
-                                                    remapper, surface_tracker)
-from dolfinx_nnqem.numerics.ranges import check_magnitude, shown
+from dolfinx_nnqem.contact.surfaces import ContactPairError
+from dolfinx_nnqem.contact.current_geometry import remapper
+from dolfinx_nnqem.contact.geometry_tracking import ContactGeometry, Remap, starting_pairs
+from dolfinx_nnqem.contact.specification import interface_r
 
-logger = logging.getLogger("dolfinx_nnqem")
+if TYPE_CHECKING:
+    from dolfinx_nnqem.contact.pair_laws import PairLaws
+    from dolfinx_nnqem.contact.specification import Contact
 
-__all__ = ["Contact", "ContactModel", "Interface", "LostContactError", "PairLaws"]
-
-GeometryTracker = ObstacleTracker | SurfaceTracker | MortarTracker
-
-class LostContactError(ContactPairError):
-    """A re-evaluation of the current geometry found no pair on an interface (the slave nodes left the
-    master surface): load stepping takes it as a failed solve and cuts the increment back."""
+__all__ = ["ContactModel", "Interface"]
 
 
 PREDICTED_PRESSURE = 1e-12
 """Starting active set: touching pairs start with p_n = this × r h (see :meth:`ContactModel.predict`)."""
-
-
-R_RANGE = (1e-6, 1e3)
-"""Supported r / (E h), E the softer Young's modulus at the interface and h the mean cell size (E h
-is the default r). Inside it every method and law converged on the two-beam benchmark; outside it convergence
-became erratic (r/(E h) = 1e-9 and 1e6 failed with every method; 1e-12 and 1e-20 converged
-with the monolithic solver, 1e-50 did not; NNEQM2 failed from 1e4): r = 1e-300 stopped
-"stalled" at a load factor the run used to pass (issue 31)."""
-
-
-def _checked_r(contact: Contact, E: float, h: float) -> float:
-    """The interface's r, refused (naming it and the range) outside :data:`R_RANGE` × E h."""
-    assert contact.r is not None  # without r the caller takes E h, which needs no check
-    reference = float(default_r(E, h))
-    ratio = float(contact.r) / reference
-    low, high = R_RANGE
-    if not low <= ratio <= high:
-        raise ValueError(f"contact {contact.label}: r = {contact.r:g} is {ratio:.3g} × E h = {reference:.4g} N/m "
-                         f"(E the softer body's Young's modulus at the interface, h the mean cell size); "
-                         f"the supported range is "
-                         f"[{low:g}, {high:g}] × E h = [{low * reference:.4g}, {high * reference:.4g}] N/m: "
-                         "outside it the law mixes forces and displacements of too different sizes and "
-                         "the Newton iterations stall (leave r out for E h)")
-    return float(contact.r)
-
-
-def _real(name: str, value, *, positive: bool = False, allow_none: bool = False) -> float | None:
-    """``value`` as a finite float (numpy scalars accepted); ``name`` in the error."""
-    if value is None and allow_none:
-        return None
-    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(float(value)):
-        raise ValueError(f"Contact: {name} = {shown(value)}; expected a finite number")
-    value = float(value)
-    if positive and value <= 0.0:
-        raise ValueError(f"Contact: {name} = {value!r}; expected a value > 0")
-    if not positive and value < 0.0:
-        raise ValueError(f"Contact: {name} = {value!r}; expected a value >= 0")
-    check_magnitude(f"Contact: {name}", value)
-    return value
-
-
-@dataclass(frozen=True)
-class Contact:
-    """One frictional contact interface.
-
-    Parameters
-    ----------
-    surface1
-        The facet tag of body 1's contact surface, or a rigid obstacle
-        (:class:`~dolfinx_nnqem.contact.obstacles.Plane`, ``Sphere``, ``Cylinder``). The master side
-        unless ``slave`` says otherwise; the pair normal is the master's outward normal (for mortar,
-        minus the slave's).
-    surface2
-        The facet tag of body 2's contact surface: the slave side by default for node-to-node
-        pairs and obstacles (λ is the force on it; every one of its nodes gets a pair).
-    mu_f
-        Coulomb friction coefficient (≥ 0).
-    law
-        ``"alart-curnier"`` (Cartesian, the robust default) or ``"polar"`` (the seed's form).
-    r
-        Scaling of the pair laws (force/length); default E·h (see :func:`contact.laws.default_r`).
-    tolerance
-        Distance below which nodes coincide (default 1e-8 × the mesh's bounding-box diagonal).
-    search_distance
-        Node-to-node: the largest distance of non-coincident partners (see
-        :func:`dolfinx_nnqem.contact.pairs.find_pairs`). Node-to-surface and mortar: the largest
-        distance between a slave node (facet) and the master facets it can touch (default twice
-        the larger facet size).
-    initial_gap
-        Node-to-node only: g0(x) replacing the geometric gap.
-    name
-        How logs and pair tables name the interface (default ``"21-22"`` or ``"sphere-22"``).
-    discretisation
-        ``"auto"`` (node-to-node where the surfaces' nodes coincide, else dual mortar),
-        ``"node-to-node"``, ``"node-to-surface"`` or ``"mortar"`` (see
-        :mod:`dolfinx_nnqem.contact.discretisation`). Against a rigid obstacle: ``"auto"`` or
-        ``"node-to-surface"`` (the same thing: slave nodes projected onto the exact surface).
-    slave
-        The slave surface's tag, ``surface1`` or ``surface2``. Default: ``surface2`` for
-        node-to-node; the finer side for node-to-surface and mortar. The pair table's body 1 is
-        always the master side.
-    geometry
-        ``"auto"`` (the default), ``"reference"`` or ``"current"``: where the closest points,
-        normals and gaps come from. ``"reference"``: computed once, in the reference configuration;
-        ``"current"``: re-evaluated at X + u as the bodies move (large sliding,
-        :mod:`~dolfinx_nnqem.contact.current_geometry`); ``"auto"``: the reference ones while the
-        surfaces slide less than :data:`~dolfinx_nnqem.contact.slip_check.SLIP_LIMIT` × the facet
-        size, the current ones from the increment where they slide more. No state is committed in a
-        geometry known to be stale: a reference-geometry interface past the limit that cannot follow
-        the bodies (``"reference"``, node-to-node pairs, degree 2, NNEQM2) stops the run there.
-        ``"current"`` takes a rigid obstacle, node-to-surface or mortar pairs (``discretisation =
-        "auto"`` then means node-to-surface); node-to-node pairs are refused.
-    """
-
-    surface1: int | RigidObstacle
-    surface2: int
-    mu_f: float
-    law: str = "alart-curnier"
-    r: float | None = None
-    tolerance: float | None = None
-    search_distance: float | None = None
-    initial_gap: Callable | None = None
-    name: str | None = None
-    discretisation: str = "auto"
-    slave: int | None = None
-    geometry: str = "auto"
-
-    def __post_init__(self):
-        _real("mu_f", self.mu_f)
-        _real("r", self.r, positive=True, allow_none=True)
-        _real("tolerance", self.tolerance, positive=True, allow_none=True)
-        _real("search_distance", self.search_distance, positive=True, allow_none=True)
-        get_law(self.law)  # an unknown name raises here, before any mesh work
-        if isinstance(self.surface2, bool) or not isinstance(self.surface2, numbers.Integral):
-            raise ValueError(f"Contact: surface2 = {self.surface2!r}; expected a facet tag (an integer)")
-        if self.obstacle is None:
-            if isinstance(self.surface1, bool) or not isinstance(self.surface1, numbers.Integral):
-                raise ValueError(f"Contact: surface1 = {self.surface1!r}; expected a facet tag or a rigid "
-                                 "obstacle (Plane, Sphere, Cylinder)")
-            if self.surface1 == self.surface2:
-                raise ValueError(f"Contact: surface1 and surface2 are both tag {self.surface1}")
-        elif self.search_distance is not None or self.initial_gap is not None:
-            raise ValueError("Contact: search_distance and initial_gap apply to node-to-node contact, not to a "
-                             "rigid obstacle (its gap is the exact distance)")
-        allowed = DISCRETISATIONS if self.obstacle is None else OBSTACLE_DISCRETISATIONS
-        if self.discretisation not in allowed:
-            why = " (a rigid obstacle's exact surface takes the slave nodes' projections)" if self.obstacle else ""
-            raise ValueError(f"Contact: discretisation = {self.discretisation!r}; expected one of "
-                             f"{', '.join(allowed)}{why}")
-        if self.slave is not None:
-            sides = (self.surface2,) if self.obstacle is not None else (self.surface1, self.surface2)
-            if isinstance(self.slave, bool) or self.slave not in sides:
-                raise ValueError(f"Contact: slave = {self.slave!r}; expected one of the surfaces' tags "
-                                 f"{', '.join(str(t) for t in sides)}")
-        if self.initial_gap is not None and self.discretisation not in ("auto", "node-to-node"):
-            raise ValueError(f"Contact: initial_gap applies to node-to-node contact, not to "
-                             f"discretisation = {self.discretisation!r}")
-        self._check_geometry()
-
-    def _check_geometry(self) -> None:
-        """Refuse ``geometry = "current"`` where this version does not re-evaluate the pairs."""
-        if self.geometry not in GEOMETRIES:
-            raise ValueError(f"Contact: geometry = {self.geometry!r}; expected one of {', '.join(GEOMETRIES)}")
-        if self.geometry != "current" or self.obstacle is not None:
-            return
-        if self.discretisation == "node-to-node" or self.initial_gap is not None:
-            raise ValueError("Contact: geometry = 'current' does not apply to node-to-node pairs: they join nodes "
-                             "that face each other in a matching mesh and stay reference geometry; use "
-                             "discretisation = 'node-to-surface' for large sliding")
-
-    @property
-    def obstacle(self) -> RigidObstacle | None:
-        """The rigid obstacle of the master side, or None for two deformable surfaces."""
-        return self.surface1 if isinstance(self.surface1, RigidObstacle) else None
-
-    @property
-    def deformable_surfaces(self) -> tuple[int, ...]:
-        """The facet tags of the interface's deformable sides (one beside a rigid obstacle)."""
-        if isinstance(self.surface1, RigidObstacle):
-            return (int(self.surface2),)
-        return (int(self.surface1), int(self.surface2))
-
-    @property
-    def label(self) -> str:
-        if self.name is not None:
-            return self.name
-        master = type(self.obstacle).__name__.lower() if self.obstacle is not None else str(self.surface1)
-        return f"{master}-{self.surface2}"
-
-    def pair_set(self, V, facet_tags, supported: np.ndarray | None = None) -> PairSet:
-        """The discretised interface (collective); ``supported``: see
-        :func:`~dolfinx_nnqem.contact.discretisation.discretise`."""
-        if self.geometry == "current":
-            return self.tracker(V, facet_tags, supported).pairs_at(zero_displacement(V), 0.0)
-        if isinstance(self.surface1, RigidObstacle):  # self.obstacle, narrowed for the type checker
-            return obstacle_pairs(V, facet_tags, int(self.surface2), self.surface1, tolerance=self.tolerance)
-        return discretise(V, facet_tags, int(self.surface1), int(self.surface2), self.discretisation,
-                          slave=self.slave, tolerance=self.tolerance, search_distance=self.search_distance,
-                          initial_gap=self.initial_gap, supported=supported)
-
-
-    def tracker(self, V, facet_tags, supported: np.ndarray | None = None, *,
-                reference: PairSet | None = None) -> GeometryTracker:
-        """What re-evaluates the pairs of the interface in the current configuration (collective).
-
-        ``reference``: the interface's reference-geometry pairs, when ``geometry = "auto"`` moves it to
-        the current geometry during a run: the tracker then keeps their discretisation (mortar where
-        ``discretisation = "auto"`` chose mortar) and slave side, so that every pair keeps its slave
-        node. Without it, ``discretisation = "auto"`` means node-to-surface.
-        """
-        if isinstance(self.surface1, RigidObstacle):
-            tolerance = mesh_tolerance(V.mesh) if self.tolerance is None else float(self.tolerance)
-            return ObstacleTracker(obstacle_pairs(V, facet_tags, int(self.surface2), self.surface1,
-                                                  tolerance=tolerance))
-        slave = self.slave
-        if reference is not None:
-            discretisation = "mortar" if reference.kind == "mortar" else "node-to-surface"
-            slave = getattr(reference, "slave", slave)  # node-to-surface and mortar pairs name their slave side
-        else:
-            discretisation = "mortar" if self.discretisation == "mortar" else "node-to-surface"  # auto: node-to-surface
-        return surface_tracker(V, facet_tags, (int(self.surface1), int(self.surface2)), slave=slave,
-                               search_distance=self.search_distance, supported=supported,
-                               discretisation=discretisation)
-
-
-def zero_displacement(V):
-    """A zero displacement on V (the reference configuration)."""
-    import dolfinx
-
-    return dolfinx.fem.Function(V)
-
-
-@dataclass(frozen=True, eq=False)
-class LawGroup:
-    """The pairs (``index``) that follow ``law`` with the scaling ``r``."""
-
-    law: ContactLaw
-    r: float
-    force_unit: float  #: r h: the force unit of rows that are not forces (the polar angle row)
-    index: np.ndarray
-
-
-@dataclass(frozen=True, eq=False)
-class PairLaws:
-    """Which law, r and μ_f each pair of a set follows (this rank's pairs, or all pairs gathered).
-
-    Attributes
-    ----------
-    groups
-        One :class:`LawGroup` per interface.
-    g0, mu_f
-        (n,) initial gaps and friction coefficients.
-    constrained
-        (n, 3) bool: local directions whose relative motion the supports fix.
-    """
-
-    groups: tuple[LawGroup, ...]
-    g0: np.ndarray
-    mu_f: np.ndarray
-    constrained: np.ndarray
-
-    @property
-    def size(self) -> int:
-        return len(self.g0)
-
-    def evaluate(self, w: np.ndarray, w_prev: np.ndarray, z: np.ndarray) -> LawEvaluation:
-        """H, ∂H/∂w, ∂H/∂z and the states of every pair at (w, z), pinned directions applied."""
-        n = self.size
-        if len(self.groups) == 1:  # one interface: no copies
-            return self._evaluate_group(self.groups[0], w, w_prev, z, slice(None))
-        H, dH_dw, dH_dz = np.zeros((n, 3)), np.zeros((n, 3, 3)), np.zeros((n, 3, 3))
-        state = np.zeros(n, dtype=np.int8)
-        for group in self.groups:
-            ev = self._evaluate_group(group, w, w_prev, z, group.index)
-            H[group.index], dH_dw[group.index], dH_dz[group.index] = ev.H, ev.dH_dw, ev.dH_dz
-            state[group.index] = ev.state
-        return LawEvaluation(H, dH_dw, dH_dz, state)
-
-    def _evaluate_group(self, group: LawGroup, w, w_prev, z, index) -> LawEvaluation:
-        pinned = self.constrained[index]
-        w, w_prev = w[index], w_prev[index]
-        tangential = pinned & (np.arange(3) > 0)
-        if tangential.any():
-            # A pinned tangential direction takes no part in the friction law: its force is zero
-            # and its relative motion is the supports' business (on a symmetry plane, master nodes
-            # off the plane move along it although the mirrored half would cancel that). Left in,
-            # it would widen the slip test and shrink the free direction's share of the friction
-            # disk below μ_f p_n.
-            w, w_prev = np.where(tangential, 0.0, w), np.where(tangential, 0.0, w_prev)
-        ev = group.law.evaluate(w, w_prev, z[index], self.g0[index], self.mu_f[index], group.r)
-        if tangential.any():
-            ev = ev._replace(dH_dw=ev.dH_dw * ~tangential[:, None, :])
-        return group.law.pin(ev, z[index], pinned, group.force_unit)
-
-    def force(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """λ(z) (n, 3) and ∂λ/∂z (n, 3, 3)."""
-        if len(self.groups) == 1:
-            return self.groups[0].law.force(z)
-        lam, dlam_dz = np.zeros((self.size, 3)), np.zeros((self.size, 3, 3))
-        for group in self.groups:
-            lam[group.index], dlam_dz[group.index] = group.law.force(z[group.index])
-        return lam, dlam_dz
-
-    def linearise(self, z: np.ndarray, evaluation: LawEvaluation, sliding_in_force: bool = True) -> Linearisation:
-        """The Jacobian blocks of a Newton step at z in each law's step coordinates (see
-        :meth:`ContactLaw.linearise`); ``evaluation`` is :meth:`evaluate`'s at z."""
-        if len(self.groups) == 1:
-            group = self.groups[0]
-            return group.law.linearise(z, evaluation, self.constrained, group.force_unit, sliding_in_force)
-        dH_dy, dlam_dy = np.zeros((self.size, 3, 3)), np.zeros((self.size, 3, 3))
-        cartesian = np.zeros(self.size, dtype=bool)
-        for group in self.groups:
-            i = group.index
-            part = group.law.linearise(z[i], LawEvaluation(*(a[i] for a in evaluation)), self.constrained[i],
-                                       group.force_unit, sliding_in_force)
-            dH_dy[i], dlam_dy[i] = part.dH_dy, part.dlam_dy
-            if part.cartesian is not None:
-                cartesian[i] = part.cartesian
-        return Linearisation(dH_dy, dlam_dy, cartesian if cartesian.any() else None)
-
-    def advance(self, z: np.ndarray, dy: np.ndarray, alpha: float, cartesian: np.ndarray | None) -> np.ndarray:
-        """The unknowns after the step α dy from z in the step coordinates of :meth:`linearise`."""
-        if len(self.groups) == 1:
-            group = self.groups[0]
-            return group.law.advance(z, dy, alpha, cartesian, group.force_unit)
-        out = np.empty((self.size, 3))
-        for group in self.groups:
-            i = group.index
-            out[i] = group.law.advance(z[i], dy[i], alpha, None if cartesian is None else cartesian[i],
-                                       group.force_unit)
-        return out
-
-    def extrapolate(self, z_n: np.ndarray, z_prev: np.ndarray, beta: float) -> np.ndarray:
-        """Secant prediction: the unknowns of the force λ_n + β (λ_n − λ_prev), taken nearest z_n.
-
-        The force is extrapolated, not z (for the Cartesian law, z = λ, this is the same): the
-        polar angle of a pair without friction force at the previous increment means nothing,
-        and a line through it turns the predicted force by an arbitrary angle. The new unknowns
-        come from :meth:`advance` with every pair stepping in the force.
-        """
-        lam_n, _ = self.force(z_n)
-        lam_prev, _ = self.force(z_prev)
-        return self.advance(z_n, lam_n - lam_prev, beta, np.ones(self.size, dtype=bool))
-
-    @property
-    def slip_following(self) -> bool:
-        """True if some law has unknowns that :meth:`follow_slip` may move (the polar angle)."""
-        return any(group.law.slip_following for group in self.groups)
-
-    def follow_slip(self, z: np.ndarray, w: np.ndarray, w_prev: np.ndarray, sliding_too: bool = False
-                    ) -> np.ndarray:
-        """z with the unknowns no force depends on set on the slip (each law's ``follow_slip``);
-        with ``sliding_too`` also the direction of the friction force of sliding pairs: those in
-        the slip state at (w, z) whose slip r |s| is above rounding (:data:`laws.NO_FORCE` times
-        the force unit; below it the slip has no direction)."""
-        out = np.array(z, dtype=np.float64, copy=True)
-        for group in self.groups:
-            i = group.index
-            sliding = None
-            if sliding_too and group.law.slip_following:
-                state = self._evaluate_group(group, w, w_prev, z, i).state
-                s = w[i, 1:] - w_prev[i, 1:]
-                sliding = (state == SLIP) & (group.r * np.hypot(s[:, 0], s[:, 1]) > NO_FORCE * group.force_unit)
-            out[i] = group.law.follow_slip(z[i], w[i], w_prev[i], self.constrained[i], group.force_unit, sliding)
-        return out
-
-    def initial_unknowns(self) -> np.ndarray:
-        """z of force-free pairs (each law's ``initial_unknowns`` for its pinned directions)."""
-        z = np.zeros((self.size, 3))
-        for group in self.groups:
-            z[group.index] = group.law.initial_unknowns(self.constrained[group.index])
-        return z
-
-    def unknown_scale(self, force_scale: float) -> np.ndarray:
-        """(n, 3): the scale of each unknown when forces are of order ``force_scale``."""
-        scale = np.zeros((self.size, 3))
-        for group in self.groups:
-            scale[group.index] = group.law.unknown_scale(force_scale)
-        return scale
-
-    def step_scale(self, force_scale: float, cartesian: np.ndarray | None) -> np.ndarray:
-        """(n, 3): the scale of each step coordinate of :meth:`linearise` (forces on ``cartesian`` pairs)."""
-        scale = self.unknown_scale(force_scale)
-        if cartesian is not None:
-            scale[np.asarray(cartesian, dtype=bool)] = float(force_scale)
-        return scale
 
 
 @dataclass(frozen=True, eq=False)
@@ -453,15 +83,21 @@ class ContactModel:
         The interfaces.
     E, h
         Young's modulus at each interface (one per contact; a single value for all) and element
-        size: the default r = E h and the reference of its supported range (:data:`R_RANGE`).
-        The problem passes the softer body's modulus at each interface
-        (:meth:`~dolfinx_nnqem.problem.ContactProblem.interface_moduli`).
+        size: the default r = E h and the reference of its supported range
+        (:func:`~dolfinx_nnqem.contact.specification.interface_r`). The problem passes the softer
+        body's modulus at each interface (:meth:`~dolfinx_nnqem.problem.ContactProblem.interface_moduli`).
     constrained_dofs
         A vector laid out like V, 1 at constrained dofs and 0 elsewhere: pair directions whose
         every involved dof is constrained are pinned (:meth:`ContactLaw.pin`).
 
     Attributes
     ----------
+    interfaces
+        The interfaces in pair order (:class:`Interface`).
+    laws
+        The pair laws of this rank's pairs (:class:`~dolfinx_nnqem.contact.pair_laws.PairLaws`).
+    geometry
+        Where the pairs come from (:class:`~dolfinx_nnqem.contact.geometry_tracking.ContactGeometry`).
     z, z_n
         (num_local, 3) the pair unknowns (current iterate, last converged increment).
     w_n
@@ -483,33 +119,19 @@ class ContactModel:
         labels = [c.label for c in contacts]
         if len(set(labels)) != len(labels):
             raise ValueError(f"contact interfaces need distinct names, got {labels}")
-        self.trackers: list[GeometryTracker | None] = []  #: per interface: re-evaluates current-geometry pairs
         # kept for re-pinning the pairs of a new geometry (the caller may free its vector)
         self._constrained_dofs = constrained_dofs.copy()
-        self.geometry_version = 0  #: counts :meth:`update_geometry` calls (solvers rebuild what uses B)
-        self._refreshed_at: np.ndarray | None = None  # where refresh_obstacle_geometry last evaluated
-        self._facet_tags = facet_tags  # for the trackers of interfaces that start following the bodies
-        self._facet_sizes: list[float] | None = None  # of the interfaces' slave surfaces, at the first slip check
-        interfaces = []
+        interfaces, trackers = [], []
         for contact, E_interface in zip(contacts, moduli):
-            r = float(default_r(E_interface, h)) if contact.r is None else _checked_r(contact, E_interface, h)
-            tracker: GeometryTracker | None = None
-            if contact.geometry == "current" and space_degree(V) != 1:
-                raise ValueError(f"contact {contact.label}: geometry = 'current' takes degree-1 displacements in "
-                                 f"this version (its closest points and pair rows are those of linear facets); "
-                                 f"the displacements here have degree {space_degree(V)}: use geometry = "
-                                 f"'reference', or degree 1")
+            r = interface_r(contact, E_interface, h)
             with constrained_dofs.localForm() as c:
-                if contact.geometry == "current":
-                    tracker = contact.tracker(V, facet_tags, supported=c.array.copy())
-                    pairs: PairSet = tracker.pairs_at(zero_displacement(V), 0.0)
-                else:
-                    pairs = contact.pair_set(V, facet_tags, supported=c.array.copy())
+                pairs, tracker = starting_pairs(contact, V, facet_tags, c.array.copy())
             if pairs.num_global == 0:
                 raise ContactPairError(f"contact {contact.label}: no pairs found")
             interfaces.append(Interface(contact, pairs, get_law(contact.law), r, slice(0, 0)))
-            self.trackers.append(tracker)
+            trackers.append(tracker)
         self._assemble(interfaces)
+        self.geometry = ContactGeometry(self, V, facet_tags, trackers, self._constrained_dofs)
 
         n = self.num_local
         self.z = self.laws.initial_unknowns()
@@ -539,13 +161,14 @@ class ContactModel:
         self.interface_index = np.concatenate([np.full(i.pairs.num_local, k, dtype=np.int32)
                                                for k, i in enumerate(interfaces)])
         mu_f = np.concatenate([np.full(i.pairs.num_local, float(i.contact.mu_f)) for i in interfaces])
-        self.laws = PairLaws(self._groups(self.interface_index), self.g0, mu_f,
-                             self._constrained_directions(self._constrained_dofs))
+        self.laws = pair_laws.PairLaws(self._groups(self.interface_index), self.g0, mu_f,
+                                       self._constrained_directions(self._constrained_dofs))
         self._gathered_laws: PairLaws | None = None  # gathered_laws(), at its first call
         self._w = self.B.createVecLeft()
 
-    def _groups(self, interface_index: np.ndarray) -> tuple[LawGroup, ...]:
-        return tuple(LawGroup(i.law, i.r, i.r * self.h, np.flatnonzero(interface_index == k))
+    def _groups(self, interface_index: np.ndarray) -> tuple[pair_laws.LawGroup, ...]:
+        """One law group per interface: the pairs whose ``interface_index`` names it."""
+        return tuple(pair_laws.LawGroup(i.law, i.r, i.r * self.h, np.flatnonzero(interface_index == k))
                      for k, i in enumerate(self.interfaces))
 
     def _constrained_directions(self, constrained_dofs: PETSc.Vec) -> np.ndarray:
@@ -595,6 +218,12 @@ class ContactModel:
     def mu_f(self) -> np.ndarray:
         return self.laws.mu_f
 
+    @property
+    def r_max(self) -> float:
+        """The contact scale: the largest r of the interfaces (force/length;
+        :attr:`PairLaws.r_max <dolfinx_nnqem.contact.pair_laws.PairLaws.r_max>`)."""
+        return self.laws.r_max
+
     def gather(self, values: npt.ArrayLike) -> np.ndarray:
         """All pairs' values in global pair order, on every rank (collective)."""
         values = np.asarray(values)
@@ -610,8 +239,8 @@ class ContactModel:
         """The laws of all pairs in global pair order, on every rank (collective, then cached)."""
         if self._gathered_laws is None:
             index = self.gather(self.interface_index)
-            self._gathered_laws = PairLaws(self._groups(index), self.gather(self.g0), self.gather(self.mu_f),
-                                           self.gather(self.constrained))
+            self._gathered_laws = pair_laws.PairLaws(self._groups(index), self.gather(self.g0),
+                                                     self.gather(self.mu_f), self.gather(self.constrained))
         return self._gathered_laws
 
     # -- kinematics and forces -------------------------------------------------------------------
@@ -704,12 +333,12 @@ class ContactModel:
         return self.laws.linearise(self.z if z is None else z, evaluation, sliding_in_force=False)
 
     def advance(self, z: np.ndarray, dy: np.ndarray, alpha: float, cartesian: np.ndarray | None) -> np.ndarray:
-        """The unknowns after the step α dy from z (see :meth:`PairLaws.advance`)."""
+        """The unknowns after the step α dy from z (see :meth:`~dolfinx_nnqem.contact.pair_laws.PairLaws.advance`)."""
         return self.laws.advance(z, dy, alpha, cartesian)
 
     def extrapolate(self, z_prev: np.ndarray, beta: float) -> None:
         """Secant prediction of the unknowns from z_n and the previous increment's ``z_prev``
-        (see :meth:`PairLaws.extrapolate`)."""
+        (see :meth:`~dolfinx_nnqem.contact.pair_laws.PairLaws.extrapolate`)."""
         self.z = self.laws.extrapolate(self.z_n, z_prev, beta)
 
     @property
@@ -720,7 +349,7 @@ class ContactModel:
     def follow_slip(self, w: np.ndarray, sliding_too: bool = False) -> None:
         """Set the unknowns no force depends on (the polar angle of pairs without friction force)
         on the slip of the relative displacement ``w``, with ``sliding_too`` also the angle of
-        sliding pairs (see :meth:`PairLaws.follow_slip`)."""
+        sliding pairs (see :meth:`~dolfinx_nnqem.contact.pair_laws.PairLaws.follow_slip`)."""
         self.z = self.laws.follow_slip(self.z, w, self.w_n, sliding_too)
 
     def unknown_scale(self, force_scale: float) -> np.ndarray:
@@ -756,207 +385,52 @@ class ContactModel:
         """Back to the last converged increment's unknowns."""
         self.z = self.z_n.copy()
 
-    # -- current geometry (issue 27) -----------------------------------------------------------------
-    @property
-    def current_geometry(self) -> bool:
-        """True if some interface re-evaluates its pairs in the current configuration."""
-        return any(t is not None for t in self.trackers)
-
+    # -- a new geometry (geometry_tracking) ---------------------------------------------------------
     def pair_keys(self) -> np.ndarray:
         """(num_local,) what names a local pair across geometry updates: interface and slave node."""
         blocks = np.concatenate([i.pairs.slave_blocks for i in self.interfaces]).astype(np.int64)
         return self.interface_index.astype(np.int64) * (self.V.dofmap.index_map.size_global + 1) + blocks
 
-    def update_geometry(self, u, load_factor: float, u_n, load_factor_n: float) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
-        """Re-evaluate the current-geometry interfaces at (u, ℓ) (collective).
+    def replace_pairs(self, pairs: Sequence[PairSet], u_n, load_factor_n: float) -> Remap:
+        """The model on new pair sets of its interfaces, one per interface (collective; what
+        :meth:`~dolfinx_nnqem.contact.geometry_tracking.ContactGeometry.update` evaluated).
 
-        The pair unknowns z, z_n and the states follow their slave node; new pairs start
-        force-free. w_n is measured again with the new rows, w_n = B u_n + m(ℓ_n): the slip of an
-        increment is the relative displacement increment of the slave node and the master point
-        now under it, in the current tangent plane (``docs/theory.md``).
-
-        Parameters
-        ----------
-        u, u_n
-            DOLFINx functions: where the geometry is evaluated, and the last converged displacement.
-        load_factor, load_factor_n
-            ℓ of the obstacles' position, and of the last converged increment.
-
-        Returns
-        -------
-        The remap of per-pair arrays: ``remap(old, fill)`` gives the rows of ``old`` (laid out like
-        the pairs before the update) in the new layout, and for new pairs those of ``fill`` (one
-        row, or an array in the new layout).
+        B, the frames, gaps and laws are those of the new pairs. The pair unknowns z, z_n and the
+        states follow their slave node (:meth:`pair_keys`); new pairs start force-free. w_n is
+        measured again with the new rows, w_n = B u_n + m(ℓ_n). Returns the remap of per-pair arrays
+        (:data:`~dolfinx_nnqem.contact.geometry_tracking.Remap`).
         """
         old_keys = self.pair_keys()
-        # every interface evaluated before anything changes: if one has lost its pairs, the model stays
-        interfaces = [i if t is None else replace(i, pairs=self._pairs_or_lost(i, t, u, load_factor))
-                      for i, t in zip(self.interfaces, self.trackers)]
-        self._refreshed_at = None
         for obj in (self.B, self._w):
             obj.destroy()
-        self._assemble(interfaces)
+        self._assemble([replace(i, pairs=p) for i, p in zip(self.interfaces, pairs)])
         remap = remapper(old_keys, self.pair_keys())
         fresh = self.laws.initial_unknowns()
         self.z, self.z_n = remap(self.z, fresh), remap(self.z_n, fresh)
         self.state_n = remap(self.state_n, np.zeros((), dtype=np.int8))
         self.slip_n = remap(self.slip_n, np.zeros(2))
         self.w_n = self.relative_displacement(u_n.x.petsc_vec, load_factor_n)
-        self.geometry_version += 1
         return remap
 
-    @staticmethod
-    def _pairs_or_lost(interface: Interface, tracker: GeometryTracker, u, load_factor: float) -> PairSet:
-        """The tracker's pairs at (u, ℓ); :class:`LostContactError` naming the interface if there are none."""
-        lost = (f"contact {interface.contact.label}: no pairs in the current geometry at load factor "
-                f"{load_factor:.6g}: no slave node faces the master surface any more (the bodies slid apart)")
-        try:
-            pairs: PairSet = tracker.pairs_at(u, load_factor)
-        except NoPairsError as error:  # node-to-surface and mortar alike: one outcome, one message
-            raise LostContactError(lost) from error
-        if pairs.num_global == 0:
-            raise LostContactError(lost)
-        return pairs
-
-    @property
-    def obstacle_geometry(self) -> bool:
-        """True if some interface is a rigid obstacle in the current geometry (whose pairs
-        :meth:`refresh_obstacle_geometry` re-evaluates in place)."""
-        return any(isinstance(t, ObstacleTracker) for t in self.trackers)
-
-    @property
-    def surface_geometry(self) -> bool:
-        """True if some interface is node-to-surface or mortar in the current geometry (its pairs may
-        change; it is re-evaluated between solves, not within one)."""
-        return any(isinstance(t, (SurfaceTracker, MortarTracker)) for t in self.trackers)
-
-    def refresh_obstacle_geometry(self, u, load_factor: float, u_n, load_factor_n: float) -> None:
-        """Re-evaluate the current-geometry obstacle interfaces at (u, ℓ) in place (collective).
-
-        An obstacle keeps one pair per slave node and B keeps its pattern (the slave node's three
-        columns): only the frames R, the gaps g0 (rebased as in :meth:`update_geometry`) and B's
-        values change, and w_n is measured again with the new rows. The pairs, their unknowns and
-        the solvers' matrices stay; this is what the monolithic solver calls at every Newton iterate
-        (:mod:`~dolfinx_nnqem.contact.geometric_stiffness`). Nothing is done when the slave nodes,
-        ℓ and u_n are where the last refresh had them.
-        """
-        key = self._refresh_key(u, load_factor, u_n, load_factor_n)
-        same = (self._refreshed_at is not None and len(key) == len(self._refreshed_at)
-                and bool(np.array_equal(key, self._refreshed_at)))
-        # agreed by every rank: a rank whose own slave nodes did not move must still join B's
-        # assembly and the measure of w_n below (collective) when another rank's did
-        if self.comm.allreduce(same, op=MPI.LAND):
-            return
-        for k, (interface, tracker) in enumerate(zip(self.interfaces, self.trackers)):
-            if not isinstance(tracker, ObstacleTracker):
-                continue
-            pairs = tracker.pairs_at(u, load_factor)
+    def refill_pairs(self, pairs: Mapping[int, PairSet], u_n, load_factor_n: float) -> None:
+        """New values of the pair sets of some interfaces (interface index → pairs), in place: the
+        same pairs in the same order with B's pattern (what
+        :meth:`~dolfinx_nnqem.contact.geometry_tracking.ContactGeometry.refresh_obstacles` evaluated).
+        The frames, gaps, B's values and the pinned directions follow; w_n is measured again,
+        w_n = B u_n + m(ℓ_n). The unknowns stay (collective)."""
+        for k, new in pairs.items():
+            interface = self.interfaces[k]
             local = interface.local
-            self.interfaces[k] = replace(interface, pairs=pairs)
-            self.R[local] = pairs.R
-            self.g0[local] = pairs.g0  # the laws hold this array
+            self.interfaces[k] = replace(interface, pairs=new)
+            self.R[local] = new.R
+            self.g0[local] = new.g0  # the laws hold this array
             start = self.rows.indptr[3 * local.start]
-            self.rows.values[start:start + len(pairs.rows.values)] = pairs.rows.values
+            self.rows.values[start:start + len(new.rows.values)] = new.rows.values
         self.B.setValuesCSR(self.rows.indptr, self.rows.columns, self.rows.values)  # type: ignore[arg-type]  # as in scaled_B
         self.B.assemble()
         self.laws = replace(self.laws, constrained=self._constrained_directions(self._constrained_dofs))
         self._gathered_laws = None
         self.w_n = self.relative_displacement(u_n.x.petsc_vec, load_factor_n)
-        self._refreshed_at = key
-
-    def _refresh_key(self, u, load_factor: float, u_n, load_factor_n: float) -> np.ndarray:
-        """What an obstacle refresh depends on: the slave nodes' u and u_n, ℓ and ℓ_n."""
-        start = u.function_space.dofmap.index_map.local_range[0]
-        parts = [np.array([load_factor, load_factor_n])]
-        for interface, tracker in zip(self.interfaces, self.trackers):
-            if isinstance(tracker, ObstacleTracker):
-                blocks = interface.pairs.slave_blocks - start
-                parts += [u.x.array.reshape(-1, 3)[blocks].ravel(), u_n.x.array.reshape(-1, 3)[blocks].ravel()]
-        return np.concatenate(parts)
-
-    def geometric_terms(self, u, load_factor: float, u_n, load_factor_n: float,
-                        lam: np.ndarray | None = None) -> GeometricTerms:
-        """The geometric blocks K_s, W_s of the current-geometry obstacle pairs at (u, ℓ) and the forces
-        ``lam`` (default: λ(z)), their geometry refreshed there first
-        (:mod:`~dolfinx_nnqem.contact.geometric_stiffness`)."""
-        lam = self.force() if lam is None else lam
-        start = u.function_space.dofmap.index_map.local_range[0]
-        pairs_, blocks, Ks, Ws = [], [], [], []
-        for interface, tracker in zip(self.interfaces, self.trackers):
-            if not isinstance(tracker, ObstacleTracker):
-                continue
-            pairs = interface.pairs
-            assert isinstance(pairs, ObstaclePairs)  # an obstacle tracker's pairs
-            index = pairs.slave_blocks - start
-            K, W = obstacle_terms(pairs, u.x.array.reshape(-1, 3)[index], u_n.x.array.reshape(-1, 3)[index],
-                                  pairs.obstacle.displacement(load_factor), pairs.obstacle.displacement(load_factor_n),
-                                  lam[interface.local])
-            pairs_.append(np.arange(interface.local.start, interface.local.stop))
-            blocks.append(pairs.slave_blocks)
-            Ks.append(K)
-            Ws.append(W)
-        if not pairs_:
-            return no_terms()
-        return GeometricTerms(np.concatenate(pairs_), np.concatenate(blocks).astype(np.int64), np.concatenate(Ks),
-                              np.concatenate(Ws))
-
-    def geometry_state(self) -> list[np.ndarray | None]:
-        """Per interface, what its next evaluation depends on besides u (for checkpoints): the master
-        facet of every slave node (node-to-surface in current geometry), or None."""
-        return [t.facets if isinstance(t, SurfaceTracker) else None for t in self.trackers]
-
-    def set_geometry_state(self, state: Sequence[np.ndarray | None]) -> None:
-        """Restore :meth:`geometry_state`."""
-        for tracker, facets in zip(self.trackers, state):
-            if isinstance(tracker, SurfaceTracker) and facets is not None:
-                tracker.facets = np.asarray(facets, dtype=np.int64).copy()
-
-    def slipped(self, w: np.ndarray) -> list[Slip]:
-        """The reference-geometry interfaces whose surfaces slid past
-        :data:`~dolfinx_nnqem.contact.slip_check.SLIP_LIMIT` × their facet size at the relative
-        displacement ``w`` (collective; :func:`~dolfinx_nnqem.contact.slip_check.slipped_interfaces`)."""
-        if self._facet_sizes is None:  # a reference-geometry interface's areas never change: measured once
-            self._facet_sizes = [facet_size_of(self.comm, i.pairs.area) for i in self.interfaces]
-        sizes = [None if t is not None else size for size, t in zip(self._facet_sizes, self.trackers)]
-        return slipped_interfaces(self.comm, self.interfaces, sizes, w)
-
-    def why_not_current(self, k: int) -> str | None:
-        """None if interface ``k`` (in the reference geometry) can be re-evaluated in the current
-        configuration from now on (``geometry = "auto"``); else the reason it cannot."""
-        interface = self.interfaces[k]
-        if interface.contact.geometry == "reference":
-            return "geometry = 'reference' was chosen for it (use 'auto' or 'current' for large sliding)"
-        if interface.pairs.kind == "node-to-node":
-            return ("node-to-node pairs join nodes that faced each other in the reference configuration (use "
-                    "discretisation = 'node-to-surface' or 'mortar' for large sliding)")
-        if space_degree(self.V) != 1:
-            return (f"the current geometry takes degree-1 displacements in this version (its closest points and "
-                    f"pair rows are those of linear facets); the displacements here have degree {space_degree(self.V)} "
-                    "(use degree 1 for large sliding)")
-        return None
-
-    def follow_bodies(self, k: int) -> None:
-        """Re-evaluate interface ``k`` in the current configuration from now on (collective): its tracker
-        is made, and the next :meth:`update_geometry` evaluates its pairs where the bodies are.
-
-        For ``geometry = "auto"`` past the slip limit (:meth:`why_not_current` must be None).
-        """
-        if self.trackers[k] is not None:
-            return
-        interface = self.interfaces[k]
-        with self._constrained_dofs.localForm() as c:
-            self.trackers[k] = interface.contact.tracker(self.V, self._facet_tags, supported=c.array.copy(),
-                                                         reference=interface.pairs)
-
-    @property
-    def pairs_may_change(self) -> bool:
-        """True if some interface's pairs depend on u: in the current geometry, or ``geometry = "auto"``
-        and able to move there (:meth:`why_not_current`)."""
-        return any(t is not None or self.why_not_current(k) is None for k, t in enumerate(self.trackers))
-
-    def following_bodies(self) -> list[bool]:
-        """Per interface: True where its pairs are re-evaluated in the current configuration."""
-        return [t is not None for t in self.trackers]
 
     # -- reporting ----------------------------------------------------------------------------------
     def obstacle_reactions(self, lam: np.ndarray | None = None) -> dict[str, np.ndarray]:
@@ -984,3 +458,11 @@ class ContactModel:
             B = getattr(interface.pairs, "B", None)
             if B is not None:
                 B.destroy()
+
+
+if not TYPE_CHECKING:  # for the type checker the moved names are gone: the package imports their new paths
+    def __getattr__(name: str):
+        """The names that moved out of this module, with a DeprecationWarning naming where they went."""
+        return _moved.moved_name(__name__, name)
+
+    _moved.install_members(ContactModel)  # its old geometry members: now those of ContactModel.geometry

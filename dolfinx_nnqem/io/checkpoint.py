@@ -70,7 +70,7 @@ def _fingerprint(problem) -> dict:
 def _pairs_fixed(problem, pairs: int) -> int:
     """``pairs``, or −1 where the contact geometry follows (or may come to follow) the bodies (the pairs
     then depend on u and are evaluated again when the checkpoint is read, :func:`_read_contact`)."""
-    return -1 if problem.has_contact and problem.contact.pairs_may_change else pairs
+    return -1 if problem.has_contact and problem.contact.geometry.pairs_may_change else pairs
 
 
 def _global_fingerprint(problem) -> dict:
@@ -189,10 +189,10 @@ def _write_rank(tmp: Path, problem) -> None:
         c = problem.contact
         for name in ("z", "z_n", "w_n", "state_n", "slip_n"):
             arrays[f"contact_{name}"] = getattr(c, name)
-        for k, facets in enumerate(c.geometry_state()):
+        for k, facets in enumerate(c.geometry.state()):
             if facets is not None:
                 arrays[f"contact_facets_{k}"] = facets
-        arrays["contact_following"] = np.array(c.following_bodies(), dtype=bool)
+        arrays["contact_following"] = np.array(c.geometry.following, dtype=bool)
     history = problem.predictor_history
     if history is not None:
         ell, u_prev, z_prev = history
@@ -260,11 +260,11 @@ def _read_contact(data, path: Path, problem) -> None:
     if "contact_following" in data:  # interfaces that geometry = "auto" moved to the current geometry
         for k, following in enumerate(data["contact_following"]):
             if following:
-                c.follow_bodies(k)
-    if c.current_geometry:
-        c.set_geometry_state([data[f"contact_facets_{k}"] if f"contact_facets_{k}" in data else None
+                c.geometry.start_following(k)
+    if c.geometry.follows_bodies:
+        c.geometry.set_state([data[f"contact_facets_{k}"] if f"contact_facets_{k}" in data else None
                               for k in range(len(c.interfaces))])
-        c.update_geometry(problem.u, problem.load_factor_n, problem.state.u_n, problem.load_factor_n)
+        c.geometry.update(problem.u, problem.load_factor_n, problem.state.u_n, problem.load_factor_n)
     if len(data["contact_z"]) != c.num_local:
         raise CheckpointError(f"{path}: {len(data['contact_z'])} pairs saved, {c.num_local} evaluated from the "
                               "saved displacement")

@@ -250,7 +250,7 @@ class SummaryWriter:
             model = p.contact
             # where each interface's pairs come from now ("auto" moves one to "current" once it slides)
             d["contact_geometry"] = {i.contact.label: "current" if following else "reference"
-                                     for i, following in zip(model.interfaces, model.following_bodies())}
+                                     for i, following in zip(model.interfaces, model.geometry.following)}
             t = res.pair_table(p) if table is None else table
             d["pairs"] = [
                 {"position": t["position"][i].tolist(), "state": str(t["state_name"][i]),

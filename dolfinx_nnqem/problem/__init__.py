@@ -3,7 +3,7 @@ one object every solver takes (:class:`ContactProblem`), with what builds it: th
 their free rigid modes (:mod:`.bodies`), load amplitudes (:mod:`.amplitude`), input checks
 (:mod:`.validation`) and gmsh mesh generators (:mod:`.meshing`)."""
 
-from dolfinx_nnqem.contact.model import Contact
+from dolfinx_nnqem.contact.specification import Contact
 from dolfinx_nnqem.contact.obstacles import Cylinder, Plane, Sphere
 from dolfinx_nnqem.problem.amplitude import PiecewiseLinear, PiecewiseLinearPath
 from dolfinx_nnqem.problem.contact_problem import (FORCE_FLOOR_STRAIN, BodyForce, ContactProblem, Dirichlet,

@@ -38,7 +38,8 @@ from petsc4py import PETSc
 from dolfinx_nnqem import compat, jit
 from dolfinx_nnqem.problem.bodies import (check_rigid_modes, find_bodies, free_rigid_modes, friction_held_motions,
                                           tags_sharing_nodes)
-from dolfinx_nnqem.contact.model import Contact, ContactModel
+from dolfinx_nnqem.contact.model import ContactModel
+from dolfinx_nnqem.contact.specification import Contact
 from dolfinx_nnqem.contact.surfaces import ContactPairError
 from dolfinx_nnqem.contact.obstacles import Cylinder, Plane, Sphere  # noqa: F401  (the user's imports)
 from dolfinx_nnqem.material.interface import GaussPointValues
@@ -592,10 +593,11 @@ class ContactProblem:
 
     def update_contact_geometry(self, load_factor: float) -> None:
         """Re-evaluate the current-geometry contact interfaces at u and ℓ (collective; see
-        :meth:`ContactModel.update_geometry`); the secant predictor's pair unknowns follow the pairs."""
-        if self.contact is None or not self.contact.current_geometry:
+        :meth:`~dolfinx_nnqem.contact.geometry_tracking.ContactGeometry.update`); the secant predictor's
+        pair unknowns follow the pairs."""
+        if self.contact is None or not self.contact.geometry.follows_bodies:
             return
-        remap = self.contact.update_geometry(self.u, load_factor, self.state.u_n, self.load_factor_n)
+        remap = self.contact.geometry.update(self.u, load_factor, self.state.u_n, self.load_factor_n)
         if self._previous is not None:
             ell, u_prev, z_prev = self._previous
             if z_prev is not None:  # a new pair: no change to extrapolate

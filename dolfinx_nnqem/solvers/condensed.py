@@ -40,7 +40,7 @@ from typing import NamedTuple
 import numpy as np
 
 from dolfinx_nnqem.contact.laws import LawEvaluation, Linearisation
-from dolfinx_nnqem.contact.model import PairLaws
+from dolfinx_nnqem.contact.pair_laws import PairLaws
 
 __all__ = ["CondensedProblem", "CondensedSystem", "PairRows", "newton_step", "rigid_start"]
 

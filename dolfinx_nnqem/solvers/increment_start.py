@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from petsc4py import PETSc
 
-from dolfinx_nnqem.contact.model import PairLaws
+from dolfinx_nnqem.contact.pair_laws import PairLaws
 from dolfinx_nnqem.material.kinematics import deviator_coordinates
 from dolfinx_nnqem.problem.contact_problem import ContactProblem
 from dolfinx_nnqem.solvers.condensation import Condensation

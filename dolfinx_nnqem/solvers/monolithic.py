@@ -89,7 +89,7 @@ class MonolithicSolver(ReleasesPETSc):
         self._mask = free_mask(problem) if problem.has_contact else None
         self._matrix: MonolithicMatrix | None = None  # the direct Newton matrix (also the LM fallback's)
         self._augmented: AugmentedSystem | None = self._augmented_system_of_pairs()
-        self._geometry_version = problem.contact.geometry_version if problem.contact is not None else 0
+        self._geometry_version = problem.contact.geometry.version if problem.contact is not None else 0
         self._timings: dict[str, float] = {}
         # the vectors of every iteration, created once and refilled (as DOLFINx's NonlinearProblem
         # does); only the free residual of an evaluation is new, since the watchdog keeps evaluations
@@ -101,7 +101,7 @@ class MonolithicSolver(ReleasesPETSc):
         J (asked anew at every use: ``geometry = "auto"`` moves an obstacle to the current geometry
         during a run)."""
         model = self.problem.contact
-        return self.settings.consistent_geometry and model is not None and model.obstacle_geometry
+        return self.settings.consistent_geometry and model is not None and model.geometry.obstacles_follow
 
     @property
     def timings(self) -> dict[str, float]:
@@ -130,15 +130,15 @@ class MonolithicSolver(ReleasesPETSc):
         model = self.problem.contact
         if not self.iterative or model is None or self._mask is None:  # the mask: with contact
             return None
-        return AugmentedSystem(model, self._mask, max(i.r for i in model.interfaces), self.settings.augmentation)
+        return AugmentedSystem(model, self._mask, model.r_max, self.settings.augmentation)
 
     def _follow_geometry(self) -> None:
         """After the contact geometry changed (B's rows, the number of pairs): the pieces built on
         B made again (the Newton matrix's pattern, the linear solver's operator layout)."""
         model = self.problem.contact
-        if model is None or model.geometry_version == self._geometry_version:
+        if model is None or model.geometry.version == self._geometry_version:
             return
-        self._geometry_version = model.geometry_version
+        self._geometry_version = model.geometry.version
         for old in (self._matrix, self._augmented, self.linear):
             if old is not None:
                 old.destroy()
@@ -155,7 +155,7 @@ class MonolithicSolver(ReleasesPETSc):
         if self.consistent_geometry:
             p = self.problem
             assert p.contact is not None  # consistent_geometry: with contact
-            p.contact.refresh_obstacle_geometry(p.u, p.load_factor, p.state.u_n, p.load_factor_n)
+            p.contact.geometry.refresh_obstacles(p.u, p.load_factor, p.state.u_n, p.load_factor_n)
 
     def _geometric_terms(self) -> GeometricTerms | None:
         """The obstacle pairs' geometric blocks at the iterate, or None (:attr:`consistent_geometry` off)."""
@@ -163,7 +163,7 @@ class MonolithicSolver(ReleasesPETSc):
             return None
         p = self.problem
         assert p.contact is not None  # consistent_geometry: with contact
-        return p.contact.geometric_terms(p.u, p.load_factor, p.state.u_n, p.load_factor_n)
+        return p.contact.geometry.geometric_terms(p.u, p.load_factor, p.state.u_n, p.load_factor_n)
 
     def _use_iterative(self) -> bool:
         choice = self.settings.linear_solver
@@ -195,7 +195,7 @@ class MonolithicSolver(ReleasesPETSc):
         report.converged = outcome.converged
         # every iterate was evaluated in its own geometry, and no pair can have changed: no second solve
         report.geometry_consistent = self.consistent_geometry and not (p.contact is not None
-                                                                       and p.contact.surface_geometry)
+                                                                       and p.contact.geometry.surfaces_follow)
         final = report.final
         if outcome.converged:
             report.message = "converged"

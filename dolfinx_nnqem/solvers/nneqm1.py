@@ -46,7 +46,7 @@ from petsc4py import PETSc
 from dolfinx_nnqem.solvers.condensation import Condensation, check_dense_memory
 from dolfinx_nnqem.solvers.condensed import CondensedProblem, CondensedSystem, newton_step, rigid_start
 from dolfinx_nnqem.contact.laws import LawEvaluation
-from dolfinx_nnqem.contact.model import PairLaws
+from dolfinx_nnqem.contact.pair_laws import PairLaws
 from dolfinx_nnqem.solvers.contract import ReleasesPETSc, contact_model
 from dolfinx_nnqem.solvers.convergence import IterationRecord, SolveReport, count_states, iteration_log_on, logger
 from dolfinx_nnqem.numerics.linalg import free_dropped_objects, global_norm, vec_norm
@@ -89,7 +89,7 @@ class NNEQM1Solver(ReleasesPETSc):
         self.condensation = Condensation(problem, self.name, self.options.petsc_options)
         self._timings: dict[str, float] = {}
         self.last_condensed: CondensedProblem | None = None  #: the latest outer iteration's dense problem
-        self._geometry_version = contact_model(problem).geometry_version
+        self._geometry_version = contact_model(problem).geometry.version
 
     @property
     def timings(self) -> dict[str, float]:
@@ -102,10 +102,10 @@ class NNEQM1Solver(ReleasesPETSc):
     def solve_increment(self, load_factor: float) -> SolveReport:
         p = self.problem
         model = contact_model(p)
-        if model.geometry_version != self._geometry_version:
+        if model.geometry.version != self._geometry_version:
             # the contact geometry changed (current geometry): the flexibility C = B G Bᵀ is rebuilt
             # from the new B at the next factorisation, whether the pairing or only the rows changed
-            self._geometry_version = model.geometry_version
+            self._geometry_version = model.geometry.version
             self.condensation.pairs_changed()
         # the outer iteration starts where the monolithic solver's Newton does: from the secant
         # extrapolation of the last two increments (u and the pair unknowns) while the load path
@@ -292,7 +292,7 @@ class _OuterSystem:
         cond = CondensedProblem(
             C=self._C, w_free=model.gather(model.B_times(x_r)).reshape(-1), w_m=model.gather(w).reshape(-1),
             lam_m=lam_m.reshape(-1), mu_f=self.laws.mu_f, g0=self.laws.g0, w_prev=self.w_prev,
-            r=max(group.r for group in self.laws.groups), BN=cond_solver.mode_coupling(),
+            r=self.laws.r_max, BN=cond_solver.mode_coupling(),
             e=cond_solver.mode_loads(r))
         s.last_condensed = cond
         opts = s.options

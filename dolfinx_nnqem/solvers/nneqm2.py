@@ -59,9 +59,9 @@ _SQRT23 = math.sqrt(2.0 / 3.0)
 def refuse_current_geometry(problem: ContactProblem) -> None:
     """NNEQM2 takes contact geometry computed once (``geometry = "reference"``); raise otherwise."""
     model = problem.contact
-    if model is None or not model.current_geometry:
+    if model is None or not model.geometry.follows_bodies:
         return
-    labels = [i.contact.label for i, t in zip(model.interfaces, model.trackers) if t is not None]
+    labels = [i.contact.label for i, following in zip(model.interfaces, model.geometry.following) if following]
     raise ValueError(
         f"nneqm2: contact {', '.join(labels)} has geometry = 'current', which NNEQM2 does not take yet: it condenses "
         "every increment through the elastic stiffness factorised once per run and its pair flexibility, and "

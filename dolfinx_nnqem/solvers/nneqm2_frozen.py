@@ -38,7 +38,7 @@ import time
 import numpy as np
 from petsc4py import PETSc
 
-from dolfinx_nnqem.contact.model import PairLaws
+from dolfinx_nnqem.contact.pair_laws import PairLaws
 from dolfinx_nnqem.material.interface import PointwiseMaterial
 from dolfinx_nnqem.material.kinematics import DEVIATORIC_BASIS, equivalent_stress
 from dolfinx_nnqem.material.kinematics import equivalent_stress_gradient as flow_direction
@@ -214,7 +214,7 @@ class FrozenDirections:
             u.axpy(1.0, du0)
             w0 = contact_model(p).gather(p.relative_displacement(u))
             u.destroy()
-            laws, w_prev, r = start.laws, start.w_prev, max(group.r for group in start.laws.groups)
+            laws, w_prev, r = start.laws, start.w_prev, start.laws.r_max
             BN = self.elastic.mode_coupling()
         else:
             w0, WBB, WBQ = np.zeros((0, 3)), np.zeros((0, 0)), np.zeros((0, self.gp.num_yield_points))

@@ -226,7 +226,7 @@ class ReturnMapIncrement:
             lam_m, _ = laws.force(z_all)
             cond = CondensedProblem(C=C, w_free=model.gather(model.B_times(x_r)).reshape(-1), w_m=w_all.reshape(-1),
                                     lam_m=lam_m.reshape(-1), mu_f=laws.mu_f, g0=laws.g0, w_prev=w_prev,
-                                    r=max(group.r for group in laws.groups), BN=tangent.mode_coupling(), e=e)
+                                    r=laws.r_max, BN=tangent.mode_coupling(), e=e)
             system = CondensedSystem(laws, cond, self.F)
             x0 = system.scaled(z_all)
             H, J, chart = system.residual(x0, frozen=system.at(w_all, z_all))

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 from mpi4py import MPI
 
-from dolfinx_nnqem.contact.model import LostContactError
+from dolfinx_nnqem.contact.geometry_tracking import LostContactError
 from dolfinx_nnqem.contact.slip_check import stale_message, switch_message
 from dolfinx_nnqem.material.interface import GaussPointValues
 from dolfinx_nnqem.solvers.checks import CheckOptions, StateCheck, check_state, failure_details, values_to_commit
@@ -263,7 +263,7 @@ def _solve(problem, solver, target: float) -> SolveReport:
     The report counts the Newton iterations of every pass.
     """
     model = problem.contact
-    if model is None or not model.current_geometry:
+    if model is None or not model.geometry.follows_bodies:
         return solver.solve_increment(target)
     lost = _update_geometry(problem, target)
     if lost is not None:
@@ -317,12 +317,12 @@ def _moved_to_current_geometry(problem, solver, report: SolveReport, target: flo
     model = problem.contact
     if model is None:
         return False
-    slips = model.slipped(problem.relative_displacement())
+    slips = model.geometry.slipped(problem.relative_displacement())
     if not slips:
         return False
     stale = []
     for slip in slips:
-        why_not = model.why_not_current(slip.index)
+        why_not = model.geometry.why_not_current(slip.index)
         if why_not is None and not solver.follows_contact_geometry:
             why_not = (f"{solver.name} solves contact in the reference geometry only (use the monolithic solver or "
                        "NNEQM1 for large sliding)")
@@ -339,7 +339,7 @@ def _moved_to_current_geometry(problem, solver, report: SolveReport, target: flo
                              "committed: the contact geometry is stale"] + [f"  {line}" for line in stale])
         _give_up(message, failure, callbacks)
     for slip in slips:
-        model.follow_bodies(slip.index)
+        model.geometry.start_following(slip.index)
         message = switch_message(slip, target)
         problem.slip_warnings.append(message)
         logger.warning(f"[{solver.name}] {message}")
@@ -422,7 +422,7 @@ def _stale_geometry(problem) -> list[str]:
         return []
     return [f"  likely cause: {slip.describe()} at the last iterate: the pairs, normals and gaps found in the "
             "reference configuration no longer describe the surfaces"
-            for slip in model.slipped(problem.relative_displacement())]
+            for slip in model.geometry.slipped(problem.relative_displacement())]
 
 
 def _sliding_bodies(problem, report: SolveReport) -> list[str]:

@@ -46,7 +46,7 @@ def solve(case: str, method: str, comm=MPI.COMM_WORLD) -> dict[str, np.ndarray]:
     return {"position": t["position_b"], "force": t["force_on_body1"], "total": force(problem),
             "iterations": np.array([r.iterations for r in results]),
             "pairs_per_rank": np.array(comm.allgather(problem.contact.num_local)),
-            "following": np.array(problem.contact.following_bodies()),
+            "following": np.array(problem.contact.geometry.following),
             "foreign_masters": np.array(comm.allreduce(foreign_masters(problem), op=MPI.SUM))}
 
 

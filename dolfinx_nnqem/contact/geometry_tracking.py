@@ -1,0 +1,373 @@
+r"""Geometry tracking: where the pairs of each interface of a contact model come from, and when they move.
+
+An interface's pairs are computed once in the reference configuration, or re-evaluated where the
+bodies are by a tracker (:mod:`~dolfinx_nnqem.contact.current_geometry`): from the start
+(``geometry = "current"``), or from the increment where its surfaces slid past the slip limit
+(``geometry = "auto"``, :mod:`~dolfinx_nnqem.contact.slip_check`).
+
+:class:`ContactGeometry` is all of it for one model (``ContactModel.geometry``): the trackers, the
+slip check, and the re-evaluations, which hand the model its interfaces' new pair sets
+(:class:`TrackedModel`: what the geometry reads of its model and does to it). Solvers, load
+stepping and the checkpoints use its public members only; nothing outside ``contact/`` touches a
+tracker.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from typing import Protocol
+
+from dolfinx_nnqem import compat  # noqa: F401, I001  (first: loads MPI/PETSc for the PyPI wheel)
+
+import numpy as np
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from dolfinx_nnqem.contact.current_geometry import MortarTracker, ObstacleTracker, SurfaceTracker, surface_tracker
+from dolfinx_nnqem.contact.discretisation import discretise
+from dolfinx_nnqem.contact.geometric_stiffness import GeometricTerms, no_terms, obstacle_terms
+from dolfinx_nnqem.contact.obstacles import ObstaclePairs, RigidObstacle, obstacle_pairs
+from dolfinx_nnqem.contact.pairset import PairSet
+from dolfinx_nnqem.contact.slip_check import Slip, facet_size_of, slipped_interfaces
+from dolfinx_nnqem.contact.specification import Contact
+from dolfinx_nnqem.contact.surfaces import ContactPairError, NoPairsError, mesh_tolerance, space_degree
+
+__all__ = ["ContactGeometry", "GeometryTracker", "LostContactError", "Remap", "TrackedInterface", "TrackedModel",
+           "reference_pairs", "starting_pairs", "tracker_of", "zero_displacement"]
+
+GeometryTracker = ObstacleTracker | SurfaceTracker | MortarTracker
+
+Remap = Callable[[np.ndarray, np.ndarray], np.ndarray]
+"""``remap(old, fill)``: per-pair rows laid out like the pairs before a re-evaluation, in the new
+layout (:func:`~dolfinx_nnqem.contact.current_geometry.remapper`)."""
+
+
+class LostContactError(ContactPairError):
+    """A re-evaluation of the current geometry found no pair on an interface (the slave nodes left the
+    master surface): load stepping takes it as a failed solve and cuts the increment back."""
+
+
+def zero_displacement(V):
+    """A zero displacement on V (the reference configuration)."""
+    import dolfinx
+
+    return dolfinx.fem.Function(V)
+
+
+def starting_pairs(contact: Contact, V, facet_tags, supported: np.ndarray) -> tuple[PairSet, GeometryTracker | None]:
+    """The interface's pairs where a run starts, and its tracker if it follows the bodies from there
+    (``geometry = "current"``; collective).
+
+    Parameters
+    ----------
+    contact
+        The interface.
+    V, facet_tags
+        The displacement space and the facet tags naming the surfaces.
+    supported
+        V's local dofs, non-zero at prescribed ones (see
+        :func:`~dolfinx_nnqem.contact.discretisation.discretise`).
+    """
+    if contact.geometry != "current":
+        return reference_pairs(contact, V, facet_tags, supported), None
+    if space_degree(V) != 1:
+        raise ValueError(f"contact {contact.label}: geometry = 'current' takes degree-1 displacements in "
+                         f"this version (its closest points and pair rows are those of linear facets); "
+                         f"the displacements here have degree {space_degree(V)}: use geometry = "
+                         f"'reference', or degree 1")
+    tracker = tracker_of(contact, V, facet_tags, supported)
+    return tracker.pairs_at(zero_displacement(V), 0.0), tracker
+
+
+def reference_pairs(contact: Contact, V, facet_tags, supported: np.ndarray | None = None) -> PairSet:
+    """The interface's pairs in the reference configuration (collective); ``supported``: see
+    :func:`~dolfinx_nnqem.contact.discretisation.discretise`."""
+    if isinstance(contact.surface1, RigidObstacle):  # contact.obstacle, narrowed for the type checker
+        return obstacle_pairs(V, facet_tags, int(contact.surface2), contact.surface1, tolerance=contact.tolerance)
+    return discretise(V, facet_tags, int(contact.surface1), int(contact.surface2), contact.discretisation,
+                      slave=contact.slave, tolerance=contact.tolerance, search_distance=contact.search_distance,
+                      initial_gap=contact.initial_gap, supported=supported)
+
+
+def tracker_of(contact: Contact, V, facet_tags, supported: np.ndarray | None = None, *,
+               reference: PairSet | None = None) -> GeometryTracker:
+    """What re-evaluates the pairs of the interface in the current configuration (collective).
+
+    ``reference``: the interface's reference-geometry pairs, when ``geometry = "auto"`` moves it to
+    the current geometry during a run: the tracker then keeps their discretisation (mortar where
+    ``discretisation = "auto"`` chose mortar) and slave side, so that every pair keeps its slave
+    node. Without it, ``discretisation = "auto"`` means node-to-surface.
+    """
+    if isinstance(contact.surface1, RigidObstacle):
+        tolerance = mesh_tolerance(V.mesh) if contact.tolerance is None else float(contact.tolerance)
+        return ObstacleTracker(obstacle_pairs(V, facet_tags, int(contact.surface2), contact.surface1,
+                                              tolerance=tolerance))
+    slave = contact.slave
+    if reference is not None:
+        discretisation = "mortar" if reference.kind == "mortar" else "node-to-surface"
+        slave = getattr(reference, "slave", slave)  # node-to-surface and mortar pairs name their slave side
+    else:
+        discretisation = "mortar" if contact.discretisation == "mortar" else "node-to-surface"  # auto: node-to-surface
+    return surface_tracker(V, facet_tags, (int(contact.surface1), int(contact.surface2)), slave=slave,
+                           search_distance=contact.search_distance, supported=supported,
+                           discretisation=discretisation)
+
+
+class TrackedInterface(Protocol):
+    """What the geometry reads of an interface of its model."""
+
+    @property
+    def contact(self) -> Contact: ...
+
+    @property
+    def pairs(self) -> PairSet: ...
+
+    @property
+    def local(self) -> slice:
+        """The interface's rows among the model's local pairs."""
+        ...
+
+
+class TrackedModel(Protocol):
+    """What the geometry reads of its contact model and does to it
+    (:class:`~dolfinx_nnqem.contact.model.ContactModel`)."""
+
+    @property
+    def interfaces(self) -> Sequence[TrackedInterface]: ...
+
+    def force(self, z: np.ndarray | None = None) -> np.ndarray:
+        """λ(z) of the local pairs."""
+        ...
+
+    def replace_pairs(self, pairs: Sequence[PairSet], u_n, load_factor_n: float) -> Remap:
+        """The model on new pair sets of its interfaces, one per interface; the remap of per-pair arrays."""
+        ...
+
+    def refill_pairs(self, pairs: Mapping[int, PairSet], u_n, load_factor_n: float) -> None:
+        """New values of the pair sets of some interfaces, in place: the same pairs, B's pattern kept."""
+        ...
+
+
+class ContactGeometry:
+    """Where a contact model's pairs come from, interface by interface, and when they move.
+
+    Made by the model (``ContactModel.geometry``), which passes itself and the trackers of the
+    interfaces that follow the bodies from the start. Its public members are all that solvers,
+    load stepping and the checkpoints use of the geometry (the type checker holds them to it); the
+    trackers stay inside. Every method that evaluates pairs is collective.
+
+    Parameters
+    ----------
+    model
+        The contact model whose pairs this geometry evaluates.
+    V, facet_tags
+        The displacement space and the facet tags naming the surfaces.
+    trackers
+        Per interface: its tracker, or None in the reference geometry.
+    constrained_dofs
+        The model's vector of constrained dofs (1 at prescribed ones): the supports of the trackers
+        made later (:meth:`start_following`).
+
+    Attributes
+    ----------
+    version
+        Counts the re-evaluations that changed the pairs (:meth:`update`): the solvers rebuild
+        what they built on B when it moves on.
+    """
+
+    def __init__(self, model: TrackedModel, V, facet_tags, trackers: list[GeometryTracker | None],
+                 constrained_dofs: PETSc.Vec):
+        self._model = model
+        self._V = V
+        self._comm = V.mesh.comm
+        self._facet_tags = facet_tags
+        self._trackers = trackers
+        self._constrained_dofs = constrained_dofs
+        self.version = 0
+        self._refreshed_at: np.ndarray | None = None  # where refresh_obstacles last evaluated
+        self._facet_sizes: list[float] | None = None  # of the interfaces' slave surfaces, at the first slip check
+
+    # -- which interfaces follow the bodies ---------------------------------------------------------
+    @property
+    def follows_bodies(self) -> bool:
+        """True if some interface re-evaluates its pairs in the current configuration."""
+        return any(t is not None for t in self._trackers)
+
+    @property
+    def following(self) -> list[bool]:
+        """Per interface: True where its pairs are re-evaluated in the current configuration."""
+        return [t is not None for t in self._trackers]
+
+    @property
+    def obstacles_follow(self) -> bool:
+        """True if some interface is a rigid obstacle in the current geometry (whose pairs
+        :meth:`refresh_obstacles` re-evaluates in place)."""
+        return any(isinstance(t, ObstacleTracker) for t in self._trackers)
+
+    @property
+    def surfaces_follow(self) -> bool:
+        """True if some interface is node-to-surface or mortar in the current geometry (its pairs may
+        change; it is re-evaluated between solves, not within one)."""
+        return any(isinstance(t, (SurfaceTracker, MortarTracker)) for t in self._trackers)
+
+    @property
+    def pairs_may_change(self) -> bool:
+        """True if some interface's pairs depend on u: in the current geometry, or ``geometry = "auto"``
+        and able to move there (:meth:`why_not_current`)."""
+        return any(t is not None or self.why_not_current(k) is None for k, t in enumerate(self._trackers))
+
+    def why_not_current(self, k: int) -> str | None:
+        """None if interface ``k`` (in the reference geometry) can be re-evaluated in the current
+        configuration from now on (``geometry = "auto"``); else the reason it cannot."""
+        interface = self._model.interfaces[k]
+        if interface.contact.geometry == "reference":
+            return "geometry = 'reference' was chosen for it (use 'auto' or 'current' for large sliding)"
+        if interface.pairs.kind == "node-to-node":
+            return ("node-to-node pairs join nodes that faced each other in the reference configuration (use "
+                    "discretisation = 'node-to-surface' or 'mortar' for large sliding)")
+        if space_degree(self._V) != 1:
+            return (f"the current geometry takes degree-1 displacements in this version (its closest points and "
+                    f"pair rows are those of linear facets); the displacements here have degree "
+                    f"{space_degree(self._V)} (use degree 1 for large sliding)")
+        return None
+
+    def start_following(self, k: int) -> None:
+        """Re-evaluate interface ``k`` in the current configuration from now on (collective): its tracker
+        is made, and the next :meth:`update` evaluates its pairs where the bodies are.
+
+        For ``geometry = "auto"`` past the slip limit (:meth:`why_not_current` must be None).
+        """
+        if self._trackers[k] is not None:
+            return
+        interface = self._model.interfaces[k]
+        with self._constrained_dofs.localForm() as c:
+            self._trackers[k] = tracker_of(interface.contact, self._V, self._facet_tags, supported=c.array.copy(),
+                                           reference=interface.pairs)
+
+    def slipped(self, w: np.ndarray) -> list[Slip]:
+        """The reference-geometry interfaces whose surfaces slid past
+        :data:`~dolfinx_nnqem.contact.slip_check.SLIP_LIMIT` × their facet size at the relative
+        displacement ``w`` (collective; :func:`~dolfinx_nnqem.contact.slip_check.slipped_interfaces`)."""
+        interfaces = self._model.interfaces
+        if self._facet_sizes is None:  # a reference-geometry interface's areas never change: measured once
+            self._facet_sizes = [facet_size_of(self._comm, i.pairs.area) for i in interfaces]
+        sizes = [None if t is not None else size for size, t in zip(self._facet_sizes, self._trackers)]
+        return slipped_interfaces(self._comm, interfaces, sizes, w)
+
+    # -- re-evaluations -----------------------------------------------------------------------------
+    def update(self, u, load_factor: float, u_n, load_factor_n: float) -> Remap:
+        """Re-evaluate the current-geometry interfaces at (u, ℓ) (collective).
+
+        The pair unknowns z, z_n and the states follow their slave node; new pairs start
+        force-free. w_n is measured again with the new rows, w_n = B u_n + m(ℓ_n): the slip of an
+        increment is the relative displacement increment of the slave node and the master point
+        now under it, in the current tangent plane (``docs/theory.md``).
+
+        Parameters
+        ----------
+        u, u_n
+            DOLFINx functions: where the geometry is evaluated, and the last converged displacement.
+        load_factor, load_factor_n
+            ℓ of the obstacles' position, and of the last converged increment.
+
+        Returns
+        -------
+        The remap of per-pair arrays: ``remap(old, fill)`` gives the rows of ``old`` (laid out like
+        the pairs before the update) in the new layout, and for new pairs those of ``fill`` (one
+        row, or an array in the new layout).
+
+        Raises
+        ------
+        LostContactError
+            An interface has no pair left; the model is then unchanged.
+        """
+        # every interface evaluated before anything changes: if one has lost its pairs, the model stays
+        pairs = [i.pairs if t is None else _pairs_or_lost(i, t, u, load_factor)
+                 for i, t in zip(self._model.interfaces, self._trackers)]
+        self._refreshed_at = None
+        remap = self._model.replace_pairs(pairs, u_n, load_factor_n)
+        self.version += 1
+        return remap
+
+    def refresh_obstacles(self, u, load_factor: float, u_n, load_factor_n: float) -> None:
+        """Re-evaluate the current-geometry obstacle interfaces at (u, ℓ) in place (collective).
+
+        An obstacle keeps one pair per slave node and B keeps its pattern (the slave node's three
+        columns): only the frames R, the gaps g0 (rebased as in :meth:`update`) and B's values
+        change, and w_n is measured again with the new rows. The pairs, their unknowns and the
+        solvers' matrices stay; this is what the monolithic solver calls at every Newton iterate
+        (:mod:`~dolfinx_nnqem.contact.geometric_stiffness`). Nothing is done when the slave nodes,
+        ℓ and u_n are where the last refresh had them.
+        """
+        key = self._refresh_key(u, load_factor, u_n, load_factor_n)
+        same = (self._refreshed_at is not None and len(key) == len(self._refreshed_at)
+                and bool(np.array_equal(key, self._refreshed_at)))
+        # agreed by every rank: a rank whose own slave nodes did not move must still join B's
+        # assembly and the measure of w_n (collective) when another rank's did
+        if self._comm.allreduce(same, op=MPI.LAND):
+            return
+        pairs = {k: tracker.pairs_at(u, load_factor) for k, tracker in enumerate(self._trackers)
+                 if isinstance(tracker, ObstacleTracker)}
+        self._model.refill_pairs(pairs, u_n, load_factor_n)
+        self._refreshed_at = key
+
+    def _refresh_key(self, u, load_factor: float, u_n, load_factor_n: float) -> np.ndarray:
+        """What an obstacle refresh depends on: the slave nodes' u and u_n, ℓ and ℓ_n."""
+        start = u.function_space.dofmap.index_map.local_range[0]
+        parts = [np.array([load_factor, load_factor_n])]
+        for interface, tracker in zip(self._model.interfaces, self._trackers):
+            if isinstance(tracker, ObstacleTracker):
+                blocks = interface.pairs.slave_blocks - start
+                parts += [u.x.array.reshape(-1, 3)[blocks].ravel(), u_n.x.array.reshape(-1, 3)[blocks].ravel()]
+        return np.concatenate(parts)
+
+    def geometric_terms(self, u, load_factor: float, u_n, load_factor_n: float,
+                        lam: np.ndarray | None = None) -> GeometricTerms:
+        """The geometric blocks K_s, W_s of the current-geometry obstacle pairs at (u, ℓ) and the forces
+        ``lam`` (default: the model's λ(z)), their geometry refreshed there first
+        (:mod:`~dolfinx_nnqem.contact.geometric_stiffness`)."""
+        lam = self._model.force() if lam is None else lam
+        start = u.function_space.dofmap.index_map.local_range[0]
+        pairs_, blocks, Ks, Ws = [], [], [], []
+        for interface, tracker in zip(self._model.interfaces, self._trackers):
+            if not isinstance(tracker, ObstacleTracker):
+                continue
+            pairs = interface.pairs
+            assert isinstance(pairs, ObstaclePairs)  # an obstacle tracker's pairs
+            index = pairs.slave_blocks - start
+            K, W = obstacle_terms(pairs, u.x.array.reshape(-1, 3)[index], u_n.x.array.reshape(-1, 3)[index],
+                                  pairs.obstacle.displacement(load_factor), pairs.obstacle.displacement(load_factor_n),
+                                  lam[interface.local])
+            pairs_.append(np.arange(interface.local.start, interface.local.stop))
+            blocks.append(pairs.slave_blocks)
+            Ks.append(K)
+            Ws.append(W)
+        if not pairs_:
+            return no_terms()
+        return GeometricTerms(np.concatenate(pairs_), np.concatenate(blocks).astype(np.int64), np.concatenate(Ks),
+                              np.concatenate(Ws))
+
+    # -- checkpoints --------------------------------------------------------------------------------
+    def state(self) -> list[np.ndarray | None]:
+        """Per interface, what its next evaluation depends on besides u (for checkpoints): the master
+        facet of every slave node (node-to-surface in current geometry), or None."""
+        return [t.facets if isinstance(t, SurfaceTracker) else None for t in self._trackers]
+
+    def set_state(self, state: Sequence[np.ndarray | None]) -> None:
+        """Restore :meth:`state`."""
+        for tracker, facets in zip(self._trackers, state):
+            if isinstance(tracker, SurfaceTracker) and facets is not None:
+                tracker.facets = np.asarray(facets, dtype=np.int64).copy()
+
+
+def _pairs_or_lost(interface: TrackedInterface, tracker: GeometryTracker, u, load_factor: float) -> PairSet:
+    """The tracker's pairs at (u, ℓ); :class:`LostContactError` naming the interface if there are none."""
+    lost = (f"contact {interface.contact.label}: no pairs in the current geometry at load factor "
+            f"{load_factor:.6g}: no slave node faces the master surface any more (the bodies slid apart)")
+    try:
+        pairs: PairSet = tracker.pairs_at(u, load_factor)
+    except NoPairsError as error:  # node-to-surface and mortar alike: one outcome, one message
+        raise LostContactError(lost) from error
+    if pairs.num_global == 0:
+        raise LostContactError(lost)
+    return pairs
