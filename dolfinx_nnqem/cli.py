@@ -555,6 +555,8 @@ def _abort_unless_ended(code: int, reason: str) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run the command with the arguments ``argv`` (default: the process's own) and return its exit
+    code (module docstring). Run as the command line, it ends the process with that code instead."""
     interrupts.received.clear()
     interrupts.run_over = False
     _hold_signals()  # start-up: an interrupt is recorded, and acted on once the run can end cleanly

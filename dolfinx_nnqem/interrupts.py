@@ -42,7 +42,7 @@ run_over = False
 signal in :data:`deferred` (``dolfinx_nnqem.cli`` resets it when it starts another run)."""
 
 
-def defer(signum: int, frame) -> None:
+def defer(signum: int, frame: object) -> None:
     """A signal handler that only records the signal in :data:`deferred`."""
     deferred.append(signum)
 

@@ -32,7 +32,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from dolfinx_nnqem import compat  # noqa: F401, I001  (first: loads MPI/PETSc for the PyPI wheel)
 
@@ -44,6 +44,9 @@ from dolfinx_nnqem.contact.pairset import PairRows, rows_matrix
 from dolfinx_nnqem.contact.surface_pairs import SurfacePairs, facet_size
 from dolfinx_nnqem.contact.surfaces import (GatheredSurfaces, check_no_shared_nodes, gather_surfaces, local_frames,
                                             mesh_tolerance)
+
+if TYPE_CHECKING:
+    import dolfinx
 
 __all__ = ["GEOMETRIES", "MortarTracker", "ObstacleTracker", "SurfaceTracker", "displacement_at", "match_pairs",
            "moved_surfaces", "remapper", "surface_tracker"]
@@ -74,7 +77,7 @@ patch test after a slide, unstructured tetrahedra: pressures 6.4e-6 off uniform;
 rounding, as with none, 5.9e-9 with 10⁻¹⁴ and 2.5e-8 with 10⁻¹³)."""
 
 
-def displacement_at(u, blocks: np.ndarray) -> np.ndarray:
+def displacement_at(u: dolfinx.fem.Function, blocks: np.ndarray) -> np.ndarray:
     """u at the global dof blocks ``blocks`` (the same on every rank), (len(blocks), 3), on every rank.
 
     Each rank fills the blocks it owns and the sum over the ranks puts every value everywhere
@@ -98,7 +101,7 @@ def displacement_at(u, blocks: np.ndarray) -> np.ndarray:
     return out
 
 
-def moved_surfaces(surfaces: GatheredSurfaces, u) -> GatheredSurfaces:
+def moved_surfaces(surfaces: GatheredSurfaces, u: dolfinx.fem.Function) -> GatheredSurfaces:
     """The gathered surfaces with every vertex at X + u (collective).
 
     The facets' outward area vectors and the nodes' normals stay the reference ones: they only
@@ -128,7 +131,7 @@ def with_moved_normals(surfaces: GatheredSurfaces) -> GatheredSurfaces:
     return GatheredSurfaces(surfaces.tags, replace(facets, area=area), surfaces.nodes)
 
 
-def rebased(pairs: SurfacePairs, V, u) -> SurfacePairs:
+def rebased(pairs: SurfacePairs, V: dolfinx.fem.FunctionSpace, u: dolfinx.fem.Function) -> SurfacePairs:
     """The pairs with g0 := g* − (B u*)_n, so that g = g0 + (B u)_n is the gap g* at u = u* (module)."""
     B = rows_matrix(pairs.comm, pairs.rows, pairs.num_global, V.dofmap.index_map)
     w = B.createVecLeft()
@@ -167,7 +170,7 @@ class ObstacleTracker:
 
     reference: ObstaclePairs
 
-    def pairs_at(self, u, load_factor: float) -> ObstaclePairs:
+    def pairs_at(self, u: dolfinx.fem.Function, load_factor: float) -> ObstaclePairs:
         """The pairs with the slave nodes at X + u and the obstacle at d(ℓ), gaps rebased (module)."""
         pairs = self.reference
         start = u.function_space.dofmap.index_map.local_range[0]
@@ -196,7 +199,7 @@ class SurfaceTracker:
     supported: np.ndarray | None
     facets: np.ndarray | None = None  #: (slave nodes,) the master facet of the last evaluation (−1: none)
 
-    def pairs_at(self, u, load_factor: float) -> SurfacePairs:
+    def pairs_at(self, u: dolfinx.fem.Function, load_factor: float) -> SurfacePairs:
         """The node-to-surface pairs of the moved surfaces, gaps rebased (module; collective)."""
         from dolfinx_nnqem.contact.node_to_surface import node_to_surface_pairs  # numba: only when used
 
@@ -236,7 +239,7 @@ class MortarTracker:
     note: str
     supported: np.ndarray | None
 
-    def pairs_at(self, u, load_factor: float) -> SurfacePairs:
+    def pairs_at(self, u: dolfinx.fem.Function, load_factor: float) -> SurfacePairs:
         """The mortar pairs of the moved surfaces, gaps rebased (module; collective)."""
         from dolfinx_nnqem.contact.mortar import mortar_pairs
 
@@ -246,8 +249,8 @@ class MortarTracker:
         return rebased(pairs, self.V, u)
 
 
-def surface_tracker(V, facet_tags, tags: tuple[int, int], *, slave: int | None,
-                    search_distance: float | None, supported: np.ndarray | None,
+def surface_tracker(V: dolfinx.fem.FunctionSpace, facet_tags: dolfinx.mesh.MeshTags, tags: tuple[int, int], *,
+                    slave: int | None, search_distance: float | None, supported: np.ndarray | None,
                     discretisation: str = "node-to-surface") -> SurfaceTracker | MortarTracker:
     """The tracker of a node-to-surface or mortar interface between ``tags`` (collective): the
     surfaces gathered once, the slave side chosen as :func:`~dolfinx_nnqem.contact.discretisation.discretise` does."""

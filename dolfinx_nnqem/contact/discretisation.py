@@ -21,6 +21,9 @@ the master surface: node-to-surface onto the exact surface).
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from dolfinx_nnqem.contact.nearest import nearest
@@ -29,6 +32,9 @@ from dolfinx_nnqem.contact.pairset import PairSet
 from dolfinx_nnqem.contact.surface_pairs import facet_size
 from dolfinx_nnqem.contact.surfaces import (GatheredSurfaces, check_no_shared_nodes, gather_surfaces,
                                             mesh_tolerance)
+
+if TYPE_CHECKING:
+    import dolfinx
 
 __all__ = ["DISCRETISATIONS", "OBSTACLE_DISCRETISATIONS", "discretise", "nodes_coincide", "slave_side"]
 
@@ -56,9 +62,10 @@ def slave_side(surfaces: GatheredSurfaces, slave: int | None) -> tuple[int, str]
     return tag2, f" (slave: the finer side or, on a tie, surface2; facet size {h2:.4g} against {h1:.4g})"
 
 
-def discretise(V, facet_tags, surface1: int, surface2: int, discretisation: str = "auto", *,
+def discretise(V: dolfinx.fem.FunctionSpace, facet_tags: dolfinx.mesh.MeshTags, surface1: int, surface2: int, discretisation: str = "auto", *,
                slave: int | None = None, tolerance: float | None = None, search_distance: float | None = None,
-               initial_gap=None, supported: np.ndarray | None = None) -> PairSet:
+               initial_gap: Callable[[np.ndarray], np.ndarray] | None = None,
+               supported: np.ndarray | None = None) -> PairSet:
     """The pair set of an interface between the meshed surfaces ``surface1`` and ``surface2`` (collective).
 
     Parameters

@@ -47,6 +47,7 @@ class NodeCombination:
 
     @classmethod
     def identity(cls, p: int) -> NodeCombination:
+        """The identity on ``p`` nodes: row j is node j alone, with coefficient 1."""
         return cls(np.arange(p + 1, dtype=np.int64), np.arange(p, dtype=np.int64), np.ones(p))
 
     def row(self, j: int) -> tuple[np.ndarray, np.ndarray]:

@@ -15,7 +15,7 @@ tracker.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 from dolfinx_nnqem import compat  # noqa: F401, I001  (first: loads MPI/PETSc for the PyPI wheel)
 
@@ -32,6 +32,9 @@ from dolfinx_nnqem.contact.slip_check import Slip, facet_size_of, slipped_interf
 from dolfinx_nnqem.contact.specification import Contact
 from dolfinx_nnqem.contact.surfaces import ContactPairError, NoPairsError, mesh_tolerance, space_degree
 
+if TYPE_CHECKING:
+    import dolfinx
+
 __all__ = ["ContactGeometry", "GeometryTracker", "LostContactError", "Remap", "TrackedInterface", "TrackedModel",
            "reference_pairs", "starting_pairs", "tracker_of", "zero_displacement"]
 
@@ -47,14 +50,15 @@ class LostContactError(ContactPairError):
     master surface): load stepping takes it as a failed solve and cuts the increment back."""
 
 
-def zero_displacement(V):
+def zero_displacement(V: dolfinx.fem.FunctionSpace) -> dolfinx.fem.Function:
     """A zero displacement on V (the reference configuration)."""
     import dolfinx
 
     return dolfinx.fem.Function(V)
 
 
-def starting_pairs(contact: Contact, V, facet_tags, supported: np.ndarray) -> tuple[PairSet, GeometryTracker | None]:
+def starting_pairs(contact: Contact, V: dolfinx.fem.FunctionSpace, facet_tags: dolfinx.mesh.MeshTags,
+                   supported: np.ndarray) -> tuple[PairSet, GeometryTracker | None]:
     """The interface's pairs where a run starts, and its tracker if it follows the bodies from there
     (``geometry = "current"``; collective).
 
@@ -79,7 +83,8 @@ def starting_pairs(contact: Contact, V, facet_tags, supported: np.ndarray) -> tu
     return tracker.pairs_at(zero_displacement(V), 0.0), tracker
 
 
-def reference_pairs(contact: Contact, V, facet_tags, supported: np.ndarray | None = None) -> PairSet:
+def reference_pairs(contact: Contact, V: dolfinx.fem.FunctionSpace, facet_tags: dolfinx.mesh.MeshTags,
+                    supported: np.ndarray | None = None) -> PairSet:
     """The interface's pairs in the reference configuration (collective); ``supported``: see
     :func:`~dolfinx_nnqem.contact.discretisation.discretise`."""
     if isinstance(contact.surface1, RigidObstacle):  # contact.obstacle, narrowed for the type checker
@@ -89,7 +94,7 @@ def reference_pairs(contact: Contact, V, facet_tags, supported: np.ndarray | Non
                       initial_gap=contact.initial_gap, supported=supported)
 
 
-def tracker_of(contact: Contact, V, facet_tags, supported: np.ndarray | None = None, *,
+def tracker_of(contact: Contact, V: dolfinx.fem.FunctionSpace, facet_tags: dolfinx.mesh.MeshTags, supported: np.ndarray | None = None, *,
                reference: PairSet | None = None) -> GeometryTracker:
     """What re-evaluates the pairs of the interface in the current configuration (collective).
 
@@ -117,10 +122,14 @@ class TrackedInterface(Protocol):
     """What the geometry reads of an interface of its model."""
 
     @property
-    def contact(self) -> Contact: ...
+    def contact(self) -> Contact:
+        """The interface's specification."""
+        ...
 
     @property
-    def pairs(self) -> PairSet: ...
+    def pairs(self) -> PairSet:
+        """The interface's current pair set."""
+        ...
 
     @property
     def local(self) -> slice:
@@ -133,17 +142,19 @@ class TrackedModel(Protocol):
     (:class:`~dolfinx_nnqem.contact.model.ContactModel`)."""
 
     @property
-    def interfaces(self) -> Sequence[TrackedInterface]: ...
+    def interfaces(self) -> Sequence[TrackedInterface]:
+        """The model's interfaces, in the order of its local pairs."""
+        ...
 
     def force(self, z: np.ndarray | None = None) -> np.ndarray:
         """λ(z) of the local pairs."""
         ...
 
-    def replace_pairs(self, pairs: Sequence[PairSet], u_n, load_factor_n: float) -> Remap:
+    def replace_pairs(self, pairs: Sequence[PairSet], u_n: dolfinx.fem.Function, load_factor_n: float) -> Remap:
         """The model on new pair sets of its interfaces, one per interface; the remap of per-pair arrays."""
         ...
 
-    def refill_pairs(self, pairs: Mapping[int, PairSet], u_n, load_factor_n: float) -> None:
+    def refill_pairs(self, pairs: Mapping[int, PairSet], u_n: dolfinx.fem.Function, load_factor_n: float) -> None:
         """New values of the pair sets of some interfaces, in place: the same pairs, B's pattern kept."""
         ...
 
@@ -255,7 +266,7 @@ class ContactGeometry:
         return slipped_interfaces(self._comm, interfaces, sizes, w)
 
     # -- re-evaluations -----------------------------------------------------------------------------
-    def update(self, u, load_factor: float, u_n, load_factor_n: float) -> Remap:
+    def update(self, u: dolfinx.fem.Function, load_factor: float, u_n: dolfinx.fem.Function, load_factor_n: float) -> Remap:
         """Re-evaluate the current-geometry interfaces at (u, ℓ) (collective).
 
         The pair unknowns z, z_n and the states follow their slave node; new pairs start
@@ -289,7 +300,7 @@ class ContactGeometry:
         self.version += 1
         return remap
 
-    def refresh_obstacles(self, u, load_factor: float, u_n, load_factor_n: float) -> None:
+    def refresh_obstacles(self, u: dolfinx.fem.Function, load_factor: float, u_n: dolfinx.fem.Function, load_factor_n: float) -> None:
         """Re-evaluate the current-geometry obstacle interfaces at (u, ℓ) in place (collective).
 
         An obstacle keeps one pair per slave node and B keeps its pattern (the slave node's three
@@ -321,7 +332,7 @@ class ContactGeometry:
                 parts += [u.x.array.reshape(-1, 3)[blocks].ravel(), u_n.x.array.reshape(-1, 3)[blocks].ravel()]
         return np.concatenate(parts)
 
-    def geometric_terms(self, u, load_factor: float, u_n, load_factor_n: float,
+    def geometric_terms(self, u: dolfinx.fem.Function, load_factor: float, u_n: dolfinx.fem.Function, load_factor_n: float,
                         lam: np.ndarray | None = None) -> GeometricTerms:
         """The geometric blocks K_s, W_s of the current-geometry obstacle pairs at (u, ℓ) and the forces
         ``lam`` (default: the model's λ(z)), their geometry refreshed there first

@@ -449,17 +449,31 @@ class ContactLaw(Protocol):
         g0: npt.ArrayLike,
         mu_f: npt.ArrayLike,
         r: float,
-    ) -> LawEvaluation: ...
+    ) -> LawEvaluation:
+        """H, dH/dw, dH/dz and the states of the pairs at (w, z), with w_prev the relative
+        displacement at the start of the step, gaps g0 (nc,), friction coefficients mu_f and the
+        scaling parameter r (force/length)."""
+        ...
 
-    def force(self, z: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]: ...
+    def force(self, z: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """The contact force λ(z) (nc, 3) = (p_n, q1, q2) and dλ/dz (nc, 3, 3)."""
+        ...
 
     def unknowns(self, lam: npt.ArrayLike, slip: npt.ArrayLike | None = None,
-                 no_force: float = 0.0, constrained: npt.ArrayLike | None = None) -> np.ndarray: ...
+                 no_force: float = 0.0, constrained: npt.ArrayLike | None = None) -> np.ndarray:
+        """The unknowns z (nc, 3) giving the force ``lam``: the inverse of :meth:`force` (``slip``,
+        ``no_force`` and ``constrained`` choose z where the force gives no tangential direction)."""
+        ...
 
-    def unknown_scale(self, force_scale: float) -> np.ndarray: ...
+    def unknown_scale(self, force_scale: float) -> np.ndarray:
+        """(3,) the scale of each component of z when forces scale with ``force_scale``."""
+        ...
 
     def pin(self, evaluation: LawEvaluation, z: npt.ArrayLike, constrained: npt.ArrayLike,
-            force_unit: float) -> LawEvaluation: ...
+            force_unit: float) -> LawEvaluation:
+        """``evaluation`` with the rows of the directions the supports fix (``constrained`` (nc, 3)
+        bool) replaced by rows in z alone that vanish with λ_k (see :func:`_pin_rows`)."""
+        ...
 
     def initial_unknowns(self, constrained: npt.ArrayLike) -> np.ndarray:
         """z of pairs without force, (nc, 3), for the pinned directions ``constrained`` (nc, 3)."""

@@ -49,6 +49,8 @@ from dolfinx_nnqem.contact.geometry_tracking import ContactGeometry, Remap, star
 from dolfinx_nnqem.contact.specification import interface_r
 
 if TYPE_CHECKING:
+    import dolfinx
+
     from dolfinx_nnqem.contact.pair_laws import PairLaws
     from dolfinx_nnqem.contact.specification import Contact
 
@@ -212,10 +214,12 @@ class ContactModel:
     # -- sizes and parallel helpers ------------------------------------------------------------
     @property
     def constrained(self) -> np.ndarray:
+        """(num_local, 3) bool: the local directions whose relative motion the supports fix."""
         return self.laws.constrained
 
     @property
     def mu_f(self) -> np.ndarray:
+        """(num_local,) the friction coefficients of the local pairs."""
         return self.laws.mu_f
 
     @property
@@ -391,7 +395,7 @@ class ContactModel:
         blocks = np.concatenate([i.pairs.slave_blocks for i in self.interfaces]).astype(np.int64)
         return self.interface_index.astype(np.int64) * (self.V.dofmap.index_map.size_global + 1) + blocks
 
-    def replace_pairs(self, pairs: Sequence[PairSet], u_n, load_factor_n: float) -> Remap:
+    def replace_pairs(self, pairs: Sequence[PairSet], u_n: dolfinx.fem.Function, load_factor_n: float) -> Remap:
         """The model on new pair sets of its interfaces, one per interface (collective; what
         :meth:`~dolfinx_nnqem.contact.geometry_tracking.ContactGeometry.update` evaluated).
 
@@ -412,7 +416,7 @@ class ContactModel:
         self.w_n = self.relative_displacement(u_n.x.petsc_vec, load_factor_n)
         return remap
 
-    def refill_pairs(self, pairs: Mapping[int, PairSet], u_n, load_factor_n: float) -> None:
+    def refill_pairs(self, pairs: Mapping[int, PairSet], u_n: dolfinx.fem.Function, load_factor_n: float) -> None:
         """New values of the pair sets of some interfaces (interface index → pairs), in place: the
         same pairs in the same order with B's pattern (what
         :meth:`~dolfinx_nnqem.contact.geometry_tracking.ContactGeometry.refresh_obstacles` evaluated).

@@ -46,12 +46,17 @@ Documented choices:
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from dolfinx_nnqem.contact.facet_layout import node_combination
 from dolfinx_nnqem.contact.mortar_geometry import mortar_integrals
 from dolfinx_nnqem.contact.surface_pairs import SurfacePairs, facet_size, surface_pairs
 from dolfinx_nnqem.contact.surfaces import ContactPairError, GatheredSurfaces, NoPairsError, first_by_position, format_point
+
+if TYPE_CHECKING:
+    import dolfinx
 
 __all__ = ["MAX_COVERAGE", "MIN_COVERED", "ROUND_OFF", "mortar_pairs"]
 
@@ -66,7 +71,7 @@ MAX_COVERAGE = 1.0 + 1e-6
 """Coverage above this means master facets overlap in projection (refused)."""
 
 
-def mortar_pairs(V, surfaces: GatheredSurfaces, *, tolerance: float, search_distance: float | None = None,
+def mortar_pairs(V: dolfinx.fem.FunctionSpace, surfaces: GatheredSurfaces, *, tolerance: float, search_distance: float | None = None,
                  note: str = "", supported: np.ndarray | None = None) -> SurfacePairs:
     """Dual mortar pairs of the second gathered surface (slave) against the first (master).
 

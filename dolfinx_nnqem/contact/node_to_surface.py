@@ -34,6 +34,8 @@ projected inside the master.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from dolfinx_nnqem.contact.projection import Projection, project_points
@@ -42,10 +44,13 @@ from dolfinx_nnqem.contact.quadratic_projection import project_points_quadratic
 from dolfinx_nnqem.contact.surface_pairs import SurfacePairs, facet_size, surface_pairs
 from dolfinx_nnqem.contact.surfaces import ContactPairError, Facets, NoPairsError, GatheredSurfaces, first_by_position, format_point
 
+if TYPE_CHECKING:
+    import dolfinx
+
 __all__ = ["keep_preferred", "node_to_surface_pairs"]
 
 
-def node_to_surface_pairs(V, surfaces: GatheredSurfaces, *, tolerance: float, search_distance: float | None = None,
+def node_to_surface_pairs(V: dolfinx.fem.FunctionSpace, surfaces: GatheredSurfaces, *, tolerance: float, search_distance: float | None = None,
                           note: str = "", supported: np.ndarray | None = None,
                           edge_allowance: float | None = None, preferred: np.ndarray | None = None
                           ) -> SurfacePairs:

@@ -140,16 +140,19 @@ class Plane(RigidObstacle):
         _vector3("Plane.point", self.point)
         _vector3("Plane.normal", self.normal, unit=True)
 
-    def project(self, x):
+    def project(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """g = n · (x − point), the normal n everywhere, p = x − g n."""
         n = _vector3("Plane.normal", self.normal, unit=True)
         g = (x - np.asarray(self.point, dtype=np.float64)) @ n
         normals = np.broadcast_to(n, x.shape).copy()
         return g, normals, x - g[:, None] * normals
 
-    def normal_derivative(self, x):
+    def normal_derivative(self, x: np.ndarray) -> np.ndarray:
+        """Zero (m, 3, 3): a plane's normal does not turn."""
         return np.zeros((len(x), 3, 3))  # a plane's normal does not turn
 
     def describe(self) -> str:
+        """The plane's point and normal, in words."""
         return f"rigid plane through {format_point(self.point)} with normal {format_point(self.normal)}"
 
 
@@ -165,20 +168,23 @@ class Sphere(RigidObstacle):
         _vector3("Sphere.centre", self.centre)
         _positive("Sphere.radius", self.radius)
 
-    def project(self, x):
+    def project(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """g = |x − centre| − radius, n the unit vector from the centre to x, p = centre + radius n."""
         d = x - np.asarray(self.centre, dtype=np.float64)
         distance = np.linalg.norm(d, axis=1)
         _check_off_axis(distance, x, "the centre of the sphere")
         n = d / distance[:, None]
         return distance - float(self.radius), n, np.asarray(self.centre) + float(self.radius) * n
 
-    def normal_derivative(self, x):
+    def normal_derivative(self, x: np.ndarray) -> np.ndarray:
+        """(I − n nᵀ)/ρ, ρ = |x − centre| (m, 3, 3)."""
         d = x - np.asarray(self.centre, dtype=np.float64)
         rho = np.linalg.norm(d, axis=1)
         n = d / rho[:, None]
         return (np.eye(3) - n[:, :, None] * n[:, None, :]) / rho[:, None, None]
 
     def describe(self) -> str:
+        """The sphere's radius and centre, in words."""
         return f"rigid sphere of radius {self.radius:g} centred at {format_point(self.centre)}"
 
 
@@ -196,7 +202,9 @@ class Cylinder(RigidObstacle):
         _vector3("Cylinder.axis", self.axis, unit=True)
         _positive("Cylinder.radius", self.radius)
 
-    def project(self, x):
+    def project(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """g = ρ − radius with ρ the distance of x from the axis, n the unit radial vector of x,
+        p = x − g n."""
         e = _vector3("Cylinder.axis", self.axis, unit=True)
         d = x - np.asarray(self.point, dtype=np.float64)
         radial = d - (d @ e)[:, None] * e
@@ -205,7 +213,8 @@ class Cylinder(RigidObstacle):
         n = radial / distance[:, None]
         return distance - float(self.radius), n, x - (distance - float(self.radius))[:, None] * n
 
-    def normal_derivative(self, x):
+    def normal_derivative(self, x: np.ndarray) -> np.ndarray:
+        """(I − e eᵀ − n nᵀ)/ρ (m, 3, 3), e the axis and ρ the distance of x from it."""
         e = _vector3("Cylinder.axis", self.axis, unit=True)
         d = x - np.asarray(self.point, dtype=np.float64)
         radial = d - (d @ e)[:, None] * e
@@ -215,6 +224,7 @@ class Cylinder(RigidObstacle):
         return (np.eye(3) - np.outer(e, e) - n[:, :, None] * n[:, None, :]) / rho[:, None, None]
 
     def describe(self) -> str:
+        """The cylinder's radius and axis, in words."""
         return (f"rigid cylinder of radius {self.radius:g} about the axis through {format_point(self.point)} "
                 f"along {format_point(self.axis)}")
 
@@ -265,9 +275,11 @@ class ObstaclePairs:
         return -np.einsum("nij,j->ni", self.R, self.obstacle.displacement(load_factor))
 
     def motion_amplitudes(self, load_factor: float) -> np.ndarray:
+        """The obstacle's translation d(ℓ) (3,)."""
         return self.obstacle.displacement(load_factor)
 
     def describe(self) -> str:
+        """The obstacle, the surface and the number of pairs, in one line."""
         return f"{self.obstacle.describe()} against surface {self.surface}, {self.num_global} pairs"
 
 

@@ -134,7 +134,7 @@ def _match(
 # --------------------------------------------------------------------------------------------
 
 
-def owned_by_slave(comm: MPI.Comm, index_map, slave_blocks: np.ndarray) -> tuple[np.ndarray, int, int]:
+def owned_by_slave(comm: MPI.Comm, index_map: dolfinx.common.IndexMap, slave_blocks: np.ndarray) -> tuple[np.ndarray, int, int]:
     """Ownership of pairs given (on every rank, in the same order) by their slave dof blocks.
 
     Returns the indices of this rank's pairs (in global pair order: by owner rank, then in
@@ -209,14 +209,17 @@ class ContactPairs:
 
     @property
     def X_slave(self) -> np.ndarray:
+        """(num_local, 3) the slave nodes' positions, X_b."""
         return self.X_b
 
     @property
     def X_master(self) -> np.ndarray:
+        """(num_local, 3) the master nodes' positions, X_a."""
         return self.X_a
 
     @property
     def slave_blocks(self) -> np.ndarray:
+        """(num_local,) the slave nodes' global dof blocks, dofs_b."""
         return self.dofs_b
 
     def motion(self, load_factor: float) -> np.ndarray:
@@ -224,9 +227,11 @@ class ContactPairs:
         return np.zeros((self.num_local, 3))
 
     def motion_amplitudes(self, load_factor: float) -> np.ndarray:
+        """Empty: neither side moves besides u."""
         return np.zeros(0)
 
     def describe(self) -> str:
+        """The kind, the number of pairs and the two surfaces, in one line."""
         return f"node-to-node, {self.num_global} pairs between surfaces {self.surface1} and {self.surface2}"
 
     # ---- geometry --------------------------------------------------------------------------

@@ -24,11 +24,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cached_property
-from typing import Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
+
+if TYPE_CHECKING:
+    import dolfinx
 
 __all__ = ["PairRows", "PairSet", "rows_matrix"]
 
@@ -134,6 +137,7 @@ class PairRows:
 
     @property
     def num_pairs(self) -> int:
+        """The number of pairs (three rows each)."""
         return (len(self.indptr) - 1) // 3
 
     @cached_property
@@ -170,7 +174,7 @@ class PairRows:
         return D[pair, r, 0] * v[s[0]] + D[pair, r, 1] * v[s[1]] + D[pair, r, 2] * v[s[2]]
 
 
-def rows_matrix(comm: MPI.Comm, rows: PairRows, num_global_pairs: int, index_map,
+def rows_matrix(comm: MPI.Comm, rows: PairRows, num_global_pairs: int, index_map: dolfinx.common.IndexMap,
                 values: np.ndarray | None = None) -> PETSc.Mat:
     """A PETSc AIJ matrix with ``rows`` as its local rows (3 per local pair).
 

@@ -87,7 +87,7 @@ def _lagrange_1d(i, s):
 
 
 @numba.njit(cache=True)
-def shape_at(k, s, t, N, dN, d2N):
+def shape_at(k: int, s: float, t: float, N: np.ndarray, dN: np.ndarray, d2N: np.ndarray) -> None:
     """Fill N (k,), dN (k, 2) and d2N (k, 3) (∂²/∂ξ², ∂²/∂ξ∂η, ∂²/∂η²) at (ξ, η) = (s, t)."""
     if k == 6:
         l0 = 1.0 - s - t

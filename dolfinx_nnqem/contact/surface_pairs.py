@@ -21,6 +21,7 @@ pairs whose slave node it owns.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from dolfinx_nnqem import compat  # noqa: F401, I001  (first: loads MPI/PETSc for the PyPI wheel)
 
@@ -32,6 +33,9 @@ from dolfinx_nnqem.contact.pairset import PairRows
 from dolfinx_nnqem.contact.surfaces import (ContactPairError, Facets, GatheredSurfaces, first_by_position,
                                             format_point, local_frames)
 from dolfinx_nnqem.contact.symmetry_planes import IN_PLANE, support_rules
+
+if TYPE_CHECKING:
+    import dolfinx
 
 __all__ = ["MAX_INTERFERENCE", "SurfacePairs", "facet_size", "surface_pairs"]
 
@@ -102,9 +106,11 @@ class SurfacePairs:
         return np.zeros((self.num_local, 3))
 
     def motion_amplitudes(self, load_factor: float) -> np.ndarray:
+        """Empty: neither side moves besides u."""
         return np.zeros(0)
 
     def describe(self) -> str:
+        """The kind, the number of pairs, the slave and master surfaces and the note, in one line."""
         without = self.num_slave_nodes - self.num_global
         beyond = f" ({without} slave nodes beyond the master surface have none)" if without else ""
         return (f"{self.kind}, {self.num_global} pairs{beyond}: slave surface {self.slave} against master "
@@ -148,7 +154,7 @@ def _joined_rows(slave_rows: tuple[np.ndarray, np.ndarray, np.ndarray], local: n
     return nodes_indptr, nodes, coefficients
 
 
-def surface_pairs(V, kind: str, tags: tuple[int, int], slave_index: np.ndarray, X_slave: np.ndarray,
+def surface_pairs(V: dolfinx.fem.FunctionSpace, kind: str, tags: tuple[int, int], slave_index: np.ndarray, X_slave: np.ndarray,
                   area: np.ndarray, normal: np.ndarray, g0: np.ndarray, master_indptr: np.ndarray,
                   master_index: np.ndarray, weights: np.ndarray, X_master_nodes: np.ndarray, *,
                   master_size: float, tolerance: float, num_slave_nodes: int, note: str = "",

@@ -185,6 +185,7 @@ def first_by_position(x: np.ndarray, candidates: np.ndarray) -> int:
 
 
 def format_point(x: npt.ArrayLike) -> str:
+    """The point ``x`` as "(x, y, z)", six significant digits, for messages."""
     return "(" + ", ".join(f"{v:.6g}" for v in np.asarray(x, dtype=np.float64).ravel()) + ")"
 
 
@@ -205,9 +206,11 @@ class Facets:
 
     @classmethod
     def concatenate(cls, parts: list[Facets]) -> Facets:
+        """The facets of ``parts``, one after the other."""
         return cls(*(np.concatenate([getattr(p, f) for p in parts]) for f in cls.__dataclass_fields__))
 
     def take(self, index: np.ndarray) -> Facets:
+        """The facets ``index``, in that order."""
         return Facets(*(getattr(self, f)[index] for f in self.__dataclass_fields__))
 
     @property
@@ -484,7 +487,7 @@ class GatheredSurfaces:
         return GatheredSurfaces((self.tags[1], self.tags[0]), facets, [self.nodes[1], self.nodes[0]])
 
 
-def check_contact_space(V: dolfinx.fem.FunctionSpace, facet_tags) -> None:
+def check_contact_space(V: dolfinx.fem.FunctionSpace, facet_tags: dolfinx.mesh.MeshTags | None) -> None:
     """Raise :class:`ContactPairError` unless V is vector P1 or P2 on a 3D mesh and ``facet_tags`` tags facets."""
     problem = _check_space(V)
     if problem is not None:

@@ -32,12 +32,16 @@ rule touched: no normal changes, and no friction is dropped, silently.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from mpi4py import MPI
 
 from dolfinx_nnqem.contact.surfaces import local_frames, owned_supports, symmetry_normals
 from dolfinx_nnqem.numerics.graphs import connected_components
+
+if TYPE_CHECKING:
+    import dolfinx
 
 __all__ = ["DEPENDENT", "IN_PLANE", "SupportRules", "overconstraining", "support_rules", "supports_of",
            "symmetry_axes", "tangents_in_span"]
@@ -66,7 +70,7 @@ class SupportRules:
     note: str  #: words for the pair set's description ("" when no rule changed anything)
 
 
-def supports_of(V, supported: np.ndarray, blocks: np.ndarray) -> np.ndarray:
+def supports_of(V: dolfinx.fem.FunctionSpace, supported: np.ndarray, blocks: np.ndarray) -> np.ndarray:
     """(m, 3) bool: the prescribed components of the dof blocks ``blocks`` (collective).
 
     ``blocks`` (global indices) must be the same on every rank; each rank fills in the blocks it
@@ -162,7 +166,8 @@ def overconstraining(R: np.ndarray, candidates: np.ndarray, rows: tuple[np.ndarr
     return out
 
 
-def support_rules(V, supported: np.ndarray, slave_index: np.ndarray, X_slave: np.ndarray, normal: np.ndarray,
+def support_rules(V: dolfinx.fem.FunctionSpace, supported: np.ndarray, slave_index: np.ndarray, X_slave: np.ndarray,
+                  normal: np.ndarray,
                   master_indptr: np.ndarray, master_index: np.ndarray, X_master: np.ndarray,
                   rows: tuple[np.ndarray, np.ndarray, np.ndarray], in_plane: float) -> SupportRules:
     """The normals and pinned directions of every pair (module docstring; collective).

@@ -18,11 +18,15 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from mpi4py import MPI
 
 import dolfinx_nnqem.io.results as res
+
+if TYPE_CHECKING:
+    from dolfinx_nnqem.problem.contact_problem import ContactProblem
 
 __all__ = ["Measure", "ProbePoints", "QUANTITY_KINDS", "Quantities", "probe_points", "read_quantities"]
 
@@ -59,7 +63,7 @@ Measure = Callable[[object], Quantities]
 radius and peak pressure (:func:`dolfinx_nnqem.cases.hertz.hertz_quantities`)."""
 
 
-def read_quantities(problem, probes: ProbePoints | None = None, extra: Measure | None = None) -> Quantities:
+def read_quantities(problem: ContactProblem, probes: ProbePoints | None = None, extra: Measure | None = None) -> Quantities:
     """Every quantity of the problem's current (converged) state, by name (collective).
 
     A probe is located on the mesh of ``problem`` (the nearest node, of the probe's body): on an
@@ -68,6 +72,7 @@ def read_quantities(problem, probes: ProbePoints | None = None, extra: Measure |
     """
     values: Quantities = {}
     if problem.has_contact:
+        assert problem.contact is not None  # has_contact is "contact is not None"
         table = res.pair_table(problem)
         for name in dict.fromkeys(str(i.contact.label) for i in problem.contact.interfaces):
             on_body2 = -table["force_on_body1"][table["interface_name"] == name].sum(axis=0)

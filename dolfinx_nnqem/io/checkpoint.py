@@ -35,6 +35,7 @@ import json
 import os
 import shutil
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -42,6 +43,9 @@ from dolfinx_nnqem.collective import agree, on_rank0
 from dolfinx_nnqem.io.safe_io import StagedFiles, atomic_write, commit
 from dolfinx_nnqem.problem.validation import check_integer
 from dolfinx_nnqem.solvers.stepping import StepperState
+
+if TYPE_CHECKING:
+    from dolfinx_nnqem.problem.contact_problem import ContactProblem
 
 __all__ = ["CheckpointError", "Checkpointer", "latest_checkpoint", "restore"]
 
@@ -127,7 +131,7 @@ class Checkpointer:
         if result.index % self.every == 0:
             self.save(problem, stepper_state)
 
-    def save(self, problem, stepper_state) -> Path:
+    def save(self, problem: ContactProblem, stepper_state: StepperState) -> Path:
         """Write the checkpoint of the current (committed) state (collective)."""
         comm = problem.comm
         index = int(stepper_state.index)
@@ -205,7 +209,8 @@ def _write_rank(tmp: Path, problem) -> None:
         np.savez(fh, **arrays)
 
 
-def restore(problem, folder: str | os.PathLike, expected_meta: dict | None = None):
+def restore(problem: ContactProblem, folder: str | os.PathLike,
+            expected_meta: dict | None = None) -> tuple[StepperState, dict]:
     """Load the last complete checkpoint of an output folder into ``problem`` (collective).
 
     Returns ``(stepper_state, meta)``: the :class:`~dolfinx_nnqem.solvers.stepping.StepperState` to pass

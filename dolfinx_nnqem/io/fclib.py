@@ -153,6 +153,8 @@ def _import_h5py():
 if TYPE_CHECKING:
     import h5py
     from mpi4py import MPI
+
+    from dolfinx_nnqem.solvers.nneqm1 import NNEQM1Solver
 else:
     h5py = _import_h5py()
 
@@ -508,7 +510,7 @@ def write_condensed_problem(path: str | Path, condensed: Mapping[str, Any], *,
                              guesses=guesses, **kwargs)
 
 
-def write_nneqm1_problem(path: str | Path, solver, *, with_solution: bool = True, **kwargs) -> Path:
+def write_nneqm1_problem(path: str | Path, solver: NNEQM1Solver, *, with_solution: bool = True, **kwargs: Any) -> Path:
     """Export the last inner problem of an NNEQM1 solver, with its solution (collective).
 
     The solution is the solver's current contact force λ(z): after an increment has
@@ -525,6 +527,7 @@ def write_nneqm1_problem(path: str | Path, solver, *, with_solution: bool = True
     p = solver.problem
     solution = None
     if with_solution:
+        assert p.contact is not None  # last_condensed is set only by a solve on the problem's contact model
         solution = p.contact.gather(p.contact.force()).reshape(-1)
     kwargs.setdefault("comm", p.comm)
     kwargs.setdefault("number_of_dofs", int(p.V.dofmap.index_map.size_global * p.V.dofmap.index_map_bs))

@@ -33,6 +33,7 @@ import time
 import warnings
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -97,6 +98,7 @@ class PairWriter:
         self._write_pvd(self.folder / "pairs.pvd", at_once=durable)  # only after the .vtp is complete
 
     def state(self) -> dict:
+        """What a restart needs (:meth:`resume`): the pair files written, as [load factor, path] pairs."""
         return {"entries": [list(e) for e in self.entries]}
 
     def resume(self, state: dict) -> None:
@@ -335,7 +337,7 @@ def summary_json(data: dict) -> str:
     return "{\n" + ",\n".join(f" {json.dumps(k)}: {v}" for k, v in values.items()) + "\n}"
 
 
-def jsonable_copy(value):
+def jsonable_copy(value: object) -> Any:
     """A JSON-ready deep copy of ``value`` (numpy values as Python ones, non-finite floats as
     None), through the C encoder when it can (a checkpoint saves the writers' state every
     increment)."""

@@ -200,7 +200,7 @@ def _slave_triangles(problem, table: dict) -> np.ndarray | None:
     return row[np.all(row >= 0, axis=1)]
 
 
-def contact_pressure_data(problem) -> dict | None:
+def contact_pressure_data(problem: ContactProblem) -> dict | None:
     """What :func:`draw_contact_pressure` draws of ``problem``, gathered on rank 0 (None elsewhere).
 
     Collective. A dict of ``points`` (the pairs' slave nodes, ``position_b`` of the pair table),
@@ -211,6 +211,7 @@ def contact_pressure_data(problem) -> dict | None:
     from dolfinx_nnqem.io.results import pair_table
 
     table = pair_table(problem)
+    assert problem.contact is not None  # pair_table reads the contact model: it has raised without one
     triangles = _slave_triangles(problem, table) if len(problem.contact.interfaces) == 1 else None
     if problem.comm.rank != 0:
         return None

@@ -393,10 +393,12 @@ class ContactProblem:
     # -- quantities solvers combine --------------------------------------------------------------
     @property
     def has_contact(self) -> bool:
+        """Whether the problem has contact interfaces (a contact model)."""
         return self.contact is not None
 
     @property
     def num_pairs(self) -> int:
+        """The number of contact pairs over all ranks (0 without contact)."""
         return 0 if self.contact is None else self.contact.num_global
 
     def constrained_rows(self) -> np.ndarray:
@@ -641,7 +643,7 @@ class ContactProblem:
         self.rigid_modes.destroy()
 
 
-def assemble_vector(form, V, F: PETSc.Vec | None = None) -> PETSc.Vec:
+def assemble_vector(form: dolfinx.fem.Form, V: dolfinx.fem.FunctionSpace, F: PETSc.Vec | None = None) -> PETSc.Vec:
     """Assemble the linear ``form`` into ``F`` (a new ghosted vector of ``V`` if None), owned
     entries summed over ranks."""
     if F is None:

@@ -120,30 +120,37 @@ class BlockStackTags:
 
     @staticmethod
     def body(k: int) -> int:
+        """The cell tag of block k: k."""
         return k
 
     @staticmethod
     def bottom(k: int) -> int:
+        """The facet tag of block k's bottom face (y min): 100 + k."""
         return 100 + k
 
     @staticmethod
     def top(k: int) -> int:
+        """The facet tag of block k's top face (y max): 200 + k."""
         return 200 + k
 
     @staticmethod
     def xmin(k: int) -> int:
+        """The facet tag of block k's x-min face: 300 + k."""
         return 300 + k
 
     @staticmethod
     def xmax(k: int) -> int:
+        """The facet tag of block k's x-max face: 400 + k."""
         return 400 + k
 
     @staticmethod
     def zmin(k: int) -> int:
+        """The facet tag of block k's z-min face: 500 + k."""
         return 500 + k
 
     @staticmethod
     def zmax(k: int) -> int:
+        """The facet tag of block k's z-max face: 600 + k."""
         return 600 + k
 
 

@@ -18,11 +18,17 @@ nest and its AIJ conversion are made at the first iteration and refilled in plac
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 from petsc4py import PETSc
 
 from dolfinx_nnqem.contact.geometric_stiffness import GeometricTerms
 from dolfinx_nnqem.contact.pairset import PairRows, rows_matrix
+
+if TYPE_CHECKING:
+    from dolfinx_nnqem.contact.model import ContactModel
+    from dolfinx_nnqem.solvers.contract import SolvableProblem
 
 __all__ = ["AugmentedSystem", "BlockDiagonal", "MonolithicMatrix", "free_columns", "free_rows"]
 
@@ -48,10 +54,11 @@ class BlockDiagonal:
         return self.matrix
 
     def destroy(self) -> None:
+        """Free the block-diagonal matrix (collective)."""
         self.matrix.destroy()
 
 
-def free_rows(model, free_mask: PETSc.Vec) -> PairRows:
+def free_rows(model: ContactModel, free_mask: PETSc.Vec) -> PairRows:
     """B_free's rows: B's rows with the columns of constrained dofs zeroed (same sparsity).
 
     ``free_mask`` is laid out like V's owned dofs: 0 at constrained dofs, 1 elsewhere.
@@ -65,7 +72,7 @@ def free_rows(model, free_mask: PETSc.Vec) -> PairRows:
     return PairRows(model.rows.indptr, model.rows.columns, values)
 
 
-def free_columns(model, free_mask: PETSc.Vec) -> np.ndarray:
+def free_columns(model: ContactModel, free_mask: PETSc.Vec) -> np.ndarray:
     """Per entry of B's layout: 1 if its column is a free dof, 0 if a constrained one (B's values may
     be exact zeros, so the mask is that of a matrix of ones with B's pattern)."""
     ones = PairRows(model.rows.indptr, model.rows.columns, np.ones_like(model.rows.values))
@@ -78,12 +85,13 @@ def free_columns(model, free_mask: PETSc.Vec) -> np.ndarray:
     return np.asarray(values, dtype=np.float64)
 
 
-def free_mask(problem) -> PETSc.Vec:
-    """A vector laid out like V: 0 at the constrained dofs, 1 elsewhere."""
+def free_mask(problem: SolvableProblem) -> PETSc.Vec:
+    """A vector laid out like V: 0 at the constrained dofs, 1 elsewhere (the problem has contact)."""
+    assert problem.contact is not None  # the monolithic solver makes it only when problem.has_contact
     mask = problem.contact.B.createVecRight()
     mask.set(1.0)
     start, _ = mask.getOwnershipRange()
-    with mask as m:  # constrained_rows are global indices of owned dofs
+    with mask as m:  # type: ignore[attr-defined]  # petsc4py's stub lacks Vec.__enter__/__exit__; constrained_rows are global indices of owned dofs
         m[np.asarray(problem.constrained_rows(), dtype=np.int64) - start] = 0.0
     return mask
 
@@ -175,6 +183,7 @@ class MonolithicMatrix:
         return self.J
 
     def destroy(self) -> None:
+        """Free the blocks, the nest and the Newton matrix (collective)."""
         self._blocks.destroy()
         for m in (self._nest, self.J):
             if m is not None:
@@ -288,6 +297,7 @@ class AugmentedSystem:
         return b
 
     def destroy(self) -> None:
+        """Free the blocks, B_free, the nest and the work vectors (collective)."""
         self._blocks.destroy()
         self._P.destroy()
         for m in (self.B_free, self._BtPB, self._nest, self._g, self._Btg, self._b):

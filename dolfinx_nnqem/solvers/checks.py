@@ -43,6 +43,7 @@ from __future__ import annotations
 import math
 import weakref
 from dataclasses import asdict, dataclass, field
+from typing import TYPE_CHECKING
 
 import dolfinx.fem as fem
 import numpy as np
@@ -57,6 +58,10 @@ from dolfinx_nnqem.problem.contact_problem import assemble_vector
 from dolfinx_nnqem.problem.validation import check_real
 from dolfinx_nnqem.solvers.constitutive import ConstitutiveCheck, check_constitutive_law
 from dolfinx_nnqem.solvers.options import SolverOptions
+
+if TYPE_CHECKING:
+    from dolfinx_nnqem.solvers.contract import SolvableProblem
+    from dolfinx_nnqem.solvers.convergence import SolveReport
 
 __all__ = ["CheckOptions", "StateCheck", "check_state", "failure_details", "radial_return_values",
            "values_to_commit"]
@@ -93,6 +98,8 @@ class CheckOptions:
                 check_real(f"CheckOptions.{name}", value, low=0.0, high=math.inf)
 
     def tolerance(self, solver_rtol: float) -> float:
+        """The relative tolerance of the check: ``rtol`` if given, else 10⁴ × the solver's rtol within
+        [10⁻⁷, 10⁻³], and never below 10 × the solver's rtol."""
         if self.rtol is not None:
             return float(self.rtol)
         rtol = float(solver_rtol)
@@ -119,6 +126,7 @@ class StateCheck:
     worst_nodes: list = field(default_factory=list)  #: [{position, |R|/F}] (failed checks)
 
     def as_dict(self) -> dict:
+        """The figures as a dictionary of their fields."""
         return asdict(self)
 
 
@@ -166,13 +174,13 @@ class _Forms:
         return self._material
 
 
-def radial_return_values(problem) -> GaussPointValues:
+def radial_return_values(problem: SolvableProblem) -> GaussPointValues:
     """The values the material's return map gives at the problem's u, at the owned Gauss points
     (collective): what the commit stores for a solver without Gauss-point values of its own."""
     return problem.state.return_map_values(problem.u)
 
 
-def values_to_commit(problem, report=None) -> GaussPointValues:
+def values_to_commit(problem: SolvableProblem, report: SolveReport | None = None) -> GaussPointValues:
     """The Gauss-point values a commit of the problem's current iterate stores (collective): the
     solver's own (``report.gauss_point_values``) where they belong to the current u on every
     rank, else the return map's at u. The check verifies these, and the commit stores them."""
@@ -203,7 +211,8 @@ def _allmax(comm, value: float) -> float:
     return comm.allreduce(float(value), op=MPI.MAX)
 
 
-def check_state(problem, report=None, solver_options=None, options: CheckOptions | None = None,
+def check_state(problem: SolvableProblem, report: SolveReport | None = None,
+                solver_options: SolverOptions | None = None, options: CheckOptions | None = None,
                 values: GaussPointValues | None = None) -> StateCheck:
     """Check the problem's current iterate (collective; call before commit).
 

@@ -26,6 +26,8 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 import dolfinx.fem as fem
 import numpy as np
@@ -33,6 +35,9 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from dolfinx_nnqem.numerics.linalg import clear_options, create_ksp, direct_options, factorise
+
+if TYPE_CHECKING:
+    from dolfinx_nnqem.solvers.contract import SolvableProblem
 
 __all__ = ["Condensation", "check_dense_memory", "dense_memory"]
 
@@ -69,7 +74,7 @@ def available_memory() -> float | None:
     return None
 
 
-def check_dense_memory(problem, solver: str, limit_gb: float | None, factorisations: int = 1) -> None:
+def check_dense_memory(problem: SolvableProblem, solver: str, limit_gb: float | None, factorisations: int = 1) -> None:
     """Refuse, before anything is assembled, a problem whose dense condensation does not fit.
 
     The need is :func:`dense_memory` summed over the ranks of each node; it must fit in
@@ -196,7 +201,7 @@ class Condensation:
         return fixing, bcs
 
     # -- factorisation and solves ----------------------------------------------------------------
-    def factorise(self, assemble, what: str) -> None:
+    def factorise(self, assemble: Callable[[PETSc.Mat | None, Any], PETSc.Mat], what: str) -> None:
         """Assemble K̃ with ``assemble(A, extra_bcs)`` (into the same matrix every time) and factorise it."""
         t0 = time.perf_counter()
         self._K = assemble(self._K, self.fixing_bcs)
@@ -303,6 +308,7 @@ class Condensation:
         self.timings[key] = self.timings.get(key, 0.0) + time.perf_counter() - t0
 
     def destroy(self) -> None:
+        """Free the factorisation, K̃ and the dense flexibility's PETSc objects (collective)."""
         for obj in (self.ksp, self._K, self._Bt_dense, self._X, self._C_rows):
             if obj is not None:
                 obj.destroy()

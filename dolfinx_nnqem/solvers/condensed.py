@@ -78,6 +78,7 @@ class CondensedProblem:
     e: np.ndarray
 
     def as_dict(self) -> dict:
+        """The problem's fields as a dictionary (what :func:`~dolfinx_nnqem.io.fclib.write_condensed_problem` takes)."""
         return asdict(self)
 
 
@@ -222,7 +223,7 @@ class CondensedSystem:
                 J[n3:, n3:a] = self.E_xi * self.xi_scale[None, :] / F
         return PairRows(H / F, J, lam, lin, y_scale, ev.state)
 
-    def residual(self, x: np.ndarray, frozen: Frozen | None = None):
+    def residual(self, x: np.ndarray, frozen: Frozen | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         """The whole system's (H, J, chart) when it has no ξ (NNEQM1's inner system)."""
         rows = self.pair_rows(x, frozen)
         return rows.H, rows.J, rows.lin.cartesian

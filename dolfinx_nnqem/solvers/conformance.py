@@ -26,12 +26,15 @@ __all__ = ["as_material", "as_material_part", "as_material_state", "as_pair_set"
 
 
 def as_solver(solver: MonolithicSolver | NNEQM1Solver | NNEQM2Solver) -> Solver:
+    """``solver`` as a :class:`~dolfinx_nnqem.solvers.contract.Solver` (checked by the type checker)."""
     return solver
 
 
 def as_problem(problem: ContactProblem) -> SolvableProblem:
+    """``problem`` as a :class:`~dolfinx_nnqem.solvers.contract.SolvableProblem` (checked by the type checker)."""
     return problem
 
 
 def as_pair_set(pairs: ContactPairs | SurfacePairs | ObstaclePairs) -> PairSet:
+    """``pairs`` as a :class:`~dolfinx_nnqem.contact.pairset.PairSet` (checked by the type checker)."""
     return pairs

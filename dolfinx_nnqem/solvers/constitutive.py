@@ -56,7 +56,7 @@ CHUNK = 65_536
 mesh (at 10⁶ dofs, 1.3 million points per rank, the whole arrays took over a gigabyte)."""
 
 
-def check_constitutive_law(comm, strain_increment: np.ndarray, sigma: np.ndarray, dp: np.ndarray,
+def check_constitutive_law(comm: MPI.Comm, strain_increment: np.ndarray, sigma: np.ndarray, dp: np.ndarray,
                            deps_p: np.ndarray, flow_rule: str, sigma_n: np.ndarray,
                            internal: Mapping[str, np.ndarray], material: PointwiseMaterial) -> ConstitutiveCheck:
     """The relations of the module docstring at this rank's owned Gauss points (collective).

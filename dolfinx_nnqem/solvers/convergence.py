@@ -4,11 +4,15 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from dolfinx_nnqem.contact.laws import STATE_NAMES  # noqa: F401  (the pair states' names, kept here for old imports)
 from dolfinx_nnqem.material.interface import GaussPointValues
+
+if TYPE_CHECKING:
+    from mpi4py import MPI
 
 logger = logging.getLogger("dolfinx_nnqem")
 
@@ -30,6 +34,7 @@ class IterationRecord:
     yield_residual: float = 0.0  #: ‖G̃‖ of NNEQM2's yield rows (relative to the stress unit), else 0
 
     def line(self, solver: str) -> str:
+        """The record as one line of the iteration log, prefixed by ``[solver]``."""
         alpha = "   -  " if np.isnan(self.step_length) else f"{self.step_length:6.3f}"
         inner = f" inner {self.inner_iterations:3d}" if self.inner_iterations else ""
         inner += f"  |G|/σ_u {self.yield_residual:9.3e}" if self.yield_residual else ""
@@ -58,6 +63,7 @@ class SolveReport:
 
     @property
     def final(self) -> IterationRecord | None:
+        """The last iteration's record (None if there was none)."""
         return self.history[-1] if self.history else None
 
 
@@ -67,7 +73,7 @@ class ConvergenceError(RuntimeError):
     failure: dict  #: set by load stepping: increment, load factor, reason, the worst nodes and pairs
 
 
-def iteration_log_on(comm) -> bool:
+def iteration_log_on(comm: MPI.Comm) -> bool:
     """Whether some rank logs the iterations (the package's logger at INFO, e.g. ``-v``). What is
     counted for that log only is counted by every rank or none: the counts are collective, and a
     program may configure logging on rank 0 alone."""
@@ -76,7 +82,7 @@ def iteration_log_on(comm) -> bool:
     return bool(comm.allreduce(logger.isEnabledFor(logging.INFO), op=MPI.LOR))
 
 
-def count_states(states_local: np.ndarray, comm) -> tuple[int, int, int]:
+def count_states(states_local: np.ndarray, comm: MPI.Comm) -> tuple[int, int, int]:
     """Global numbers of open (0), stick (1) and slip (2) pairs."""
     from mpi4py import MPI
 

@@ -118,5 +118,6 @@ class GaussPointOperators:
         return out
 
     def destroy(self) -> None:
+        """Free the PETSc objects of the operators (collective)."""
         self.A.destroy()
         self._strain.destroy()

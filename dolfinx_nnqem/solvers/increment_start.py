@@ -73,6 +73,7 @@ class IncrementStart:
     internal_n: dict[str, np.ndarray] = field(default_factory=dict)
 
     def destroy(self) -> None:
+        """Free the vectors b and F_ext (collective)."""
         for vec in (self.b, self.F_ext):
             vec.destroy()
 

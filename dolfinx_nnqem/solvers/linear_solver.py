@@ -109,6 +109,7 @@ class DirectSolver:
             self._set_up_once = True
 
     def destroy(self) -> None:
+        """Free the KSP and its options (collective)."""
         self._clear_options()  # a solver never set up (made again when the contact geometry changed) leaves none
         self.ksp.destroy()
 
@@ -287,6 +288,7 @@ class IterativeSolver:
         return self.ksp.getConvergedReason() <= 0  # type: ignore[operator]  # as in DirectSolver.solve
 
     def destroy(self) -> None:
+        """Free the KSP, its options and the objects it keeps (collective)."""
         if not self._set_up_once:  # never set up (made again when the contact geometry changed): its options go
             clear_options(self.prefix, self._options)
             self._set_up_once = True

@@ -52,7 +52,7 @@ from dolfinx_nnqem.solvers.convergence import IterationRecord, SolveReport, coun
 from dolfinx_nnqem.numerics.linalg import free_dropped_objects, global_norm, vec_norm
 from dolfinx_nnqem.numerics.newton import Globalisation, Merit, solve
 from dolfinx_nnqem.numerics.roundoff import floor_note, residual_floor
-from dolfinx_nnqem.numerics.nonsmooth import Fallback, solve_dense
+from dolfinx_nnqem.numerics.nonsmooth import Fallback, NonsmoothResult, solve_dense
 from dolfinx_nnqem.problem.contact_problem import ContactProblem
 from dolfinx_nnqem.solvers.options import NNEQM1Options, SolverOptions
 
@@ -100,6 +100,9 @@ class NNEQM1Solver(ReleasesPETSc):
         return out
 
     def solve_increment(self, load_factor: float) -> SolveReport:
+        """Solve for the load factor ``load_factor`` from the last converged state: outer Newton
+        iterations on u, each with the dense nonsmooth solve of the contact problem condensed onto
+        the pairs (:meth:`inner_solve`)."""
         p = self.problem
         model = contact_model(p)
         if model.geometry.version != self._geometry_version:
@@ -141,7 +144,8 @@ class NNEQM1Solver(ReleasesPETSc):
                               + ("" if note is None else f": {note}"))
         return report
 
-    def inner_solve(self, cond: CondensedProblem, laws: PairLaws, z_m: np.ndarray, tol: float, scale: float):
+    def inner_solve(self, cond: CondensedProblem, laws: PairLaws, z_m: np.ndarray, tol: float,
+                    scale: float) -> tuple[NonsmoothResult, CondensedSystem]:
         """Dense nonsmooth Newton/LM on x = (z, α) of the condensed problem ``cond``
         (:class:`~dolfinx_nnqem.solvers.condensed.CondensedSystem`: unknowns and rows scaled by
         the load scale F, so that the LM parameter ν = c |H̃| sees a residual and a Jacobian of
@@ -183,6 +187,7 @@ class NNEQM1Solver(ReleasesPETSc):
         return result, system
 
     def destroy(self) -> None:
+        """Free the condensation's PETSc objects (collective)."""
         self.condensation.destroy()
 
 

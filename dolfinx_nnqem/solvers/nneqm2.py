@@ -159,6 +159,8 @@ class NNEQM2Solver(ReleasesPETSc):
 
     # -- one increment -------------------------------------------------------------------------------
     def solve_increment(self, load_factor: float) -> SolveReport:
+        """Solve for the load factor ``load_factor`` from the last converged state (the elastic
+        stiffness K_e factorised once, on the first call)."""
         p = self.problem
         if not self._factorised:
             self.elastic.factorise(p.assemble_elastic_stiffness, "the elastic stiffness K_e")
@@ -301,6 +303,7 @@ class NNEQM2Solver(ReleasesPETSc):
         }
 
     def destroy(self) -> None:
+        """Free the condensations' and the Gauss-point operators' PETSc objects (collective)."""
         for part in (self.elastic, self.tangent, self.gp):
             if part is not None:
                 part.destroy()

@@ -187,6 +187,8 @@ class ReturnMapIncrement:
         p.u.x.array[p.bc_dofs] = u_bc
 
     def evaluate(self) -> Merit:
+        """u at the current iterate, and its merit Ψ = ½ (|H|² + |E|² + |G̃|²) of the pair rows H and
+        the self-equilibrium rows E (relative to the load scale F) and the scaled yield rows G̃."""
         x, p = self.x, self.p
         t0 = time.perf_counter()
         self._displace(x)
@@ -350,6 +352,7 @@ class ReturnMapIncrement:
         return None
 
     def lm_direction(self, merit: Merit, globalisation: Globalisation) -> str | None:
+        """Why there is none: NNEQM2's step has no Levenberg–Marquardt variant."""
         return "NNEQM2's Newton step has no Levenberg–Marquardt variant"
 
     def slope(self) -> float:
@@ -363,6 +366,7 @@ class ReturnMapIncrement:
         return None
 
     def move(self, step_length: float) -> Merit:
+        """x = x_0 + step_length · d (the pair unknowns in the laws' step coordinates), evaluated."""
         assert self._x0 is not None and self._direction is not None  # set by start_step and newton_direction
         x0, (pairs, d_eps, dalpha) = self._x0, self._direction
         x = x0.copy()
@@ -375,18 +379,22 @@ class ReturnMapIncrement:
 
     # -- the driver's bookkeeping -------------------------------------------------------------------
     def start_step(self) -> None:
+        """The current iterate becomes the start x_0 of the next step (and Ψ(x_0) is kept)."""
         self._x0 = self.x.copy()
         norm_H, norm_E, norm_G = self.x.norms
         self._psi0 = 0.5 * (norm_H ** 2 + norm_E ** 2 + norm_G ** 2)
 
-    def snapshot(self):
+    def snapshot(self) -> _Iterate:
+        """A copy of the current iterate."""
         return self.x.copy()
 
     def restore(self, snapshot) -> Merit:
+        """Return to a copy of ``snapshot`` (from :meth:`snapshot`); its merit."""
         self.x = snapshot.copy()
         return self.evaluate()
 
     def record(self, iteration: int, step_length: float, kind: str) -> None:
+        """Append the current iterate's record to the report and log it."""
         p, x = self.p, self.x
         free_dropped_objects(p.petsc_comms)
         norm_H, norm_E, norm_G = x.norms

@@ -29,7 +29,7 @@ def _solver_class(method: str) -> type:
 
 
 def make_solver(method: str, problem: ContactProblem, options: SolverOptions | None = None,
-                **method_options) -> Solver:
+                **method_options: MonolithicOptions | NNEQM1Options | NNEQM2Options) -> Solver:
     """The solver called ``method`` ("monolithic", "nneqm1", "nneqm2") for ``problem``.
 
     Parameters

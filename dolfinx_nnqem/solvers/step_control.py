@@ -103,7 +103,7 @@ class AutomaticIncrements:
         return ell + direction * step
 
 
-def as_step_control(increments) -> tuple[int | None, AutomaticIncrements | None]:
+def as_step_control(increments: int | str | AutomaticIncrements) -> tuple[int | None, AutomaticIncrements | None]:
     """``increments`` of :func:`~dolfinx_nnqem.solvers.stepping.solve_load_steps` as (N, None) or (None, settings).
 
     ``"auto"`` means :class:`AutomaticIncrements` with its defaults.

@@ -48,6 +48,7 @@ class IncrementResult:
 
     @property
     def iterations(self) -> int:
+        """The solver's iterations in this increment (the converged attempt's)."""
         return self.report.iterations
 
 
