@@ -35,6 +35,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from dolfinx_nnqem.numerics.linalg import clear_options, create_ksp, direct_options, factorise
+from dolfinx_nnqem.solvers.timings import Timings
 
 if TYPE_CHECKING:
     from dolfinx_nnqem.solvers.contract import SolvableProblem
@@ -139,7 +140,7 @@ class Condensation:
         self._X: PETSc.Mat | None = None
         self._C_rows: PETSc.Mat | None = None
         self._BN: np.ndarray | None = None
-        self.timings: dict[str, float] = {}
+        self.timings = Timings()
 
     @property
     def K(self) -> PETSc.Mat:
@@ -205,7 +206,7 @@ class Condensation:
         """Assemble K̃ with ``assemble(A, extra_bcs)`` (into the same matrix every time) and factorise it."""
         t0 = time.perf_counter()
         self._K = assemble(self._K, self.fixing_bcs)
-        self._tick("assembly", t0)
+        self.timings.add("assembly", t0)
         t0 = time.perf_counter()
         try:
             factorise(self.ksp, self._K, self.solver.upper(), what)
@@ -213,7 +214,7 @@ class Condensation:
             if not self._options_cleared:
                 clear_options(self.prefix, self._options)
                 self._options_cleared = True
-        self._tick("factorisation", t0)
+        self.timings.add("factorisation", t0)
 
     def solve(self, rhs: PETSc.Vec) -> PETSc.Vec:
         """K̃⁻¹ (rhs with the fixing rows zeroed); constrained rows of ``rhs`` are kept (lifting)."""
@@ -224,7 +225,7 @@ class Condensation:
         x = rhs.duplicate()
         t0 = time.perf_counter()
         self.ksp.solve(b, x)
-        self._tick("solve", t0)
+        self.timings.add("solve", t0)
         if b is not rhs:
             b.destroy()
         return x
@@ -263,7 +264,7 @@ class Condensation:
         nc = model.num_global
         # (3 rows per owned pair) × 3NC, regrouped per pair for the gather (a rank may own none)
         C = model.gather(self._C_rows.getDenseArray().reshape(model.num_local, 9 * nc)).reshape(3 * nc, 3 * nc)
-        self._tick("flexibility", t0)
+        self.timings.add("flexibility", t0)
         return self._X.getDenseArray().copy(), C
 
     def pairs_changed(self) -> None:
@@ -304,8 +305,6 @@ class Condensation:
             return np.zeros((3 * self.problem.V.dofmap.index_map.size_local, 0))
         return self.modes.local_array()
 
-    def _tick(self, key: str, t0: float) -> None:
-        self.timings[key] = self.timings.get(key, 0.0) + time.perf_counter() - t0
 
     def destroy(self) -> None:
         """Free the factorisation, K̃ and the dense flexibility's PETSc objects (collective)."""

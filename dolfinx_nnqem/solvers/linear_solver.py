@@ -31,6 +31,7 @@ from dolfinx_nnqem.numerics.linalg import (ITERATIVE_NO_CONTACT_OPTIONS, ITERATI
                                            ITERATIVE_SOLVER_OPTIONS, clear_options, create_ksp,
                                   products_without_intermediates, relative_residual,
                                   direct_options, rigid_body_modes, vec_norm)
+from dolfinx_nnqem.solvers.timings import Timings
 
 __all__ = ["DIRECT_RESIDUAL_TOL", "DirectSolver", "IterativeSolver"]
 
@@ -62,7 +63,7 @@ class DirectSolver:
         self._options = direct_options(petsc_options, comm.size)
         self.ksp = create_ksp(comm, prefix, self._options)
         self._set_up_once = False
-        self.timings: dict[str, float] = {}
+        self.timings = Timings()
         self.linear_iterations = 0
         self.amg_setups = 0
 
@@ -79,7 +80,7 @@ class DirectSolver:
         t0 = time.perf_counter()
         try:
             self.ksp.setUp()
-            _tick(self.timings, "setup", t0)
+            self.timings.add("setup", t0)
             t0 = time.perf_counter()
             self.ksp.solve(b, x)
         except PETSc.Error:
@@ -88,7 +89,7 @@ class DirectSolver:
             self.ksp.reset()
             raise
         finally:
-            _tick(self.timings, "solve", t0)
+            self.timings.add("solve", t0)
             self._clear_options()
         self.linear_iterations += self.ksp.getIterationNumber()
         reason = self.ksp.getConvergedReason()
@@ -160,7 +161,7 @@ class IterativeSolver:
         self._lag_refreshed = True
         self._fresh_rate: float | None = None  # Krylov convergence rate right after the last AMG set-up
         self._last_forcing: tuple[float, float] | None = None  # (ε, η) of the last inexact Newton step of the increment
-        self.timings: dict[str, float] = {}
+        self.timings = Timings()
         self.linear_iterations = 0  #: Krylov iterations over all solves
         self.amg_setups = 0  #: AMG hierarchies built (with contact)
 
@@ -233,14 +234,14 @@ class IterativeSolver:
             with products_without_intermediates():
                 self.ksp.setUp()
                 self._lag_u_preconditioner(pair_state)
-                _tick(self.timings, "setup", t0)
+                self.timings.add("setup", t0)
                 t0 = time.perf_counter()
                 self.ksp.solve(b, x)
         except PETSc.Error:
             self._refresh = True  # whatever failed, do not lag from it
             raise
         finally:
-            _tick(self.timings, "solve", t0)
+            self.timings.add("solve", t0)
             if not self._set_up_once:
                 clear_options(self.prefix, self._options)
                 self._set_up_once = True
@@ -296,6 +297,3 @@ class IterativeSolver:
         for obj in self._keep:
             obj.destroy()
 
-
-def _tick(timings: dict[str, float], key: str, t0: float) -> None:
-    timings[key] = timings.get(key, 0.0) + time.perf_counter() - t0

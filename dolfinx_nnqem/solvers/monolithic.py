@@ -42,6 +42,7 @@ from dolfinx_nnqem.numerics.newton import Globalisation, Merit, NewtonResult, so
 from dolfinx_nnqem.numerics.roundoff import floor_note, residual_floor
 from dolfinx_nnqem.problem.contact_problem import ContactProblem
 from dolfinx_nnqem.solvers.options import MonolithicOptions, SolverOptions
+from dolfinx_nnqem.solvers.timings import Timings
 
 __all__ = ["MonolithicSolver"]
 
@@ -90,7 +91,7 @@ class MonolithicSolver(ReleasesPETSc):
         self._matrix: MonolithicMatrix | None = None  # the direct Newton matrix (also the LM fallback's)
         self._augmented: AugmentedSystem | None = self._augmented_system_of_pairs()
         self._geometry_version = problem.contact.geometry.version if problem.contact is not None else 0
-        self._timings: dict[str, float] = {}
+        self._timings = Timings()
         # the vectors of every iteration, created once and refilled (as DOLFINx's NonlinearProblem
         # does); only the free residual of an evaluation is new, since the watchdog keeps evaluations
         self._work: dict[str, PETSc.Vec] = {}
@@ -284,7 +285,7 @@ class MonolithicSolver(ReleasesPETSc):
         self._refresh_geometry()
         t0 = time.perf_counter()
         F_int = p.assemble_internal_force(self._vector("F_int", lambda: compat.create_vector(p.V)))
-        self._tick("assembly", t0)
+        self._timings.add("assembly", t0)
         F_ext = p.external_force(out=self._vector("F_ext", lambda: compat.create_vector(p.V)))
         contact_force = None
         if p.contact is not None:
@@ -301,7 +302,7 @@ class MonolithicSolver(ReleasesPETSc):
             lin = p.contact.linearise(law)
             H = law.H
             geometric = self._geometric_terms()
-            self._tick("contact", t0)
+            self._timings.add("contact", t0)
         return _Evaluation(R_free, H, law, p.force_scale(F_int, F_ext, contact_force), vec_norm(R_free),
                            global_norm(H, p.comm), lin, geometric)
 
@@ -310,7 +311,7 @@ class MonolithicSolver(ReleasesPETSc):
         p = self.problem
         t0 = time.perf_counter()
         self._K = p.assemble_tangent(self._K)
-        self._tick("assembly", t0)
+        self._timings.add("assembly", t0)
         if p.contact is None:
             return self._K
         assert self._mask is not None and ev.law is not None and ev.lin is not None  # all made with contact
@@ -322,7 +323,7 @@ class MonolithicSolver(ReleasesPETSc):
             ev.geometric.add_to_tangent(self._K, self._matrix.slave_free(ev.geometric))
             B_values = ev.geometric.rows_values(p.contact.rows)
         J = self._matrix.assemble(self._K, ev.law.dH_dw, ev.lin.dH_dy, ev.lin.dlam_dy, B_values)
-        self._tick("block_matrix", t0)
+        self._timings.add("block_matrix", t0)
         return J
 
     def _augmented_system(self, ev: _Evaluation):
@@ -330,7 +331,7 @@ class MonolithicSolver(ReleasesPETSc):
         p = self.problem
         t0 = time.perf_counter()
         self._K = p.assemble_tangent(self._K)
-        self._tick("assembly", t0)
+        self._timings.add("assembly", t0)
         t0 = time.perf_counter()
         assert p.contact is not None and self._augmented is not None and ev.law is not None and ev.lin is not None
         B_values = None
@@ -341,7 +342,7 @@ class MonolithicSolver(ReleasesPETSc):
             B_values = terms.rows_values(p.contact.rows)
         J = self._augmented.matrix(self._K, ev.law.dH_dw, ev.lin.dH_dy, ev.lin.dlam_dy, B_values)
         b = self._augmented.rhs(ev.R_free, ev.H, ev.law.dH_dw)
-        self._tick("block_matrix", t0)
+        self._timings.add("block_matrix", t0)
         return J, b
 
     def _rhs(self, J: PETSc.Mat, ev: _Evaluation, b: PETSc.Vec | None = None) -> PETSc.Vec:
@@ -420,8 +421,6 @@ class MonolithicSolver(ReleasesPETSc):
             p.contact.z = p.contact.advance(z0, dz, alpha, None if lin is None else lin.cartesian)
             p.contact.follow_slip(p.relative_displacement(), sliding_too=align_sliding)
 
-    def _tick(self, key: str, t0: float) -> None:
-        self._timings[key] = self._timings.get(key, 0.0) + time.perf_counter() - t0
 
     def destroy(self) -> None:
         """Free the PETSc objects (linear solver, matrices, work vectors)."""

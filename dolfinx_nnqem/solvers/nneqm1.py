@@ -55,6 +55,7 @@ from dolfinx_nnqem.numerics.roundoff import floor_note, residual_floor
 from dolfinx_nnqem.numerics.nonsmooth import Fallback, NonsmoothResult, solve_dense
 from dolfinx_nnqem.problem.contact_problem import ContactProblem
 from dolfinx_nnqem.solvers.options import NNEQM1Options, SolverOptions
+from dolfinx_nnqem.solvers.timings import Timings, summed
 
 __all__ = ["CondensedProblem", "NNEQM1Solver", "rigid_start"]  # the first and last live in .condensed
 
@@ -87,17 +88,14 @@ class NNEQM1Solver(ReleasesPETSc):
         self.settings = nneqm1 or NNEQM1Options()
         check_dense_memory(problem, self.name, self.settings.max_memory_gb)  # before anything is built
         self.condensation = Condensation(problem, self.name, self.options.petsc_options)
-        self._timings: dict[str, float] = {}
+        self._timings = Timings()
         self.last_condensed: CondensedProblem | None = None  #: the latest outer iteration's dense problem
         self._geometry_version = contact_model(problem).geometry.version
 
     @property
     def timings(self) -> dict[str, float]:
         """Seconds per phase: assembly, factorisation, flexibility, solve, contact."""
-        out = dict(self.condensation.timings)
-        for key, value in self._timings.items():
-            out[key] = out.get(key, 0.0) + value
-        return out
+        return summed(self.condensation.timings, self._timings)
 
     def solve_increment(self, load_factor: float) -> SolveReport:
         """Solve for the load factor ``load_factor`` from the last converged state: outer Newton
@@ -216,7 +214,7 @@ class _OuterSystem:
         p, s = self.problem, self.solver
         t0 = time.perf_counter()
         F_int = p.assemble_internal_force()
-        s._timings["assembly"] = s._timings.get("assembly", 0.0) + time.perf_counter() - t0
+        s._timings.add("assembly", t0)
         R_free = p.free_residual(p.residual(F_int=F_int))
         w = p.relative_displacement()
         law = self.contact.evaluate(w)
@@ -304,7 +302,7 @@ class _OuterSystem:
         tol = opts.rtol * scale + opts.atol
         t0 = time.perf_counter()
         result, system = s.inner_solve(cond, self.laws, z_m, tol, max(tol / max(opts.rtol, 1e-300), 1e-300))
-        s._timings["contact"] = s._timings.get("contact", 0.0) + time.perf_counter() - t0
+        s._timings.add("contact", t0)
         self.inner_iterations = result.iterations
         if not result.converged:
             self.inner_failure = f"inner nonsmooth solve failed at outer iteration {self.steps}: {result.message}"

@@ -50,6 +50,7 @@ from dolfinx_nnqem.solvers.increment_start import IncrementStart, start_incremen
 from dolfinx_nnqem.solvers.nneqm2_frozen import FrozenDirections
 from dolfinx_nnqem.solvers.nneqm2_return_map import ReturnMapIncrement
 from dolfinx_nnqem.solvers.options import NNEQM2Options, SolverOptions
+from dolfinx_nnqem.solvers.timings import Timings, summed
 
 __all__ = ["NNEQM2Solver"]
 
@@ -140,22 +141,18 @@ class NNEQM2Solver(ReleasesPETSc):
         self._frozen = (FrozenDirections(problem, self.gp, self.elastic, self.settings.inner_globalisations,
                                          self.settings.inner_max_iterations) if self.frozen else None)
         self._factorised = False
-        self._timings = {"setup": time.perf_counter() - t0}
+        self._timings = Timings(setup=time.perf_counter() - t0)
         self._phases: list[dict[str, float]] = []
 
     @property
     def timings(self) -> dict[str, float]:
         """Seconds per phase: setup, assembly, factorisation, flexibility, solve, and the variant's own."""
-        out = dict(self._timings)
-        parts = [self.elastic.timings, *self._phases]
+        parts = [self._timings, self.elastic.timings, *self._phases]
         if self.tangent is not None:
             parts.append({f"tangent_{k}": v for k, v in self.tangent.timings.items()})
         if self._frozen is not None:
             parts.append(self._frozen.timings)
-        for part in parts:
-            for key, value in part.items():
-                out[key] = out.get(key, 0.0) + value
-        return out
+        return summed(*parts)
 
     # -- one increment -------------------------------------------------------------------------------
     def solve_increment(self, load_factor: float) -> SolveReport:

@@ -51,6 +51,7 @@ from dolfinx_nnqem.solvers.contract import contact_model
 from dolfinx_nnqem.solvers.convergence import IterationRecord, SolveReport, logger
 from dolfinx_nnqem.solvers.gauss_points import GaussPointOperators
 from dolfinx_nnqem.solvers.increment_start import IncrementStart
+from dolfinx_nnqem.solvers.timings import Timings
 
 __all__ = ["FrozenDirections", "FrozenSolution"]
 
@@ -81,7 +82,7 @@ class FrozenDirections:
         self.p, self.gp, self.elastic = problem, gp, elastic
         self.material: PointwiseMaterial = gp.material  # von Mises yield (NNEQM2Solver refuses others)
         self.globalisations, self.max_iterations = globalisations, max_iterations
-        self.timings: dict[str, float] = {}
+        self.timings = Timings()
         slope = self.material.hardening({"p": problem.state.p_n.x.array[:gp.n_gp]})
         self.gscale = gp.gather_yielding(gp.stress_unit / (3.0 * gp.mu + slope))  # Δγ = Δγ̃ · gscale
         self._pairs = None  # G Bᵀ (owned rows), its strains (NG, 5, 3NC) and B G Bᵀ: built once
@@ -112,7 +113,7 @@ class FrozenDirections:
             Bt = self.elastic.transposed_B()
             self._pairs = self._influence(Bt)
             Bt.destroy()
-            self._tick("flexibility", t0)
+            self.timings.add("flexibility", t0)
         return self._pairs
 
     def _flow_matrix(self, N: np.ndarray) -> PETSc.Mat:
@@ -173,7 +174,7 @@ class FrozenDirections:
         NtQ = self._mode_loads_of(Q)
         YQ, SQ, WBQ = self._influence(Q)
         Q.destroy()
-        self._tick("plastic_matrix", t0)
+        self.timings.add("plastic_matrix", t0)
         system = self._system(start, du0, WBB, WBQ, NtQ, F, nc)
         rows = _YieldRows(system, gp, self.material, start, e0, SB, SQ, N, self.gscale)
         x0 = system.scaled(z, np.zeros(gp.num_yield_points), alpha)
@@ -279,15 +280,13 @@ class FrozenDirections:
             x0, step_rule = system.on_the_slip(x0), system.advance_on_the_slip
         result = solve_dense(residual, x0, tol=tol, max_iter=self.max_iterations, log=log,
                              globalisations=self.globalisations, advance=step_rule)
-        self._tick("dense_solve", t0)
+        self.timings.add("dense_solve", t0)
         comm = self.p.comm
         if comm.size > 1:  # every rank takes rank 0's decision and solution
             result.converged, result.message, result.x = comm.bcast((result.converged, result.message, result.x),
                                                                     root=0)
         return result, records
 
-    def _tick(self, key: str, t0: float) -> None:
-        self.timings[key] = self.timings.get(key, 0.0) + time.perf_counter() - t0
 
 
 class _YieldRows:

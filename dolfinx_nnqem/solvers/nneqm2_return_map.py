@@ -65,6 +65,7 @@ from dolfinx_nnqem.solvers.contract import contact_model
 from dolfinx_nnqem.solvers.convergence import IterationRecord, SolveReport, count_states, logger
 from dolfinx_nnqem.solvers.gauss_points import GaussPointOperators
 from dolfinx_nnqem.solvers.increment_start import IncrementStart
+from dolfinx_nnqem.solvers.timings import Timings
 
 __all__ = ["ReturnMapIncrement"]
 
@@ -122,7 +123,7 @@ class ReturnMapIncrement:
         self.F = start.force_scale
         self.row_scale = np.where(gp.yields, _SQRT23 * (3.0 * gp.mu + gp.material.hardening(start.internal_n))
                                   / gp.stress_unit, 0.0)
-        self.timings: dict[str, float] = {}
+        self.timings = Timings()
         z = problem.contact.z.copy() if problem.contact is not None else np.zeros((0, 3))
         self.x = _Iterate(z, np.zeros((gp.n_gp, 5)), np.zeros(elastic.num_modes))
         self._direction: tuple[_PairStep | None, np.ndarray, np.ndarray] | None = None  #: (pairs, dΔε_p, dα)
@@ -200,7 +201,7 @@ class ReturnMapIncrement:
         norm_E = float(np.linalg.norm(x.E)) / self.F
         norm_G = global_norm(self.row_scale[:, None] * x.G, p.comm)
         x.norms = (norm_H, norm_E, norm_G)
-        self._tick("residual", t0)
+        self.timings.add("residual", t0)
         psi = 0.5 * (norm_H ** 2 + norm_E ** 2 + norm_G ** 2)
         return Merit(psi, max(x.norms) <= self.tol)
 
@@ -326,7 +327,7 @@ class ReturnMapIncrement:
         for vec in (du_lin, du_vec):
             vec.destroy()
         self.x = x
-        self._tick("newton_step", t0)
+        self.timings.add("newton_step", t0)
         return None
 
     def newton_direction(self, merit: Merit) -> str | None:
@@ -348,7 +349,7 @@ class ReturnMapIncrement:
             "jab,jb->ja", self._return_map_tangent(x.t), gp.deviatoric_strains(y_vec)), 0.0)
         y_vec.destroy()
         self._direction = (pairs, d_eps, dalpha)
-        self._tick("newton_step", t0)
+        self.timings.add("newton_step", t0)
         return None
 
     def lm_direction(self, merit: Merit, globalisation: Globalisation) -> str | None:
@@ -405,5 +406,3 @@ class ReturnMapIncrement:
         self.report.history.append(record)
         logger.info(record.line("nneqm2"))
 
-    def _tick(self, key: str, t0: float) -> None:
-        self.timings[key] = self.timings.get(key, 0.0) + time.perf_counter() - t0
