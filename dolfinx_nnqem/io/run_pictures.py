@@ -407,10 +407,7 @@ def draw_run_pictures(folder: str | os.PathLike, *, out: str | os.PathLike | Non
         ``error_estimates.png`` without an estimate, ``error_indicator.png`` without that field.
     """
 
-    unknown = set(names) - set(PICTURES)
-    if unknown:
-        raise ValueError(f"pictures {sorted(unknown)}: expected some of {PICTURES}")
-    names = [name for name in PICTURES if name in names]
+    names = _picture_names(names)
     folder = Path(folder)
     out = Path(out) if out is not None else folder / PICTURE_FOLDER
     out.mkdir(parents=True, exist_ok=True)
@@ -419,54 +416,99 @@ def draw_run_pictures(folder: str | os.PathLike, *, out: str | os.PathLike | Non
     pairs = read_pairs(folder)
     rows = pairs[-1]["rows"] if pairs else []
     done: dict[str, Path | str] = {}
-
-    def attempt(name, draw, *args, **kwargs):
-        try:
-            done[name] = _whole_picture(out / name, lambda path: draw(*args, path, **kwargs))
-        except (ValueError, KeyError, OSError, IndexError, PictureUnavailable) as error:  # data missing, no VTK
-            done[name] = f"not drawn: {error}"
-
     if not summary.get("load_factors"):
         return {name: "not drawn: no converged increment" for name in names}
-    fields = None
-    if "deformed.png" not in names and "error_indicator.png" not in names:
-        pass
-    elif step is not None:
-        fields = lambda: [step]  # noqa: E731  (from memory: nothing to read)
-    elif (folder / "fields.xdmf").exists():  # the last step is read (by a child process) while the curves are drawn
-        try:
-            fields = start_reading_fields(folder, last_only=True)
-        except OSError as error:
-            done["deformed.png"] = f"not drawn: {error}"
+    fields = _start_fields(folder, names, step, done)
     try:
-        if "pair_pressure.png" not in names:
-            pass
-        elif rows:
-            attempt("pair_pressure.png", draw_pair_pressure, rows, title=title)
-        else:
-            done["pair_pressure.png"] = "not drawn: no contact pairs"
-        if "load_curve.png" in names:
-            attempt("load_curve.png", draw_load_curve, summary, title=title)
-        if "convergence.png" in names:
-            attempt("convergence.png", draw_convergence, summary, title=title)
-        if ESTIMATE_PICTURE in names and "error_estimates" in summary:  # (a run without estimates: none)
-            attempt(ESTIMATE_PICTURE, draw_error_estimates, summary, title=title)
+        _draw_curves(out, names, summary, rows, title, done)
     finally:  # the reading process is waited for whatever happened
-        try:
-            steps = fields() if fields is not None else []
-        except OSError as error:
-            steps, done["deformed.png"] = [], f"not drawn: {error}"
+        steps = _wait_for_fields(fields, done)
     if steps:
         last = steps[-1] if step is not None else _with_quadratic_displacement(folder, steps[-1])
-        if "deformed.png" in names:
-            attempt("deformed.png", draw_deformed, last, rows, title=title, scale=scale, field=field, camera=camera)
-        if "error_indicator.png" in names and "error_indicator" in last:  # (written by the command line)
-            attempt("error_indicator.png", draw_deformed, last, rows, title=title, scale=scale,
-                    field="error_indicator", camera=camera)
+        _draw_fields(out, names, last, rows, done, title=title, scale=scale, field=field, camera=camera)
     else:
         for name in ("deformed.png", "error_indicator.png"):
             done.setdefault(name, "not drawn: no fields (the run was made with fields = false)")
     return {name: done[name] for name in names if name in done}
+
+
+def _picture_names(names: Collection[str]) -> list[str]:
+    """``names``, of :data:`PICTURES`, in the order of :data:`PICTURES`; ValueError names the others."""
+    unknown = set(names) - set(PICTURES)
+    if unknown:
+        raise ValueError(f"pictures {sorted(unknown)}: expected some of {PICTURES}")
+    return [name for name in PICTURES if name in names]
+
+
+def _attempt(done: dict[str, Path | str], out: Path, name: str, draw: Callable[..., object], /, *args: Any,
+             **kwargs: Any) -> None:
+    """``done[name]``: the picture ``draw(*args, path, **kwargs)`` drawn whole at ``out / name``,
+    or why not, for the reasons a folder's data or the machine give (a missing field, no VTK)."""
+    try:
+        done[name] = _whole_picture(out / name, lambda path: draw(*args, path, **kwargs))
+    except (ValueError, KeyError, OSError, IndexError, PictureUnavailable) as error:  # data missing, no VTK
+        done[name] = f"not drawn: {error}"
+
+
+def _start_fields(folder: Path, names: Collection[str], step: dict | None,
+                  done: dict[str, Path | str]) -> Callable[[], list[dict]] | None:
+    """What returns the field steps of the pictures drawn on the mesh, or None (none asked for,
+    or no ``fields.xdmf``; a failure to start reading goes in ``done``).
+
+    The reading starts here, before the curves are drawn: where this process cannot use h5py,
+    a child process reads the last step meanwhile (:func:`~dolfinx_nnqem.io.reader.start_reading_fields`).
+    """
+    if "deformed.png" not in names and "error_indicator.png" not in names:
+        return None
+    if step is not None:
+        return lambda: [step]  # from memory: nothing to read
+    if not (folder / "fields.xdmf").exists():
+        return None
+    try:
+        return start_reading_fields(folder, last_only=True)
+    except OSError as error:
+        done["deformed.png"] = f"not drawn: {error}"
+        return None
+
+
+def _wait_for_fields(fields: Callable[[], list[dict]] | None, done: dict[str, Path | str]) -> list[dict]:
+    """The field steps ``fields`` returns, waited for; none without it, or when reading failed
+    (the reason goes in ``done``)."""
+    try:
+        return fields() if fields is not None else []
+    except OSError as error:
+        done["deformed.png"] = f"not drawn: {error}"
+        return []
+
+
+def _draw_curves(out: Path, names: Collection[str], summary: dict, rows: list[dict], title: str,
+                 done: dict[str, Path | str]) -> None:
+    """The pictures of ``names`` drawn from the pair CSV and ``summary.json``: the pair pressure,
+    the load curve, the convergence and the error estimates."""
+    if "pair_pressure.png" not in names:
+        pass
+    elif rows:
+        _attempt(done, out, "pair_pressure.png", draw_pair_pressure, rows, title=title)
+    else:
+        done["pair_pressure.png"] = "not drawn: no contact pairs"
+    if "load_curve.png" in names:
+        _attempt(done, out, "load_curve.png", draw_load_curve, summary, title=title)
+    if "convergence.png" in names:
+        _attempt(done, out, "convergence.png", draw_convergence, summary, title=title)
+    if ESTIMATE_PICTURE in names and "error_estimates" in summary:  # (a run without estimates: none)
+        _attempt(done, out, ESTIMATE_PICTURE, draw_error_estimates, summary, title=title)
+
+
+def _draw_fields(out: Path, names: Collection[str], last: dict, rows: list[dict], done: dict[str, Path | str], *,
+                 title: str, scale: float | None, field: str, camera: str) -> None:
+    """The pictures of ``names`` drawn on the deformed mesh of the ``last`` field step:
+    ``deformed.png`` and ``error_indicator.png``."""
+    if "deformed.png" in names:
+        _attempt(done, out, "deformed.png", draw_deformed, last, rows, title=title, scale=scale, field=field,
+                 camera=camera)
+    if "error_indicator.png" in names and "error_indicator" in last:  # (written by the command line)
+        _attempt(done, out, "error_indicator.png", draw_deformed, last, rows, title=title, scale=scale,
+                 field="error_indicator", camera=camera)
 
 
 CONTACT_PICTURE = "contact_pressure.png"

@@ -241,80 +241,152 @@ def solve(system: NewtonSystem, globalisation: Globalisation, max_iterations: in
     result = NewtonResult(iterations=first_iteration)
     merit = system.evaluate()
     step_length, kind = first_step_length, first_kind
-    # the watchdog's best iterate: the last progress (Chamberlain), or the lowest Ψ when progress
-    # is measured by its own fraction
-    best: tuple[Merit, object] | None = None
-    track_lowest = g.watchdog_progress is not None
-    progress = 1.0 - 2.0 * g.armijo if g.watchdog_progress is None else g.watchdog_progress
-    progress_psi = math.inf  # Ψ at the last progress
-    nonmonotone = 0  # steps taken since the last progress
-    watchdog = g.watchdog  # 0 once the watchdog has returned to the best iterate watchdog_restarts times
+    watchdog = _Watchdog.start(g)
     lowest: list[float] = []  # the lowest Ψ reached, after each iteration (the stall test)
     for iteration in range(first_iteration, max_iterations + 1):
         result.iterations = iteration
         system.record(iteration, step_length, kind)
-        if not merit.finite:
-            result.message = f"the residual is not finite (NaN/inf) at iteration {iteration}"
-            return result
-        if merit.converged:
-            result.converged = True
-            result.message = f"converged in {iteration} iterations"
+        if _finished(merit, iteration, result):
             return result
         if iteration == max_iterations:
             break
         lowest.append(min(merit.psi, lowest[-1]) if lowest else merit.psi)
         if _stalled(lowest, g):
-            why = _why_stuck(system, "a local minimum, a plateau or a cycle of the merit function")
-            result.message = (f"stopped at iteration {iteration}: stalled, the lowest |H| fell by less than "
-                              f"{1.0 - math.sqrt(g.stall_progress):.0%} in the last {g.stall_window} iterations "
-                              f"({why})")
+            result.message = _stall_message(system, g, iteration)
             return result
-        if g.line_search and watchdog > 0:
-            if best is None or merit.psi < progress * progress_psi:
-                best, progress_psi, nonmonotone = (merit, system.snapshot()), merit.psi, 0
-            else:
-                if track_lowest and merit.psi < best[0].psi:
-                    best = (merit, system.snapshot())
-                if nonmonotone >= watchdog:  # the watchdog ran out: a monotone step from the best
-                    if not track_lowest or best[0].psi < merit.psi:
-                        merit = system.restore(best[1])
-                    progress_psi, nonmonotone = best[0].psi, -1
-                    result.watchdog_restarts += 1
-                    if g.watchdog_restarts is not None and result.watchdog_restarts >= g.watchdog_restarts:
-                        watchdog = 0
-        system.start_step()
-        why_not = system.newton_direction(merit)
-        step = None
-        if why_not is None:
-            step, rejected = _take_step(system, merit, g, allow_increase=watchdog > 0 and nonmonotone >= 0)
-            result.line_search_steps += rejected
-            if step is None:
-                why_not = "the Newton direction failed the line search"
-        if step is not None:
-            kind = "newton" if step[2] else "full"  # "full": a watchdog step without decrease
-            result.newton_steps += 1
-        elif g.levenberg_marquardt:
-            why_lm = system.lm_direction(merit, g)
-            if why_lm is not None:
-                result.message = f"stopped at iteration {iteration + 1}: {why_not}, and {why_lm}"
-                return result
-            step, rejected = _take_step(system, merit, g, allow_increase=False)
-            result.line_search_steps += rejected
-            if step is None:
-                why = _why_stuck(system, "a local minimum or a kink of the merit function")
-                result.message = (f"stopped at iteration {iteration + 1}: {why_not}, and the Levenberg–Marquardt "
-                                  f"direction failed it down to step length {g.min_step:.1e} ({why})")
-                return result
-            kind = "lm"
-            result.lm_steps += 1
-        else:
-            result.message = f"stopped at iteration {iteration + 1}: {why_not}"
+        if g.line_search and watchdog.steps > 0:
+            merit = watchdog.check(system, merit, result)
+        step = _next_step(system, merit, g, watchdog.allows_increase(), iteration, result)
+        if step is None:  # no step: result.message says why
             return result
-        step_length, merit = step[0], step[1]
-        nonmonotone += 1
+        step_length, merit, kind = step
+        watchdog.nonmonotone += 1
     note = system.roundoff_note()
     result.message = f"no convergence in {max_iterations} iterations" + ("" if note is None else f" ({note})")
     return result
+
+
+def _finished(merit: Merit, iteration: int, result: NewtonResult) -> bool:
+    """Whether the iterate ends the solve: Ψ is not finite (a failure) or the backend's
+    convergence test holds; ``result`` then says so."""
+    if not merit.finite:
+        result.message = f"the residual is not finite (NaN/inf) at iteration {iteration}"
+        return True
+    if merit.converged:
+        result.converged = True
+        result.message = f"converged in {iteration} iterations"
+        return True
+    return False
+
+
+def _stall_message(system: NewtonSystem, g: Globalisation, iteration: int) -> str:
+    """Why the solve stops when :func:`_stalled` holds at ``iteration``."""
+    why = _why_stuck(system, "a local minimum, a plateau or a cycle of the merit function")
+    return (f"stopped at iteration {iteration}: stalled, the lowest |H| fell by less than "
+            f"{1.0 - math.sqrt(g.stall_progress):.0%} in the last {g.stall_window} iterations "
+            f"({why})")
+
+
+@dataclass
+class _Watchdog:
+    """Chamberlain's watchdog over the iterates of one solve (see :class:`Globalisation`).
+
+    Attributes
+    ----------
+    steps
+        Full steps accepted in a row without progress before a return to the best iterate;
+        0 once the watchdog has returned ``watchdog_restarts`` times (monotone steps only).
+    restarts
+        ``Globalisation.watchdog_restarts``.
+    progress
+        Progress is Ψ below this fraction of ``progress_psi``.
+    track_lowest
+        The best iterate is the lowest Ψ (progress measured by its own fraction), not the last
+        progress (Chamberlain).
+    best
+        The best iterate's merit and snapshot; None before the first iterate is checked.
+    progress_psi
+        Ψ at the last progress.
+    nonmonotone
+        Steps taken since the last progress; −1 right after a return to the best iterate, so
+        that the next step is line-searched.
+    """
+
+    steps: int
+    restarts: int | None
+    progress: float
+    track_lowest: bool
+    best: tuple[Merit, object] | None = None
+    progress_psi: float = math.inf
+    nonmonotone: int = 0
+
+    @classmethod
+    def start(cls, g: Globalisation) -> _Watchdog:
+        """The watchdog of a new solve."""
+        progress = 1.0 - 2.0 * g.armijo if g.watchdog_progress is None else g.watchdog_progress
+        return cls(steps=g.watchdog, restarts=g.watchdog_restarts, progress=progress,
+                   track_lowest=g.watchdog_progress is not None)
+
+    def allows_increase(self) -> bool:
+        """Whether the next step may be a full step that increases Ψ (not right after a return)."""
+        return self.steps > 0 and self.nonmonotone >= 0
+
+    def check(self, system: NewtonSystem, merit: Merit, result: NewtonResult) -> Merit:
+        """Record progress at the current iterate, or, when the watchdog has run out, return to
+        the best iterate; the merit of the iterate the next step starts from."""
+        if self.best is None or merit.psi < self.progress * self.progress_psi:
+            self.best, self.progress_psi, self.nonmonotone = (merit, system.snapshot()), merit.psi, 0
+            return merit
+        if self.track_lowest and merit.psi < self.best[0].psi:
+            self.best = (merit, system.snapshot())
+        if self.nonmonotone >= self.steps:  # the watchdog ran out: a monotone step from the best
+            # (with track_lowest, the current iterate may be the best one already: no return)
+            if not self.track_lowest or self.best[0].psi < merit.psi:
+                merit = system.restore(self.best[1])
+            self.progress_psi, self.nonmonotone = self.best[0].psi, -1
+            result.watchdog_restarts += 1
+            if self.restarts is not None and result.watchdog_restarts >= self.restarts:
+                self.steps = 0
+        return merit
+
+
+def _next_step(system: NewtonSystem, merit: Merit, g: Globalisation, allow_increase: bool, iteration: int,
+               result: NewtonResult) -> tuple[float, Merit, str] | None:
+    """The step from the current iterate: (α, merit at the new iterate, kind), the Newton step
+    if it passes the line search, else the Levenberg–Marquardt step; counted in ``result``.
+    None when there is none (``result.message`` says why)."""
+    system.start_step()
+    why_not = system.newton_direction(merit)
+    if why_not is None:
+        step, rejected = _take_step(system, merit, g, allow_increase=allow_increase)
+        result.line_search_steps += rejected
+        if step is not None:
+            result.newton_steps += 1
+            return step[0], step[1], "newton" if step[2] else "full"  # "full": a watchdog step without decrease
+        why_not = "the Newton direction failed the line search"
+    if not g.levenberg_marquardt:
+        result.message = f"stopped at iteration {iteration + 1}: {why_not}"
+        return None
+    return _lm_step(system, merit, g, why_not, iteration, result)
+
+
+def _lm_step(system: NewtonSystem, merit: Merit, g: Globalisation, why_not: str, iteration: int,
+             result: NewtonResult) -> tuple[float, Merit, str] | None:
+    """The Levenberg–Marquardt step, taken because of ``why_not`` (no Newton step), always
+    line-searched; None when there is none (``result.message`` says why)."""
+    why_lm = system.lm_direction(merit, g)
+    if why_lm is not None:
+        result.message = f"stopped at iteration {iteration + 1}: {why_not}, and {why_lm}"
+        return None
+    step, rejected = _take_step(system, merit, g, allow_increase=False)
+    result.line_search_steps += rejected
+    if step is None:
+        why = _why_stuck(system, "a local minimum or a kink of the merit function")
+        result.message = (f"stopped at iteration {iteration + 1}: {why_not}, and the Levenberg–Marquardt "
+                          f"direction failed it down to step length {g.min_step:.1e} ({why})")
+        return None
+    result.lm_steps += 1
+    return step[0], step[1], "lm"
 
 
 def _why_stuck(system: NewtonSystem, otherwise: str) -> str:

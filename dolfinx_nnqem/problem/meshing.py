@@ -536,47 +536,65 @@ def build_two_beams(
     for label, n in (("refine", refine), ("refine2", refine if refine2 is None else refine2)):
         if int(n) != n or n < 1:
             raise ValueError(f"{label} must be a positive integer, got {n!r}")
+    return _mesh_from_gmsh(comm, "two_beams", lambda: _build_two_beams_model(refine, refine2), msh_file, order)
+
+
+_BEAM_WIDTH = 0.4
+"""The two beams' height (y) and width (z)."""
+
+
+def _build_two_beams_model(refine: int, refine2: int | None) -> None:
+    """The gmsh model of :func:`build_two_beams` (current model, rank 0): geometry, groups, mesh."""
+    width = _BEAM_WIDTH
+    # each beam in two boxes, split where the other beam starts or ends and fragmented with each
+    # other only: the contact surfaces are exactly the overlap, and the beams share no node
+    beam1 = _fragment_boxes([(0.0, 0.0, 0.0, 1.6, width, width), (1.6, 0.0, 0.0, 0.4, width, width)])
+    beam2 = _fragment_boxes([(1.6, width, 0.0, 0.4, width, width), (2.0, width, 0.0, 1.6, width, width)])
+    gmsh.model.occ.synchronize()
+    _structured_hexahedra(_two_beams_curve_counts(beam1, beam2, refine, refine2))
+    _tag_two_beams(beam1, beam2)
+    gmsh.model.mesh.generate(3)
+    _round_node_coordinates()
+
+
+def _two_beams_curve_counts(beam1: list[int], beam2: list[int], refine: int,
+                            refine2: int | None) -> dict[int, int]:
+    """Element count of each curve of the two beams: edges of 0.2 / ``refine`` m, beam 2's of
+    0.2 / ``refine2`` m when it is given."""
     h = 0.2 / int(refine)
-    width = 0.4  # beam height (y) and width (z)
+    counts = _box_curve_counts(beam1 + beam2, lambda d: max(1, round(float(d.max()) / h)))
+    if refine2 is not None:  # the beams share no curve: beam 2's counts are its own
+        h2 = 0.2 / int(refine2)
+        counts |= _box_curve_counts(beam2, lambda d: max(1, round(float(d.max()) / h2)))
+    return counts
 
-    def build() -> None:
-        beam1 = _fragment_boxes([(0.0, 0.0, 0.0, 1.6, width, width), (1.6, 0.0, 0.0, 0.4, width, width)])
-        beam2 = _fragment_boxes([(1.6, width, 0.0, 0.4, width, width), (2.0, width, 0.0, 1.6, width, width)])
-        gmsh.model.occ.synchronize()
 
-        counts = _box_curve_counts(beam1 + beam2, lambda d: max(1, round(float(d.max()) / h)))
-        if refine2 is not None:  # the beams share no curve: beam 2's counts are its own
-            h2 = 0.2 / int(refine2)
-            counts |= _box_curve_counts(beam2, lambda d: max(1, round(float(d.max()) / h2)))
-        _structured_hexahedra(counts)
-
-        size = 3.6
-        _add_group(3, beam1, TwoBeamsTags.BODY1, "beam1")
-        _add_group(3, beam2, TwoBeamsTags.BODY2, "beam2")
-        _add_group(
-            2, _surfaces_in_box((0, 0, 0), (0, width, width), beam1, size),
-            TwoBeamsTags.CLAMP1, "clamp1",
-        )  # fmt: skip
-        _add_group(
-            2, _surfaces_in_box((3.6, width, 0), (3.6, 2 * width, width), beam2, size),
-            TwoBeamsTags.CLAMP2, "clamp2",
-        )  # fmt: skip
-        _add_group(
-            2, _surfaces_in_box((1.6, 2 * width, 0), (3.6, 2 * width, width), beam2, size),
-            TwoBeamsTags.LOAD, "load",
-        )  # fmt: skip
-        _add_group(
-            2, _surfaces_in_box((1.6, width, 0), (2.0, width, width), beam1, size),
-            TwoBeamsTags.CONTACT1, "contact1",
-        )  # fmt: skip
-        _add_group(
-            2, _surfaces_in_box((1.6, width, 0), (2.0, width, width), beam2, size),
-            TwoBeamsTags.CONTACT2, "contact2",
-        )  # fmt: skip
-        gmsh.model.mesh.generate(3)
-        _round_node_coordinates()
-
-    return _mesh_from_gmsh(comm, "two_beams", build, msh_file, order)
+def _tag_two_beams(beam1: list[int], beam2: list[int]) -> None:
+    """The physical groups of the two beams (:class:`TwoBeamsTags`)."""
+    width = _BEAM_WIDTH
+    size = 3.6  # the model's length: the scale of _surfaces_in_box's tolerance
+    _add_group(3, beam1, TwoBeamsTags.BODY1, "beam1")
+    _add_group(3, beam2, TwoBeamsTags.BODY2, "beam2")
+    _add_group(
+        2, _surfaces_in_box((0, 0, 0), (0, width, width), beam1, size),
+        TwoBeamsTags.CLAMP1, "clamp1",
+    )  # fmt: skip
+    _add_group(
+        2, _surfaces_in_box((3.6, width, 0), (3.6, 2 * width, width), beam2, size),
+        TwoBeamsTags.CLAMP2, "clamp2",
+    )  # fmt: skip
+    _add_group(
+        2, _surfaces_in_box((1.6, 2 * width, 0), (3.6, 2 * width, width), beam2, size),
+        TwoBeamsTags.LOAD, "load",
+    )  # fmt: skip
+    _add_group(
+        2, _surfaces_in_box((1.6, width, 0), (2.0, width, width), beam1, size),
+        TwoBeamsTags.CONTACT1, "contact1",
+    )  # fmt: skip
+    _add_group(
+        2, _surfaces_in_box((1.6, width, 0), (2.0, width, width), beam2, size),
+        TwoBeamsTags.CONTACT2, "contact2",
+    )  # fmt: skip
 
 
 # --------------------------------------------------------------------------------------------
@@ -656,29 +674,42 @@ def build_stacked_blocks(
     y_i = Ly1 if y_interface is None else float(y_interface)
     x0 = -Lx / 2 if centred else 0.0
     z0 = -Lz / 2 if centred else 0.0
+    return _mesh_from_gmsh(
+        comm, "stacked_blocks",
+        lambda: _build_stacked_blocks_model(x0, z0, y_i, gap, (Lx, Ly1, Ly2, Lz), (nx, ny1, nz), (nx2, ny2, nz2)),
+        msh_file, order)
+
+
+def _build_stacked_blocks_model(x0: float, z0: float, y_i: float, gap: float,
+                                lengths: tuple[float, float, float, float], divisions1: tuple[int, int, int],
+                                divisions2: tuple[int, int, int]) -> None:
+    """The gmsh model of :func:`build_stacked_blocks` (current model, rank 0): geometry, groups, mesh.
+
+    ``(x0, z0)``: the blocks' lowest corner in x and z; ``y_i``: the height of body 1's top face;
+    ``lengths``: (Lx, Ly1, Ly2, Lz); ``divisions1``, ``divisions2``: the element counts (x, y, z)
+    of body 1 and of body 2.
+    """
+    Lx, Ly1, Ly2, Lz = lengths
     y2 = y_i + gap
+    body1 = _fragment_boxes([(x0, y_i - Ly1, z0, Lx, Ly1, Lz)])
+    body2 = _fragment_boxes([(x0, y2, z0, Lx, Ly2, Lz)])
+    gmsh.model.occ.synchronize()
+    _structured_hexahedra(_axis_curve_counts(body1, divisions1) | _axis_curve_counts(body2, divisions2))
 
-    def build() -> None:
-        body1 = _fragment_boxes([(x0, y_i - Ly1, z0, Lx, Ly1, Lz)])
-        body2 = _fragment_boxes([(x0, y2, z0, Lx, Ly2, Lz)])
-        gmsh.model.occ.synchronize()
+    size = float(np.linalg.norm([Lx, Ly1 + Ly2 + abs(gap), Lz]))
+    _add_group(3, body1, StackedBlocksTags.BODY1, "body1")
+    _add_group(3, body2, StackedBlocksTags.BODY2, "body2")
+    for body, lower, upper, tag, label in _stacked_block_faces(body1, body2, (x0, x0 + Lx), (z0, z0 + Lz),
+                                                               (y_i - Ly1, y_i), (y2, y2 + Ly2)):
+        _add_group(2, _surfaces_in_box(lower, upper, body, size), tag, label)
+    gmsh.model.mesh.generate(3)
+    _round_node_coordinates()
 
-        def counts_for(volumes: list[int], n_x: int, n_y: int, n_z: int) -> dict[int, int]:
-            # the curve's direction is the axis of its (only) non-zero extent
-            return _box_curve_counts(volumes, lambda d: (n_x, n_y, n_z)[int(np.argmax(d))])
 
-        _structured_hexahedra(counts_for(body1, nx, ny1, nz) | counts_for(body2, nx2, ny2, nz2))
-
-        size = float(np.linalg.norm([Lx, Ly1 + Ly2 + abs(gap), Lz]))
-        _add_group(3, body1, StackedBlocksTags.BODY1, "body1")
-        _add_group(3, body2, StackedBlocksTags.BODY2, "body2")
-        for body, lower, upper, tag, label in _stacked_block_faces(body1, body2, (x0, x0 + Lx), (z0, z0 + Lz),
-                                                                   (y_i - Ly1, y_i), (y2, y2 + Ly2)):
-            _add_group(2, _surfaces_in_box(lower, upper, body, size), tag, label)
-        gmsh.model.mesh.generate(3)
-        _round_node_coordinates()
-
-    return _mesh_from_gmsh(comm, "stacked_blocks", build, msh_file, order)
+def _axis_curve_counts(volumes: list[int], divisions: tuple[int, int, int]) -> dict[int, int]:
+    """Element count of each curve of the boxes ``volumes``: ``divisions`` (x, y, z) by the
+    curve's direction, the axis of its (only) non-zero extent."""
+    return _box_curve_counts(volumes, lambda d: divisions[int(np.argmax(d))])
 
 
 def _stacked_block_faces(body1: list[int], body2: list[int], xs: tuple[float, float], zs: tuple[float, float],
@@ -842,61 +873,94 @@ def build_thick_cylinder(
     for label, n in (("n_radial", n_radial), ("n_circumferential", n_circumferential)):
         if int(n) != n or n < 1:
             raise ValueError(f"{label} must be a positive integer, got {n!r}")
+    return _mesh_from_gmsh(
+        comm, "thick_cylinder",
+        lambda: _build_thick_cylinder_model(a, b, t, n_radial, n_circumferential, radial_progression), msh_file)
 
-    def build() -> None:
-        occ = gmsh.model.occ
-        centre = occ.addPoint(0, 0, 0)
-        p_ax, p_bx = occ.addPoint(a, 0, 0), occ.addPoint(b, 0, 0)
-        p_ay, p_by = occ.addPoint(0, a, 0), occ.addPoint(0, b, 0)
-        # both radial lines run from r = a to r = b, so one progression grades them alike
-        line_y0 = occ.addLine(p_ax, p_bx)
-        line_x0 = occ.addLine(p_ay, p_by)
-        arc_b = occ.addCircleArc(p_bx, centre, p_by)
-        arc_a = occ.addCircleArc(p_ay, centre, p_ax)
-        loop = occ.addCurveLoop([line_y0, arc_b, line_x0, arc_a])
-        base = occ.addPlaneSurface([loop])
-        occ.remove([(0, centre)])
-        out = occ.extrude([(2, base)], 0, 0, t, numElements=[1], recombine=True)
-        occ.synchronize()
-        volumes = [tag for dim, tag in out if dim == 3]
 
-        for line in (line_y0, line_x0):
-            gmsh.model.mesh.setTransfiniteCurve(line, n_radial + 1, "Progression", radial_progression)
-        for arc in (arc_a, arc_b):
-            gmsh.model.mesh.setTransfiniteCurve(arc, n_circumferential + 1)
-        gmsh.model.mesh.setTransfiniteSurface(base, cornerTags=[p_ax, p_bx, p_by, p_ay])
-        gmsh.model.mesh.setRecombine(2, base)
+class _QuarterTube(NamedTuple):
+    """The gmsh entities of the extruded quarter annulus that its meshing and tagging use."""
 
-        T = ThickCylinderTags
-        names = {
-            T.INNER: "inner", T.OUTER: "outer", T.SYMMETRY_X: "symmetry_x",
-            T.SYMMETRY_Y: "symmetry_y", T.FACES_Z: "faces_z",
-        }  # fmt: skip
-        groups: dict[int, list[int]] = {tag: [] for tag in names}
-        tol = _EPS * 10 * b
-        for s in sorted(_surfaces_of(volumes)):
-            lo = np.array(gmsh.model.getBoundingBox(2, s)[:3])
-            hi = np.array(gmsh.model.getBoundingBox(2, s)[3:])
-            if hi[2] - lo[2] < tol:
-                groups[T.FACES_Z].append(s)
-            elif hi[0] < tol:
-                groups[T.SYMMETRY_X].append(s)
-            elif hi[1] < tol:
-                groups[T.SYMMETRY_Y].append(s)
-            elif abs(hi[0] - a) < 1e-3 * a:
-                groups[T.INNER].append(s)
-            elif abs(hi[0] - b) < 1e-3 * b:
-                groups[T.OUTER].append(s)
-            else:
-                raise RuntimeError(f"cannot classify surface {s} with bounding box {lo}-{hi}")
-        for tag, surfaces in groups.items():
-            if not surfaces:
-                raise RuntimeError(f"no surface found for tag {tag} ({names[tag]})")
-            _add_group(2, surfaces, tag, names[tag])
-        _add_group(3, volumes, T.BODY, "tube")
-        gmsh.model.mesh.generate(3)
+    volumes: list[int]
+    base: int
+    """The quarter annulus at z = 0, the extrusion's source (and the transfinite surface)."""
+    radial_lines: tuple[int, int]
+    """The base's edges on y = 0 and on x = 0, both from r = a to r = b."""
+    arcs: tuple[int, int]
+    """The base's edges r = a and r = b."""
+    corners: tuple[int, int, int, int]
+    """The base's corner points (a, 0), (b, 0), (0, b), (0, a)."""
 
-    return _mesh_from_gmsh(comm, "thick_cylinder", build, msh_file)
+
+def _build_thick_cylinder_model(a: float, b: float, t: float, n_radial: int, n_circumferential: int,
+                                radial_progression: float) -> None:
+    """The gmsh model of :func:`build_thick_cylinder` (current model, rank 0): geometry, mesh sizes,
+    groups, mesh."""
+    tube = _quarter_tube(a, b, t)
+    for line in tube.radial_lines:
+        gmsh.model.mesh.setTransfiniteCurve(line, n_radial + 1, "Progression", radial_progression)
+    for arc in tube.arcs:
+        gmsh.model.mesh.setTransfiniteCurve(arc, n_circumferential + 1)
+    gmsh.model.mesh.setTransfiniteSurface(tube.base, cornerTags=list(tube.corners))
+    gmsh.model.mesh.setRecombine(2, tube.base)
+
+    T = ThickCylinderTags
+    names = {
+        T.INNER: "inner", T.OUTER: "outer", T.SYMMETRY_X: "symmetry_x",
+        T.SYMMETRY_Y: "symmetry_y", T.FACES_Z: "faces_z",
+    }  # fmt: skip
+    for tag, surfaces in _classify_tube_surfaces(tube.volumes, a, b).items():
+        if not surfaces:
+            raise RuntimeError(f"no surface found for tag {tag} ({names[tag]})")
+        _add_group(2, surfaces, tag, names[tag])
+    _add_group(3, tube.volumes, T.BODY, "tube")
+    gmsh.model.mesh.generate(3)
+
+
+def _quarter_tube(a: float, b: float, t: float) -> _QuarterTube:
+    """The quarter annulus a ≤ r ≤ b (x, y ≥ 0) at z = 0, extruded by ``t`` in z with one
+    recombined element layer (hexahedra); the OCC model synchronised."""
+    occ = gmsh.model.occ
+    centre = occ.addPoint(0, 0, 0)
+    p_ax, p_bx = occ.addPoint(a, 0, 0), occ.addPoint(b, 0, 0)
+    p_ay, p_by = occ.addPoint(0, a, 0), occ.addPoint(0, b, 0)
+    # both radial lines run from r = a to r = b, so one progression grades them alike
+    line_y0 = occ.addLine(p_ax, p_bx)
+    line_x0 = occ.addLine(p_ay, p_by)
+    arc_b = occ.addCircleArc(p_bx, centre, p_by)
+    arc_a = occ.addCircleArc(p_ay, centre, p_ax)
+    loop = occ.addCurveLoop([line_y0, arc_b, line_x0, arc_a])
+    base = occ.addPlaneSurface([loop])
+    occ.remove([(0, centre)])
+    out = occ.extrude([(2, base)], 0, 0, t, numElements=[1], recombine=True)
+    occ.synchronize()
+    volumes = [tag for dim, tag in out if dim == 3]
+    return _QuarterTube(volumes, base, (line_y0, line_x0), (arc_a, arc_b), (p_ax, p_bx, p_by, p_ay))
+
+
+def _classify_tube_surfaces(volumes: list[int], a: float, b: float) -> dict[int, list[int]]:
+    """The tube's boundary surfaces by tag of :class:`ThickCylinderTags` (by bounding boxes), in
+    the order INNER, OUTER, SYMMETRY_X, SYMMETRY_Y, FACES_Z; RuntimeError for a surface that is
+    none of them."""
+    T = ThickCylinderTags
+    groups: dict[int, list[int]] = {tag: [] for tag in (T.INNER, T.OUTER, T.SYMMETRY_X, T.SYMMETRY_Y, T.FACES_Z)}
+    tol = _EPS * 10 * b
+    for s in sorted(_surfaces_of(volumes)):
+        lo = np.array(gmsh.model.getBoundingBox(2, s)[:3])
+        hi = np.array(gmsh.model.getBoundingBox(2, s)[3:])
+        if hi[2] - lo[2] < tol:
+            groups[T.FACES_Z].append(s)
+        elif hi[0] < tol:
+            groups[T.SYMMETRY_X].append(s)
+        elif hi[1] < tol:
+            groups[T.SYMMETRY_Y].append(s)
+        elif abs(hi[0] - a) < 1e-3 * a:  # the curved faces, by their largest x: r = a or r = b
+            groups[T.INNER].append(s)
+        elif abs(hi[0] - b) < 1e-3 * b:
+            groups[T.OUTER].append(s)
+        else:
+            raise RuntimeError(f"cannot classify surface {s} with bounding box {lo}-{hi}")
+    return groups
 
 
 def graded_nodes(h: float, n_fine: int, length: float, ratio: float = 1.3) -> np.ndarray:

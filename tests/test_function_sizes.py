@@ -1,0 +1,42 @@
+"""The house's size limits (issue 42, ``CONTRIBUTING.md``): a function at most 80 lines, a class at
+most 400, from its ``def``/``class`` line to its last line (docstring included).
+
+Checked for the modules already split to them; a module joins :data:`SPLIT_MODULES` once its
+largest function and class fit, so that none of them grows back.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+import dolfinx_nnqem
+
+PACKAGE = Path(dolfinx_nnqem.__file__).resolve().parent
+SPLIT_MODULES = ("numerics/newton.py", "io/run_pictures.py", "problem/meshing.py")
+MAX_FUNCTION_LINES = 80
+MAX_CLASS_LINES = 400
+
+
+def _oversized(path: Path) -> list[str]:
+    """The functions and classes of ``path`` over their limit, as ``name: lines``."""
+    found = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            limit = MAX_FUNCTION_LINES
+        elif isinstance(node, ast.ClassDef):
+            limit = MAX_CLASS_LINES
+        else:
+            continue
+        assert node.end_lineno is not None  # (ast.parse sets it)
+        lines = node.end_lineno - node.lineno + 1
+        if lines > limit:
+            found.append(f"{node.name} (line {node.lineno}): {lines} lines, limit {limit}")
+    return found
+
+
+@pytest.mark.parametrize("module", SPLIT_MODULES)
+def test_functions_and_classes_keep_to_their_size_limits(module: str) -> None:
+    assert _oversized(PACKAGE / module) == []
