@@ -36,7 +36,7 @@ from dolfinx_nnqem.problem.meshing import build_stacked_blocks
 from dolfinx_nnqem.solvers import (METHODS, MonolithicOptions, NNEQM1Options, NNEQM2Options, SolverOptions,
                                    make_solver)
 from dolfinx_nnqem.solvers import conformance
-from dolfinx_nnqem.solvers.contract import SolvableProblem, Solver
+from dolfinx_nnqem.solvers.contract import CondensingSolver, SolvableProblem, Solver
 
 PACKAGE = Path(dolfinx_nnqem.__file__).parent
 STEEL = VonMises(E=2.0e10, nu=0.2, sigma_y0=2.0e7, H=2.0e9)
@@ -58,6 +58,9 @@ def test_every_solver_satisfies_the_solver_contract(method):
         assert isinstance(conformance.as_solver(solver), Solver)
         report = solver.solve_increment(0.5)
         assert report.converged and isinstance(solver.timings, dict)
+        if method == "nneqm1":  # what the FCLIB export reads of it (issue 42: declared, not duck-typed)
+            assert isinstance(conformance.as_condensing_solver(solver), CondensingSolver)
+            assert solver.last_condensed is not None
 
 
 @pytest.mark.parametrize("discretisation", ["node-to-node", "node-to-surface", "mortar", "obstacle"])

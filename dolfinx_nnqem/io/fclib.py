@@ -154,7 +154,7 @@ if TYPE_CHECKING:
     import h5py
     from mpi4py import MPI
 
-    from dolfinx_nnqem.solvers.nneqm1 import NNEQM1Solver
+    from dolfinx_nnqem.solvers.contract import CondensingSolver
 else:
     h5py = _import_h5py()
 
@@ -510,7 +510,7 @@ def write_condensed_problem(path: str | Path, condensed: Mapping[str, Any], *,
                              guesses=guesses, **kwargs)
 
 
-def write_nneqm1_problem(path: str | Path, solver: NNEQM1Solver, *, with_solution: bool = True, **kwargs: Any) -> Path:
+def write_nneqm1_problem(path: str | Path, solver: CondensingSolver, *, with_solution: bool = True, **kwargs: Any) -> Path:
     """Export the last inner problem of an NNEQM1 solver, with its solution (collective).
 
     The solution is the solver's current contact force λ(z): after an increment has

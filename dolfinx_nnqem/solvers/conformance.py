@@ -16,17 +16,23 @@ from dolfinx_nnqem.contact.surface_pairs import SurfacePairs
 from dolfinx_nnqem.material.conformance import (as_material, as_material_part, as_material_state,  # noqa: F401
                                                 as_pointwise_material, as_pointwise_plasticity)
 from dolfinx_nnqem.problem.contact_problem import ContactProblem
-from dolfinx_nnqem.solvers.contract import SolvableProblem, Solver
+from dolfinx_nnqem.solvers.contract import CondensingSolver, SolvableProblem, Solver
 from dolfinx_nnqem.solvers.monolithic import MonolithicSolver
 from dolfinx_nnqem.solvers.nneqm1 import NNEQM1Solver
 from dolfinx_nnqem.solvers.nneqm2 import NNEQM2Solver
 
-__all__ = ["as_material", "as_material_part", "as_material_state", "as_pair_set", "as_pointwise_material",
-           "as_pointwise_plasticity", "as_problem", "as_solver"]
+__all__ = ["as_condensing_solver", "as_material", "as_material_part", "as_material_state", "as_pair_set",
+           "as_pointwise_material", "as_pointwise_plasticity", "as_problem", "as_solver"]
 
 
 def as_solver(solver: MonolithicSolver | NNEQM1Solver | NNEQM2Solver) -> Solver:
     """``solver`` as a :class:`~dolfinx_nnqem.solvers.contract.Solver` (checked by the type checker)."""
+    return solver
+
+
+def as_condensing_solver(solver: NNEQM1Solver) -> CondensingSolver:
+    """``solver`` as a :class:`~dolfinx_nnqem.solvers.contract.CondensingSolver`, what the FCLIB
+    export reads of it (checked by the type checker)."""
     return solver
 
 

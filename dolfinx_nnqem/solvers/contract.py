@@ -27,10 +27,11 @@ if TYPE_CHECKING:
     from dolfinx_nnqem.material.interface import MaterialState
     from dolfinx_nnqem.material.interface import GaussPointValues
     from dolfinx_nnqem.problem.bodies import RigidModes
+    from dolfinx_nnqem.solvers.condensed import CondensedProblem
     from dolfinx_nnqem.solvers.convergence import SolveReport
     from dolfinx_nnqem.solvers.options import SolverOptions
 
-__all__ = ["ReleasesPETSc", "SolvableProblem", "Solver", "contact_model"]
+__all__ = ["CondensingSolver", "ReleasesPETSc", "SolvableProblem", "Solver", "contact_model"]
 
 
 @runtime_checkable
@@ -219,6 +220,22 @@ class Solver(Protocol):
 
     def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
                  traceback: TracebackType | None) -> None: ...
+
+
+@runtime_checkable
+class CondensingSolver(Solver, Protocol):
+    """A solver that solves the contact forces on a condensed (dense) problem, and keeps the last
+    one: what :func:`~dolfinx_nnqem.io.fclib.write_nneqm1_problem` exports (NNEQM1)."""
+
+    @property
+    def problem(self) -> SolvableProblem:
+        """The problem it solves."""
+        ...
+
+    @property
+    def last_condensed(self) -> CondensedProblem | None:
+        """The latest outer iteration's condensed problem (C, w_free, g0, ...); None before the first."""
+        ...
 
 
 class ReleasesPETSc:
