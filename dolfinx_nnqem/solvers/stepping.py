@@ -19,6 +19,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 from mpi4py import MPI
 
@@ -26,6 +27,7 @@ from dolfinx_nnqem.contact.geometry_tracking import LostContactError
 from dolfinx_nnqem.contact.slip_check import stale_message, switch_message
 from dolfinx_nnqem.material.interface import GaussPointValues
 from dolfinx_nnqem.solvers.checks import CheckOptions, StateCheck, check_state, failure_details, values_to_commit
+from dolfinx_nnqem.solvers.contract import SolvableProblem, Solver
 from dolfinx_nnqem.solvers.convergence import ConvergenceError, SolveReport, logger
 from dolfinx_nnqem.numerics.linalg import free_dropped_objects
 from dolfinx_nnqem.solvers.step_control import AutomaticIncrements, as_step_control
@@ -62,9 +64,15 @@ class StepperState:
     index: int  #: converged increments so far
 
 
+Checkpoint = Callable[[Any, StepperState, "IncrementResult"], object]
+"""``checkpoint(problem, stepper_state, result)``, called after every converged increment
+(:class:`dolfinx_nnqem.io.checkpoint.Checkpointer`, whose problem is the concrete
+:class:`~dolfinx_nnqem.problem.contact_problem.ContactProblem`: hence ``Any`` for it here)."""
+
+
 def solve_load_steps(
-    problem,
-    solver,
+    problem: SolvableProblem,
+    solver: Solver,
     increments: int | str | AutomaticIncrements = 15,
     *,
     max_cutbacks: int = 5,
@@ -72,7 +80,7 @@ def solve_load_steps(
     final_load_factor: float = 1.0,
     max_displacement: float | None = None,
     check: CheckOptions | None = None,
-    checkpoint=None,
+    checkpoint: Checkpoint | None = None,
     resume: StepperState | None = None,
 ) -> list[IncrementResult]:
     """Drive ``solver`` from the last converged load factor to ``final_load_factor``.
@@ -116,14 +124,8 @@ def solve_load_steps(
     equal, max_cutbacks, final_load_factor, max_displacement = check_stepping_arguments(
         equal, max_cutbacks, final_load_factor, max_displacement)
     check = check or CheckOptions()
-    if resume is None:
-        schedule = _Schedule.starting(problem.load_factor_n, final_load_factor, equal, control)
-        index0 = 0
-    else:
-        schedule = _Schedule(resume.start, final_load_factor, resume.step, resume.cutbacks, equal, control)
-        index0 = resume.index
-    if control is not None:
-        check_load_factors(control.load_factors, schedule.start, final_load_factor)
+    schedule = _Schedule.of_run(problem.load_factor_n, final_load_factor, equal, control, resume)
+    index0 = 0 if resume is None else resume.index
     results: list[IncrementResult] = []
     ell = problem.load_factor_n
     while not schedule.reached(ell):
@@ -136,13 +138,8 @@ def solve_load_steps(
             problem.restore()  # the same increment again, the slid interfaces in the current geometry
             continue
         if not report.converged:
-            if not schedule.can_cut_back(max_cutbacks):
-                _fail(problem, solver, report, target, increment=index0 + len(results) + 1,
-                      cutbacks=schedule.cutbacks, callbacks=callbacks, last_converged=ell)
-            problem.restore()
-            schedule.cut_back()
-            logger.warning(f"[{solver.name}] increment to load factor {target:.6g} failed "
-                           f"({report.message}); cutback {schedule.cutbacks}, new step {schedule.step:.6g}")
+            _cut_back_or_fail(problem, solver, report, schedule, max_cutbacks, target, index0 + len(results) + 1,
+                              callbacks, ell)
             continue
         result = _commit(problem, solver, report, values, target, index=index0 + len(results) + 1,
                          cutbacks=schedule.cutbacks, verdict=verdict, t0=t0, callbacks=callbacks)
@@ -152,6 +149,20 @@ def solve_load_steps(
         if checkpoint is not None:
             checkpoint(problem, schedule.state(result.index), result)
     return results
+
+
+def _cut_back_or_fail(problem: SolvableProblem, solver: Solver, report: SolveReport, schedule: _Schedule,
+                      max_cutbacks: int, target: float, increment: int,
+                      callbacks: Sequence[Callable[[IncrementResult], None]], last_converged: float) -> None:
+    """After an increment that did not converge: back to the converged state with the step halved,
+    or, after ``max_cutbacks`` halvings, the run's failure (:func:`_fail` raises)."""
+    if not schedule.can_cut_back(max_cutbacks):
+        _fail(problem, solver, report, target, increment=increment, cutbacks=schedule.cutbacks,
+              callbacks=callbacks, last_converged=last_converged)
+    problem.restore()
+    schedule.cut_back()
+    logger.warning(f"[{solver.name}] increment to load factor {target:.6g} failed "
+                   f"({report.message}); cutback {schedule.cutbacks}, new step {schedule.step:.6g}")
 
 
 @dataclass
@@ -178,6 +189,19 @@ class _Schedule:
         else:
             step = control.first_step(final - start)
         return cls(start, final, step, 0, increments, control)
+
+    @classmethod
+    def of_run(cls, load_factor_n: float, final: float, increments: int | None,
+               control: AutomaticIncrements | None, resume: StepperState | None) -> _Schedule:
+        """The schedule of a run from the converged load factor ``load_factor_n``, or of the run a
+        checkpoint's ``resume`` continues; an automatic one's prescribed load factors checked."""
+        if resume is None:
+            schedule = cls.starting(load_factor_n, final, increments, control)
+        else:
+            schedule = cls(resume.start, final, resume.step, resume.cutbacks, increments, control)
+        if control is not None:
+            check_load_factors(control.load_factors, schedule.start, final)
+        return schedule
 
     @property
     def direction(self) -> float:
@@ -449,7 +473,7 @@ def _slipping(report: SolveReport) -> bool:
     return (last is not None and last.states[2] > 0) or (inner is not None and inner[2] > 0)
 
 
-def solve_load_path(problem, solver, load_factors: Sequence[float], *,
+def solve_load_path(problem: SolvableProblem, solver: Solver, load_factors: Sequence[float], *,
                     callbacks: Sequence[Callable[[IncrementResult], None]] = (),
                     check: CheckOptions | None = None) -> list[IncrementResult]:
     """Solve the increments ending at the given load factors, in order, without cutback.
