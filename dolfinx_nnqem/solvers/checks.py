@@ -278,12 +278,7 @@ def check_state(problem: SolvableProblem, report: SolveReport | None = None,
 
     # -- small strain
     strain, rotation = _largest_strain_and_rotation(problem, forms)
-    if options.max_strain is not None and not strain <= options.max_strain:
-        reasons.append(f"largest strain {strain:.3g} exceeds max_strain = {options.max_strain:g}: far outside "
-                       "the small-strain setting (plastic collapse or friction exceeded?)")
-    if options.max_rotation is not None and not rotation <= options.max_rotation:
-        reasons.append(f"largest rotation {rotation:.3g} rad exceeds max_rotation = {options.max_rotation:g}: "
-                       "far outside the small-rotation setting (a mechanism or collapse?)")
+    reasons += _beyond_small_strain(strain, rotation, options)
 
     result = StateCheck(not reasons, "; ".join(reasons), float(eq), float(contact), float(coulomb),
                         float(strain), float(rotation), float(F), float(tol), own, float(yield_violation),
@@ -294,6 +289,18 @@ def check_state(problem: SolvableProblem, report: SolveReport | None = None,
             result.worst_pairs = _worst_pairs(problem, pair_violation)
     Rf.destroy()
     return result
+
+
+def _beyond_small_strain(strain: float, rotation: float, options: CheckOptions) -> list[str]:
+    """Why the largest strain or rotation is outside the small-strain setting (empty if it is not)."""
+    reasons = []
+    if options.max_strain is not None and not strain <= options.max_strain:
+        reasons.append(f"largest strain {strain:.3g} exceeds max_strain = {options.max_strain:g}: far outside "
+                       "the small-strain setting (plastic collapse or friction exceeded?)")
+    if options.max_rotation is not None and not rotation <= options.max_rotation:
+        reasons.append(f"largest rotation {rotation:.3g} rad exceeds max_rotation = {options.max_rotation:g}: "
+                       "far outside the small-rotation setting (a mechanism or collapse?)")
+    return reasons
 
 
 def _finite(problem) -> bool:
