@@ -38,6 +38,9 @@ TUTORIALS = [
       "slide_forces.png": "indenter_slide_forces.png"}),
     ("plasticity", "ironing.py",
      {"forces.png": "ironing_forces.png", "plastic_zone.png": "ironing_plastic_zone.png"}),
+    ("plasticity", "two_beams_concrete.py",
+     {"load_deflection.png": "two_beams_concrete_load_deflection.png",
+      "plastic_zone.png": "two_beams_concrete_plastic_zone.png"}),
     ("your own gmsh mesh", "own_gmsh_mesh.py",
      {"deformed.png": "own_mesh_deformed.png", "pair_pressure.png": "own_mesh_pair_pressure.png"}),
 ]
