@@ -3,7 +3,7 @@ r"""The limit load of a rigid strip footing on a weightless soil, in plane strai
 A half model: the soil occupies x ∈ [0, ``width``], y ∈ [−``depth``, 0] (in footing half widths
 b = 1), one element thick in z with u_z = 0 on both z faces (plane strain); the footing, a rigid
 flat body of half width b, is pressed into the top over x ∈ [0, b]. x = 0 is the symmetry plane
-(u_x = 0), the far side x = ``width`` a roller (u_x = 0), the bottom clamped. The footing is
+(u_x = 0), the far side x = ``width`` and the bottom clamped. The footing is
 
 * ``route = "contact"`` (the default): a rigid plane obstacle (:class:`~dolfinx_nnqem.contact.obstacles.Plane`)
   moved down, in contact with the footing's part of the top only (the tag :data:`FOOTING`; the
@@ -17,7 +17,10 @@ load no equilibrium exists under a prescribed force). :func:`footing_pressure` g
 pressure q = F / (b t) under the footing (t the slab's thickness).
 
 Soils (:func:`von_mises_soil`, :func:`drucker_prager_soil`): cohesion c = :data:`COHESION`,
-E = :data:`E_SOIL` (E/c = 1000), ν = 0.3, perfectly plastic; von Mises with σ_y = √3 c (its
+E = :data:`E_SOIL`, ν = 0.3, perfectly plastic (E/c = 10⁶: the limit load of small-strain perfect
+plasticity does not depend on E, the settlement that reaches it scales with c/E, and a stiff
+soil keeps the strains at the footing's edge, where the settlement is a jump of the
+displacement, within the independent check's small-strain limits); von Mises with σ_y = √3 c (its
 cohesion in plane strain: the shear strength), Drucker–Prager matched to Mohr–Coulomb in plane
 strain with associated flow (ψ = φ). The limit pressures (weightless soil, no surcharge) are
 Prandtl's q = (2 + π) c and Prandtl–Reissner's q = c N_c, N_c = (N_q − 1) cot φ,
@@ -26,8 +29,12 @@ footing when the soil is weightless. ``docs/verification-materials.md`` gives th
 limit loads, the meshes and the rule that reads the plateau (:func:`limit_pressure`).
 
 The mesh (:func:`footing_mesh`): elements of size b/``n`` over x ≤ 2b and y ≥ −2b, growing by
-:data:`GROWTH` beyond; with ``degree = 2`` (the default) 27-node hexahedra (Q2): trilinear ones
-lock under the isochoric flow of von Mises plasticity and overestimate the limit load.
+:data:`GROWTH` beyond. 27-node hexahedra (Q2) with 2 × 2 × 2 Gauss points (reduced integration,
+the default): trilinear elements, and Q2 with its full 3 × 3 × 3 points, lock under the
+isochoric flow of von Mises plasticity and overestimate the limit load. The reduced rule leaves
+each horizontal row of elements a zero-energy mode (the u_y of its mid-height nodes); a support
+at the row's end that holds u_y removes it, hence the clamped far side (with a roller there the
+stiffness matrix of n = 1 has 15 zero eigenvalues, with the clamp none).
 """
 
 from __future__ import annotations
@@ -149,8 +156,9 @@ def strip_footing_problem(material: VonMises | DruckerPrager | None = None, n: i
     if route not in ("contact", "prescribed"):
         raise ValueError(f"route = {route!r}; expected 'contact' or 'prescribed'")
     mesh, cell_tags, facet_tags = mesh_and_tags or footing_mesh(comm, n)
-    dirichlet = [Dirichlet(BOTTOM), Dirichlet(SYMMETRY, 0.0, [0]), Dirichlet(FAR, 0.0, [0]),
-                 Dirichlet(ZFACES, 0.0, [2])]
+    # the far side clamped, not a roller: with 2 × 2 × 2 Gauss points a row of Q2 elements has a
+    # zero-energy mode in u_y that only a u_y support at the row's end removes (module docstring)
+    dirichlet = [Dirichlet(BOTTOM), Dirichlet(SYMMETRY, 0.0, [0]), Dirichlet(FAR), Dirichlet(ZFACES, 0.0, [2])]
     contact = None
     if route == "prescribed":
         moved = Dirichlet(FOOTING, [0.0, -settlement], [0, 1]) if footing == "rough" else \
