@@ -101,6 +101,20 @@ def test_full_integration_locks():
     assert full[-1] > 1.03 * reduced[-1]
 
 
+def test_reduced_integration_leaves_no_zero_energy_mode():
+    """2 × 2 × 2 Gauss points in Q2 elements: each horizontal row of elements has a zero-energy u_y
+    mode unless a support holds u_y at the row's end; with the clamped far side the elastic stiffness
+    (supports only, n = 1) has no zero eigenvalue, so NNEQM1 and NNEQM2 (which factorise it) work."""
+    import scipy.linalg
+
+    problem = case.strip_footing_problem(case.von_mises_soil(), 1, route="prescribed", comm=MPI.COMM_SELF)
+    K = problem.assemble_tangent().convert("dense").getDenseArray()
+    free = np.setdiff1d(np.arange(K.shape[0]), problem.bc_dofs)
+    w = scipy.linalg.eigvalsh(K[np.ix_(free, free)])
+    print(f"\n  {len(free)} free dofs: smallest eigenvalues / largest {np.round(w[:3] / w[-1], 9).tolist()}")
+    assert w[0] > 1e-7 * w[-1]
+
+
 @pytest.fixture(scope="module")
 def monolithic_dp():
     return footing_run(case.drucker_prager_soil(20.0), footing="rough")[0]
