@@ -54,7 +54,7 @@ def test_mesh_tags_the_footing_and_the_free_surface():
     one = dolfinx.fem.Constant(mesh, 1.0)
     x = ufl.SpatialCoordinate(mesh)
     area = {tag: dolfinx.fem.assemble_scalar(dolfinx.fem.form(one * ds(tag)))
-            for tag in (case.FOOTING, case.FREE, case.BOTTOM, case.SYMMETRY, case.FAR)}
+            for tag in (case.FOOTING, case.FREE, case.BOTTOM, case.SYMMETRY, case.FAR, case.ZFACES)}
     edge = dolfinx.fem.assemble_scalar(dolfinx.fem.form(x[0] * ds(case.FOOTING)))
     t = 0.5  # the slab is one fine element thick
     print(f"\n  areas {area}")
@@ -62,6 +62,8 @@ def test_mesh_tags_the_footing_and_the_free_surface():
     assert area[case.FREE] == pytest.approx(19.0 * t, rel=1e-12)
     assert area[case.BOTTOM] == pytest.approx(20.0 * t, rel=1e-12)
     assert area[case.SYMMETRY] == pytest.approx(12.0 * t, rel=1e-12) and area[case.FAR] == pytest.approx(12.0 * t, rel=1e-12)
+    assert area[case.ZFACES] == pytest.approx(2 * 20.0 * 12.0, rel=1e-12)
+    assert len(np.unique(facet_tags.indices)) == len(facet_tags.indices)  # one tag per facet
     assert np.all(cell_tags.values == case.SOIL)
 
 
@@ -145,6 +147,25 @@ def test_nneqm2_refuses_drucker_prager_and_takes_von_mises(monolithic_vm, law):
     difference = np.abs(nneqm2 - monolithic_vm).max() / monolithic_vm.max()
     print(f"\n  nneqm2/{law}, von Mises: difference {difference:.1e}, plastic points {problem.state.count_plastic_points()}")
     assert problem.state.count_plastic_points() > 0 and difference < 1e-8
+
+
+def test_problem_file_gives_the_python_run(tmp_path, monolithic_dp):
+    """The rough footing on Drucker–Prager as a problem file (an XDMF mesh, ``quadrature_degree = 2``)."""
+    import json
+
+    from dolfinx_nnqem.cli import EXIT_OK, main
+    from dolfinx_nnqem.problem.meshing import write_xdmf
+
+    write_xdmf(tmp_path / "footing.xdmf", *case.footing_mesh(MPI.COMM_SELF, 1))
+    toml = tmp_path / "footing.toml"
+    toml.write_text(case.problem_file_text(case.drucker_prager_soil(20.0), "footing.xdmf", footing="rough",
+                                           settlement=2.0e-5, increments=3, folder=str(tmp_path / "out")))
+    assert main(["-q", "run", str(toml)]) == EXIT_OK
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    pressures = np.array([-f["footing"][1] for f in summary["obstacle_force_history"]])  # the slab is 1 thick
+    difference = np.abs(pressures - monolithic_dp).max() / monolithic_dp.max()
+    print(f"\n  problem file: q/c {np.round(pressures / case.COHESION, 6).tolist()}, difference from Python {difference:.1e}")
+    assert summary["converged"] and difference < 1e-9
 
 
 @pytest.mark.mpi

@@ -52,7 +52,7 @@ from dolfinx_nnqem.problem.meshing import MeshAndTags, graded_nodes
 
 __all__ = ["BOTTOM", "COHESION", "E_SOIL", "FAR", "FOOTING", "FREE", "GROWTH", "NU_SOIL", "ROUGH_MU_F", "SOIL",
            "SYMMETRY", "ZFACES", "drucker_prager_soil", "footing_mesh", "footing_pressure", "limit_pressure",
-           "prandtl", "prandtl_reissner", "strip_footing_problem", "von_mises_soil"]
+           "prandtl", "prandtl_reissner", "problem_file_text", "strip_footing_problem", "von_mises_soil"]
 
 SOIL = 1  #: cell tag
 BOTTOM, SYMMETRY, FAR, ZFACES, FOOTING, FREE = 1, 2, 3, 4, 5, 6  #: facet tags
@@ -116,7 +116,8 @@ def _facet_tags(mesh, width: float, bottom: float, thickness: float):
     where = [(BOTTOM, lambda x: np.isclose(x[1], bottom, atol=tol)),
              (SYMMETRY, lambda x: np.isclose(x[0], 0.0, atol=tol)),
              (FAR, lambda x: np.isclose(x[0], width, atol=tol)),
-             (ZFACES, lambda x: np.isclose(x[2], 0.0, atol=tol) | np.isclose(x[2], thickness, atol=tol)),
+             (ZFACES, lambda x: np.isclose(x[2], 0.0, atol=tol)),  # every vertex of a facet on z = 0
+             (ZFACES, lambda x: np.isclose(x[2], thickness, atol=tol)),  # or on z = t (not either: all are)
              (FOOTING, lambda x: np.isclose(x[1], 0.0, atol=tol) & (x[0] <= 1.0 + tol)),
              (FREE, lambda x: np.isclose(x[1], 0.0, atol=tol) & (x[0] >= 1.0 - tol))]
     facets, values = [], []
@@ -170,6 +171,30 @@ def strip_footing_problem(material: VonMises | DruckerPrager | None = None, n: i
     return ContactProblem(mesh, cell_tags, facet_tags, materials=material or von_mises_soil(),
                           dirichlet=dirichlet, contact=contact, degree=degree,
                           quadrature_degree=quadrature_degree)
+
+
+def problem_file_text(soil: VonMises | DruckerPrager, mesh: str, *, footing: str = "smooth", settlement: float = 0.05,
+                      increments: int = 20, folder: str = "results/strip_footing") -> str:
+    """The contact route as a problem file (``dolfinx-nnqem run``) on ``mesh``, an XDMF file of
+    :func:`footing_mesh` (:func:`~dolfinx_nnqem.problem.meshing.write_xdmf`): Q2 with 2 × 2 × 2 Gauss points."""
+    if isinstance(soil, DruckerPrager):
+        material = ['model = "drucker-prager"', f"cohesion = {soil.cohesion!r}",
+                    f"friction_angle = {soil.friction_angle!r}", f"dilatancy_angle = {soil.dilatancy_angle!r}",
+                    f'match = "{soil.match}"']
+    else:
+        material = [f"sigma_y0 = {soil.sigma_y0!r}", "H = 0.0"]
+    lines = ["# A rigid strip footing on a weightless soil (dolfinx_nnqem.cases.strip_footing), plane strain",
+             "[mesh]", f'file = "{mesh}"', "degree = 2", "quadrature_degree = 2", "",
+             f"[materials.{SOIL}]", f"E = {soil.E!r}", f"nu = {soil.nu!r}", *material, "",
+             "[contact]", f"surface2 = {FOOTING}", f"mu_f = {ROUGH_MU_F if footing == 'rough' else 0.0!r}",
+             'name = "footing"', "[contact.obstacle]", 'type = "plane"', "point = [0.0, 0.0, 0.0]",
+             "normal = [0.0, -1.0, 0.0]", f"motion = [0.0, {-settlement!r}, 0.0]", ""]
+    for tag, components in ((BOTTOM, None), (SYMMETRY, [0]), (FAR, None), (ZFACES, [2])):
+        lines += ["[[dirichlet]]", f"tag = {tag}"] + ([] if components is None else
+                                                       ["value = 0.0", f"components = {components}"])
+    lines += ["", "[solver]", 'method = "monolithic"', f"increments = {increments}", "rtol = 1e-11", "",
+              "[output]", f'folder = "{folder}"', "pictures = false"]
+    return "\n".join(lines) + "\n"
 
 
 def footing_pressure(problem: ContactProblem) -> float:
