@@ -168,6 +168,19 @@ def test_problem_file_gives_the_python_run(tmp_path, monolithic_dp):
     assert summary["converged"] and difference < 1e-9
 
 
+@pytest.mark.parametrize("value, match", [("0", "expected a value > 0"), ("9", "expected a value <= 8"),
+                                          ('"two"', "expected a number"), ("2.5", "expected an integer")])
+def test_problem_file_refuses_a_bad_quadrature_degree(tmp_path, value, match):
+    from dolfinx_nnqem.problem.meshing import write_xdmf
+    from dolfinx_nnqem.problem_file import ProblemFileError, load_problem_file
+
+    write_xdmf(tmp_path / "footing.xdmf", *case.footing_mesh(MPI.COMM_SELF, 1))
+    text = case.problem_file_text(case.von_mises_soil(), "footing.xdmf")
+    (tmp_path / "p.toml").write_text(text.replace("quadrature_degree = 2", f"quadrature_degree = {value}"))
+    with pytest.raises(ProblemFileError, match=rf"mesh\.quadrature_degree = .*{match}"):
+        load_problem_file(tmp_path / "p.toml")
+
+
 @pytest.mark.mpi
 def test_two_ranks_match_serial(tmp_path, monolithic_dp):
     out = tmp_path / "out.npz"
