@@ -12,7 +12,7 @@ the mesh convergence from every json in OUTDIR.
 Usage::
 
     python benchmarks/strip_footing_limit.py OUTDIR [--soil vm dp10 dp20 dp30] [--footing smooth rough]
-        [--n 2 4 8] [--increments 20] [--route contact] [--method monolithic] [--plot]
+        [--n 2 4 8] [--increments 20] [--route contact] [--method monolithic] [--dilatancy PSI] [--plot]
 """
 
 from __future__ import annotations
@@ -31,21 +31,21 @@ from dolfinx_nnqem.cases import strip_footing as case
 SETTLEMENTS = {"vm": 1.0e-4, "dp10": 1.5e-4, "dp20": 2.0e-4, "dp30": 3.5e-4}
 
 
-def soil(name: str):
-    """The material and its limit pressure: ``"vm"`` or ``"dp{φ}"``."""
+def soil(name: str, dilatancy: float | None = None):
+    """The material and its limit pressure: ``"vm"`` or ``"dp{φ}"`` (``dilatancy``: ψ, default φ)."""
     if name == "vm":
         return case.von_mises_soil(), case.prandtl()
     phi = float(name[2:])
-    return case.drucker_prager_soil(phi), case.prandtl_reissner(phi)
+    return case.drucker_prager_soil(phi, dilatancy_angle=dilatancy), case.prandtl_reissner(phi)
 
 
 def run(name: str, footing: str, n: int, increments: int, route: str = "contact", method: str = "monolithic",
-        law: str = "alart-curnier") -> dict:
-    """One load–settlement curve and its limit pressure."""
+        law: str = "alart-curnier", dilatancy: float | None = None) -> dict:
+    """One load–settlement curve and its limit pressure (``dilatancy``: ψ of a Drucker–Prager soil)."""
     from dolfinx_nnqem.io.results import pair_table
     from dolfinx_nnqem.solvers import SolverOptions, make_solver, solve_load_steps
 
-    material, target = soil(name)
+    material, target = soil(name, dilatancy)
     settlement = SETTLEMENTS[name]
     problem = case.strip_footing_problem(material, n, footing=footing, route=route, settlement=settlement, law=law)
     rows, slipping = [], 0
@@ -62,7 +62,7 @@ def run(name: str, footing: str, n: int, increments: int, route: str = "contact"
     d, q = np.array(rows).T
     limit, rise = case.limit_pressure(d, q)
     return {"soil": name, "footing": footing, "n": n, "increments": increments, "route": route, "method": method,
-            "law": law, "settlement": d.tolist(), "pressure": q.tolist(), "target": target, "limit": limit,
+            "law": law, "dilatancy": dilatancy, "settlement": d.tolist(), "pressure": q.tolist(), "target": target, "limit": limit,
             "rise": rise, "error": limit / target - 1.0, "iterations": sum(r.iterations for r in results),
             "slipping_pairs": slipping, "dofs": problem.V.dofmap.index_map.size_global * 3,
             "seconds": time.perf_counter() - t0}
@@ -75,7 +75,8 @@ def plot(outdir: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    runs = [json.loads(p.read_text()) for p in sorted(outdir.glob("footing_*.json"))]
+    runs = [r for r in (json.loads(p.read_text()) for p in sorted(outdir.glob("footing_*.json")))
+            if r["route"] == "contact" and r.get("dilatancy") is None]
     soils = [s for s in SETTLEMENTS if any(r["soil"] == s for r in runs)]
     labels = {"vm": "von Mises", "dp10": "DP φ = 10°", "dp20": "DP φ = 20°", "dp30": "DP φ = 30°"}
     fig, axes = plt.subplots(1, len(soils), figsize=(3.6 * len(soils), 3.6), squeeze=False)
@@ -121,6 +122,7 @@ def main(argv=None) -> int:
     parser.add_argument("--increments", type=int, default=20)
     parser.add_argument("--route", default="contact", choices=["contact", "prescribed"])
     parser.add_argument("--method", default="monolithic")
+    parser.add_argument("--dilatancy", type=float, default=None, help="ψ of the Drucker–Prager soils (default φ)")
     parser.add_argument("--plot", action="store_true", help="only draw the figures from OUTDIR's json files")
     args = parser.parse_args(argv)
     out = Path(args.outdir)
@@ -131,8 +133,9 @@ def main(argv=None) -> int:
     for n in args.n:
         for name in args.soil:
             for footing in args.footing:
-                r = run(name, footing, n, args.increments, args.route, args.method)
-                suffix = "" if args.route == "contact" else f"_{args.route}"
+                r = run(name, footing, n, args.increments, args.route, args.method, dilatancy=args.dilatancy)
+                suffix = ("" if args.route == "contact" else f"_{args.route}") + \
+                    ("" if args.dilatancy is None else f"_psi{args.dilatancy:g}")
                 (out / f"footing_{name}_{footing}_n{n}{suffix}.json").write_text(json.dumps(r, indent=1))
                 print(f"{name:5s} {footing:6s} n = {n}: q/c = {r['limit'] / case.COHESION:.4f} (closed form "
                       f"{r['target'] / case.COHESION:.4f}, {100 * r['error']:+.2f} %), rise over the last 20 % "
