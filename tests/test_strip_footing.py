@@ -85,12 +85,13 @@ def test_the_rigid_obstacle_equals_prescribed_displacements(footing):
 
 
 def test_coarse_mesh_limit_load_of_von_mises():
-    """n = 2 (h = b/2, Q2 with 2 × 2 × 2 Gauss points), smooth: the curve flattens (less than 0.5 %
-    over the last 20 % of the settlement) within 5 % of Prandtl's (2 + π) c (the 2 % on n = 8 is slow)."""
-    result = bench.run("vm", "smooth", 2, 10)
+    """n = 1 (h = b, Q2 with 2 × 2 × 2 Gauss points), smooth: the curve flattens (less than 0.5 %
+    over the last 20 % of the settlement) within 10 % of Prandtl's (2 + π) c, above it as a coarse
+    mesh is (measured +8.7 %; n = 2 gives +3.6 %, the 2 % on n = 8 is slow)."""
+    result = bench.run("vm", "smooth", 1, 10)
     print(f"\n  q/c = {result['limit'] / case.COHESION:.4f}, Prandtl {case.prandtl(1.0):.4f}: {100 * result['error']:+.2f} %; "
           f"rise over the last 20 %: {100 * result['rise']:.3f} %")
-    assert result["rise"] < 5e-3 and abs(result["error"]) < 0.05
+    assert result["rise"] < 5e-3 and 0.0 < result["error"] < 0.10
 
 
 def test_full_integration_locks():
