@@ -6,6 +6,7 @@ A problem file names a mesh with physical tags and everything :class:`ContactPro
     file = "../meshes/two_beams.msh"      # gmsh .msh, or .xdmf (see below); relative to this file
     # degree = 2                          # the displacement's degree; default: the mesh's (2 for a
                                           # second-order mesh: 10-node tetrahedra, 27-node hexahedra)
+    # quadrature_degree = 2               # the Gauss rule's degree; default 2 × degree
 
     [materials.1]                         # cell tag → material
     # model = "von-mises"                 # or "elastic" (E, nu, density only)
@@ -138,7 +139,7 @@ class ProblemFileError(ValueError):
 
 OBSTACLE_KEYS = {kind: obstacle_parameters(kind) for kind in OBSTACLES}
 KEYS: dict[str, frozenset[str]] = {
-    "mesh": frozenset({"file", "mesh_name", "cell_tags", "facet_tags", "degree"}),
+    "mesh": frozenset({"file", "mesh_name", "cell_tags", "facet_tags", "degree", "quadrature_degree"}),
     "materials.TAG": frozenset({"model", "E", "nu", "sigma_y0", "H", "density", "hardening", "Q", "b", "table",
                                 "kinematic", "cohesion", "friction_angle", "dilatancy_angle", "match"}),
     "contact": frozenset({"surface1", "surface2", "obstacle", "mu_f", "law", "r", "tolerance", "search_distance",
@@ -308,6 +309,9 @@ def _mesh_section(mesh: dict, folder: Path, where: str) -> dict:
         if mesh["degree"] not in (1, 2):
             raise ProblemFileError(f"{where}: mesh.degree = {mesh['degree']}: the displacement is Lagrange of "
                                    "degree 1 or 2")
+    if "quadrature_degree" in mesh:  # e.g. 2 with degree 2: 2 × 2 × 2 Gauss points (no locking)
+        mesh["quadrature_degree"] = int(_number(mesh["quadrature_degree"], f"{where}: mesh.quadrature_degree",
+                                                integer=True, positive=True, high=8))
     return mesh
 
 
@@ -800,6 +804,7 @@ def build_problem(spec: ProblemSpec, comm: MPI.Comm) -> ContactProblem:
         dirichlet=[Dirichlet(e["tag"], e.get("value", 0.0), e.get("components"), e.get("amplitude"))
                    for e in spec.dirichlet],
         tractions=loads, body_forces=body, contact=contact or None, degree=spec.mesh.get("degree"),
+        quadrature_degree=spec.mesh.get("quadrature_degree"),
     )
 
 

@@ -66,3 +66,20 @@ def test_own_gmsh_mesh_demo_runs_with_a_second_order_mesh(tmp_path):
     assert "mortar" in run.stdout  # non-matching quadratic faces: auto chose mortar
     assert (tmp_path / "results" / "fields_p2.pvd").is_file()
     assert (tmp_path / "results" / "pictures" / "deformed.png").is_file()
+
+
+def test_two_beams_concrete_demo_runs(tmp_path):
+    """The Drucker–Prager concrete tutorial: the cone passes through C30/37's uniaxial strengths, the
+    concrete beams yield later and less than the seed's von Mises ones, and the pictures are drawn."""
+    env = {k: v for k, v in os.environ.items() if k != "DOLFINX_NNQEM_PICTURES"}
+    env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
+    run = subprocess.run([sys.executable, str(ROOT / "demos" / "two_beams_concrete.py"), "--out", str(tmp_path)],
+                         capture_output=True, text=True, env=env, timeout=600, cwd=tmp_path)
+    print("\n" + run.stdout + run.stderr[-2000:])
+    assert run.returncode == 0
+    assert "compression 30.000 MPa, tension 2.900 MPa" in run.stdout
+    tables = (tmp_path / "tables.md").read_text()
+    plastic = re.search(r"\| plastic Gauss points at the end \| (\d+) \| (\d+) \|", tables)
+    first = re.search(r"\| first increment with a plastic point \| (\d+) \| (\d+) \|", tables)
+    assert 0 < int(plastic.group(2)) < int(plastic.group(1)) and int(first.group(2)) > int(first.group(1))
+    assert (tmp_path / "load_deflection.png").is_file() and (tmp_path / "plastic_zone.png").is_file()
