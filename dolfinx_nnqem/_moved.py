@@ -43,8 +43,11 @@ MOVED: dict[str, str] = {
     "sphere_on_block": "cases.sphere_on_block", "step_control": "solvers.step_control",
     "stepping": "solvers.stepping", "two_beams": "cases.two_beams", "validation": "problem.validation",
     "solver": "solvers",
+    # NNEQM2's modules in a folder of their own (issue 42)
+    "solvers.nneqm2_return_map": "solvers.nneqm2.return_map", "solvers.nneqm2_frozen": "solvers.nneqm2.frozen",
+    "solvers.increment_start": "solvers.nneqm2.increment_start", "solvers.gauss_points": "solvers.nneqm2.gauss_points",
 }
-"""Old module name (under ``dolfinx_nnqem.``) → its new path (under ``dolfinx_nnqem.``)."""
+"""Old module path (under ``dolfinx_nnqem.``) → its new path (under ``dolfinx_nnqem.``)."""
 
 MOVED_NAMES: dict[str, dict[str, str]] = {
     "contact.model": {
@@ -134,10 +137,10 @@ class _Alias(importlib.abc.Loader):
 
 class _Finder(importlib.abc.MetaPathFinder):
     def find_spec(self, fullname, path, target=None):
-        package, _, name = fullname.rpartition(".")
-        if package != "dolfinx_nnqem" or name not in MOVED:
+        old = fullname.removeprefix("dolfinx_nnqem.")
+        if old == fullname or old not in MOVED:
             return None
-        return importlib.machinery.ModuleSpec(fullname, _Alias(f"dolfinx_nnqem.{MOVED[name]}"))
+        return importlib.machinery.ModuleSpec(fullname, _Alias(f"dolfinx_nnqem.{MOVED[old]}"))
 
 
 def install() -> None:

@@ -194,9 +194,9 @@ class NNEQM2Options:
     flow_directions
         "return-map" (default): the flow directions are unknowns with the plastic strains, and the
         answer is the backward-Euler (radial return) state, the other methods' answer
-        (:mod:`~dolfinx_nnqem.solvers.nneqm2_return_map`). "frozen": the seed's method, the
+        (:mod:`~dolfinx_nnqem.solvers.nneqm2.return_map`). "frozen": the seed's method, the
         directions frozen at the start of the increment and a dense system in the plastic
-        multipliers (:mod:`~dolfinx_nnqem.solvers.nneqm2_frozen`): first-order accurate in the
+        multipliers (:mod:`~dolfinx_nnqem.solvers.nneqm2.frozen`): first-order accurate in the
         increment where the stress turns (``docs/theory.md`` measures its error).
     extrapolate
         Start each increment from the secant extrapolation of the last two increments (the pair

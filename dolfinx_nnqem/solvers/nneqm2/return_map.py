@@ -4,7 +4,7 @@ The unknowns of an increment are the pair unknowns z (forces λ(z)), the plastic
 increment Δε_p,j of every Gauss point j of a material that can yield (a deviator: 5
 coordinates; Δε_p,j = Δγ_j N_j with its flow direction an unknown too, where the seed froze it)
 and, where bodies float, the free rigid modes' amplitudes α. The displacement follows from the
-ELASTIC stiffness K_e, factorised once per run (:mod:`~dolfinx_nnqem.solvers.increment_start`):
+ELASTIC stiffness K_e, factorised once per run (:mod:`~dolfinx_nnqem.solvers.nneqm2.increment_start`):
 
     du = G (b + Bᵀλ + q(Δε_p)) + N α,     q(Δε_p) = ∫ Bᵀ C Δε_p dx,
 
@@ -63,8 +63,8 @@ from dolfinx_nnqem.solvers.condensation import Condensation
 from dolfinx_nnqem.solvers.condensed import CondensedProblem, CondensedSystem
 from dolfinx_nnqem.solvers.contract import contact_model
 from dolfinx_nnqem.solvers.convergence import IterationRecord, SolveReport, count_states, logger
-from dolfinx_nnqem.solvers.gauss_points import GaussPointOperators
-from dolfinx_nnqem.solvers.increment_start import IncrementStart
+from dolfinx_nnqem.solvers.nneqm2.gauss_points import GaussPointOperators
+from dolfinx_nnqem.solvers.nneqm2.increment_start import IncrementStart
 from dolfinx_nnqem.solvers.timings import Timings
 
 __all__ = ["ReturnMapIncrement"]
@@ -103,7 +103,7 @@ class ReturnMapIncrement:
         The problem, its Gauss-point operators and the factorisations of K_e (once per run) and of
         K_t (every step).
     start
-        The increment's start (:func:`~dolfinx_nnqem.solvers.increment_start.start_increment`).
+        The increment's start (:func:`~dolfinx_nnqem.solvers.nneqm2.increment_start.start_increment`).
     tol
         Converged when |H|/F, |Nᵀ…|/F and |G̃| are all at most ``tol``.
     report

@@ -26,7 +26,7 @@ from dolfinx_nnqem.contact.pair_laws import PairLaws
 from dolfinx_nnqem.material.kinematics import deviator_coordinates
 from dolfinx_nnqem.problem.contact_problem import ContactProblem
 from dolfinx_nnqem.solvers.condensation import Condensation
-from dolfinx_nnqem.solvers.gauss_points import GaussPointOperators
+from dolfinx_nnqem.solvers.nneqm2.gauss_points import GaussPointOperators
 
 __all__ = ["IncrementStart", "start_increment"]
 

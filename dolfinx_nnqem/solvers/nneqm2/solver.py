@@ -2,20 +2,20 @@ r"""NNEQM2: one nonsmooth system for the pair unknowns and every Gauss point's p
 
 The displacement of an increment follows from the ELASTIC stiffness K_e, factorised once per run,
 and the unknowns that load it: the pair forces, the Gauss points' plastic strains and, where
-bodies float, the free rigid modes' amplitudes (:mod:`~dolfinx_nnqem.solvers.increment_start`):
+bodies float, the free rigid modes' amplitudes (:mod:`~dolfinx_nnqem.solvers.nneqm2.increment_start`):
 equilibrium holds by construction, and the equations are the pair laws and the Gauss points'
 yield conditions — one nonsmooth system. Only the Gauss points of a material that can yield
 carry unknowns (an elastic body adds nothing).
 
 Two variants (:class:`~dolfinx_nnqem.solvers.options.NNEQM2Options`, ``flow_directions``):
 
-* "return-map" (default, :mod:`~dolfinx_nnqem.solvers.nneqm2_return_map`): each Gauss point's
+* "return-map" (default, :mod:`~dolfinx_nnqem.solvers.nneqm2.return_map`): each Gauss point's
   plastic strain increment, direction included, is an unknown, and its rows are the radial
   return's — the seed's yield complementarity with the normality of the flow. The answer is the
   backward-Euler state of the monolithic solver and NNEQM1, from any state, under any driver.
   A Newton step eliminates the Gauss points' rows locally through the consistent tangent, so it
   costs what an outer iteration of NNEQM1 costs.
-* "frozen" (:mod:`~dolfinx_nnqem.solvers.nneqm2_frozen`): the seed's method, the flow directions
+* "frozen" (:mod:`~dolfinx_nnqem.solvers.nneqm2.frozen`): the seed's method, the flow directions
   frozen at the start of the increment and a dense system of order 3NC + NG in the plastic
   multipliers; first-order accurate in the increment where the stress turns.
 
@@ -45,10 +45,10 @@ from dolfinx_nnqem.problem.contact_problem import ContactProblem
 from dolfinx_nnqem.solvers.condensation import Condensation, check_dense_memory
 from dolfinx_nnqem.solvers.contract import ReleasesPETSc
 from dolfinx_nnqem.solvers.convergence import IterationRecord, SolveReport, logger
-from dolfinx_nnqem.solvers.gauss_points import GaussPointOperators
-from dolfinx_nnqem.solvers.increment_start import IncrementStart, start_increment
-from dolfinx_nnqem.solvers.nneqm2_frozen import FrozenDirections
-from dolfinx_nnqem.solvers.nneqm2_return_map import ReturnMapIncrement
+from dolfinx_nnqem.solvers.nneqm2.gauss_points import GaussPointOperators
+from dolfinx_nnqem.solvers.nneqm2.increment_start import IncrementStart, start_increment
+from dolfinx_nnqem.solvers.nneqm2.frozen import FrozenDirections
+from dolfinx_nnqem.solvers.nneqm2.return_map import ReturnMapIncrement
 from dolfinx_nnqem.solvers.options import NNEQM2Options, SolverOptions
 from dolfinx_nnqem.solvers.timings import Timings, summed
 

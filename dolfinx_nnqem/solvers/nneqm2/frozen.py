@@ -3,7 +3,7 @@ r"""NNEQM2 as the seed writes it: flow directions frozen at the start of the inc
 The unknowns are the pair unknowns z, the plastic multiplier increment Δγ_j of every Gauss point
 j that can yield (NG of them) and, where bodies float, the free rigid modes' amplitudes α: a
 dense nonsmooth system of order 3NC + NG (+ n_r). With the flow directions N_j frozen, the
-displacement is linear in the unknowns (:mod:`~dolfinx_nnqem.solvers.increment_start`),
+displacement is linear in the unknowns (:mod:`~dolfinx_nnqem.solvers.nneqm2.increment_start`),
 
     du = du_0 + G Bᵀ λ(z) + G Q Δγ + N α,   Q_{:,j} = w_j B_jᵀ C N_j,
 
@@ -26,7 +26,7 @@ shapes the directions. A Gauss point with no direction even there cannot flow in
 (its row is H4 = Δγ); if its stress then leaves the yield surface the independent check refuses
 the state, and load stepping cuts back. With frozen N the integration is exact for radial stress
 paths and first-order accurate in the increment otherwise (``docs/theory.md`` measures it against
-the backward-Euler answer of the default variant, :mod:`~dolfinx_nnqem.solvers.nneqm2_return_map`).
+the backward-Euler answer of the default variant, :mod:`~dolfinx_nnqem.solvers.nneqm2.return_map`).
 A large plastic increment where the stress turns may leave the yield rows without a solution:
 the increment then fails, and load stepping cuts back.
 """
@@ -49,8 +49,8 @@ from dolfinx_nnqem.solvers.condensation import Condensation
 from dolfinx_nnqem.solvers.condensed import CondensedProblem, CondensedSystem, newton_step, rigid_start
 from dolfinx_nnqem.solvers.contract import contact_model
 from dolfinx_nnqem.solvers.convergence import IterationRecord, SolveReport, logger
-from dolfinx_nnqem.solvers.gauss_points import GaussPointOperators
-from dolfinx_nnqem.solvers.increment_start import IncrementStart
+from dolfinx_nnqem.solvers.nneqm2.gauss_points import GaussPointOperators
+from dolfinx_nnqem.solvers.nneqm2.increment_start import IncrementStart
 from dolfinx_nnqem.solvers.timings import Timings
 
 __all__ = ["FrozenDirections", "FrozenSolution"]
