@@ -36,8 +36,25 @@ def box_factory():
     return box_with_face_tags
 
 
+FAST_TIER = (
+    "test_api_coverage.py", "test_compat.py", "test_contracts.py", "test_drucker_prager.py",
+    "test_dual_quadratic.py", "test_function_sizes.py", "test_kinematic_hardening.py", "test_laws.py",
+    "test_material.py", "test_mortar_geometry.py", "test_nonsmooth.py", "test_problem_file_doc.py",
+)
+"""The fast tier (``scripts/run-tests --fast``, under 2 minutes): the unit tests of the layers'
+pieces — the pair laws and their Jacobians, the nonsmooth Newton driver, the return maps and
+hardening laws against closed forms, the mortar geometry and quadratic facets — and the
+contracts (layers, Protocols, moved names, sizes, docstrings). No test here solves a load path."""
+
+
+def pytest_addoption(parser):
+    parser.addoption("--fast", action="store_true", default=False,
+                     help="run only the fast tier (tests/conftest.py FAST_TIER): the edit-test loop")
+
+
 def pytest_collection_modifyitems(config, items):
     """Tests marked ``slow`` run only when asked for (``-m slow``); the default run deselects them.
+    With ``--fast``, only the files of :data:`FAST_TIER` run.
 
     With pytest-xdist (``scripts/run-tests`` on several cores) the tests marked ``mpi`` share one
     worker, one after another: two ``mpiexec -n 2`` jobs at once would put four busy-polling ranks
@@ -46,6 +63,11 @@ def pytest_collection_modifyitems(config, items):
         for item in items:
             if "mpi" in item.keywords:
                 item.add_marker(pytest.mark.xdist_group("mpi"))
+    if config.getoption("fast"):
+        other = [item for item in items if item.path.name not in FAST_TIER]
+        if other:
+            config.hook.pytest_deselected(items=other)
+            items[:] = [item for item in items if item.path.name in FAST_TIER]
     if "slow" in (config.getoption("markexpr") or ""):
         return
     slow = [item for item in items if "slow" in item.keywords]
