@@ -6,6 +6,7 @@ is refused. On a coarse mesh (h = 1 mm), one press and lift in four increments."
 from __future__ import annotations
 
 import json
+import subprocess
 import sys
 from pathlib import Path
 
@@ -13,6 +14,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
+from dolfinx_nnqem import compat
 from dolfinx_nnqem.cases import sphere_press as case
 from dolfinx_nnqem.solvers import SolverOptions, make_solver, solve_load_steps
 
@@ -22,9 +24,10 @@ import calculix_sphere_press as ccx_sphere  # noqa: E402
 H = 1.0  # mm: a coarse mesh (a code-to-code comparison needs no converged one)
 
 
-def press(method: str, law: str = "alart-curnier", material: str = "combined", **build) -> tuple[list, list]:
+def press(method: str, law: str = "alart-curnier", material: str = "combined", comm: MPI.Comm = MPI.COMM_SELF,
+          **build) -> tuple[list, list]:
     """(force, depth) after each of 4 increments (two down, two up) of ``case.sphere_press_problem(H, ...)``."""
-    problem = case.sphere_press_problem(H, material, 1, law=law, comm=MPI.COMM_SELF, **build)
+    problem = case.sphere_press_problem(H, material, 1, law=law, comm=comm, **build)
     forces, depths = [], []
 
     def record(result):
@@ -106,3 +109,20 @@ def test_calculix_materials_map_the_laws():
 def test_bad_input_is_refused(kwargs, match):
     with pytest.raises(ValueError, match=match):
         case.sphere_press_problem(H, **{"material": "table", **kwargs})
+
+
+@pytest.mark.mpi
+def test_two_ranks_match_serial(tmp_path, reference):
+    """The combined-hardening press and lift on 2 ranks: the serial forces and depths."""
+    out = tmp_path / "out.npz"
+    script = Path(__file__).parent / "mpi_scripts" / "sphere_press.py"
+    cmd = [*compat.mpiexec(), "-n", "2", sys.executable, str(script), str(out)]
+    result = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env=compat.mpi_environment())
+    assert result.returncode == 0, f"{' '.join(cmd)} failed:\n{result.stdout[-3000:]}\n{result.stderr[-3000:]}"
+    parallel = np.load(out)
+    f_ref, d_ref = reference
+    df = np.abs(parallel["forces"] - f_ref).max() / max(f_ref)
+    dd = np.abs(parallel["depths"] - d_ref).max() / max(d_ref)
+    print(f"\n  2 ranks (cells per rank {parallel['cells'].tolist()}): peak force {parallel['forces'][1]:.6g} N, "
+          f"residual depth {parallel['depths'][-1]:.6g} mm; differences from serial {df:.1e} (force), {dd:.1e} (depth)")
+    assert min(parallel["cells"]) > 0 and df < 1e-8 and dd < 1e-8
