@@ -54,7 +54,6 @@ def _match(
     Returns the indices into ``body1`` and ``body2`` of the pairs (body-2 nodes in a
     deterministic coordinate order) and an error message or None.
     """
-    tag1, tag2 = tags
     # body-2 nodes in lexicographic order of their coordinates (rounded to the tolerance, so
     # that the order does not depend on round-off in the mesh generator)
     key = np.round(body2.x / tolerance)
@@ -65,32 +64,54 @@ def _match(
     partner = np.where(dist <= tolerance, closest, -1)
 
     unmatched = np.flatnonzero(partner < 0)
+    error = None
     if len(unmatched) and search_distance is not None:
-        from scipy.spatial import cKDTree  # non-coincident pairs only: SciPy's import is not paid otherwise
+        error = _partners_within_search(body1, x2, partner, unmatched, tags, tolerance, search_distance)
+    if error is None:
+        error = _pairing_error(body1, body2, order2, partner, tags, tolerance, search_distance)
+    return order2, partner, error
 
-        candidates = cKDTree(body1.x).query_ball_point(x2[unmatched], r=search_distance)
-        for k, found in zip(unmatched, candidates):
-            if not found:
-                continue
-            found = np.asarray(found)
-            d = x2[k] - body1.x[found]
-            g0 = np.einsum("ij,ij->i", body1.normal[found], d)
-            ahead = g0 >= -tolerance
-            if not np.any(ahead):
-                i = found[np.argmin(np.linalg.norm(d, axis=1))]
-                return order2, partner, (
-                    f"the node at {format_point(x2[k])} of surface {tag2} (body 2) lies behind surface "
-                    f"{tag1} (body 1): its nearest body-1 node at {format_point(body1.x[i])} with outward "
-                    f"normal {format_point(body1.normal[i])} gives the initial gap "
-                    f"{float(np.dot(body1.normal[i], x2[k] - body1.x[i])):.6g} < 0. Are the bodies "
-                    "overlapping, or are surface1 and surface2 swapped?"
-                )
-            found, d = found[ahead], d[ahead]
-            distance = np.linalg.norm(d, axis=1)
-            xc = body1.x[found]
-            best = np.lexsort((xc[:, 2], xc[:, 1], xc[:, 0], distance))[0]  # ties: by coordinates
-            partner[k] = found[best]
 
+def _partners_within_search(body1: SurfaceNodes, x2: np.ndarray, partner: np.ndarray, unmatched: np.ndarray,
+                            tags: tuple[int, int], tolerance: float, search_distance: float) -> str | None:
+    """Fill ``partner`` of the body-2 nodes ``unmatched`` (no coincident body-1 node) with the
+    nearest body-1 node within ``search_distance`` ahead of its surface (ties by coordinates);
+    the error message of a node that lies behind body 1's surface, or None."""
+    from scipy.spatial import cKDTree  # non-coincident pairs only: SciPy's import is not paid otherwise
+
+    tag1, tag2 = tags
+    candidates = cKDTree(body1.x).query_ball_point(x2[unmatched], r=search_distance)
+    for k, found in zip(unmatched, candidates):
+        if not found:
+            continue
+        found = np.asarray(found)
+        d = x2[k] - body1.x[found]
+        g0 = np.einsum("ij,ij->i", body1.normal[found], d)
+        ahead = g0 >= -tolerance
+        if not np.any(ahead):
+            i = found[np.argmin(np.linalg.norm(d, axis=1))]
+            return (
+                f"the node at {format_point(x2[k])} of surface {tag2} (body 2) lies behind surface "
+                f"{tag1} (body 1): its nearest body-1 node at {format_point(body1.x[i])} with outward "
+                f"normal {format_point(body1.normal[i])} gives the initial gap "
+                f"{float(np.dot(body1.normal[i], x2[k] - body1.x[i])):.6g} < 0. Are the bodies "
+                "overlapping, or are surface1 and surface2 swapped?"
+            )
+        found, d = found[ahead], d[ahead]
+        distance = np.linalg.norm(d, axis=1)
+        xc = body1.x[found]
+        best = np.lexsort((xc[:, 2], xc[:, 1], xc[:, 0], distance))[0]  # ties: by coordinates
+        partner[k] = found[best]
+    return None
+
+
+def _pairing_error(body1: SurfaceNodes, body2: SurfaceNodes, order2: np.ndarray, partner: np.ndarray,
+                   tags: tuple[int, int], tolerance: float, search_distance: float | None) -> str | None:
+    """Why the pairs (body-2 nodes ``order2``, their body-1 ``partner``) are not node-to-node pairs:
+    a body-2 node without a partner, a body-1 node taken twice, or surfaces that do not face each
+    other; None if they are."""
+    tag1, tag2 = tags
+    x2 = body2.x[order2]
     if np.any(partner < 0):
         j = int(np.flatnonzero(partner < 0)[0])
         within = (
@@ -98,7 +119,7 @@ def _match(
             if search_distance is not None
             else f"coincident with it (tolerance {tolerance:.3g}; pass search_distance for non-coincident pairs)"
         )
-        return order2, partner, (
+        return (
             f"the node at {format_point(x2[j])} of contact surface {tag2} (body 2) has no partner: "
             f"no node of surface {tag1} (body 1) is {within}"
         )
@@ -109,7 +130,7 @@ def _match(
         j = int(np.flatnonzero(np.isin(partner, used[counts > 1]))[0])
         i = int(partner[j])
         twice = np.flatnonzero(partner == i)
-        return order2, partner, (
+        return (
             f"the node at {format_point(body1.x[i])} of contact surface {tag1} (body 1) is the partner "
             f"of {len(twice)} body-2 nodes of surface {tag2}, at "
             f"{', '.join(format_point(x2[j]) for j in twice)}; node-to-node pairs need one body-1 node "
@@ -119,14 +140,13 @@ def _match(
     facing = np.einsum("ij,ij->i", body1.normal[partner], body2.normal[order2])
     if np.any(facing >= 0):
         j = int(np.flatnonzero(facing >= 0)[0])
-        return order2, partner, (
+        return (
             f"the contact surfaces do not face each other: at the pair of body-1 node "
             f"{format_point(body1.x[partner[j]])} (surface {tag1}, outward normal "
             f"{format_point(body1.normal[partner[j]])}) and body-2 node {format_point(x2[j])} (surface {tag2}, "
             f"outward normal {format_point(body2.normal[order2[j]])}) the normals point the same way"
         )
-    return order2, partner, None
-
+    return None
 
 
 # --------------------------------------------------------------------------------------------
@@ -443,7 +463,6 @@ def find_pairs(
         node has no partner, a body-1 node is matched twice, a body-2 node lies behind body
         1's surface, or paired nodes' normals do not face each other.
     """
-    comm = V.mesh.comm
     tags = (int(surface1), int(surface2))
     tolerance = _check_search(V, tags, tolerance, search_distance)
     surfaces = gather_surfaces(V, facet_tags, tags)
@@ -453,7 +472,15 @@ def find_pairs(
     order2, partner, error = _match(body1, body2, tags, tolerance, search_distance)
     if error:
         raise ContactPairError(error)
+    return _owned_pairs(V, body1, body2, order2, partner, tags, tolerance, initial_gap)
 
+
+def _owned_pairs(V: dolfinx.fem.FunctionSpace, body1: SurfaceNodes, body2: SurfaceNodes, order2: np.ndarray,
+                 partner: np.ndarray, tags: tuple[int, int], tolerance: float,
+                 initial_gap: Callable[[np.ndarray], np.ndarray] | None) -> ContactPairs:
+    """The :class:`ContactPairs` of the matched nodes (body-2 nodes ``order2``, their body-1
+    ``partner``) whose node b this rank owns: frames, initial gaps, the rows of B (collective)."""
+    comm = V.mesh.comm
     # --- all pairs, in body-2 coordinate order
     index_a, index_b = body1.index[partner], body2.index[order2]
     X_a, X_b = body1.x[partner], body2.x[order2]
