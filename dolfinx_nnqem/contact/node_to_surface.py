@@ -101,18 +101,7 @@ def node_to_surface_pairs(V: dolfinx.fem.FunctionSpace, surfaces: GatheredSurfac
         p = keep_preferred(p, nodes.x, master, preferred, 0.0 if edge_allowance is None else edge_allowance)
     found = p.facet >= 0
     inside = found & (p.tangential_offset <= (tolerance if edge_allowance is None else edge_allowance))
-    if not np.any(inside):
-        raise NoPairsError(
-            f"no node of the slave surface {tags[1]} projects onto the master surface {tags[0]} within the search "
-            f"distance {search_distance:.6g}: do the surfaces face each other? (pass search_distance for "
-            "larger initial gaps)")
-    facing = np.einsum("ij,ij->i", p.normal[inside], nodes.normal[inside])
-    if np.any(facing >= 0.0):
-        j = first_by_position(nodes.x[inside], facing >= 0.0)
-        raise ContactPairError(
-            f"the contact surfaces do not face each other: the slave node at {format_point(nodes.x[inside][j])} "
-            f"(surface {tags[1]}, outward normal {format_point(nodes.normal[inside][j])}) projects onto surface "
-            f"{tags[0]} where its outward normal is {format_point(p.normal[inside][j])}")
+    _check_projections(p, inside, nodes.x, nodes.normal, tags, search_distance)
     k = master.nodes.shape[1]
     combination = nodes.combination
     if len(combination.columns) == len(nodes.index):  # linear or quad9 slave facets: the node alone
@@ -133,6 +122,25 @@ def node_to_surface_pairs(V: dolfinx.fem.FunctionSpace, surfaces: GatheredSurfac
         master_indptr, master_index, weights, X_master_nodes, master_size=master_size, tolerance=tolerance,
         num_slave_nodes=len(nodes.index), note=note, supported=supported, facet=p.facet[keep],
         slave_rows=(rows.indptr, nodes.index[rows.columns], rows.coefficients))
+
+
+def _check_projections(p: Projection, inside: np.ndarray, x: np.ndarray, normal: np.ndarray, tags: tuple[int, int],
+                       search_distance: float) -> None:
+    """Raise if no slave node (positions ``x``, outward normals ``normal``) projects ``inside`` the
+    master surface (:class:`NoPairsError`), or if one that does faces the same way as the master
+    there (:class:`ContactPairError`); ``tags`` = (master, slave)."""
+    if not np.any(inside):
+        raise NoPairsError(
+            f"no node of the slave surface {tags[1]} projects onto the master surface {tags[0]} within the search "
+            f"distance {search_distance:.6g}: do the surfaces face each other? (pass search_distance for "
+            "larger initial gaps)")
+    facing = np.einsum("ij,ij->i", p.normal[inside], normal[inside])
+    if np.any(facing >= 0.0):
+        j = first_by_position(x[inside], facing >= 0.0)
+        raise ContactPairError(
+            f"the contact surfaces do not face each other: the slave node at {format_point(x[inside][j])} "
+            f"(surface {tags[1]}, outward normal {format_point(normal[inside][j])}) projects onto surface "
+            f"{tags[0]} where its outward normal is {format_point(p.normal[inside][j])}")
 
 
 def _combined_master_side(rows: NodeCombination, p: Projection, master_nodes: np.ndarray,
