@@ -12,7 +12,9 @@ pytestmark = pytest.mark.mpi
 KILLED_RANK_1 = ("import os, signal, time\n"
                  "from mpi4py import MPI\n"
                  "MPI.COMM_WORLD.Barrier()\n"
-                 "print('rank', MPI.COMM_WORLD.rank, 'started', flush=True)\n"
+                 # one string, one write: print's separate pieces (unbuffered output) are tagged, and
+                 # under load interleaved with the other ranks' pieces, one by one
+                 "print(f'rank {MPI.COMM_WORLD.rank} started', flush=True)\n"
                  "time.sleep(1.0)  # (seen by the watch first)\n"
                  "if MPI.COMM_WORLD.rank == 1:\n"
                  "    os.kill(os.getpid(), signal.SIGKILL)\n"
