@@ -26,7 +26,6 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-from mpi4py import MPI
 from petsc4py import PETSc
 
 from dolfinx_nnqem import compat
@@ -42,6 +41,7 @@ from dolfinx_nnqem.numerics.newton import Globalisation, Merit, NewtonResult, so
 from dolfinx_nnqem.numerics.roundoff import floor_note, residual_floor
 from dolfinx_nnqem.problem.contact_problem import ContactProblem
 from dolfinx_nnqem.solvers.options import MonolithicOptions, SolverOptions
+from dolfinx_nnqem.solvers.prediction import lifted_residual, predict_increment
 from dolfinx_nnqem.solvers.timings import Timings
 
 __all__ = ["MonolithicSolver"]
@@ -223,16 +223,12 @@ class MonolithicSolver(ReleasesPETSc):
         lifted (:meth:`_lifted_step`); otherwise the converged state.
         """
         p = self.problem
-        extrapolated = self.settings.extrapolate and p.extrapolate(load_factor)
-        u_bc = p.u.x.array[p.bc_dofs].copy()
-        p.apply_prescribed_displacements(load_factor)
-        self._refresh_geometry()  # the starting active set sees the predicted configuration's gaps
-        p.predict_contact()
-        delta_bc = p.u.x.array[p.bc_dofs] - u_bc
-        if extrapolated or not p.comm.allreduce(bool(np.any(delta_bc != 0.0)), op=MPI.LOR):
+        # the starting active set sees the predicted configuration's gaps
+        start = predict_increment(p, load_factor, self.settings.extrapolate, self._refresh_geometry)
+        if not start.lift:
             return False
-        p.u.x.array[p.bc_dofs] = u_bc
-        if self._lifted_step(self.evaluate(), delta_bc):
+        p.u.x.array[p.bc_dofs] = start.u_bc
+        if self._lifted_step(self.evaluate(), start.delta_bc):
             return True
         p.apply_prescribed_displacements(load_factor)  # the solve failed: plain Newton from here
         return False
@@ -251,9 +247,7 @@ class MonolithicSolver(ReleasesPETSc):
         p = self.problem
         delta = np.zeros_like(p.u.x.array)
         delta[p.bc_dofs] = delta_bc
-        K_delta = p.tangent_action(delta)
-        R_lifted = p.free_residual(K_delta)
-        R_lifted.axpy(1.0, ev.R_free)
+        R_lifted = lifted_residual(p, ev.R_free, delta)
         H_lifted = ev.H
         if p.contact is not None and ev.law is not None:  # the law: with contact
             delta_vec = p.u.x.petsc_vec.duplicate()

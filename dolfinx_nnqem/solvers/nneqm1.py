@@ -40,7 +40,6 @@ import math
 import time
 
 import numpy as np
-from mpi4py import MPI
 from petsc4py import PETSc
 
 from dolfinx_nnqem.solvers.condensation import Condensation, check_dense_memory
@@ -55,6 +54,7 @@ from dolfinx_nnqem.numerics.roundoff import floor_note, residual_floor
 from dolfinx_nnqem.numerics.nonsmooth import Fallback, NonsmoothResult, solve_dense
 from dolfinx_nnqem.problem.contact_problem import ContactProblem
 from dolfinx_nnqem.solvers.options import NNEQM1Options, SolverOptions
+from dolfinx_nnqem.solvers.prediction import newton_right_hand_side, predict_increment
 from dolfinx_nnqem.solvers.timings import Timings, summed
 
 __all__ = ["CondensedProblem", "NNEQM1Solver", "rigid_start"]  # the first and last live in .condensed
@@ -111,18 +111,14 @@ class NNEQM1Solver(ReleasesPETSc):
         # the outer iteration starts where the monolithic solver's Newton does: from the secant
         # extrapolation of the last two increments (u and the pair unknowns) while the load path
         # goes on in the same direction, else with the jump of the prescribed values lifted
-        extrapolated = self.settings.extrapolate and p.extrapolate(load_factor)
-        u_bc = p.u.x.array[p.bc_dofs].copy()
-        p.apply_prescribed_displacements(load_factor)
-        p.predict_contact()
-        delta_bc = p.u.x.array[p.bc_dofs] - u_bc
+        start = predict_increment(p, load_factor, self.settings.extrapolate)
         report = SolveReport(converged=False, iterations=0,
                              system_order=3 * p.num_pairs + self.condensation.num_modes)
         system = _OuterSystem(self, report)
         lifted = False
-        if not extrapolated and p.comm.allreduce(bool(np.any(delta_bc != 0.0)), op=MPI.LOR):
-            p.u.x.array[p.bc_dofs] = u_bc
-            lifted = system.lifted_step(delta_bc)
+        if start.lift:
+            p.u.x.array[p.bc_dofs] = start.u_bc
+            lifted = system.lifted_step(start.delta_bc)
             if not lifted:  # its contact solve failed: the plain start, from the moved boundary
                 p.apply_prescribed_displacements(load_factor)
                 system.inner_failure, report.inner_states = None, None
@@ -278,17 +274,7 @@ class _OuterSystem:
         if not (s.settings.modified and self.steps > 0):
             cond_solver.factorise(p.assemble_tangent, "the tangent stiffness K_t")
             self._X, self._C = cond_solver.pair_flexibility()
-        r = R_free.copy()
-        if lift is not None:
-            K_delta = p.tangent_action(lift)
-            K_delta_free = p.free_residual(K_delta)
-            r.axpy(1.0, K_delta_free)
-            for vec in (K_delta, K_delta_free):
-                vec.destroy()
-        r.scale(-1.0)
-        if lift is not None:  # the constrained rows of the right-hand side are du there (identity rows)
-            owned = p.owned_bc_dofs()
-            r.getArray()[owned] = lift[owned]
+        r = newton_right_hand_side(p, R_free, lift)
         x_r = cond_solver.solve(r)
         z_m = model.gather(model.z)
         lam_m, _ = self.laws.force(z_m)

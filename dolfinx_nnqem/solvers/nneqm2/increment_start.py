@@ -27,6 +27,7 @@ from dolfinx_nnqem.material.kinematics import deviator_coordinates
 from dolfinx_nnqem.problem.contact_problem import ContactProblem
 from dolfinx_nnqem.solvers.condensation import Condensation
 from dolfinx_nnqem.solvers.nneqm2.gauss_points import GaussPointOperators
+from dolfinx_nnqem.solvers.prediction import predict_increment
 
 __all__ = ["IncrementStart", "start_increment"]
 
@@ -80,17 +81,14 @@ class IncrementStart:
 
 def start_increment(problem: ContactProblem, gp: GaussPointOperators, elastic: Condensation,
                     load_factor: float, extrapolate: bool) -> IncrementStart:
-    """Apply the prescribed values of ℓ, predict the pair unknowns (the secant extrapolation of
-    the last two increments when ``extrapolate``, then the touching pairs closed,
-    :meth:`ContactProblem.predict_contact`) and build the elastic predictor (collective)."""
+    """Start the increment as every solver does (the secant extrapolation of the last two
+    increments when ``extrapolate``, the prescribed values of ℓ, the touching pairs closed:
+    :func:`~dolfinx_nnqem.solvers.prediction.predict_increment`) and build the elastic predictor,
+    the jump of the prescribed values in its right-hand side (collective)."""
     p, st = problem, problem.state
     # the pair unknowns start from the secant extrapolation of the last two increments; so does u,
     # where w_start (the pair branches a floating body's first step freezes) is read
-    beta = p.extrapolation_factor(load_factor) if extrapolate else None
-    if beta is not None:
-        p.extrapolate(load_factor)
-    p.apply_prescribed_displacements(load_factor)
-    p.predict_contact()
+    beta = predict_increment(p, load_factor, extrapolate).beta
     sigma_n = st.sigma_n.x.array[:9 * gp.n_gp].reshape(gp.n_gp, 3, 3).copy()
     F_n = gp.force(sigma_n)
     F_ext = p.external_force()

@@ -65,6 +65,7 @@ from dolfinx_nnqem.solvers.contract import contact_model
 from dolfinx_nnqem.solvers.convergence import IterationRecord, SolveReport, count_states, logger
 from dolfinx_nnqem.solvers.nneqm2.gauss_points import GaussPointOperators
 from dolfinx_nnqem.solvers.nneqm2.increment_start import IncrementStart
+from dolfinx_nnqem.solvers.prediction import newton_right_hand_side
 from dolfinx_nnqem.solvers.timings import Timings
 
 __all__ = ["ReturnMapIncrement"]
@@ -294,16 +295,11 @@ class ReturnMapIncrement:
         n_u = self.elastic.K.getLocalSize()[0]
         du_lin = self._owned_vector(p.u.x.array[:n_u] - st.u_n.x.array[:n_u])
         tangent.factorise(p.assemble_tangent, "the tangent stiffness K_t")
-        r = p.free_residual(p.residual(z=self.x.z))
-        if lift:
-            K_delta = p.tangent_action(delta)
-            K_delta_free = p.free_residual(K_delta)
-            r.axpy(1.0, K_delta_free)
-            for vec in (K_delta, K_delta_free):
-                vec.destroy()
-        r.scale(-1.0)
-        owned = p.owned_bc_dofs()
-        r.getArray()[owned] = delta[owned]  # the constrained rows of the step: the lifted jump
+        R = p.residual(z=self.x.z)
+        R_free = p.free_residual(R)
+        r = newton_right_hand_side(p, R_free, delta if lift else None)
+        for vec in (R, R_free):
+            vec.destroy()
         w_lin = p.relative_displacement() if p.has_contact else None
         t_lin = self._trial(du_lin)
         e_lin = (t_lin - start.s_n) / (2.0 * gp.mu[:, None])
