@@ -32,7 +32,8 @@ __all__ = ["axial_vector", "eigen", "log_derivative", "log_divided_differences",
 
 def eigen(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(λ (n, 3), Q (n, 3, 3)) of the symmetric part of tensors A (n, 3, 3): A = Q diag(λ) Qᵀ."""
-    return np.linalg.eigh(0.5 * (A + np.swapaxes(A, -1, -2)))
+    lam, Q = np.linalg.eigh(0.5 * (A + np.swapaxes(A, -1, -2)))
+    return lam, Q
 
 
 def tensor_function(Q: np.ndarray, values: np.ndarray) -> np.ndarray:
