@@ -340,6 +340,16 @@ def test_polar_rotation_derivative_equals_central_differences() -> None:
     assert np.abs(r[0] @ Omega - dr[0]).max() <= 1e-7
 
 
+def test_an_elastic_von_mises_material_is_hencky_elasticity() -> None:
+    """VonMises(E, nu) (σ_y0 = inf) has the finite-strain form of Elastic(E, nu): the same P and tangent."""
+    F = np.array([[[1.3, 0.2, 0.0], [0.0, 0.9, 0.1], [0.0, -0.05, 0.95]]])
+    a, b = finite_strain_material(VonMises(E, NU), 1), finite_strain_material(Elastic(E, NU), 1)
+    out_a, out_b = a.update(F, a.initial_state()), b.update(F, b.initial_state())
+    assert out_a.tangent is not None and out_b.tangent is not None
+    assert np.abs(out_a.P - out_b.P).max() <= 1e-12 * np.abs(out_b.P).max() and out_a.dp[0] == 0.0
+    assert np.abs(out_a.tangent - out_b.tangent).max() <= 1e-12 * np.abs(out_b.tangent).max()
+
+
 # -- the interface and refusals ---------------------------------------------------------------------------------
 def test_materials_conform_to_the_finite_strain_protocol() -> None:
     for material in MATERIALS.values():

@@ -44,15 +44,15 @@ def pointwise_material(material: object, n: int) -> PointwiseMaterial:
         return ElasticAtPoints(np.full(n, material.mu), np.full(n, material.lmbda), np.full(n, material.E))
     if isinstance(material, VonMises):
         mu, lmbda, E = np.full(n, material.mu), np.full(n, material.lmbda), np.full(n, material.E)
-        law = HardeningAtPoints(zeros, [material.isotropic_law])
         if material.kinematic:
+            law = HardeningAtPoints(zeros, [material.isotropic_law])
             C = np.tile([b.C for b in material.kinematic], (n, 1))
             gamma = np.tile([b.gamma for b in material.kinematic], (n, 1))
             return KinematicAtPoints(mu, lmbda, E, law, C, gamma, tuple(back_stress_names(len(material.kinematic))))
         if material.hardening is None:
             sigma_y0 = material.sigma_y0 if np.isfinite(material.sigma_y0) else ELASTIC_YIELD_STRESS
             return VonMisesAtPoints(mu, lmbda, np.full(n, sigma_y0), np.full(n, material.H), E)
-        return IsotropicAtPoints(mu, lmbda, E, law)
+        return IsotropicAtPoints(mu, lmbda, E, HardeningAtPoints(zeros, [material.hardening]))
     if isinstance(material, DruckerPrager):
         eta, xi, eta_bar = material.coefficients
         mu, lmbda = np.full(n, material.mu), np.full(n, material.lmbda)
