@@ -10,13 +10,14 @@ from __future__ import annotations
 from dolfinx_nnqem.material.composite import CompositeAtPoints
 from dolfinx_nnqem.material.drucker_prager import DruckerPrager, DruckerPragerAtPoints, DruckerPragerPart
 from dolfinx_nnqem.material.elastic import Elastic, ElasticAtPoints, ElasticPart
+from dolfinx_nnqem.material.finite_strain import FiniteStrainMaterial, HenckyAtPoints, NeoHookeAtPoints
 from dolfinx_nnqem.material.interface import Material, MaterialPart, MaterialState, PointwiseMaterial
 from dolfinx_nnqem.material.isotropic import IsotropicAtPoints, IsotropicHardeningPart
 from dolfinx_nnqem.material.kinematic import KinematicAtPoints, KinematicHardeningPart
 from dolfinx_nnqem.material.state import GaussPointState
 from dolfinx_nnqem.material.von_mises import VonMises, VonMisesAtPoints, VonMisesPart
 
-__all__ = ["as_material", "as_material_part", "as_material_state", "as_pointwise_material",
+__all__ = ["as_finite_strain_material", "as_material", "as_material_part", "as_material_state", "as_pointwise_material",
            "as_pointwise_plasticity"]
 
 
@@ -39,6 +40,12 @@ def as_material_state(state: GaussPointState) -> MaterialState:
 def as_pointwise_material(points: VonMisesAtPoints | IsotropicAtPoints | KinematicAtPoints | DruckerPragerAtPoints
                           | ElasticAtPoints | CompositeAtPoints) -> PointwiseMaterial:
     """``points`` as the :class:`~dolfinx_nnqem.material.interface.PointwiseMaterial` Protocol."""
+    return points
+
+
+
+def as_finite_strain_material(points: HenckyAtPoints | NeoHookeAtPoints) -> FiniteStrainMaterial:
+    """``points`` as the :class:`~dolfinx_nnqem.material.finite_strain.interface.FiniteStrainMaterial` Protocol."""
     return points
 
 

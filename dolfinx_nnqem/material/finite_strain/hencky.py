@@ -1,0 +1,227 @@
+"""Elastoplasticity at finite strain by the logarithmic (Hencky) strain and the exponential map:
+every small-strain return map of :mod:`dolfinx_nnqem.material` reused unchanged.
+
+Simo (1992), Eterovic & Bathe (1990), Miehe, Apel & Lambrecht (2002); ``formulation.md`` §1c.
+F = F_e F_p, b_e = F_e F_eᵀ; the state of an increment is (F_n, b_e,n, the internal variables).
+From the deformation gradient F = F_{n+1}:
+
+1. the relative deformation f = F F_n⁻¹ and the elastic trial b_e^tr = f b_e,n fᵀ (the plastic
+   flow frozen), its logarithmic strain ε^tr = ½ ln b_e^tr (spectral decomposition:
+   :mod:`.spectral`);
+2. the small-strain return map of the material (its
+   :class:`~dolfinx_nnqem.material.interface.PointwiseMaterial`, called as it is) at the trial
+   strain ε^tr: its trial stress C : ε^tr is the σ_n + C : Δε of the small-strain code with
+   ε_e,n in the place of ε_n − ε_p,n. It gives Δε_p, Δp and ∂Δε_p/∂ε; ε_e = ε^tr − Δε_p and the
+   Kirchhoff stress τ = C : ε_e (Hencky's hyperelastic law in the logarithmic space);
+3. b_e = exp(2 ε_e): the exponential map of the plastic flow, which keeps det b_e = det b_e^tr
+   exp(−2 tr Δε_p) (plastic incompressibility exactly, for a deviatoric flow);
+4. P = τ F⁻ᵀ, σ = τ / J.
+
+For an isotropic law (von Mises with isotropic hardening of any shape, Drucker–Prager, Hencky
+elasticity) τ is coaxial with b_e^tr and the update is Simo's. **Back-stresses** (kinematic
+hardening) are spatial tensors in the logarithmic space, and need a transport from one
+configuration to the next: here they turn with the rotation r of the polar decomposition
+f = r u of the increment's deformation (α_n → r α_n rᵀ, a Green–Naghdi-type rule). This is a
+model choice of its own (``formulation.md`` §1c: "for kinematic hardening it is a model of its
+own"); it is objective, and exact for loading without rotation (the uniaxial closed forms).
+The return map runs in the increment's rotated frame, ε̄ = rᵀ ε^tr r with the stored α_n; for an
+isotropic law that frame changes nothing.
+
+**Consistent tangent.** Along a direction δF, with δf = δF F_n⁻¹,
+δb = δf b_e,n fᵀ + f b_e,n δfᵀ, δε^tr = ½ d ln(b_e^tr)[δb] (:func:`.spectral.log_derivative`,
+exact as eigenvalues coincide), Ω = rᵀδr (:func:`.spectral.rotation_derivative`),
+
+    δε̄ = rᵀ δε^tr r − Ω ε̄ + ε̄ Ω,   δτ̄ = D : δε̄,   δτ = r (Ω τ̄ − τ̄ Ω + δτ̄) rᵀ,
+    δP = δτ F⁻ᵀ − τ F⁻ᵀ δFᵀ F⁻ᵀ,
+
+with D = C (I − ∂Δε_p/∂ε) the small-strain algorithmic tangent in the logarithmic space. The
+nine directions δF = e_k ⊗ e_l give ∂P/∂F (n, 3, 3, 3, 3).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from dolfinx_nnqem.material.drucker_prager import DruckerPragerAtPoints
+from dolfinx_nnqem.material.elastic import ElasticAtPoints
+from dolfinx_nnqem.material.finite_strain.interface import (FiniteStrainResponse, FiniteStrainState,
+                                                            checked_deformation_gradients)
+from dolfinx_nnqem.material.finite_strain.spectral import (eigen, log_derivative, polar_decomposition,
+                                                           rotation_derivative, tensor_function)
+from dolfinx_nnqem.material.interface import PointwiseMaterial
+from dolfinx_nnqem.material.isotropic import IsotropicAtPoints
+from dolfinx_nnqem.material.kinematic import KinematicAtPoints, back_stresses
+from dolfinx_nnqem.material.kinematics import (deviator_coordinates, deviator_tensors, symmetric_coordinates,
+                                               symmetric_tensors)
+from dolfinx_nnqem.material.von_mises import VonMisesAtPoints
+
+__all__ = ["SUPPORTED_POINTWISE", "HenckyAtPoints", "LogarithmicReturn", "logarithmic_return"]
+
+SUPPORTED_POINTWISE = (VonMisesAtPoints, IsotropicAtPoints, KinematicAtPoints, DruckerPragerAtPoints, ElasticAtPoints)
+"""The pointwise materials the route takes: each is a small-strain return map with C = 2μ on the
+deviators and 3κ on the volume, and internal variables the route knows how to carry ("p"; the
+back-stresses of :class:`~dolfinx_nnqem.material.kinematic.KinematicAtPoints`)."""
+_DIRECTIONS = np.eye(9).reshape(9, 3, 3)
+
+
+@dataclass(frozen=True)
+class LogarithmicReturn:
+    """The small-strain return map at logarithmic trial strains, n points (coordinates of
+    :mod:`~dolfinx_nnqem.material.kinematics`: (n, 6), the volumetric one tr/√3 last)."""
+
+    eps_e: np.ndarray  #: (n, 6) elastic logarithmic strain ε_e = ε^tr − Δε_p
+    deps_p: np.ndarray  #: (n, 6) plastic strain increment Δε_p
+    dp: np.ndarray  #: (n,) equivalent plastic strain increment Δp
+    tau: np.ndarray  #: (n, 6) Kirchhoff stress τ = C : ε_e
+    D: np.ndarray  #: (n, 6, 6) algorithmic tangent dτ/dε^tr = C (I − ∂Δε_p/∂ε)
+
+
+def logarithmic_return(pointwise: PointwiseMaterial, eps_tr: np.ndarray, internal: dict[str, np.ndarray]
+                       ) -> LogarithmicReturn:
+    """The material's own return map (:class:`~dolfinx_nnqem.material.interface.PointwiseMaterial`)
+    at the trial logarithmic strains ``eps_tr`` (n, 3, 3) from the converged ``internal`` variables.
+
+    A deviatoric flow takes the trial deviator t = 2μ dev ε^tr (coordinates (n, 5)) and gives
+    ∂Δε_p/∂e (n, 5, 5); a pressure-dependent one (``deviatoric_flow`` False) the full trial stress
+    C : ε^tr (n, 6) and ∂Δε_p/∂ε (n, 6, 6).
+    """
+    mu, kappa = pointwise.mu, pointwise.lmbda + 2.0 * pointwise.mu / 3.0
+    C6 = np.concatenate([np.repeat((2.0 * mu)[:, None], 5, axis=1), (3.0 * kappa)[:, None]], axis=1)
+    e = symmetric_coordinates(eps_tr)
+    n = e.shape[0]
+    deps_p, R = np.zeros((n, 6)), np.zeros((n, 6, 6))
+    if pointwise.deviatoric_flow:
+        t = 2.0 * mu[:, None] * e[:, :5]
+        deps_p[:, :5], dp = pointwise.plastic_strain(t, internal)
+        R[:, :5, :5] = pointwise.plastic_strain_tangent(t, internal)
+    else:
+        t = C6 * e
+        deps_p, dp = pointwise.plastic_strain(t, internal)
+        R = pointwise.plastic_strain_tangent(t, internal)
+    eps_e = e - deps_p
+    D = C6[:, :, None] * (np.eye(6) - R)
+    return LogarithmicReturn(eps_e, deps_p, dp, C6 * eps_e, D)
+
+
+@dataclass(frozen=True)
+class _Trial:
+    """The elastic trial state of an increment at n points (the module docstring, step 1)."""
+
+    F_n_inv: np.ndarray  #: F_n⁻¹
+    b_n: np.ndarray  #: b_e,n
+    f: np.ndarray  #: F F_n⁻¹
+    lam: np.ndarray  #: eigenvalues of b_e^tr (n, 3)
+    Q: np.ndarray  #: its eigenvectors (columns)
+    r: np.ndarray  #: polar rotation of f
+    u: np.ndarray  #: its stretch
+    eps_bar: np.ndarray  #: rᵀ ε^tr r
+
+
+def _trial(F: np.ndarray, state: FiniteStrainState) -> _Trial:
+    """b_e^tr = f b_e,n fᵀ, its eigen-decomposition and ε̄ = rᵀ (½ ln b_e^tr) r."""
+    F_n_inv = np.linalg.inv(state.F)
+    f = F @ F_n_inv
+    b_tr = f @ state.b_e @ np.swapaxes(f, 1, 2)
+    lam, Q = eigen(b_tr)
+    if np.any(lam <= 0.0):
+        raise ValueError(f"the elastic trial b_e has an eigenvalue <= 0 at {np.count_nonzero((lam <= 0).any(1))} "
+                         "Gauss point(s): the state's b_e is not positive definite")
+    r, u = polar_decomposition(f)
+    eps_tr = tensor_function(Q, 0.5 * np.log(lam))
+    return _Trial(F_n_inv, state.b_e, f, lam, Q, r, u, np.swapaxes(r, 1, 2) @ eps_tr @ r)
+
+
+def _rotated(r: np.ndarray, T: np.ndarray) -> np.ndarray:
+    """r T rᵀ for (n, 3, 3) arrays."""
+    return r @ T @ np.swapaxes(r, 1, 2)
+
+
+def _tangent(F: np.ndarray, trial: _Trial, ret: LogarithmicReturn, tau: np.ndarray) -> np.ndarray:
+    """∂P_ij/∂F_kl (n, 3, 3, 3, 3) along the nine directions e_k⊗e_l (the module docstring)."""
+    n = F.shape[0]
+    dF = np.broadcast_to(_DIRECTIONS, (n, 9, 3, 3))
+    df = dF @ trial.F_n_inv[:, None]
+    left = (trial.f @ trial.b_n)[:, None]
+    db = df @ np.swapaxes(left, -1, -2) + left @ np.swapaxes(df, -1, -2)
+    deps = 0.5 * log_derivative(trial.lam, trial.Q, db)
+    r, rT = trial.r[:, None], np.swapaxes(trial.r, 1, 2)[:, None]
+    Omega = rotation_derivative(trial.r, trial.u, df)
+    eps_bar = trial.eps_bar[:, None]
+    deps_bar = rT @ deps @ r - Omega @ eps_bar + eps_bar @ Omega
+    dtau_bar = np.einsum("nab,nmb->nma", ret.D, symmetric_coordinates(deps_bar).reshape(n, 9, 6))
+    tau_bar = symmetric_tensors(ret.tau)[:, None]
+    dtau = r @ (Omega @ tau_bar - tau_bar @ Omega + symmetric_tensors(dtau_bar.reshape(-1, 6)).reshape(n, 9, 3, 3)) @ rT
+    F_inv_T = np.swapaxes(np.linalg.inv(F), 1, 2)[:, None]
+    dP = dtau @ F_inv_T - tau[:, None] @ F_inv_T @ np.swapaxes(dF, -1, -2) @ F_inv_T
+    return dP.reshape(n, 3, 3, 3, 3).transpose(0, 3, 4, 1, 2)
+
+
+class HenckyAtPoints:
+    """A small-strain material at n Gauss points, at finite strain by the logarithmic strain and the
+    exponential map (the module docstring): a :class:`~.interface.FiniteStrainMaterial`.
+
+    Parameters
+    ----------
+    pointwise
+        The material's :class:`~dolfinx_nnqem.material.interface.PointwiseMaterial` at the points
+        (one of :data:`SUPPORTED_POINTWISE`; :func:`~.finite_strain_material` makes it from a material).
+
+    Raises
+    ------
+    TypeError
+        A pointwise material of another kind, named: the route does not know how to carry its
+        internal variables from one configuration to the next.
+    """
+
+    def __init__(self, pointwise: PointwiseMaterial):
+        if not isinstance(pointwise, SUPPORTED_POINTWISE):
+            raise TypeError(
+                f"{type(pointwise).__name__} has no finite-strain form: the logarithmic-strain route takes the "
+                f"pointwise return maps {[k.__name__ for k in SUPPORTED_POINTWISE]} (one material kind at a time), "
+                "whose internal variables it knows how to carry between configurations")
+        self.pointwise = pointwise
+        self.back_stress_names: tuple[str, ...] = pointwise.names if isinstance(pointwise, KinematicAtPoints) else ()
+
+    @property
+    def size(self) -> int:
+        """The number of Gauss points n."""
+        return int(self.pointwise.mu.size)
+
+    def initial_state(self) -> FiniteStrainState:
+        """F = b_e = I, p = 0 and every back-stress 0."""
+        n = self.size
+        eye = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
+        internal = {"p": np.zeros(n), **{name: np.zeros((n, 3, 3)) for name in self.back_stress_names}}
+        return FiniteStrainState(eye, eye.copy(), internal)
+
+    def _updated_back_stresses(self, internal: dict[str, np.ndarray], ret: LogarithmicReturn, r: np.ndarray
+                               ) -> dict[str, np.ndarray]:
+        """The back-stresses at the end of the increment, spatial: r ᾱ_k rᵀ (:func:`back_stresses`
+        in the rotated frame, from the stored α_k,n)."""
+        if not self.back_stress_names:
+            return {}
+        pw = self.pointwise
+        assert isinstance(pw, KinematicAtPoints)  # (back_stress_names is set for it alone)
+        alpha_n = np.stack([deviator_coordinates(internal[name]) for name in self.back_stress_names], axis=1)
+        alpha = back_stresses(alpha_n, ret.deps_p[:, :5], ret.dp, pw.C, pw.gamma)
+        return {name: _rotated(r, deviator_tensors(alpha[:, k])) for k, name in enumerate(self.back_stress_names)}
+
+    def update(self, F: np.ndarray, state: FiniteStrainState, tangent: bool = True) -> FiniteStrainResponse:
+        """The return map at the deformation gradients ``F`` (n, 3, 3) from the converged ``state``
+        (the module docstring), with the consistent tangent ∂P/∂F if ``tangent``."""
+        F, J = checked_deformation_gradients(F, self.size)
+        trial = _trial(F, state)
+        internal = {name: np.asarray(v) for name, v in state.internal.items()}
+        ret = logarithmic_return(self.pointwise, trial.eps_bar, internal)
+        tau = _rotated(trial.r, symmetric_tensors(ret.tau))
+        eps_e = _rotated(trial.r, symmetric_tensors(ret.eps_e))
+        lam_e, Q_e = eigen(eps_e)
+        new_internal = {**internal, "p": internal["p"] + ret.dp,
+                        **self._updated_back_stresses(internal, ret, trial.r)}
+        new_state = FiniteStrainState(F.copy(), tensor_function(Q_e, np.exp(2.0 * lam_e)), new_internal)
+        P = tau @ np.swapaxes(np.linalg.inv(F), 1, 2)
+        return FiniteStrainResponse(P=P, tau=tau, sigma=tau / J[:, None, None], dp=ret.dp, state=new_state,
+                                    tangent=_tangent(F, trial, ret, tau) if tangent else None)
+
