@@ -7,7 +7,7 @@ hardens by a table (isotropic), by Prager's linear kinematic rule, or by both
 the sphere's force at the peaks, the block's residual depth at the first point of contact after
 each lift, and the equivalent plastic strain at every Gauss point of the fine zone:
 
-* the block: the package's own mesh (:func:`~dolfinx_nnqem.problem.meshing.build_graded_block`) as
+* the block: the package's own mesh (:func:`~dolfinx_nnqem.cases.geometries.build_graded_block`) as
   C3D8 elements (2×2×2 Gauss points, like the package's);
 * the materials (the parameters mapped exactly, ``CalculiX.tex``, ``*PLASTIC`` and
   ``incplas.f``): ``"table"`` is ``*PLASTIC`` with the table's rows; ``"kinematic"`` is

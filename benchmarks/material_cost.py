@@ -35,8 +35,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from dolfinx_nnqem.material import (BackStress, DruckerPrager, Elastic, TabulatedHardening, VoceHardening,  # noqa: E402
                                     VonMises)
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Pressure, Traction  # noqa: E402
-from dolfinx_nnqem.problem.meshing import BlockStackTags as B  # noqa: E402
-from dolfinx_nnqem.problem.meshing import build_block_stack  # noqa: E402
+from dolfinx_nnqem.cases.geometries import BlockStackTags as B  # noqa: E402
+from dolfinx_nnqem.cases.geometries import build_block_stack  # noqa: E402
 from dolfinx_nnqem.solvers import SolverOptions, make_solver, solve_load_steps  # noqa: E402
 
 MATERIALS = {

@@ -24,7 +24,7 @@ from mpi4py import MPI
 from dolfinx_nnqem.material import VonMises
 from dolfinx_nnqem.problem import ContactProblem, Dirichlet, Pressure
 from dolfinx_nnqem.problem.mesh_quality import check_cells
-from dolfinx_nnqem.problem.meshing import build_block_stack
+from dolfinx_nnqem.cases.geometries import build_block_stack
 
 
 def boxed(mesh, degree: int) -> tuple:

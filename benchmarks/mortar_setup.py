@@ -37,8 +37,8 @@ from mpi4py import MPI
 from dolfinx_nnqem.contact import discretisation as discretisation_module
 from dolfinx_nnqem.contact import mortar_geometry
 from dolfinx_nnqem.contact.discretisation import discretise
-from dolfinx_nnqem.problem.meshing import StackedBlocksTags as T
-from dolfinx_nnqem.problem.meshing import build_stacked_blocks
+from dolfinx_nnqem.cases.geometries import StackedBlocksTags as T
+from dolfinx_nnqem.cases.geometries import build_stacked_blocks
 from dolfinx_nnqem.solvers.monolithic import MonolithicSolver
 from dolfinx_nnqem.cases.pressed_blocks import DRAG, MATERIAL, PRESSURE, drag_amplitude, pressure_amplitude
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Pressure

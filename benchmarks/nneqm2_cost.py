@@ -26,8 +26,8 @@ from dolfinx_nnqem.contact.obstacles import Sphere
 from dolfinx_nnqem.io import pair_table
 from dolfinx_nnqem.material import VonMises
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet
-from dolfinx_nnqem.problem.meshing import BlockStackTags as T
-from dolfinx_nnqem.problem.meshing import build_block_stack
+from dolfinx_nnqem.cases.geometries import BlockStackTags as T
+from dolfinx_nnqem.cases.geometries import build_block_stack
 from dolfinx_nnqem.solvers import ConvergenceError, NNEQM2Options, SolverOptions, make_solver, solve_load_steps
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))

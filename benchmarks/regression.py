@@ -84,8 +84,8 @@ def two_beams(method: str, law: str) -> dict:
 
 def patch_test() -> dict:
     from dolfinx_nnqem.material import VonMises
-    from dolfinx_nnqem.problem.meshing import StackedBlocksTags as T
-    from dolfinx_nnqem.problem.meshing import build_stacked_blocks
+    from dolfinx_nnqem.cases.geometries import StackedBlocksTags as T
+    from dolfinx_nnqem.cases.geometries import build_stacked_blocks
     from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Pressure
     from dolfinx_nnqem.solvers import solve_load_steps
 

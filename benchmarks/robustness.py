@@ -35,9 +35,9 @@ from mpi4py import MPI
 from dolfinx_nnqem.problem import PiecewiseLinearPath
 from dolfinx_nnqem.solvers import ConvergenceError
 from dolfinx_nnqem.material import VonMises
-from dolfinx_nnqem.problem.meshing import BlockStackTags as B
-from dolfinx_nnqem.problem.meshing import StackedBlocksTags as T
-from dolfinx_nnqem.problem.meshing import build_block_stack, build_stacked_blocks
+from dolfinx_nnqem.cases.geometries import BlockStackTags as B
+from dolfinx_nnqem.cases.geometries import StackedBlocksTags as T
+from dolfinx_nnqem.cases.geometries import build_block_stack, build_stacked_blocks
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Pressure, Traction
 from dolfinx_nnqem.solvers import METHODS, SolverOptions, make_solver
 from dolfinx_nnqem.solvers import solve_load_steps

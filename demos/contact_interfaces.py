@@ -28,8 +28,8 @@ import numpy as np
 from mpi4py import MPI
 
 from dolfinx_nnqem.material import VonMises
-from dolfinx_nnqem.problem.meshing import BlockStackTags as T
-from dolfinx_nnqem.problem.meshing import build_block_stack
+from dolfinx_nnqem.cases.geometries import BlockStackTags as T
+from dolfinx_nnqem.cases.geometries import build_block_stack
 from dolfinx_nnqem.io import ResultsWriter
 from dolfinx_nnqem.io.plots import plot_deformed
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Pressure

@@ -51,8 +51,8 @@ from mpi4py import MPI
 
 from dolfinx_nnqem.cases.hertz import NodalLoads, hertz_contact, measure_hertz
 from dolfinx_nnqem.material import VonMises
-from dolfinx_nnqem.problem.meshing import StackedBlocksTags as T
-from dolfinx_nnqem.problem.meshing import build_graded_contact_blocks
+from dolfinx_nnqem.cases.geometries import StackedBlocksTags as T
+from dolfinx_nnqem.cases.geometries import build_graded_contact_blocks
 from dolfinx_nnqem.solvers.monolithic import MonolithicSolver
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet
 from dolfinx_nnqem.solvers import SolverOptions

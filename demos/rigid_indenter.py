@@ -37,8 +37,8 @@ from dolfinx_nnqem.problem import PiecewiseLinearPath
 from dolfinx_nnqem.contact.obstacles import Sphere
 from dolfinx_nnqem.cases.hertz import NodalLoads, effective_modulus, measure_hertz
 from dolfinx_nnqem.material import VonMises
-from dolfinx_nnqem.problem.meshing import BlockStackTags as T
-from dolfinx_nnqem.problem.meshing import build_graded_block
+from dolfinx_nnqem.cases.geometries import BlockStackTags as T
+from dolfinx_nnqem.cases.geometries import build_graded_block
 from dolfinx_nnqem.io.plots import plot_deformed
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet
 from dolfinx_nnqem.io import equilibrium_check, pair_table

@@ -41,8 +41,8 @@ from mpi4py import MPI
 
 from dolfinx_nnqem.solvers import ConvergenceError
 from dolfinx_nnqem.material import VonMises
-from dolfinx_nnqem.problem.meshing import ThickCylinderTags as T
-from dolfinx_nnqem.problem.meshing import build_thick_cylinder
+from dolfinx_nnqem.cases.geometries import ThickCylinderTags as T
+from dolfinx_nnqem.cases.geometries import build_thick_cylinder
 from dolfinx_nnqem.solvers.monolithic import MonolithicSolver
 from dolfinx_nnqem.io import ResultsWriter
 from dolfinx_nnqem.io.plots import plot_convergence, plot_curve, plot_deformed

@@ -39,8 +39,8 @@ from dolfinx_nnqem.io.plots import plot_deformed
 from dolfinx_nnqem.io.results import node_blocks_at_points, values_at_blocks
 from dolfinx_nnqem.material import DruckerPrager
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Gravity, Traction
-from dolfinx_nnqem.problem.meshing import TwoBeamsTags as T
-from dolfinx_nnqem.problem.meshing import build_two_beams
+from dolfinx_nnqem.cases.geometries import TwoBeamsTags as T
+from dolfinx_nnqem.cases.geometries import build_two_beams
 from dolfinx_nnqem.solvers import make_solver, solve_load_steps
 
 parser = argparse.ArgumentParser(description="The seed's two beams in Drucker–Prager concrete")

@@ -6,10 +6,12 @@ names the new path: ``import dolfinx_nnqem.stepping`` gives ``dolfinx_nnqem.solv
 The table :data:`MOVED` is the whole mechanism: a finder on ``sys.meta_path`` answers for these
 names only.
 
-Names that moved out of a module that stays (``contact/model.py`` split by idea) are in
-:data:`MOVED_NAMES`; the old module's ``__getattr__`` hands them out through :func:`moved_name`,
-with the same warning: ``from dolfinx_nnqem.contact.model import Contact`` gives
-``dolfinx_nnqem.contact.specification.Contact``.
+Names that moved out of a module that stays (``contact/model.py`` split by idea, the benchmark
+geometries out of ``problem/meshing.py``) are in :data:`MOVED_NAMES`; the old module's
+``__getattr__`` hands them out through :func:`moved_name`, with the same warning:
+``from dolfinx_nnqem.contact.model import Contact`` gives ``dolfinx_nnqem.contact.specification.Contact``,
+``from dolfinx_nnqem.problem.meshing import build_two_beams`` gives
+``dolfinx_nnqem.cases.geometries.build_two_beams``.
 
 Members that moved off a class that stays (the geometry of ``ContactModel``, now
 ``ContactModel.geometry``) are in :data:`MOVED_MEMBERS`; :func:`install_members` gives the class a
@@ -56,6 +58,11 @@ MOVED_NAMES: dict[str, dict[str, str]] = {
         "zero_displacement": "contact.geometry_tracking",
         "LawGroup": "contact.pair_laws", "PairLaws": "contact.pair_laws",
     },
+    # the benchmark geometries out of the mesh reading and writing (issue 42)
+    "problem.meshing": {name: "cases.geometries" for name in (
+        "TwoBeamsTags", "build_two_beams", "StackedBlocksTags", "build_stacked_blocks", "BlockStackTags",
+        "build_block_stack", "ThickCylinderTags", "build_thick_cylinder", "graded_nodes", "build_graded_block",
+        "build_graded_contact_blocks", "SphereOnBlockTags", "build_sphere_on_block")},
 }
 """Module (under ``dolfinx_nnqem.``) → its names that moved → the module they are in now."""
 

@@ -1,4 +1,4 @@
-"""Write the project's meshes (gmsh ``.msh``; the seed's also as XDMF) with the builders of ``dolfinx_nnqem.problem.meshing``.
+"""Write the project's meshes (gmsh ``.msh``; the seed's also as XDMF) with the builders of ``dolfinx_nnqem.cases.geometries``.
 
     python meshes/generate.py                 # all models, default parameters, into meshes/
     python meshes/generate.py two_beams --refine 2 --output-dir /tmp
@@ -19,6 +19,7 @@ import argparse
 import pathlib
 
 import dolfinx_nnqem  # noqa: F401  (first: the PyPI wheel loads MPI/PETSc before dolfinx)
+from dolfinx_nnqem.cases import geometries
 from dolfinx_nnqem.problem import meshing
 from mpi4py import MPI
 
@@ -45,7 +46,7 @@ def main(argv: list[str] | None = None) -> list[pathlib.Path]:
         if model == "two_beams":
             name = "two_beams.msh" if args.refine == 1 else f"two_beams_refine{args.refine}.msh"
             path = args.output_dir / name
-            meshing.build_two_beams(comm, refine=args.refine, msh_file=path)
+            geometries.build_two_beams(comm, refine=args.refine, msh_file=path)
             # and the same mesh, read back from the .msh, in DOLFINx's own format (what
             # demos/two_beams.toml reads: no gmsh library to load)
             mesh, cell_tags, facet_tags = meshing.read_msh(path, comm)
@@ -53,16 +54,16 @@ def main(argv: list[str] | None = None) -> list[pathlib.Path]:
             written.append(path.with_suffix(".xdmf"))
         elif model == "stacked_blocks":
             path = args.output_dir / "stacked_blocks.msh"
-            mesh, _, _ = meshing.build_stacked_blocks(comm, msh_file=path)
+            mesh, _, _ = geometries.build_stacked_blocks(comm, msh_file=path)
         elif model == "thick_cylinder":
             path = args.output_dir / "thick_cylinder.msh"
-            mesh, _, _ = meshing.build_thick_cylinder(comm, msh_file=path)
+            mesh, _, _ = geometries.build_thick_cylinder(comm, msh_file=path)
         elif model == "three_blocks":
             path = args.output_dir / "three_blocks.msh"
-            mesh, _, _ = meshing.build_block_stack(comm, 1.0, 1.0, [0.5] * 3, [(4, 2, 4)] * 3, msh_file=path)
+            mesh, _, _ = geometries.build_block_stack(comm, 1.0, 1.0, [0.5] * 3, [(4, 2, 4)] * 3, msh_file=path)
         else:
             path = args.output_dir / "indenter_block.msh"
-            mesh, _, _ = meshing.build_graded_block(comm, 0.25, half=True, msh_file=path)
+            mesh, _, _ = geometries.build_graded_block(comm, 0.25, half=True, msh_file=path)
         num_cells = mesh.topology.index_map(mesh.topology.dim).size_global
         print(f"{path}: {num_cells} hexahedra, {mesh.geometry.x.shape[0]} nodes")
         written.append(path)

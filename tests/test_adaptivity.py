@@ -17,7 +17,7 @@ from dolfinx_nnqem.cases.indentation import (A_HERTZ, HERTZ_MATERIAL, R_HERTZ, S
                                              hertz_tetrahedra_problem, step42_problem)
 from dolfinx_nnqem.estimates import read_quantities, rebuild_problem, refine_mesh_and_tags
 from dolfinx_nnqem.estimates.adaptive import solve_adaptively
-from dolfinx_nnqem.problem.meshing import BlockStackTags as T
+from dolfinx_nnqem.cases.geometries import BlockStackTags as T
 from dolfinx_nnqem.solvers import make_solver, solve_load_steps
 from dolfinx_nnqem.solvers.checks import CheckOptions
 

@@ -5,8 +5,8 @@ from mpi4py import MPI
 
 from dolfinx_nnqem.solvers.condensation import Condensation
 from dolfinx_nnqem.material import VonMises
-from dolfinx_nnqem.problem.meshing import BlockStackTags as T
-from dolfinx_nnqem.problem.meshing import build_block_stack
+from dolfinx_nnqem.cases.geometries import BlockStackTags as T
+from dolfinx_nnqem.cases.geometries import build_block_stack
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Pressure
 
 

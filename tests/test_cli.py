@@ -95,7 +95,7 @@ def test_problem_file_with_an_xdmf_mesh(tmp_path):
     from dolfinx.io import XDMFFile
     from mpi4py import MPI
 
-    from dolfinx_nnqem.problem.meshing import build_two_beams
+    from dolfinx_nnqem.cases.geometries import build_two_beams
 
     mesh, cell_tags, facet_tags = build_two_beams(MPI.COMM_WORLD)
     cell_tags.name, facet_tags.name = "cell_tags", "facet_tags"

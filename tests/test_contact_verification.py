@@ -5,8 +5,8 @@ import pytest
 from mpi4py import MPI
 
 from dolfinx_nnqem.material import VonMises
-from dolfinx_nnqem.problem.meshing import StackedBlocksTags as T
-from dolfinx_nnqem.problem.meshing import build_stacked_blocks
+from dolfinx_nnqem.cases.geometries import StackedBlocksTags as T
+from dolfinx_nnqem.cases.geometries import build_stacked_blocks
 from dolfinx_nnqem.solvers.monolithic import MonolithicSolver
 from dolfinx_nnqem.material import von_mises_stress  # noqa: F401  (keeps the import surface tested)
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Pressure

@@ -31,8 +31,8 @@ from dolfinx_nnqem.contact.obstacles import Plane
 from dolfinx_nnqem.contact.pairset import PairSet
 from dolfinx_nnqem.material import Material, MaterialState, PointwisePlasticity, VonMises
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Pressure
-from dolfinx_nnqem.problem.meshing import StackedBlocksTags as T
-from dolfinx_nnqem.problem.meshing import build_stacked_blocks
+from dolfinx_nnqem.cases.geometries import StackedBlocksTags as T
+from dolfinx_nnqem.cases.geometries import build_stacked_blocks
 from dolfinx_nnqem.solvers import (METHODS, MonolithicOptions, NNEQM1Options, NNEQM2Options, SolverOptions,
                                    make_solver)
 from dolfinx_nnqem.solvers import conformance

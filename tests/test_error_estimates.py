@@ -29,8 +29,8 @@ from dolfinx_nnqem.estimates import (RecoveryIndicator, choose_enrichment, estim
                                      read_quantities, refine_mesh_and_tags)
 from dolfinx_nnqem.material import VonMises
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet
-from dolfinx_nnqem.problem.meshing import BlockStackTags as T
-from dolfinx_nnqem.problem.meshing import build_block_stack
+from dolfinx_nnqem.cases.geometries import BlockStackTags as T
+from dolfinx_nnqem.cases.geometries import build_block_stack
 from dolfinx_nnqem.solvers import SolverOptions, make_solver, solve_load_steps
 
 sys.path.insert(0, str(Path(__file__).parent))

@@ -8,7 +8,7 @@ import pytest
 from mpi4py import MPI
 
 from dolfinx_nnqem.cli import EXIT_BAD_INPUT, EXIT_OK, main
-from dolfinx_nnqem.problem.meshing import build_block_stack
+from dolfinx_nnqem.cases.geometries import build_block_stack
 from dolfinx_nnqem.problem_file import ProblemFileError, load_problem_file
 
 PROBLEM = """

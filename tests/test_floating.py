@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from dolfinx_nnqem.problem.meshing import StackedBlocksTags as T
-from dolfinx_nnqem.problem.meshing import build_stacked_blocks
+from dolfinx_nnqem.cases.geometries import StackedBlocksTags as T
+from dolfinx_nnqem.cases.geometries import build_stacked_blocks
 from dolfinx_nnqem.cases.pressed_blocks import MATERIAL, PRESSURE
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Pressure, Traction
 from dolfinx_nnqem.io import equilibrium_check, pair_table

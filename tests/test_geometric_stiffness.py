@@ -180,8 +180,8 @@ def _blocks_and_sphere():
     obstacle interface after a node-to-surface one."""
     from dolfinx_nnqem.cases.large_sliding import MATERIAL, _press, _slide
     from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet
-    from dolfinx_nnqem.problem.meshing import BlockStackTags as T
-    from dolfinx_nnqem.problem.meshing import build_block_stack
+    from dolfinx_nnqem.cases.geometries import BlockStackTags as T
+    from dolfinx_nnqem.cases.geometries import build_block_stack
 
     mesh, ct, ft = build_block_stack(MPI.COMM_WORLD, 1.0, 1.0, [0.5, 0.5], [(4, 2, 4), (6, 2, 6)])
     sphere = Sphere(centre=(-0.301, 0.8, 0.5), radius=0.3,

@@ -32,8 +32,8 @@ from mpi4py import MPI
 
 from dolfinx_nnqem import compat
 from dolfinx_nnqem.cases.hertz import NodalLoads
-from dolfinx_nnqem.problem.meshing import SphereOnBlockTags as T
-from dolfinx_nnqem.problem.meshing import build_sphere_on_block
+from dolfinx_nnqem.cases.geometries import SphereOnBlockTags as T
+from dolfinx_nnqem.cases.geometries import build_sphere_on_block
 from dolfinx_nnqem.io import equilibrium_check, pair_table
 from dolfinx_nnqem.solvers import SolverOptions, make_solver
 from dolfinx_nnqem.cases.sphere_on_block import A_NOMINAL, measure_sphere_on_block, sphere_on_block_problem

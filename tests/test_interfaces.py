@@ -18,8 +18,8 @@ import pytest
 from mpi4py import MPI
 
 from dolfinx_nnqem.material import VonMises
-from dolfinx_nnqem.problem.meshing import BlockStackTags as T
-from dolfinx_nnqem.problem.meshing import build_block_stack
+from dolfinx_nnqem.cases.geometries import BlockStackTags as T
+from dolfinx_nnqem.cases.geometries import build_block_stack
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Pressure
 from dolfinx_nnqem.io import equilibrium_check, pair_table
 from dolfinx_nnqem.solvers import METHODS, SolverOptions, make_solver

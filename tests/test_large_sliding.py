@@ -74,8 +74,8 @@ def test_plane_current_geometry_equals_reference(method, law):
     from dolfinx_nnqem.contact.obstacles import Plane
     from dolfinx_nnqem.material import VonMises
     from dolfinx_nnqem.problem import ContactProblem, Dirichlet, PiecewiseLinearPath
-    from dolfinx_nnqem.problem.meshing import BlockStackTags as T
-    from dolfinx_nnqem.problem.meshing import build_block_stack
+    from dolfinx_nnqem.cases.geometries import BlockStackTags as T
+    from dolfinx_nnqem.cases.geometries import build_block_stack
 
     def solve(geometry):
         mesh, ct, ft = build_block_stack(MPI.COMM_WORLD, 1.0, 1.0, [0.5], [(3, 2, 3)])
@@ -280,7 +280,7 @@ def test_problem_file_block_slid_in_current_geometry(tmp_path, method, law):
     from mpi4py import MPI
 
     from dolfinx_nnqem.cli import EXIT_OK, main
-    from dolfinx_nnqem.problem.meshing import build_block_stack
+    from dolfinx_nnqem.cases.geometries import build_block_stack
 
     if MPI.COMM_WORLD.size > 1:
         pytest.skip("the CLI test runs serially")
@@ -534,8 +534,8 @@ def test_node_to_node_past_the_slip_limit_stops_naming_the_interface():
     from mpi4py import MPI
 
     from dolfinx_nnqem.problem import ContactProblem, Dirichlet
-    from dolfinx_nnqem.problem.meshing import BlockStackTags as T
-    from dolfinx_nnqem.problem.meshing import build_block_stack
+    from dolfinx_nnqem.cases.geometries import BlockStackTags as T
+    from dolfinx_nnqem.cases.geometries import build_block_stack
     from dolfinx_nnqem.cases.large_sliding import MATERIAL
 
     mesh, ct, ft = build_block_stack(MPI.COMM_WORLD, 1.0, 1.0, [0.5, 0.5], [(4, 2, 4), (4, 2, 4)])
@@ -576,7 +576,7 @@ def test_current_geometry_with_degree_2_is_refused_before_solving():
 
     from dolfinx_nnqem.cases.large_sliding import MATERIAL, T
     from dolfinx_nnqem.problem import ContactProblem, Dirichlet, Sphere
-    from dolfinx_nnqem.problem.meshing import build_block_stack
+    from dolfinx_nnqem.cases.geometries import build_block_stack
 
     mesh, ct, ft = build_block_stack(MPI.COMM_WORLD, 1.0, 1.0, [1.0], [(2, 2, 2)])
     sphere = Sphere(centre=(0.5, 1.6, 0.5), radius=0.6)

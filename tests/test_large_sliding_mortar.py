@@ -16,7 +16,7 @@ from mpi4py import MPI
 
 from dolfinx_nnqem.cases.large_sliding import PATCH_PRESSURE, slave_force, sliding_blocks, sliding_patch
 from dolfinx_nnqem.io import pair_table
-from dolfinx_nnqem.problem.meshing import BlockStackTags as T
+from dolfinx_nnqem.cases.geometries import BlockStackTags as T
 from dolfinx_nnqem.solvers import SolverOptions, make_solver, solve_load_steps
 
 CASES = [("monolithic", "alart-curnier"), ("monolithic", "polar"), ("nneqm1", "alart-curnier"),
@@ -92,7 +92,7 @@ def test_problem_file_mortar_in_current_geometry(tmp_path):
     """``discretisation = "mortar"`` with ``geometry = "current"`` from a problem file, through the CLI:
     the Python run's iterations."""
     from dolfinx_nnqem.cli import EXIT_OK, main
-    from dolfinx_nnqem.problem.meshing import build_block_stack
+    from dolfinx_nnqem.cases.geometries import build_block_stack
     from test_large_sliding import BLOCKS_FILE
 
     if MPI.COMM_WORLD.size > 1:
@@ -118,7 +118,7 @@ def test_slid_off_the_master_is_one_outcome(tmp_path, discretisation):
     (not 3, "bad input") with ``failure`` in summary.json. Mortar used to end with exit 3 and no
     failure record."""
     from dolfinx_nnqem.cli import EXIT_DIVERGED, main
-    from dolfinx_nnqem.problem.meshing import build_block_stack
+    from dolfinx_nnqem.cases.geometries import build_block_stack
     from dolfinx_nnqem.solvers import ConvergenceError, solve_load_steps
     from test_large_sliding import _blocks_file
 

@@ -19,8 +19,8 @@ from dolfinx_nnqem.material import Elastic, LinearHardening, TabulatedHardening,
 from dolfinx_nnqem.material.hardening import HardeningAtPoints
 from dolfinx_nnqem.material.isotropic import IsotropicAtPoints, isotropic_return
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Pressure, Traction
-from dolfinx_nnqem.problem.meshing import BlockStackTags as B
-from dolfinx_nnqem.problem.meshing import build_block_stack
+from dolfinx_nnqem.cases.geometries import BlockStackTags as B
+from dolfinx_nnqem.cases.geometries import build_block_stack
 from dolfinx_nnqem.solvers import NNEQM2Options, SolverOptions, make_solver, solve_load_steps
 
 SCRIPTS = Path(__file__).parent / "mpi_scripts"

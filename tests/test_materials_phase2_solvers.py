@@ -16,8 +16,8 @@ from mpi4py import MPI
 from dolfinx_nnqem import compat
 from dolfinx_nnqem.material import BackStress, DruckerPrager, Elastic, VoceHardening, VonMises
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Pressure, Traction
-from dolfinx_nnqem.problem.meshing import BlockStackTags as B
-from dolfinx_nnqem.problem.meshing import build_block_stack
+from dolfinx_nnqem.cases.geometries import BlockStackTags as B
+from dolfinx_nnqem.cases.geometries import build_block_stack
 from dolfinx_nnqem.solvers import NNEQM2Options, SolverOptions, make_solver, solve_load_steps
 
 SCRIPTS = Path(__file__).parent / "mpi_scripts"

@@ -23,8 +23,9 @@ from dolfinx_nnqem.cli import EXIT_BAD_INPUT, EXIT_OK, main
 from dolfinx_nnqem.material import VonMises
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Pressure
 from dolfinx_nnqem.problem.mesh_quality import POOR_RATIO, jacobians
-from dolfinx_nnqem.problem.meshing import BlockStackTags as T
-from dolfinx_nnqem.problem.meshing import build_block_stack, write_xdmf
+from dolfinx_nnqem.cases.geometries import BlockStackTags as T
+from dolfinx_nnqem.cases.geometries import build_block_stack
+from dolfinx_nnqem.problem.meshing import write_xdmf
 
 from reliability_helpers import env, run_in_session
 

@@ -7,8 +7,8 @@ import pytest
 from mpi4py import MPI
 
 from dolfinx_nnqem import compat
-from dolfinx_nnqem.problem import meshing
-from dolfinx_nnqem.problem.meshing import StackedBlocksTags, ThickCylinderTags, TwoBeamsTags
+from dolfinx_nnqem.cases import geometries as meshing
+from dolfinx_nnqem.cases.geometries import StackedBlocksTags, ThickCylinderTags, TwoBeamsTags
 
 ROOT = __import__("pathlib").Path(__file__).resolve().parents[1]
 
@@ -173,7 +173,7 @@ def test_generate_script(tmp_path):
     assert all((tmp_path / n).stat().st_size > 0 for n in names)
     # the graded block is written with its graded nodes: it reads back as the builder's mesh
     from dolfinx_nnqem import compat
-    from dolfinx_nnqem.problem.meshing import build_graded_block
+    from dolfinx_nnqem.cases.geometries import build_graded_block
 
     read = compat.read_from_msh(str(tmp_path / "indenter_block.msh"), MPI.COMM_SELF, 0, gdim=3)
     built = build_graded_block(MPI.COMM_SELF, 0.25, half=True)

@@ -17,9 +17,9 @@ import pytest
 from mpi4py import MPI
 
 from dolfinx_nnqem.material import VonMises
-from dolfinx_nnqem.problem.meshing import BlockStackTags as T
-from dolfinx_nnqem.problem.meshing import StackedBlocksTags as S
-from dolfinx_nnqem.problem.meshing import build_block_stack, build_stacked_blocks
+from dolfinx_nnqem.cases.geometries import BlockStackTags as T
+from dolfinx_nnqem.cases.geometries import StackedBlocksTags as S
+from dolfinx_nnqem.cases.geometries import build_block_stack, build_stacked_blocks
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Pressure, Traction
 from dolfinx_nnqem.io import equilibrium_check, pair_table
 from dolfinx_nnqem.solvers import METHODS, SolverOptions, make_solver

@@ -27,7 +27,7 @@ most 1.96 %, the total contact force; corners 0.77 %); node-to-surface gives the
 import numpy as np
 import pytest
 
-from dolfinx_nnqem.problem.meshing import TwoBeamsTags as T
+from dolfinx_nnqem.cases.geometries import TwoBeamsTags as T
 from dolfinx_nnqem.io.results import equilibrium_check, node_blocks_at_points, pair_table, reactions, values_at_blocks
 from dolfinx_nnqem.solvers import SolverOptions, make_solver
 from dolfinx_nnqem.solvers import solve_load_steps

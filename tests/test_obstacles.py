@@ -23,8 +23,8 @@ from dolfinx_nnqem.problem import PiecewiseLinearPath
 from dolfinx_nnqem.contact.obstacles import Plane, Sphere
 from dolfinx_nnqem.cases.hertz import NodalLoads, effective_modulus, measure_hertz
 from dolfinx_nnqem.material import VonMises
-from dolfinx_nnqem.problem.meshing import BlockStackTags as T
-from dolfinx_nnqem.problem.meshing import build_block_stack, build_graded_block
+from dolfinx_nnqem.cases.geometries import BlockStackTags as T
+from dolfinx_nnqem.cases.geometries import build_block_stack, build_graded_block
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet
 from dolfinx_nnqem.io import equilibrium_check, pair_table
 from dolfinx_nnqem.solvers import METHODS, SolverOptions, make_solver

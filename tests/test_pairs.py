@@ -12,10 +12,10 @@ import pytest
 from mpi4py import MPI
 
 from dolfinx_nnqem import compat
-from dolfinx_nnqem.problem import meshing
+from dolfinx_nnqem.cases import geometries as meshing
 from dolfinx_nnqem.contact.pairs import ContactPairError, find_pairs, local_frames
-from dolfinx_nnqem.problem.meshing import StackedBlocksTags as S
-from dolfinx_nnqem.problem.meshing import TwoBeamsTags as T
+from dolfinx_nnqem.cases.geometries import StackedBlocksTags as S
+from dolfinx_nnqem.cases.geometries import TwoBeamsTags as T
 
 SCRIPTS = pathlib.Path(__file__).parent / "mpi_scripts"
 

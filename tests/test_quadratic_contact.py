@@ -43,8 +43,9 @@ from dolfinx_nnqem.contact.surfaces import ContactPairError
 from dolfinx_nnqem.io import equilibrium_check, pair_table
 from dolfinx_nnqem.material import VonMises
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Pressure, Traction
-from dolfinx_nnqem.problem.meshing import BlockStackTags as T
-from dolfinx_nnqem.problem.meshing import build_block_stack, build_sphere_on_block, read_msh
+from dolfinx_nnqem.cases.geometries import BlockStackTags as T
+from dolfinx_nnqem.cases.geometries import build_block_stack, build_sphere_on_block
+from dolfinx_nnqem.problem.meshing import read_msh
 from dolfinx_nnqem.solvers import METHODS, SolverOptions, make_solver, solve_load_steps
 from dolfinx_nnqem.solvers.contract import contact_model
 
@@ -479,7 +480,7 @@ SPHERE = dict(R=5.0, block=3.0, h_contact=0.5, h_max=1.0, fine_radius=0.8, conta
 
 def sphere_problem(path, degree=None):
     from dolfinx_nnqem.cases.sphere_on_block import BLOCK_MATERIAL, SPHERE_MATERIAL
-    from dolfinx_nnqem.problem.meshing import SphereOnBlockTags as S
+    from dolfinx_nnqem.cases.geometries import SphereOnBlockTags as S
 
     mesh, ct, ft = read_msh(path)
     return ContactProblem(mesh, ct, ft, materials={S.BLOCK: BLOCK_MATERIAL, S.SPHERE: SPHERE_MATERIAL},
@@ -496,7 +497,7 @@ def test_second_order_sphere_keeps_its_curved_contact_facets(tmp_path):
     first-order mesh puts the edge nodes on the chords instead (h²/8R off), and the force moves."""
     from dolfinx.mesh import entities_to_geometry
 
-    from dolfinx_nnqem.problem.meshing import SphereOnBlockTags as S
+    from dolfinx_nnqem.cases.geometries import SphereOnBlockTags as S
 
     R, centre = SPHERE["R"], np.array([0.0, SPHERE["R"], 0.0])
     paths = {order: tmp_path / f"sphere_{order}.msh" for order in (1, 2)}

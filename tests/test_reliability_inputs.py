@@ -11,7 +11,7 @@ from mpi4py import MPI
 
 from dolfinx_nnqem.cli import EXIT_BAD_INPUT, EXIT_OK, main
 from dolfinx_nnqem.material import VonMises
-from dolfinx_nnqem.problem.meshing import build_two_beams
+from dolfinx_nnqem.cases.geometries import build_two_beams
 from dolfinx_nnqem.problem import BodyForce, Contact, ContactProblem, Dirichlet, Gravity, Pressure, Traction
 from dolfinx_nnqem.solvers import SolverOptions
 from dolfinx_nnqem.solvers.step_control import AutomaticIncrements  # noqa: F401  (the "steps:" cases evaluate it)

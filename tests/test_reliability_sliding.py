@@ -98,8 +98,8 @@ def _block_on_an_incline(mu_f: float = 0.2):
     the incline at any load)."""
     from dolfinx_nnqem.material import VonMises
     from dolfinx_nnqem.problem import BodyForce, Contact, ContactProblem, Dirichlet
-    from dolfinx_nnqem.problem.meshing import BlockStackTags as T
-    from dolfinx_nnqem.problem.meshing import build_block_stack
+    from dolfinx_nnqem.cases.geometries import BlockStackTags as T
+    from dolfinx_nnqem.cases.geometries import build_block_stack
 
     mesh, cell_tags, facet_tags = build_block_stack(MPI.COMM_WORLD, 1.0, 1.0, [0.5, 0.5], [(2, 1, 2), (2, 1, 2)])
     c, s = math.cos(INCLINE), math.sin(INCLINE)

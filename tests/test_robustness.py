@@ -23,8 +23,8 @@ from mpi4py import MPI
 
 from dolfinx_nnqem.contact.laws import AlartCurnierLaw
 from dolfinx_nnqem.material import VonMises
-from dolfinx_nnqem.problem.meshing import StackedBlocksTags as T
-from dolfinx_nnqem.problem.meshing import build_stacked_blocks
+from dolfinx_nnqem.cases.geometries import StackedBlocksTags as T
+from dolfinx_nnqem.cases.geometries import build_stacked_blocks
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet
 from dolfinx_nnqem.io import pair_table
 from dolfinx_nnqem.solvers import METHODS, NNEQM2Options, SolverOptions, make_solver

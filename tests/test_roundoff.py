@@ -20,8 +20,8 @@ from dolfinx_nnqem.numerics.newton import Globalisation
 from dolfinx_nnqem.numerics.nonsmooth import solve_dense
 from dolfinx_nnqem.numerics.roundoff import ROUNDOFF_MARGIN, dense_floor
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet
-from dolfinx_nnqem.problem.meshing import BlockStackTags as T
-from dolfinx_nnqem.problem.meshing import build_block_stack
+from dolfinx_nnqem.cases.geometries import BlockStackTags as T
+from dolfinx_nnqem.cases.geometries import build_block_stack
 from dolfinx_nnqem.solvers import ConvergenceError, SolverOptions, make_solver, solve_load_steps
 
 DRIVER = (Globalisation(watchdog=0, stall_window=5),)

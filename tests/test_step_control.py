@@ -19,8 +19,8 @@ from test_contact_verification import ELASTIC, P, sliding_block
 
 from dolfinx_nnqem.cli import EXIT_OK, main
 from dolfinx_nnqem.solvers import ConvergenceError
-from dolfinx_nnqem.problem.meshing import StackedBlocksTags as T
-from dolfinx_nnqem.problem.meshing import build_stacked_blocks
+from dolfinx_nnqem.cases.geometries import StackedBlocksTags as T
+from dolfinx_nnqem.cases.geometries import build_stacked_blocks
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Traction
 from dolfinx_nnqem.problem_file import ProblemFileError, load_problem_file
 from dolfinx_nnqem.io import pair_table

@@ -25,7 +25,7 @@ from mpi4py import MPI
 from dolfinx_nnqem import compat
 from dolfinx_nnqem.io import equilibrium_check, pair_table
 from dolfinx_nnqem.io.results import reactions
-from dolfinx_nnqem.problem.meshing import BlockStackTags as T
+from dolfinx_nnqem.cases.geometries import BlockStackTags as T
 from dolfinx_nnqem.solvers import METHODS, SolverOptions, make_solver, solve_load_steps
 
 SCRIPTS = Path(__file__).parent / "mpi_scripts"

@@ -11,8 +11,8 @@ from mpi4py import MPI
 
 from dolfinx_nnqem.solvers import ConvergenceError
 from dolfinx_nnqem.material import VonMises
-from dolfinx_nnqem.problem.meshing import ThickCylinderTags as T
-from dolfinx_nnqem.problem.meshing import build_thick_cylinder
+from dolfinx_nnqem.cases.geometries import ThickCylinderTags as T
+from dolfinx_nnqem.cases.geometries import build_thick_cylinder
 from dolfinx_nnqem.solvers.monolithic import MonolithicSolver
 from dolfinx_nnqem.problem import ContactProblem, Dirichlet, Pressure
 from dolfinx_nnqem.solvers import SolverOptions

@@ -1,6 +1,6 @@
 r"""A rigid sphere pressed into a tetrahedral block: Hertz (elastic) and deal.II's step-42 (elastoplastic).
 
-Both are quarter models on tetrahedra (:func:`~dolfinx_nnqem.problem.meshing.build_block_stack`,
+Both are quarter models on tetrahedra (:func:`~dolfinx_nnqem.cases.geometries.build_block_stack`,
 structured: every face triangulated alike), the meshes adaptive refinement starts from
 (:mod:`dolfinx_nnqem.estimates.adaptive`).
 
@@ -30,8 +30,8 @@ from mpi4py import MPI
 from dolfinx_nnqem.contact.obstacles import Sphere
 from dolfinx_nnqem.material.von_mises import VonMises
 from dolfinx_nnqem.problem.contact_problem import Contact, ContactProblem, Dirichlet
-from dolfinx_nnqem.problem.meshing import BlockStackTags as T
-from dolfinx_nnqem.problem.meshing import build_block_stack
+from dolfinx_nnqem.cases.geometries import BlockStackTags as T
+from dolfinx_nnqem.cases.geometries import build_block_stack
 
 __all__ = ["HERTZ_MATERIAL", "STEP42_MATERIAL", "STEP42_PUBLISHED", "hertz_tetrahedra_problem", "step42_problem"]
 

@@ -34,8 +34,8 @@ from mpi4py import MPI
 from dolfinx_nnqem.contact.obstacles import Cylinder, RigidObstacle, Sphere
 from dolfinx_nnqem.material import VonMises
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, PiecewiseLinearPath, Pressure
-from dolfinx_nnqem.problem.meshing import BlockStackTags as T
-from dolfinx_nnqem.problem.meshing import build_block_stack
+from dolfinx_nnqem.cases.geometries import BlockStackTags as T
+from dolfinx_nnqem.cases.geometries import build_block_stack
 
 __all__ = ["LONG_SLIDE_PRESSED_AT", "LONG_SLIDE_STIFF_MASTER", "ironing", "long_slide", "obstacle_force", "slave_force", "sliding_blocks", "sliding_patch", "sliding_sphere"]
 

@@ -23,8 +23,8 @@ import math
 from mpi4py import MPI
 
 from dolfinx_nnqem.material.von_mises import VonMises
-from dolfinx_nnqem.problem.meshing import StackedBlocksTags as T
-from dolfinx_nnqem.problem.meshing import build_stacked_blocks
+from dolfinx_nnqem.cases.geometries import StackedBlocksTags as T
+from dolfinx_nnqem.cases.geometries import build_stacked_blocks
 from dolfinx_nnqem.problem.contact_problem import Contact, ContactProblem, Dirichlet, Pressure
 
 MATERIAL = VonMises(E=2.0e10, nu=0.2, sigma_y0=2.0e7, H=2.0e9)

@@ -2,7 +2,7 @@ r"""Hertz contact on non-matching meshes: an elastic sphere pressed on an elasti
 
 A quarter of a steel hemisphere (radius R, E = 210 GPa, ν = 0.3) rests with its pole on the top
 of a quarter aluminium block (E = 70 GPa, ν = 0.33, half width and height 10 a); each body is
-meshed with tetrahedra on its own (:func:`~dolfinx_nnqem.problem.meshing.build_sphere_on_block`), so
+meshed with tetrahedra on its own (:func:`~dolfinx_nnqem.cases.geometries.build_sphere_on_block`), so
 the contact surfaces do not match and the interface is discretised by dual mortar, the sphere's
 cap as slave. The block's bottom is clamped, the planes x = 0 and z = 0 are symmetry planes, and
 the sphere's flat equatorial face is pushed down by the approach δ (u_y = −δ, the other
@@ -23,8 +23,8 @@ from mpi4py import MPI
 from dolfinx_nnqem.cases.hertz import NodalLoads, effective_modulus, fit_hertz_profile, measure_hertz
 from dolfinx_nnqem.contact.surface_pairs import SurfacePairs
 from dolfinx_nnqem.material.von_mises import VonMises
-from dolfinx_nnqem.problem.meshing import SphereOnBlockTags as T
-from dolfinx_nnqem.problem.meshing import build_sphere_on_block
+from dolfinx_nnqem.cases.geometries import SphereOnBlockTags as T
+from dolfinx_nnqem.cases.geometries import build_sphere_on_block
 from dolfinx_nnqem.problem.contact_problem import Contact, ContactProblem, Dirichlet
 from dolfinx_nnqem.io.results import equilibrium_check, pair_table
 from dolfinx_nnqem.solvers.contract import contact_model
@@ -47,7 +47,7 @@ def sphere_on_block_problem(h: float, comm: MPI.Comm = MPI.COMM_WORLD, *, mu_f: 
                             block: float = BLOCK, **mesh_options: Any) -> ContactProblem:
     """The quarter model with the element size ``h`` at the contact (see the module).
 
-    ``mesh_options`` go to :func:`~dolfinx_nnqem.problem.meshing.build_sphere_on_block` (``h_max``,
+    ``mesh_options`` go to :func:`~dolfinx_nnqem.cases.geometries.build_sphere_on_block` (``h_max``,
     ``growth``, ``fine_radius``, ``contact_radius``); the defaults suit R = 20 a.
     """
     mesh, cell_tags, facet_tags = build_sphere_on_block(comm, R, block, h, **mesh_options)

@@ -4,7 +4,7 @@ The verification case of the hardening laws against CalculiX 2.20
 (``benchmarks/calculix_sphere_press.py``, ``docs/verification-materials.md``). A quarter model:
 the block occupies x, z ∈ [0, ``block``], y ∈ [−``block``, 0] (the planes x = 0 and z = 0 are
 symmetry planes, the bottom is clamped), graded towards the point x = z = 0 of its top
-(:func:`~dolfinx_nnqem.problem.meshing.build_graded_block`: hexahedra of size h over
+(:func:`~dolfinx_nnqem.cases.geometries.build_graded_block`: hexahedra of size h over
 x, z ≤ 1.5 and 1.0 below the top, growing by 1.3 beyond). A frictionless rigid sphere of radius
 :data:`R_SPHERE` touches the top at the origin and is pressed :data:`DEPTH` down, then lifted back
 to where it started, ``cycles`` times, at a constant rate in ℓ (each press and each lift takes
@@ -35,8 +35,8 @@ from dolfinx_nnqem.contact.obstacles import Sphere
 from dolfinx_nnqem.io.results import node_blocks_at_points, values_at_blocks
 from dolfinx_nnqem.material import BackStress, TabulatedHardening, VonMises
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, PiecewiseLinearPath
-from dolfinx_nnqem.problem.meshing import BlockStackTags as T
-from dolfinx_nnqem.problem.meshing import build_graded_block
+from dolfinx_nnqem.cases.geometries import BlockStackTags as T
+from dolfinx_nnqem.cases.geometries import build_graded_block
 
 __all__ = ["C_KINEMATIC", "DEPTH", "E", "FINE_DEPTH", "FINE_WIDTH", "MATERIALS", "NU", "R_SPHERE", "SYMMETRY",
            "TABLE", "TABLE_COMBINED", "indentation_force", "press_path", "problem_file_text", "sphere_press_problem", "surface_depth"]
@@ -74,7 +74,7 @@ def sphere_press_problem(h: float = 1.0 / 6.0, material: str = "table", cycles: 
     """The quarter model (module docstring) with elements of size ``h`` (mm) at the contact.
 
     ``material`` is a key of :data:`MATERIALS`; ``msh_file`` also writes the mesh for a problem
-    file (:func:`~dolfinx_nnqem.problem.meshing.build_graded_block`).
+    file (:func:`~dolfinx_nnqem.cases.geometries.build_graded_block`).
     """
     if material not in MATERIALS:
         raise ValueError(f"material = {material!r}; expected one of {list(MATERIALS)}")

@@ -48,7 +48,8 @@ from mpi4py import MPI
 from dolfinx_nnqem.contact.obstacles import Plane
 from dolfinx_nnqem.material import DruckerPrager, VonMises
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet
-from dolfinx_nnqem.problem.meshing import MeshAndTags, graded_nodes
+from dolfinx_nnqem.cases.geometries import graded_nodes
+from dolfinx_nnqem.problem.meshing import MeshAndTags
 
 __all__ = ["BOTTOM", "COHESION", "E_SOIL", "FAR", "FOOTING", "FREE", "GROWTH", "NU_SOIL", "ROUGH_MU_F", "SOIL",
            "SYMMETRY", "ZFACES", "drucker_prager_soil", "footing_mesh", "footing_pressure", "limit_pressure",

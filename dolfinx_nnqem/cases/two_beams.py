@@ -18,8 +18,8 @@ import numpy as np
 from mpi4py import MPI
 
 from dolfinx_nnqem.material.von_mises import VonMises
-from dolfinx_nnqem.problem.meshing import TwoBeamsTags as T
-from dolfinx_nnqem.problem.meshing import build_two_beams
+from dolfinx_nnqem.cases.geometries import TwoBeamsTags as T
+from dolfinx_nnqem.cases.geometries import build_two_beams
 from dolfinx_nnqem.problem.contact_problem import Contact, ContactProblem, Dirichlet, Gravity, Traction
 from dolfinx_nnqem.estimates.indicators import RecoveryIndicator
 from dolfinx_nnqem.io.output import ResultsWriter
@@ -56,7 +56,7 @@ def two_beams_problem(comm: MPI.Comm = MPI.COMM_WORLD, *, law: str = "alart-curn
     """The benchmark as a :class:`ContactProblem` (mesh built with gmsh).
 
     ``refine2`` meshes beam 2 at edge 0.2 / ``refine2`` m (a non-matching interface, see
-    :func:`~dolfinx_nnqem.problem.meshing.build_two_beams`); ``discretisation`` is the contact's (see
+    :func:`~dolfinx_nnqem.cases.geometries.build_two_beams`); ``discretisation`` is the contact's (see
     :class:`~dolfinx_nnqem.problem.contact_problem.Contact`). ``degree = 2``: triquadratic (27-node)
     hexahedra; a non-matching interface then needs ``discretisation = "node-to-surface"``.
     """

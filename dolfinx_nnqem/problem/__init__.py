@@ -1,7 +1,9 @@
 """The problem: mesh, tags, materials per body, supports, loads on a load path and contact — the
 one object every solver takes (:class:`ContactProblem`), with what builds it: the bodies and
 their free rigid modes (:mod:`.bodies`), load amplitudes (:mod:`.amplitude`), input checks
-(:mod:`.validation`) and gmsh mesh generators (:mod:`.meshing`)."""
+(:mod:`.validation`), mesh reading and writing with the gmsh session of mesh generators
+(:mod:`.meshing`) and their gmsh helpers (:mod:`.gmsh_tools`). The benchmark geometries are in
+:mod:`dolfinx_nnqem.cases.geometries`."""
 
 from dolfinx_nnqem.contact.specification import Contact
 from dolfinx_nnqem.contact.obstacles import Cylinder, Plane, Sphere

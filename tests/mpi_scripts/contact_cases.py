@@ -29,8 +29,8 @@ def elastic_on_plastic_blocks(comm, plastic_below: bool = False):
     """The pressed blocks of the robustness suite (drag 0.2 p), the lower block elastic (unless
     ``plastic_below``): NNEQM2 has plastic unknowns in the upper block only, numbered across ranks."""
     from dolfinx_nnqem.material import VonMises
-    from dolfinx_nnqem.problem.meshing import BlockStackTags as B
-    from dolfinx_nnqem.problem.meshing import build_block_stack
+    from dolfinx_nnqem.cases.geometries import BlockStackTags as B
+    from dolfinx_nnqem.cases.geometries import build_block_stack
     from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Pressure, Traction
 
     mesh, ct, ft = build_block_stack(comm, 1.0, 1.0, (0.5, 0.5), ((4, 2, 4), (4, 2, 4)))
@@ -47,8 +47,8 @@ def plane_press(comm):
     from dolfinx_nnqem.contact.obstacles import Plane
     from dolfinx_nnqem.material import VonMises
     from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet
-    from dolfinx_nnqem.problem.meshing import BlockStackTags as B
-    from dolfinx_nnqem.problem.meshing import build_block_stack
+    from dolfinx_nnqem.cases.geometries import BlockStackTags as B
+    from dolfinx_nnqem.cases.geometries import build_block_stack
 
     mesh, ct, ft = build_block_stack(comm, 1.0, 1.0, (1.0,), ((4, 4, 4),))
     plane = Plane(point=(0.0, 1.0, 0.0), normal=(0.0, -1.0, 0.0), motion=(0.0, -0.01, 0.0))

@@ -22,7 +22,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 from dolfinx_nnqem.cases.hertz import hertz_quantities  # noqa: E402
 from dolfinx_nnqem.cases.indentation import hertz_tetrahedra_problem  # noqa: E402
 from dolfinx_nnqem.estimates import RecoveryIndicator, estimate_errors, probe_points  # noqa: E402
-from dolfinx_nnqem.problem.meshing import BlockStackTags as T  # noqa: E402
+from dolfinx_nnqem.cases.geometries import BlockStackTags as T  # noqa: E402
 from dolfinx_nnqem.solvers import SolverOptions, make_solver, solve_load_steps  # noqa: E402
 
 
@@ -31,7 +31,7 @@ def sphere_problem(comm):
     from dolfinx_nnqem.contact.obstacles import Sphere
     from dolfinx_nnqem.material import VonMises
     from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet
-    from dolfinx_nnqem.problem.meshing import build_graded_block
+    from dolfinx_nnqem.cases.geometries import build_graded_block
 
     mesh, ct, ft = build_graded_block(comm, 0.5, fine_width=1.25, fine_depth=0.5)
     sphere = Sphere(centre=(0.0, 50.0, 0.0), radius=50.0, motion=(0.0, -1.0 / 50.0, 0.0))

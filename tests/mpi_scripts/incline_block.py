@@ -24,8 +24,8 @@ from dolfinx_nnqem.io import pair_table  # noqa: E402
 from dolfinx_nnqem.io.results import reactions  # noqa: E402
 from dolfinx_nnqem.material import VonMises  # noqa: E402
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Gravity  # noqa: E402
-from dolfinx_nnqem.problem.meshing import BlockStackTags as T  # noqa: E402
-from dolfinx_nnqem.problem.meshing import build_block_stack  # noqa: E402
+from dolfinx_nnqem.cases.geometries import BlockStackTags as T  # noqa: E402
+from dolfinx_nnqem.cases.geometries import build_block_stack  # noqa: E402
 from dolfinx_nnqem.solvers import SolverOptions, make_solver, solve_load_steps  # noqa: E402
 
 SLOPE = 0.1  #: tan α

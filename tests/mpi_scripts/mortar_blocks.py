@@ -21,8 +21,8 @@ from mpi4py import MPI
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from dolfinx_nnqem.material import VonMises  # noqa: E402
-from dolfinx_nnqem.problem.meshing import BlockStackTags as T  # noqa: E402
-from dolfinx_nnqem.problem.meshing import build_block_stack  # noqa: E402
+from dolfinx_nnqem.cases.geometries import BlockStackTags as T  # noqa: E402
+from dolfinx_nnqem.cases.geometries import build_block_stack  # noqa: E402
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, Pressure  # noqa: E402
 from dolfinx_nnqem.io.results import node_blocks_at_points, pair_table, values_at_blocks  # noqa: E402
 from dolfinx_nnqem.solvers import SolverOptions, make_solver  # noqa: E402

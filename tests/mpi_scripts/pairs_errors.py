@@ -11,7 +11,7 @@ import dolfinx_nnqem  # noqa: F401  (first: the PyPI wheel loads MPI/PETSc befor
 import dolfinx
 from mpi4py import MPI
 
-from dolfinx_nnqem.problem import meshing
+from dolfinx_nnqem.cases import geometries as meshing
 from dolfinx_nnqem.contact.pairs import ContactPairError, find_pairs
 
 

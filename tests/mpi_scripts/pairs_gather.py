@@ -15,7 +15,7 @@ import dolfinx
 import numpy as np
 from mpi4py import MPI
 
-from dolfinx_nnqem.problem import meshing
+from dolfinx_nnqem.cases import geometries as meshing
 from dolfinx_nnqem.contact.pairs import find_pairs
 
 

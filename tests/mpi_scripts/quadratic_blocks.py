@@ -33,9 +33,9 @@ from dolfinx_nnqem.contact.obstacles import Plane  # noqa: E402
 from dolfinx_nnqem.io.results import pair_table  # noqa: E402
 from dolfinx_nnqem.material import VonMises  # noqa: E402
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet, PiecewiseLinearPath, Pressure  # noqa: E402
-from dolfinx_nnqem.problem.meshing import BlockStackTags as T  # noqa: E402
-from dolfinx_nnqem.problem.meshing import SphereOnBlockTags as S  # noqa: E402
-from dolfinx_nnqem.problem.meshing import build_block_stack, build_sphere_on_block  # noqa: E402
+from dolfinx_nnqem.cases.geometries import BlockStackTags as T  # noqa: E402
+from dolfinx_nnqem.cases.geometries import SphereOnBlockTags as S  # noqa: E402
+from dolfinx_nnqem.cases.geometries import build_block_stack, build_sphere_on_block  # noqa: E402
 from dolfinx_nnqem.solvers import SolverOptions, make_solver, solve_load_steps  # noqa: E402
 
 P = 1.0e6
