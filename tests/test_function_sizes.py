@@ -17,7 +17,7 @@ import dolfinx_nnqem
 PACKAGE = Path(dolfinx_nnqem.__file__).resolve().parent
 SPLIT_MODULES = ("numerics/newton.py", "io/run_pictures.py", "problem/meshing.py", "problem/contact_problem.py",
                  "problem/assembly.py", "problem/interfaces.py", "problem/loads.py", "problem/predictor.py",
-                 "problem/supports.py")
+                 "problem/supports.py", "problem/parameter_study.py")
 MAX_FUNCTION_LINES = 80
 MAX_CLASS_LINES = 400
 

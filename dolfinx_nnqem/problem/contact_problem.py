@@ -23,7 +23,7 @@ anything itself. Before any solve it checks that no body can move rigidly withou
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import dolfinx.fem as fem
@@ -38,12 +38,13 @@ from dolfinx_nnqem.problem.bodies import check_rigid_modes, find_bodies, free_ri
 from dolfinx_nnqem.contact.model import ContactModel
 from dolfinx_nnqem.contact.specification import Contact
 from dolfinx_nnqem.contact.obstacles import Cylinder, Plane, Sphere  # noqa: F401  (the user's imports)
-from dolfinx_nnqem.material.interface import GaussPointValues
+from dolfinx_nnqem.material.interface import GaussPointValues, Material
 from dolfinx_nnqem.material.state import material_state
 from dolfinx_nnqem.problem.assembly import assemble_matrix, assemble_vector
 from dolfinx_nnqem.problem.loads import BodyForce, ExternalLoads, Gravity, Pressure, Traction
-from dolfinx_nnqem.problem.interfaces import build_contact_model, interface_moduli
+from dolfinx_nnqem.problem.interfaces import build_contact_model, interface_moduli, largest_modulus
 from dolfinx_nnqem.problem.mesh_quality import check_cells
+from dolfinx_nnqem.problem.parameter_study import reset_state, update_parameters
 from dolfinx_nnqem.problem.predictor import SecantPredictor
 from dolfinx_nnqem.problem.supports import Dirichlet, Supports, check_facet_tags
 from dolfinx_nnqem.problem.validation import check_mesh, check_one_contact_per_pair
@@ -165,7 +166,7 @@ class ContactProblem:
         #: interfaces that slid past the slip limit and were moved to the current geometry (``geometry = "auto"``)
         self.slip_warnings: list[str] = []
         self.contact: ContactModel | None = None
-        E_max = self.comm.allreduce(float(np.max(self.state.E.x.array, initial=0.0)), op=MPI.MAX)
+        E_max = largest_modulus(self.state.E)
         self.force_floor = FORCE_FLOOR_STRAIN * E_max * self.characteristic_length() ** 2
         """The smallest force scale F (N): what a strain of 1e-6 sets up over one cell face."""
         if contacts:
@@ -307,11 +308,11 @@ class ContactProblem:
         """
         if F_ext is None:
             F_ext = self.external_force()
-            F_ext_norm = F_ext.norm()
+            F_ext_norm = vec_norm(F_ext)
             F_ext.destroy()
         else:
-            F_ext_norm = F_ext.norm()
-        scale = max(F_ext_norm, F_int.norm(), self.force_floor)
+            F_ext_norm = vec_norm(F_ext)
+        scale = max(F_ext_norm, vec_norm(F_int), self.force_floor)
         if self.contact is not None:
             force = self.contact.global_force(self.contact.force()) if contact_force is None else contact_force
             scale = max(scale, vec_norm(force), self.contact.motion_force_scale(self.load_factor, self.load_factor_n))
@@ -422,6 +423,28 @@ class ContactProblem:
         self.load_factor = self.load_factor_n
         if self.contact is not None:
             self.contact.restore()
+
+    # -- a parameter study -------------------------------------------------------------------------
+    def update(self, *, materials: Material | Mapping[int, Material] | None = None,
+               mu_f: float | Mapping[str, float] | None = None, tractions: Sequence[Traction | Pressure] | None = None,
+               body_forces: Sequence[BodyForce | Gravity] | None = None,
+               dirichlet: Sequence[Dirichlet] | None = None) -> None:
+        """Change parameters and start again from the initial state (:meth:`reset`): the same problem
+        solved again without new forms or compiles. Build the solver again afterwards.
+
+        ``materials`` as when built (one, or ``{cell_tag: material}`` for some bodies: E, ν, density;
+        σ_y0 and H of a linear-hardening ``VonMises``); ``mu_f`` for every interface or ``{name: μ_f}``;
+        ``tractions``, ``body_forces``, ``dirichlet``: the same loads and supports with other magnitudes,
+        values or amplitudes. What else is refused and why: :mod:`~dolfinx_nnqem.problem.parameter_study`
+        (a ValueError naming the parameter; the problem is then unchanged).
+        """
+        update_parameters(self, materials=materials, mu_f=mu_f, tractions=tractions, body_forces=body_forces,
+                          dirichlet=dirichlet)
+
+    def reset(self) -> None:
+        """Back to the initial state: u = 0, the Gauss-point state and pair unknowns as built, load
+        factor 0, no predictor history (:func:`~dolfinx_nnqem.problem.parameter_study.reset_state`)."""
+        reset_state(self)
 
     def destroy(self) -> None:
         """Free the PETSc objects the problem holds (the contact model's, the rigid modes')."""

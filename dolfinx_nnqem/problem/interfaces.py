@@ -17,7 +17,12 @@ from dolfinx_nnqem.contact.specification import Contact
 from dolfinx_nnqem.contact.surfaces import ContactPairError
 from dolfinx_nnqem.problem.bodies import tags_sharing_nodes
 
-__all__ = ["bodies_meshed_together", "build_contact_model", "interface_moduli"]
+__all__ = ["bodies_meshed_together", "build_contact_model", "interface_moduli", "largest_modulus"]
+
+
+def largest_modulus(E: fem.Function) -> float:
+    """E_max: the largest Young's modulus of the mesh over all ranks (collective; 0 without cells)."""
+    return E.function_space.mesh.comm.allreduce(float(np.max(E.x.array, initial=0.0)), op=MPI.MAX)
 
 
 def interface_moduli(E: fem.Function, facet_tags: dolfinx.mesh.MeshTags | None, contacts: Sequence[Contact],

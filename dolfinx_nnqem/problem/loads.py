@@ -23,7 +23,8 @@ from dolfinx_nnqem import compat, jit
 from dolfinx_nnqem.problem.assembly import assemble_vector
 from dolfinx_nnqem.problem.validation import check_cell_tag, check_magnitude
 
-__all__ = ["BodyForce", "ExternalLoads", "Gravity", "Pressure", "Traction", "check_finite", "load_amplitude"]
+__all__ = ["BodyForce", "ExternalLoads", "Gravity", "Pressure", "Traction", "check_finite", "load_amplitude",
+           "load_factor_between"]
 
 Amplitude = Callable[[float], float]
 
@@ -158,6 +159,7 @@ class ExternalLoads:
         forms += [body_force_form(b, v, dx, density, cell_tags) for b in body_forces]
         self.V = V
         self.loads: list[Load] = [*tractions, *body_forces]
+        self.built = list(self.loads)  # the values compiled into the forms
         self.forms = [jit.form(form) for form in forms]
         self.scales = [1.0] * len(self.forms)  # F_k = scale_k · (the assembled form), see rescale
         self.parts = [(load.amplitude, assemble_vector(form, V)) for load, form in zip(self.loads, self.forms)]
@@ -175,11 +177,67 @@ class ExternalLoads:
         """a_k(ℓ) of every load."""
         return [load_amplitude(a, load_factor) for a, _ in self.parts]
 
+    def rescale(self, loads: Sequence[Load]) -> None:
+        """New magnitudes and amplitudes of the same loads (in the order of :attr:`loads`): each new
+        load is the one the problem was built with times a factor s, its vector s F_k (assembled
+        again from the compiled form), with any amplitude.
+
+        The direction of a load is compiled into its form as numbers; its magnitude is a factor of
+        the assembled vector, so a new magnitude needs no compile.
+
+        Raises
+        ------
+        ValueError
+            Naming the load that is not a multiple of the one it replaces (another direction, tag or
+            kind).
+        """
+        if len(loads) != len(self.built):
+            raise ValueError(f"loads: {len(loads)} given for the {len(self.built)} the problem was built with "
+                             "(tractions, then body forces); only their magnitudes and amplitudes may change")
+        self.scales = [load_factor_between(old, new) for old, new in zip(self.built, loads)]
+        self.parts[:] = [(new.amplitude, F_k) for new, (_, F_k) in zip(loads, self.parts)]  # the problem holds it
+        self.loads = list(loads)
+        self.reassemble()
+
     def reassemble(self) -> None:
         """Assemble every F_k again from its compiled form (after a change of the densities), times
         its scale; nothing is compiled."""
-        for k, (form, scale) in enumerate(zip(self.forms, self.scales)):
-            amplitude, F_k = self.parts[k]
+        for form, scale, (_, F_k) in zip(self.forms, self.scales, self.parts):
             assemble_vector(form, self.V, F_k)
             if scale != 1.0:
                 F_k.scale(scale)
+
+
+def _magnitude(load: Load) -> np.ndarray:
+    """The numbers a load's form is linear in: its value, pressure or g."""
+    if isinstance(load, Pressure):
+        return np.array([float(load.p)])
+    return np.asarray(load.g if isinstance(load, Gravity) else load.value, dtype=float)
+
+
+def _where(load: Load) -> object:
+    """Where a load acts: its facet or cell tag."""
+    return load.tag if isinstance(load, (Traction, Pressure)) else getattr(load, "cell_tag", None)
+
+
+def load_factor_between(old: Load, new: Load) -> float:
+    """s with new = s · old (value, pressure or g; the same kind and tag).
+
+    Raises
+    ------
+    ValueError
+        Naming the load, when ``new`` is of another kind or place, or not parallel to ``old``.
+    """
+    name = f"{type(old).__name__}(tag={_where(old)})"
+    if type(new) is not type(old) or _where(new) != _where(old):
+        raise ValueError(f"loads: {new!r} replaces {name}; a load's kind and tag are fixed when the problem "
+                         "is built: build a new ContactProblem for another")
+    check_finite(f"{name} (new)", _magnitude(new))
+    a, b = _magnitude(old), _magnitude(new)
+    norm = float(a @ a)
+    s = float(b @ a) / norm if norm > 0.0 else 0.0
+    if np.linalg.norm(b - s * a) > 1e-12 * np.linalg.norm(b):
+        raise ValueError(f"loads: {name} changes from {a.tolist()} to {b.tolist()}, which is not a multiple of it: "
+                         "the direction of a load is compiled into its form (only its magnitude and amplitude "
+                         "may change without a new compile); build a new ContactProblem for another direction")
+    return s

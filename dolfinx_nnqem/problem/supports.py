@@ -71,6 +71,8 @@ class Supports:
 
     Attributes
     ----------
+    conditions
+        The conditions (:class:`Dirichlet`).
     dofs, values
         Unrolled local dof indices (owned and ghost) and their values at a unit amplitude.
     bcs
@@ -84,6 +86,7 @@ class Supports:
     def __init__(self, V: fem.FunctionSpace, facet_tags: dolfinx.mesh.MeshTags | None,
                  dirichlet: Sequence[Dirichlet]):
         self.V = V
+        self.conditions = list(dirichlet)
         fdim = V.mesh.topology.dim - 1
         dofs_all: list[np.ndarray] = []
         values_all: list[np.ndarray] = []
@@ -106,6 +109,38 @@ class Supports:
             self.dofs, self.values = np.concatenate(dofs_all), np.concatenate(values_all)
         else:
             self.dofs, self.values = np.zeros(0, np.int32), np.zeros(0)
+
+    def revalue(self, dirichlet: Sequence[Dirichlet]) -> None:
+        """New values and amplitudes of the same conditions (the same tags and components, in order):
+        the constrained dofs stay, :attr:`values` (in place) and :attr:`amplitudes` follow.
+
+        Raises
+        ------
+        ValueError
+            If a condition has another tag or other components than the one it replaces.
+        """
+        values, self.amplitudes = self.revalued(dirichlet)
+        self.values[:] = values
+        self.conditions = list(dirichlet)
+
+    def revalued(self, dirichlet: Sequence[Dirichlet]) -> tuple[np.ndarray, list]:
+        """The :attr:`values` and :attr:`amplitudes` of :meth:`revalue` (checked; nothing changes)."""
+        if len(dirichlet) != len(self.conditions):
+            raise ValueError(f"dirichlet: {len(dirichlet)} conditions given for the {len(self.conditions)} the "
+                             "problem was built with; only their values and amplitudes may change")
+        values, amplitudes = [], []
+        counts = iter([n for _, n in self.amplitudes])
+        for old, new in zip(self.conditions, dirichlet):
+            components, new_values = _components_and_values(new)
+            if new.tag != old.tag or components != _components_and_values(old)[0]:
+                raise ValueError(f"dirichlet: Dirichlet(tag={new.tag}, components={new.components}) replaces "
+                                 f"Dirichlet(tag={old.tag}, components={old.components}); the constrained dofs "
+                                 "are fixed when the problem is built: only values and amplitudes may change")
+            for val in new_values:
+                n = next(counts)
+                values.append(np.full(n, val))
+                amplitudes.append((new.amplitude, n))
+        return (np.concatenate(values) if values else np.zeros(0)), amplitudes
 
     def prescribed(self, load_factor: float) -> np.ndarray:
         """The values a(ℓ) · value of the constrained dofs at ``load_factor``."""
