@@ -159,3 +159,16 @@ def test_parameters_of_a_return_map_on_arrays_are_refused():
     problem = _fresh(two_beams_problem(), materials={T.BODY1: voce, T.BODY2: voce})
     with pytest.raises(ValueError, match=r"materials\[1\]\.E: .*arrays built with the problem"):
         problem.update(materials={T.BODY1: dataclasses.replace(voce, E=3e10)})
+
+
+def test_an_nneqm2_solver_built_before_a_material_update_is_refused():
+    """NNEQM2 builds its Gauss-point operators and factorises K_e with the materials of its time: after
+    a material update it says so instead of failing to converge (measured: 5 cutbacks, then a
+    ConvergenceError). The monolithic solver and NNEQM1 read the materials anew at every iteration:
+    one built before an update gives the fresh answer bit for bit (docs/user-guide.md)."""
+    problem = two_beams_problem(law="polar")
+    with make_solver("nneqm2", problem) as solver:
+        solve_load_steps(problem, solver, INCREMENTS)
+        problem.update(materials={T.BODY2: dataclasses.replace(MATERIAL, E=3e10)})
+        with pytest.raises(ValueError, match="material parameters changed .* build the solver again"):
+            solve_load_steps(problem, solver, INCREMENTS)

@@ -18,9 +18,9 @@ materials whose return map runs on arrays built with the problem (hardening laws
 back-stresses, Drucker–Prager), and an interface's law or anything but μ_f. Those need a new
 problem. Every change is checked before anything changes.
 
-After an update the problem is back at its initial state (:func:`reset_state`); a solver reads
-the problem's parameters when it is built (a factorised stiffness, the gathered laws): build the
-solver again after an update.
+After an update the problem is back at its initial state (:func:`reset_state`). Build the solver
+again after an update: NNEQM2 holds the materials it was built with (its Gauss-point operators,
+the factorised elastic stiffness) and refuses to solve after they changed.
 """
 
 from __future__ import annotations
