@@ -7,8 +7,9 @@ recovery indicator, pair tables; no pictures) into a folder of its own. CalculiX
 ``benchmarks/calculix_two_beams.py`` with the variant's μ (no ``*FRICTION`` for μ = 0), one
 ``ccx`` process per variant, with its default outputs (.frd, .dat, .sta).
 
-Prints the time per variant of both, the ratio, our set-up (import and build, once per study)
-and the compiles of the variants after the first (counted in ``dolfinx_nnqem.jit``). The issue's
+The two alternate, variant by variant, so that both see the same load of the machine. Prints the
+time per variant of both, the ratio, our set-up (import and build, once per study) and the
+compiles of the variants after the first (counted in ``dolfinx_nnqem.jit``). The issue's
 target: at most 0.3 × CalculiX per variant. Figures: ``docs/performance.md``.
 
 Usage::
@@ -48,58 +49,59 @@ def calculix_text(mu_f: float) -> str:
     return "\n".join(lines) + "\n"
 
 
-def run_calculix(folder: Path, mu_values: np.ndarray) -> list[float]:
-    """Wall time of one ``ccx`` process per variant (whole process, outputs written)."""
+def run_calculix_variant(folder: Path, k: int, mu_f: float) -> float:
+    """Wall time of one ``ccx`` process on variant ``k`` (the whole process, its outputs written)."""
     ccx = shutil.which("ccx")
     if ccx is None:
         raise SystemExit("no ccx on PATH (Debian: apt-get install calculix-ccx)")
-    times = []
-    for k, mu in enumerate(mu_values):
-        work = folder / f"ccx_{k:02d}"
-        work.mkdir(parents=True, exist_ok=True)
-        (work / "two_beams.inp").write_text(calculix_text(float(mu)))
+    work = folder / f"ccx_{k:02d}"
+    work.mkdir(parents=True, exist_ok=True)
+    (work / "two_beams.inp").write_text(calculix_text(mu_f))
+    t0 = time.perf_counter()
+    subprocess.run([ccx, "-i", "two_beams"], cwd=work, check=True, stdout=subprocess.DEVNULL)
+    return time.perf_counter() - t0
+
+
+class Study:
+    """Our side: the problem built once, then one variant per :meth:`variant` call."""
+
+    def __init__(self, folder: Path, method: str):
+        from dolfinx_nnqem.cases.two_beams import DEFAULT_LAW, two_beams_problem
+        from dolfinx_nnqem.estimates import RecoveryIndicator
+
+        self.folder, self.method = folder, method
+        self.count = [0]
+        original = jit._compile
+
+        def counting(make, expr):
+            self.count[0] += 1
+            return original(make, expr)
+
+        jit._compile = counting  # every form and expression compile of the package goes through it
+        self.problem = two_beams_problem(law=DEFAULT_LAW[method])
+        self.indicator = RecoveryIndicator(self.problem)
+        self.setup = time.perf_counter() - T_START
+
+    def variant(self, k: int, mu_f: float) -> tuple[float, int, float]:
+        """Wall time, compiles and total normal contact force of variant ``k`` (μ_f = ``mu_f``)."""
+        from dolfinx_nnqem.cases.two_beams import FREE_END_CORNERS
+        from dolfinx_nnqem.io.output import ResultsWriter
+        from dolfinx_nnqem.solvers.registry import make_solver
+        from dolfinx_nnqem.solvers.stepping import solve_load_steps
+
+        problem = self.problem
+        self.count[0] = 0
         t0 = time.perf_counter()
-        subprocess.run([ccx, "-i", "two_beams"], cwd=work, check=True, stdout=subprocess.DEVNULL)
-        times.append(time.perf_counter() - t0)
-    return times
-
-
-def run_ours(folder: Path, mu_values: np.ndarray, method: str) -> tuple[float, list[float], list[int], list[float]]:
-    """Set-up time (imports and the build), per-variant wall times, compiles per variant and the
-    total normal contact force of each variant's last increment."""
-    from dolfinx_nnqem.cases.two_beams import DEFAULT_LAW, FREE_END_CORNERS, two_beams_problem
-    from dolfinx_nnqem.estimates import RecoveryIndicator
-    from dolfinx_nnqem.io.output import ResultsWriter
-    from dolfinx_nnqem.solvers.registry import make_solver
-    from dolfinx_nnqem.solvers.stepping import solve_load_steps
-
-    count = [0]
-    original = jit._compile
-
-    def counting(make, expr):
-        count[0] += 1
-        return original(make, expr)
-
-    jit._compile = counting
-    problem = two_beams_problem(law=DEFAULT_LAW[method])
-    indicator = RecoveryIndicator(problem)
-    setup = time.perf_counter() - T_START
-    times, compiles, normal = [], [], []
-    for k, mu in enumerate(mu_values):
-        count[0] = 0
-        t0 = time.perf_counter()
-        problem.update(mu_f=float(mu))
-        writer = ResultsWriter(problem, method, folder / f"ours_{k:02d}", 15, probes=FREE_END_CORNERS,
-                               extra={"mu_f": float(mu)}, pictures=False, cell_fields=[indicator])
-        with make_solver(method, problem) as solver:
+        problem.update(mu_f=mu_f)
+        writer = ResultsWriter(problem, self.method, self.folder / f"ours_{k:02d}", 15, probes=FREE_END_CORNERS,
+                               extra={"mu_f": mu_f}, pictures=False, cell_fields=[self.indicator])
+        with make_solver(self.method, problem) as solver:
             solve_load_steps(problem, solver, 15, callbacks=[writer])
         writer.close()
-        times.append(time.perf_counter() - t0)
-        compiles.append(count[0])
+        elapsed = time.perf_counter() - t0
         assert problem.contact is not None
-        normal.append(float(problem.comm.allreduce(np.sum(problem.contact.force()[:, 0]))))
-    jit._compile = original
-    return setup, times, compiles, normal
+        normal = float(problem.comm.allreduce(np.sum(problem.contact.force()[:, 0])))
+        return elapsed, self.count[0], normal
 
 
 def main(argv=None) -> int:
@@ -110,8 +112,15 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     folder = Path(args.outdir)
     mu_values = np.linspace(0.0, 0.5, args.variants)
-    setup, ours, compiles, normal = run_ours(folder, mu_values, args.method)
-    theirs = run_calculix(folder, mu_values)
+    study = Study(folder, args.method)
+    ours, theirs, compiles, normal = [], [], [], []
+    for k, mu in enumerate(mu_values):  # alternated, so that both see the same load of the machine
+        elapsed, count, force = study.variant(k, float(mu))
+        ours.append(elapsed)
+        compiles.append(count)
+        normal.append(force)
+        theirs.append(run_calculix_variant(folder, k, float(mu)))
+    setup = study.setup
     n = args.variants
     print(f"{n} variants of the two beams, mu_f = {mu_values[0]:g} ... {mu_values[-1]:g}, method {args.method}")
     print(f"ours:     set-up {setup:.3f} s once (imports, mesh, forms, compiles), then per variant "
