@@ -172,3 +172,31 @@ def test_an_nneqm2_solver_built_before_a_material_update_is_refused():
         problem.update(materials={T.BODY2: dataclasses.replace(MATERIAL, E=3e10)})
         with pytest.raises(ValueError, match="material parameters changed .* build the solver again"):
             solve_load_steps(problem, solver, INCREMENTS)
+
+
+def test_friction_that_alone_holds_a_body_cannot_go_to_zero():
+    """The three stacked blocks of demos/contact_interfaces.py: block 2 slides along x against
+    nothing but friction. μ_f = 0 on both of its interfaces is refused, naming the body, and the
+    problem keeps its friction; μ_f = 0 on one interface is a parameter like any other."""
+    from mpi4py import MPI
+
+    from dolfinx_nnqem.problem import Contact, Pressure
+    from dolfinx_nnqem.problem.meshing import BlockStackTags as B
+    from dolfinx_nnqem.problem.meshing import build_block_stack
+
+    mesh, cell_tags, facet_tags = build_block_stack(MPI.COMM_WORLD, 1.0, 1.0, [0.5] * 3, [(2, 1, 2)] * 3)
+    elastic = VonMises(E=1.0e9, nu=0.3)
+    problem = ContactProblem(
+        mesh, cell_tags, facet_tags, materials={k: elastic for k in (1, 2, 3)},
+        dirichlet=[Dirichlet(B.bottom(1)), Dirichlet(B.top(3), 1e-2, [0])]
+        + [Dirichlet(face(k), 0.0, [2]) for k in (1, 2, 3) for face in (B.zmin, B.zmax)],
+        tractions=[Pressure(B.top(3), 1.0e6)],
+        contact=[Contact(B.top(1), B.bottom(2), mu_f=0.2, name="lower"),
+                 Contact(B.top(2), B.bottom(3), mu_f=0.4, name="upper")])
+    held_by_friction = r"(?s)move rigidly without resistance.*body 2 \(cells tagged 2\): translation along \(1, 0, 0\)"
+    with pytest.raises(ValueError, match=held_by_friction):
+        problem.update(mu_f=0.0)
+    assert sorted(set(problem.contact.mu_f.tolist())) == [0.2, 0.4]
+    assert [c.mu_f for c in problem.definition.contact] == [0.2, 0.4]
+    problem.update(mu_f={"lower": 0.0})
+    assert [c.mu_f for c in problem.definition.contact] == [0.0, 0.4]

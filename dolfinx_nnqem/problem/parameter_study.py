@@ -49,7 +49,8 @@ CELLWISE_FIELDS = ("E", "nu", "density")
 PART_FIELDS: dict[str, dict[str, float]] = {"elastic": {}, "von-mises": {"sigma_y0": ELASTIC_YIELD_STRESS, "H": 0.0}}
 """Per material kind whose parameters are all cell-wise functions: its part's own fields and their
 value in the cells of other bodies (:mod:`~dolfinx_nnqem.material.von_mises`)."""
-CHANGEABLE_FIELDS: dict[str, tuple[str, ...]] = {kind: CELLWISE_FIELDS + tuple(own) for kind, own in PART_FIELDS.items()}
+CHANGEABLE_FIELDS: dict[str, tuple[str, ...]] = {kind: CELLWISE_FIELDS + tuple(own)
+                                                 for kind, own in PART_FIELDS.items()}
 """The material parameters a study may change, per material kind (``Material.part_kind``)."""
 
 
@@ -77,7 +78,10 @@ def update_parameters(problem: ContactProblem, *, materials: Material | Mapping[
         for old, new in zip(problem.loads.built, loads):
             load_factor_between(old, new)
     if dirichlet is not None:
-        problem.supports.revalued(dirichlet)
+        problem.supports.revalued(dirichlet)  # (the check alone)
+    # applied: first the one change that can still be refused (a body held by friction alone)
+    if mu_f is not None:
+        _set_contact_parameters(problem, contacts)
     if dirichlet is not None:
         problem.supports.revalue(dirichlet)
     if tractions is not None or body_forces is not None:
@@ -86,8 +90,10 @@ def update_parameters(problem: ContactProblem, *, materials: Material | Mapping[
         _refill_materials(problem.state, new_materials)
         problem.loads.reassemble()  # the self-weight follows the densities
         problem.force_floor = _force_floor(problem)
-    if problem.contact is not None and (mu_f is not None or new_materials is not None):
-        _set_contact_parameters(problem, contacts)
+        if problem.contact is not None:  # r = E h follows E
+            E = problem.state.E
+            problem.contact.set_parameters(contacts, interface_moduli(E, problem.facet_tags, contacts,
+                                                                      largest_modulus(E)))
     problem.definition = dataclasses.replace(
         definition, materials=_definition_materials(definition.materials, new_materials),
         dirichlet=tuple(problem.supports.conditions), tractions=tuple(loads[:len(definition.tractions)]),
@@ -130,7 +136,7 @@ def _check_same_kind(where: str, old: Material, new: Material) -> None:
         raise ValueError(f"{where}: {new!r} replaces a {type(old).__name__} of kind {old.part_kind!r}; a body's "
                          "material kind is compiled into the forms: build a new ContactProblem")
     changeable = CHANGEABLE_FIELDS.get(old.part_kind)
-    for field in dataclasses.fields(old):  # type: ignore[arg-type]  # every material is a dataclass (material/models.py)
+    for field in dataclasses.fields(old):  # type: ignore[arg-type]  # every material is a dataclass (models.py)
         name = field.name
         if getattr(old, name) == getattr(new, name) or (changeable is not None and name in changeable):
             continue
@@ -182,8 +188,14 @@ def friction_changed(contacts: Sequence[Contact], mu_f: float | Mapping[str, flo
 
 
 def _set_contact_parameters(problem: ContactProblem, contacts: list[Contact]) -> None:
-    """μ_f and r of the contact model; the rigid-mode checks again (a body held by friction alone
-    must keep some friction). Back to the old parameters if that check fails."""
+    """μ_f of the contact model (r of the current moduli); the rigid-mode checks again (a body held
+    by friction alone must keep some friction). Back to the old parameters if that check fails.
+
+    Raises
+    ------
+    ValueError
+        Naming the body and the motion nothing holds any more (:func:`~dolfinx_nnqem.problem.bodies.check_rigid_modes`).
+    """
     model = problem.contact
     assert model is not None  # the caller checked
     old = [i.contact for i in model.interfaces]
