@@ -141,9 +141,13 @@ class GaussPointState:
 
     def parameters_changed(self) -> None:
         """Fill E, ν and the density again from :attr:`materials` after their parameters changed (a
-        parameter study, :mod:`dolfinx_nnqem.problem.parameter_study`); the parts' own cell-wise
-        fields are refilled by the caller. The forms read these fields: nothing is compiled."""
+        parameter study, :mod:`dolfinx_nnqem.problem.parameter_study`), and the parts' own cell-wise
+        fields (a part with ``refill_parameters``). The forms read these fields: nothing is compiled."""
         self.fill_cellwise({"E": self.E, "nu": self.nu, "density": self.density})
+        for kind, part in zip(self.kinds, self.parts):
+            refill = getattr(part, "refill_parameters", None)  # the parts whose parameters are cell-wise fields
+            if refill is not None:
+                refill({tag: m for tag, m in self.materials.items() if m.part_kind == kind})
         self._material_at_points = None  # the material at the points, from the old fields
         self.parameters_version += 1
 

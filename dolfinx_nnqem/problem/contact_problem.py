@@ -167,7 +167,7 @@ class ContactProblem:
         self.slip_warnings: list[str] = []
         self.contact: ContactModel | None = None
         E_max = largest_modulus(self.state.E)
-        self.force_floor = FORCE_FLOOR_STRAIN * E_max * self.characteristic_length() ** 2
+        self.force_floor = self.moduli_force_floor()
         """The smallest force scale F (N): what a strain of 1e-6 sets up over one cell face."""
         if contacts:
             self.contact = build_contact_model(self.V, cell_tags, facet_tags, contacts,
@@ -213,6 +213,10 @@ class ContactProblem:
         See :func:`~dolfinx_nnqem.problem.interfaces.interface_moduli`.
         """
         return interface_moduli(self.state.E, self.facet_tags, contacts, default)
+
+    def moduli_force_floor(self) -> float:
+        """F_floor = :data:`FORCE_FLOOR_STRAIN` · E_max h², of the current moduli (collective)."""
+        return FORCE_FLOOR_STRAIN * largest_modulus(self.state.E) * self.characteristic_length() ** 2
 
     def characteristic_length(self) -> float:
         """Mean cell size h (cube root of the mean cell volume), over all ranks."""

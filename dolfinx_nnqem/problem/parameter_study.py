@@ -27,34 +27,55 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING
-
-import numpy as np
+from typing import TYPE_CHECKING, Any, Protocol
 
 from dolfinx_nnqem.contact.specification import Contact
 from dolfinx_nnqem.material.interface import Material
-from dolfinx_nnqem.material.von_mises import ELASTIC_YIELD_STRESS
 from dolfinx_nnqem.problem.bodies import check_rigid_modes, friction_held_motions
 from dolfinx_nnqem.problem.interfaces import interface_moduli, largest_modulus
 from dolfinx_nnqem.problem.loads import load_factor_between
 
 if TYPE_CHECKING:
+    from dolfinx_nnqem.contact.model import ContactModel
     from dolfinx_nnqem.material.state import GaussPointState
-    from dolfinx_nnqem.problem.contact_problem import ContactProblem
+    from dolfinx_nnqem.problem.bodies import FrictionHeld, RigidModes
+    from dolfinx_nnqem.problem.loads import ExternalLoads
+    from dolfinx_nnqem.problem.predictor import SecantPredictor
+    from dolfinx_nnqem.problem.supports import Supports
 
-__all__ = ["CHANGEABLE_FIELDS", "reset_state", "update_parameters"]
-
-CELLWISE_FIELDS = ("E", "nu", "density")
-"""The fields every material has in the mesh-wide state's cell-wise functions."""
-PART_FIELDS: dict[str, dict[str, float]] = {"elastic": {}, "von-mises": {"sigma_y0": ELASTIC_YIELD_STRESS, "H": 0.0}}
-"""Per material kind whose parameters are all cell-wise functions: its part's own fields and their
-value in the cells of other bodies (:mod:`~dolfinx_nnqem.material.von_mises`)."""
-CHANGEABLE_FIELDS: dict[str, tuple[str, ...]] = {kind: CELLWISE_FIELDS + tuple(own)
-                                                 for kind, own in PART_FIELDS.items()}
-"""The material parameters a study may change, per material kind (``Material.part_kind``)."""
+__all__ = ["CHANGEABLE_FIELDS", "StudiedProblem", "reset_state", "update_parameters"]
 
 
-def update_parameters(problem: ContactProblem, *, materials: Material | Mapping[int, Material] | None = None,
+class StudiedProblem(Protocol):
+    """What a parameter study reads of a problem and changes in it
+    (:class:`~dolfinx_nnqem.problem.ContactProblem`, which imports this module)."""
+
+    definition: Any  #: the ProblemDefinition
+    state: GaussPointState
+    supports: Supports
+    loads: ExternalLoads
+    contact: ContactModel | None
+    facet_tags: Any
+    rigid_modes: RigidModes
+    friction_held: FrictionHeld
+    force_floor: float
+    u: Any
+    load_factor: float
+    load_factor_n: float
+    predictor: SecantPredictor
+    warm_start: bool
+    slip_warnings: list[str]
+
+    def moduli_force_floor(self) -> float:
+        """The force floor of the current moduli."""
+
+CHANGEABLE_FIELDS: dict[str, tuple[str, ...]] = {"elastic": ("E", "nu", "density"),
+                                                 "von-mises": ("E", "nu", "density", "sigma_y0", "H")}
+"""The material parameters a study may change, per material kind (``Material.part_kind``): those
+held in cell-wise (DG 0) functions (the state's E, ν, density; ``VonMisesPart``'s σ_y0 and H)."""
+
+
+def update_parameters(problem: StudiedProblem, *, materials: Material | Mapping[int, Material] | None = None,
                       mu_f: float | Mapping[str, float] | None = None, tractions: Sequence | None = None,
                       body_forces: Sequence | None = None, dirichlet: Sequence | None = None) -> None:
     """Change parameters of a built problem (collective); the problem then starts again from its
@@ -89,7 +110,7 @@ def update_parameters(problem: ContactProblem, *, materials: Material | Mapping[
     if new_materials is not None:
         _refill_materials(problem.state, new_materials)
         problem.loads.reassemble()  # the self-weight follows the densities
-        problem.force_floor = _force_floor(problem)
+        problem.force_floor = problem.moduli_force_floor()
         if problem.contact is not None:  # r = E h follows E
             E = problem.state.E
             problem.contact.set_parameters(contacts, interface_moduli(E, problem.facet_tags, contacts,
@@ -150,22 +171,6 @@ def _refill_materials(state: GaussPointState, new: Mapping[int | None, Material]
     """The state's and the parts' cell-wise fields from the new materials (no compile)."""
     state.materials.update(new)
     state.parameters_changed()
-    for kind, part in zip(state.kinds, state.parts):
-        defaults = PART_FIELDS.get(kind, {})
-        if not defaults:
-            continue
-        fields = {name: getattr(part, name) for name in defaults}
-        tags = [tag for tag, material in state.materials.items() if material.part_kind == kind]
-        state.fill_cellwise(fields, default=defaults, tags=tags)
-        for f in fields.values():  # an elastic material's σ_y0 = inf, stored finite (as VonMisesPart does)
-            f.x.array[~np.isfinite(f.x.array)] = ELASTIC_YIELD_STRESS
-
-
-def _force_floor(problem: ContactProblem) -> float:
-    """The force floor of the problem's moduli, as the problem computes it when it is built."""
-    from dolfinx_nnqem.problem.contact_problem import FORCE_FLOOR_STRAIN  # (that module imports this one)
-
-    return FORCE_FLOOR_STRAIN * largest_modulus(problem.state.E) * problem.characteristic_length() ** 2
 
 
 def friction_changed(contacts: Sequence[Contact], mu_f: float | Mapping[str, float]) -> list[Contact]:
@@ -187,7 +192,7 @@ def friction_changed(contacts: Sequence[Contact], mu_f: float | Mapping[str, flo
     return [dataclasses.replace(c, mu_f=values[c.label]) if c.label in values else c for c in contacts]
 
 
-def _set_contact_parameters(problem: ContactProblem, contacts: list[Contact]) -> None:
+def _set_contact_parameters(problem: StudiedProblem, contacts: list[Contact]) -> None:
     """μ_f of the contact model (r of the current moduli); the rigid-mode checks again (a body held
     by friction alone must keep some friction). Back to the old parameters if that check fails.
 
@@ -218,7 +223,7 @@ def _definition_materials(materials: object, new: Mapping[int | None, Material] 
     return {**materials, **new} if isinstance(materials, Mapping) else materials
 
 
-def reset_state(problem: ContactProblem) -> None:
+def reset_state(problem: StudiedProblem) -> None:
     """Back to the initial state of a new problem: u = 0, the Gauss-point state and the pair
     unknowns as built, load factor 0, no predictor history (collective).
 
