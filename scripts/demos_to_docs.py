@@ -30,6 +30,7 @@ TUTORIALS = [
      {"friction.png": "three_blocks_friction.png", "deformed.png": "three_blocks_deformed.png"}),
     ("friction", "hertz_contact.py",
      {"pressure_profile.png": "hertz_pressure_profile.png", "stick_slip_map.png": "hertz_stick_slip_map.png"}),
+    ("friction", "friction_sweep.py", {"contact_force.png": "friction_sweep_contact_force.png"}),
     ("plasticity", "thick_cylinder.py",
      {"pressure_displacement.png": "thick_cylinder_pressure_displacement.png",
       "plastic_zone.png": "thick_cylinder_plastic_zone.png"}),

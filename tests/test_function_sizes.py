@@ -19,7 +19,9 @@ SPLIT_MODULES = ("numerics/newton.py", "io/run_pictures.py", "problem/meshing.py
                  *(f"cases/geometries/{name}.py" for name in ("two_beams", "stacked_blocks", "block_stack",
                                                               "thick_cylinder", "graded_blocks", "sphere_on_block")),
                  *(f"material/finite_strain/{name}.py" for name in ("__init__", "hencky", "interface", "neo_hooke",
-                                                                    "spectral")))
+                                                                    "spectral")),
+                 *(f"problem/{name}.py" for name in ("contact_problem", "assembly", "interfaces", "loads", "predictor",
+                                                     "supports", "parameter_study")))
 MAX_FUNCTION_LINES = 80
 MAX_CLASS_LINES = 400
 

@@ -436,6 +436,41 @@ class ContactModel:
         self._gathered_laws = None
         self.w_n = self.relative_displacement(u_n.x.petsc_vec, load_factor_n)
 
+    # -- a parameter study ----------------------------------------------------------------------------
+    def set_parameters(self, contacts: Sequence[Contact], E: Sequence[float]) -> None:
+        """New friction coefficients and moduli of the same interfaces (one ``Contact`` and one E per
+        interface, in order): μ_f of every pair and each interface's r = E h (or its own ``r``) follow.
+
+        Only μ_f and r may differ: the pairs, their laws and unknowns stay (a parameter study,
+        :meth:`~dolfinx_nnqem.problem.ContactProblem.update`).
+
+        Raises
+        ------
+        ValueError
+            If a contact differs from its interface's in anything but ``mu_f``.
+        """
+        if len(contacts) != len(self.interfaces) or len(E) != len(self.interfaces):
+            raise ValueError(f"ContactModel.set_parameters: {len(contacts)} contacts and {len(E)} moduli for "
+                             f"{len(self.interfaces)} interfaces")
+        for interface, contact in zip(self.interfaces, contacts):
+            if replace(contact, mu_f=interface.contact.mu_f) != interface.contact:
+                raise ValueError(f"contact {interface.contact.label}: only mu_f may change in a parameter study")
+        self.interfaces = [replace(i, contact=c, r=interface_r(c, float(e), self.h))
+                           for i, c, e in zip(self.interfaces, contacts, E)]
+        mu_f = np.concatenate([np.full(i.pairs.num_local, float(i.contact.mu_f)) for i in self.interfaces])
+        self.laws = replace(self.laws, groups=self._groups(self.interface_index), mu_f=mu_f)
+        self._gathered_laws = None
+
+    def reset(self) -> None:
+        """Back to the pair unknowns of a new model: force-free pairs, w_n = 0, no states or slip
+        (the pairs themselves stay: those of the reference geometry)."""
+        n = self.num_local
+        self.z = self.laws.initial_unknowns()
+        self.z_n = self.z.copy()
+        self.w_n = np.zeros((n, 3))
+        self.state_n = np.zeros(n, dtype=np.int8)
+        self.slip_n = np.zeros((n, 2))
+
     # -- reporting ----------------------------------------------------------------------------------
     def obstacle_reactions(self, lam: np.ndarray | None = None) -> dict[str, np.ndarray]:
         """Force of each rigid obstacle on the body, Σ R_sᵀ λ_s (global frame), over all ranks."""

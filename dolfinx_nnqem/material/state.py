@@ -98,6 +98,9 @@ class GaussPointState:
         self._dx_parts = self._part_measure(metadata) if len(self.parts) > 1 else None
         self._commit_u: fem.Function | None = None
         self._material_at_points: PointwiseMaterial | None = None
+        self.parameters_version = 0
+        """Counts the changes of the materials' parameters (:meth:`parameters_changed`): what holds the
+        material at the points (:meth:`at_points`) takes it again when this moves."""
 
     # -- set-up ---------------------------------------------------------------------------------------
     def cells_of(self, tag: int | None) -> np.ndarray:
@@ -135,6 +138,24 @@ class GaussPointState:
                                  "every cell needs a material")
         for f in fields.values():
             f.x.scatter_forward()
+
+    def parameters_changed(self) -> None:
+        """Fill E, ν and the density again from :attr:`materials` after their parameters changed (a
+        parameter study, :mod:`dolfinx_nnqem.problem.parameter_study`), and the parts' own cell-wise
+        fields (a part with ``refill_parameters``). The forms read these fields: nothing is compiled."""
+        self.fill_cellwise({"E": self.E, "nu": self.nu, "density": self.density})
+        for kind, part in zip(self.kinds, self.parts):
+            refill = getattr(part, "refill_parameters", None)  # the parts whose parameters are cell-wise fields
+            if refill is not None:
+                refill({tag: m for tag, m in self.materials.items() if m.part_kind == kind})
+        self._material_at_points = None  # the material at the points, from the old fields
+        self.parameters_version += 1
+
+    def reset(self) -> None:
+        """Back to the initial state: σ_n, p_n, Δp_n, u_n and every internal variable zero, as built."""
+        for f in (self.sigma_n, self.p_n, self.dp_n, self.u_n, *self._others.values()):
+            f.x.array[:] = 0.0
+        self.version += 1
 
     def _space_of(self, shape: tuple[int, ...]) -> fem.FunctionSpace:
         if shape == ():

@@ -201,6 +201,12 @@ class VonMisesPart:
         self._trial_dp: fem.Function | None = None
         self._material_expressions: tuple[fem.Expression, ...] | None = None
 
+    def refill_parameters(self, members: Mapping[int | None, VonMises]) -> None:
+        """σ_y0 and H again from ``members`` after their parameters changed (a parameter study,
+        :meth:`~dolfinx_nnqem.material.state.GaussPointState.parameters_changed`): the forms read
+        these fields, nothing is compiled."""
+        _set_cellwise(self.space, {"sigma_y0": self.sigma_y0, "H": self.H}, members)
+
     # -- the return map in UFL ---------------------------------------------------------------------
     def ufl_return_map(self, u: fem.Function) -> ReturnMap:
         """Radial return from the converged state for the displacement ``u``."""

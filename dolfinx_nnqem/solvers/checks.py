@@ -145,6 +145,7 @@ class _Forms:
         self.strain_increment_expr = jit.expression(strain(problem.u) - strain(st.u_n), points)
         self._own_force: tuple[fem.Function, fem.Form] | None = None
         self._material: PointwiseMaterial | None = None
+        self._material_version = 0  # the state's parameters_version of _material
         # the state, not the problem: this object is the value of a WeakKeyDictionary keyed by
         # the problem, and a reference to its key would keep both alive for the whole process
         self._state = st
@@ -169,8 +170,9 @@ class _Forms:
     def material_at_points(self) -> PointwiseMaterial:
         """The material at the owned Gauss points (computed once; made per check instead, they did not
         lower the measured peak memory, ``docs/performance.md``)."""
-        if self._material is None:
-            self._material = self._state.at_points()
+        version = getattr(self._state, "parameters_version", 0)  # a parameter study changes them
+        if self._material is None or version != self._material_version:
+            self._material, self._material_version = self._state.at_points(), version
         return self._material
 
 

@@ -122,6 +122,7 @@ class NNEQM2Solver(ReleasesPETSc):
         self.increment_info: list[dict] = []  #: per converged increment: checks and counts
         t0 = time.perf_counter()
         self.gp = GaussPointOperators(problem)
+        self._parameters_version = problem.state.parameters_version  # the materials gp and K_e are built of
         self.frozen = self.settings.flow_directions == "frozen"
         refuse_material(self.gp, self.frozen)
         n_r = problem.rigid_modes.count
@@ -159,6 +160,10 @@ class NNEQM2Solver(ReleasesPETSc):
         """Solve for the load factor ``load_factor`` from the last converged state (the elastic
         stiffness K_e factorised once, on the first call)."""
         p = self.problem
+        if p.state.parameters_version != self._parameters_version:  # the same on every rank (update is collective)
+            raise ValueError("nneqm2: the problem's material parameters changed (ContactProblem.update) after this "
+                             "solver was built; its Gauss-point operators and factorised elastic stiffness are those "
+                             "of the old parameters: build the solver again (make_solver)")
         if not self._factorised:
             self.elastic.factorise(p.assemble_elastic_stiffness, "the elastic stiffness K_e")
             self._factorised = True
