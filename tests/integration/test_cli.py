@@ -4,6 +4,7 @@ import json
 from pathlib import Path
 
 import pytest
+from problem_files import two_beams_demo, two_beams_minimal
 
 from dolfinx_nnqem.cli import EXIT_BAD_INPUT, EXIT_OK, EXIT_USAGE, main
 from dolfinx_nnqem.problem_file import ProblemFileError, load_problem_file
@@ -30,24 +31,7 @@ def _write(tmp_path, text):
     return path
 
 
-GOOD = """
-[mesh]
-file = "MESH"
-[materials.1]
-E = 1.0e9
-nu = 0.3
-[materials.2]
-E = 1.0e9
-nu = 0.3
-[contact]
-surface1 = 21
-surface2 = 22
-mu_f = 0.3
-[[dirichlet]]
-tag = 11
-[[dirichlet]]
-tag = 12
-"""
+GOOD = two_beams_minimal("MESH")
 
 
 @pytest.mark.parametrize("change, named", [
@@ -104,10 +88,7 @@ def test_problem_file_with_an_xdmf_mesh(tmp_path):
         mesh.topology.create_connectivity(2, 3)
         xdmf.write_meshtags(cell_tags, mesh.geometry)
         xdmf.write_meshtags(facet_tags, mesh.geometry)
-    text = EXAMPLE.read_text().replace('file = "../meshes/two_beams.xdmf"',
-                                       f'file = "{(tmp_path / "beams.xdmf").as_posix()}"')
-    text = text.replace("increments = 15", "increments = 3")
-    (tmp_path / "p.toml").write_text(text)
+    (tmp_path / "p.toml").write_text(two_beams_demo((tmp_path / "beams.xdmf").as_posix(), solver_lines="increments = 3"))
     assert main(["-q", "run", str(tmp_path / "p.toml"), "--out", str(tmp_path / "out")]) == EXIT_OK
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     print(f"\n  XDMF mesh: {summary['num_pairs']} pairs, iterations {summary['iterations']}, "
@@ -145,9 +126,7 @@ def test_an_interrupt_inside_compiled_code_is_still_an_interrupt():
 
 def test_run_verbose_prints_a_line_per_increment(tmp_path, capsys):
     """Issue 31, item 9: ``run -v`` printed no line per increment although ``--help`` says so."""
-    text = EXAMPLE.read_text().replace('file = "../meshes/two_beams.xdmf"',
-                                       f'file = "{(ROOT / "meshes" / "two_beams.xdmf").as_posix()}"')
-    (tmp_path / "p.toml").write_text(text.replace("increments = 15", "increments = 3"))
+    (tmp_path / "p.toml").write_text(two_beams_demo(solver_lines="increments = 3"))
     assert main(["-v", "run", str(tmp_path / "p.toml"), "--out", str(tmp_path / "out")]) == EXIT_OK
     lines = [line for line in capsys.readouterr().out.splitlines() if "] increment " in line]
     print("\n  " + "\n  ".join(lines))

@@ -6,37 +6,15 @@ import re
 
 import pytest
 from mpi4py import MPI
+from problem_files import block_under_obstacle
 
 from dolfinx_nnqem.cli import EXIT_BAD_INPUT, EXIT_OK, main
 from dolfinx_nnqem.problem.meshing import build_block_stack
 from dolfinx_nnqem.problem_file import ProblemFileError, load_problem_file
 
-PROBLEM = """
-[mesh]
-file = "MESH"
-[materials.1]
-E = 1.0e9
-nu = 0.3
-[[contact]]
-surface2 = 201
-mu_f = 0.0
-name = "press"
-[contact.obstacle]
-type = "sphere"
-centre = [0.5, 1.5, 0.5]
-radius = 1.0
-motion = [0.0, -0.02, 0.0]
-[[dirichlet]]
-tag = 101
-[solver]
-method = "METHOD"
-increments = 1
-[output]
-pictures = false
-[output.probes]
-"top" = [0.5, 0.5, 0.5]
-ESTIMATE
-"""
+PROBLEM = block_under_obstacle('type = "sphere"\ncentre = [0.5, 1.5, 0.5]\nradius = 1.0\nmotion = [0.0, -0.02, 0.0]',
+                               mu_f=0.0, increments=1,
+                               more='[output]\npictures = false\n[output.probes]\n"top" = [0.5, 0.5, 0.5]\nESTIMATE\n')
 
 pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="the command-line tests run serially")
 

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from conftest import box_with_face_tags
 from mpi4py import MPI
+from problem_files import two_beams_minimal
 
 from dolfinx_nnqem import compat
 from dolfinx_nnqem.material import Elastic, LinearHardening, TabulatedHardening, VoceHardening, VonMises
@@ -237,14 +238,11 @@ def test_two_ranks_match_serial_with_mixed_materials(tmp_path):
 
 
 # -- problem files ----------------------------------------------------------------------------------------
-ROOT = Path(__file__).resolve().parents[2]
 
 
 def _problem_file(tmp_path, materials: str) -> Path:
-    mesh = (ROOT / "meshes" / "two_beams.msh").as_posix()
     path = tmp_path / "p.toml"
-    path.write_text(f'[mesh]\nfile = "{mesh}"\n{materials}\n[contact]\nsurface1 = 21\nsurface2 = 22\nmu_f = 0.1\n'
-                    "[[dirichlet]]\ntag = 11\n")
+    path.write_text(two_beams_minimal(materials=materials, mu_f=0.1, clamped=(11,)))
     return path
 
 

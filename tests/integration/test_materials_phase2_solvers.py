@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from mpi4py import MPI
+from problem_files import two_beams_minimal
 
 from dolfinx_nnqem import compat
 from dolfinx_nnqem.material import BackStress, DruckerPrager, Elastic, VoceHardening, VonMises
@@ -102,12 +103,9 @@ def test_options_that_assume_a_symmetric_matrix_are_refused_for_an_unsymmetric_t
 def test_problem_files_take_kinematic_hardening_and_drucker_prager(tmp_path):
     from dolfinx_nnqem.problem_file import ProblemFileError, load_problem_file
 
-    mesh = (Path(__file__).resolve().parents[2] / "meshes" / "two_beams.msh").as_posix()
-
     def load(materials: str):
         path = tmp_path / "p.toml"
-        path.write_text(f'[mesh]\nfile = "{mesh}"\n{materials}\n[contact]\nsurface1 = 21\nsurface2 = 22\nmu_f = 0.1\n'
-                        "[[dirichlet]]\ntag = 11\n")
+        path.write_text(two_beams_minimal(materials=materials, mu_f=0.1, clamped=(11,)))
         return load_problem_file(path)
 
     spec = load('[materials.1]\nE = 2.0e10\nnu = 0.2\nhardening = "voce"\nsigma_y0 = 2.0e7\nQ = 5.0e6\nb = 200.0\n'

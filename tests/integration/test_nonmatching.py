@@ -15,6 +15,7 @@ independently). A DOLFINx mesh holds one cell type, so a tetrahedral side meets 
 import numpy as np
 import pytest
 from mpi4py import MPI
+from problem_files import pressed_block_stack
 
 from dolfinx_nnqem.material import VonMises
 from dolfinx_nnqem.problem.meshing import BlockStackTags as T
@@ -165,42 +166,7 @@ def test_sliding_block_non_matching(method, law, discretisation):
 
 # -- problem files ---------------------------------------------------------------------------------------
 
-PATCH_FILE = """
-[mesh]
-file = "stack.msh"
-[materials.1]
-E = 1.0e9
-nu = 0.3
-[materials.2]
-E = 1.0e9
-nu = 0.3
-[[contact]]
-surface1 = 201
-surface2 = 102
-mu_f = 0.3
-{contact}
-[[dirichlet]]
-tag = 101
-components = [1]
-[[dirichlet]]
-tag = 301
-components = [0]
-[[dirichlet]]
-tag = 302
-components = [0]
-[[dirichlet]]
-tag = 501
-components = [2]
-[[dirichlet]]
-tag = 502
-components = [2]
-[[pressure]]
-tag = 202
-p = 1.0e6
-[solver]
-increments = 1
-rtol = 1e-12
-"""
+PATCH_FILE = pressed_block_stack(contact_keys="{contact}")
 
 
 @pytest.mark.parametrize("method", METHODS)

@@ -18,6 +18,7 @@ import time
 import numpy as np
 import pytest
 from mpi4py import MPI
+from problem_files import block_under_obstacle
 
 from dolfinx_nnqem.problem import PiecewiseLinearPath
 from dolfinx_nnqem.contact.obstacles import Plane, Sphere
@@ -243,27 +244,9 @@ def test_elastoplastic_indentation_nneqm2_agrees_with_monolithic():
 
 
 # -- problem file --------------------------------------------------------------------------------------
-PROBLEM = """
-[mesh]
-file = "MESH"
-[materials.1]
-E = 1.0e9
-nu = 0.3
-[[contact]]
-surface2 = 201
-mu_f = 0.3
-name = "press"
-[contact.obstacle]
-type = "plane"
-point = [0.0, 0.5, 0.0]
-normal = [0.0, -1.0, 0.0]
-motion = [[0.0, 0.0, 0.0, 0.0], [0.5, 0.0, -0.001, 0.0], [1.0, 0.005, -0.001, 0.0]]
-[[dirichlet]]
-tag = 101
-[solver]
-method = "METHOD"
-increments = 4
-"""
+PROBLEM = block_under_obstacle('type = "plane"\npoint = [0.0, 0.5, 0.0]\nnormal = [0.0, -1.0, 0.0]\n'
+                               "motion = [[0.0, 0.0, 0.0, 0.0], [0.5, 0.0, -0.001, 0.0], [1.0, 0.005, -0.001, 0.0]]",
+                               mu_f=0.3, increments=4)
 
 
 @pytest.mark.parametrize("method", METHODS)

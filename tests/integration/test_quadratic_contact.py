@@ -34,6 +34,7 @@ import numpy as np
 import pytest
 from conftest import box_with_face_tags
 from mpi4py import MPI
+from problem_files import pressed_block_stack
 
 from dolfinx_nnqem import compat
 from dolfinx_nnqem.contact import quadratic_facets as qf
@@ -304,44 +305,8 @@ def test_solver_variants_take_quadratic_mortar(mesh_name, method, variant):
 
 
 # -- problem files and MPI ---------------------------------------------------------------------------
-PATCH_FILE = """
-[mesh]
-file = "stack.msh"
-degree = 2
-[materials.1]
-E = 1.0e9
-nu = 0.3
-[materials.2]
-E = 1.0e9
-nu = 0.3
-[[contact]]
-surface1 = 201
-surface2 = 102
-mu_f = 0.3
-discretisation = "{discretisation}"
-[[dirichlet]]
-tag = 101
-components = [1]
-[[dirichlet]]
-tag = 301
-components = [0]
-[[dirichlet]]
-tag = 302
-components = [0]
-[[dirichlet]]
-tag = 501
-components = [2]
-[[dirichlet]]
-tag = 502
-components = [2]
-[[pressure]]
-tag = 202
-p = 1.0e6
-[solver]
-method = "{method}"
-increments = 1
-rtol = 1e-12
-"""
+PATCH_FILE = pressed_block_stack(mesh_keys="degree = 2", contact_keys='discretisation = "{discretisation}"',
+                                 solver_keys='method = "{method}"')
 
 
 @pytest.mark.parametrize("method", METHODS)

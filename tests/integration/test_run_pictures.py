@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from problem_files import TWO_BEAMS_MSH, two_beams_demo
 
 from dolfinx_nnqem.cli import EXIT_DIVERGED, EXIT_IO, EXIT_OK, main
 from dolfinx_nnqem.io.run_pictures import ENV_SWITCH, PICTURES
@@ -71,8 +72,8 @@ def test_default_output_is_only_the_packages_lines(two_beam_run):
 def test_verbose_shows_gmsh(tmp_path, capfd):
     from dolfinx_nnqem.chatter import show_third_party_output
 
-    msh = (ROOT / "meshes" / "two_beams.msh").as_posix()  # (the demo reads the same mesh as XDMF, without gmsh)
-    (tmp_path / "p.toml").write_text(EXAMPLE.read_text().replace('"../meshes/two_beams.xdmf"', f'"{msh}"'))
+    # the .msh: the demo reads the same mesh as XDMF, without gmsh
+    (tmp_path / "p.toml").write_text(two_beams_demo(TWO_BEAMS_MSH))
     try:  # in this process: capfd captures what gmsh writes to the C-level stdout
         assert main(["-v", "run", str(tmp_path / "p.toml"), "--check", "--out", str(tmp_path / "out")]) == EXIT_OK
     finally:
@@ -85,7 +86,7 @@ def test_verbose_shows_gmsh(tmp_path, capfd):
 def _failing_problem(tmp_path: Path) -> Path:
     """Two beams in 2 increments whose second multiplies the loads by 30: the strain check
     (max_strain 0.005) rejects it without cutbacks; increment 1 converges (strain ~4e-4)."""
-    text = EXAMPLE.read_text().replace('"../meshes/two_beams.xdmf"', f'"{(ROOT / "meshes" / "two_beams.xdmf").as_posix()}"')
+    text = two_beams_demo()
     ramp = "amplitude = [[0.0, 0.0], [0.5, 1.0], [1.0, 30.0]]"
     text = text.replace("value = [1.0e5, -1.0e5, 0.5e5]", f"value = [1.0e5, -1.0e5, 0.5e5]\n{ramp}")
     text = text.replace("g = [0.0, -9.81, 0.0]", f"g = [0.0, -9.81, 0.0]\n{ramp}")
@@ -127,19 +128,17 @@ def test_pictures_can_be_turned_off(tmp_path, monkeypatch):
     assert (out / "summary.json").is_file() and not (out / "pictures").exists()
     from dolfinx_nnqem.problem_file import ProblemFileError, load_problem_file
 
-    text = EXAMPLE.read_text().replace("[output]", "[output]\npictures = false")
-    (tmp_path / "p.toml").write_text(text.replace("../meshes", (ROOT / "meshes").as_posix()))
+    text = two_beams_demo().replace("[output]", "[output]\npictures = false")
+    (tmp_path / "p.toml").write_text(text)
     assert load_problem_file(tmp_path / "p.toml").output["pictures"] is False
-    (tmp_path / "p.toml").write_text(text.replace("pictures = false", 'pictures = "no"')
-                                     .replace("../meshes", (ROOT / "meshes").as_posix()))
+    (tmp_path / "p.toml").write_text(text.replace("pictures = false", 'pictures = "no"'))
     with pytest.raises(ProblemFileError, match="pictures"):
         load_problem_file(tmp_path / "p.toml")
 
 
 def _degree_2_problem(tmp_path: Path) -> Path:
     """The two beams with a quadratic displacement (``degree = 2``) on their first-order mesh."""
-    text = EXAMPLE.read_text().replace('"../meshes/two_beams.xdmf"',
-                                       f'"{(ROOT / "meshes" / "two_beams.xdmf").as_posix()}"\ndegree = 2')
+    text = two_beams_demo(mesh_keys="degree = 2")
     path = tmp_path / "quadratic.toml"
     path.write_text(text)
     return path

@@ -10,11 +10,11 @@
 """
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
 from mpi4py import MPI
+from problem_files import two_beams_demo
 from test_contact_verification import ELASTIC, P, sliding_block
 
 from dolfinx_nnqem.cli import EXIT_OK, main
@@ -105,9 +105,7 @@ def test_a_load_no_state_can_carry_ends_in_a_clear_error():
 
 
 def _two_beams_file(tmp_path, solver_lines: str):
-    demo = Path(__file__).resolve().parents[2] / "demos" / "two_beams.toml"
-    text = demo.read_text().replace('file = "../meshes/two_beams.xdmf"', f'file = "{demo.parent.parent / "meshes" / "two_beams.xdmf"}"')
-    text = text.replace("increments = 15", solver_lines)
+    text = two_beams_demo(solver_lines=solver_lines)
     path = tmp_path / "auto.toml"
     path.write_text(text)
     return path

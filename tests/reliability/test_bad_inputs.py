@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from mpi4py import MPI
+from problem_files import two_beams_minimal
 
 from dolfinx_nnqem.cli import EXIT_BAD_INPUT, EXIT_OK, main
 from dolfinx_nnqem.material import VonMises
@@ -18,28 +19,7 @@ from dolfinx_nnqem.solvers.step_control import AutomaticIncrements  # noqa: F401
 
 ROOT = Path(__file__).resolve().parents[2]
 MESH = (ROOT / "meshes" / "two_beams.msh").as_posix()
-GOOD = f"""
-[mesh]
-file = "{MESH}"
-[materials.1]
-E = 1.0e9
-nu = 0.3
-[materials.2]
-E = 1.0e9
-nu = 0.3
-[contact]
-surface1 = 21
-surface2 = 22
-mu_f = 0.3
-[[dirichlet]]
-tag = 11
-[[dirichlet]]
-tag = 12
-[solver]
-increments = 2
-[output]
-folder = "out"
-"""
+GOOD = two_beams_minimal(MESH, more='[solver]\nincrements = 2\n[output]\nfolder = "out"\n')
 M = VonMises(E=1e9, nu=0.3)
 
 

@@ -7,6 +7,7 @@ import tomllib
 from pathlib import Path
 
 import pytest
+from problem_files import two_beams_minimal
 
 from dolfinx_nnqem.cli import main
 from dolfinx_nnqem.problem_file import KEYS, SECTIONS, load_problem_file
@@ -63,10 +64,8 @@ def _literal(cell: str):
 
 
 def test_documented_defaults_are_the_readers(tmp_path):
-    mesh = (ROOT / "meshes" / "two_beams.msh").as_posix()
     (tmp_path / "p.toml").write_text(
-        f'[mesh]\nfile = "{mesh}"\n[materials.1]\nE = 1.0\nnu = 0.3\n'
-        "[contact]\nsurface1 = 21\nsurface2 = 22\nmu_f = 0.1\n[[dirichlet]]\ntag = 11\n")
+        two_beams_minimal(materials="[materials.1]\nE = 1.0\nnu = 0.3", mu_f=0.1, clamped=(11,)))
     spec = load_problem_file(tmp_path / "p.toml")
     from dolfinx_nnqem.contact.specification import Contact
 
