@@ -5,7 +5,8 @@
 * :func:`two_beams_minimal`: the least a problem file on the two beams' mesh needs (materials,
   the contact 21/22, the clamps; no load), for the reader's tests and ``run --check``;
 * :func:`pressed_block_stack`: two blocks of a ``build_block_stack`` mesh ``stack.msh`` on
-  rollers, the upper one pressed by p = 1e6 onto the lower: the contact patch test.
+  rollers, the upper one pressed by p = 1e6 onto the lower: the contact patch test;
+* :func:`block_under_obstacle`: a block pressed by a rigid obstacle (``[contact.obstacle]``).
 
 Where a test fills a text in later (``str.format`` or ``str.replace``), its placeholders go in
 as parameters (``contact_keys="{contact}"``) and the test body is the same as with the copy.
@@ -33,8 +34,12 @@ def two_beams_demo(mesh: str = TWO_BEAMS_XDMF, *, mesh_keys: str = "", solver_li
     solver_lines
         Lines in place of the demo's ``increments = 15`` (the last line of ``[solver]``).
     """
-    mesh_table = f'file = "{mesh}"' + (f"\n{mesh_keys}" if mesh_keys else "")
-    text = TWO_BEAMS_DEMO.read_text().replace('file = "../meshes/two_beams.xdmf"', mesh_table)
+    text = TWO_BEAMS_DEMO.read_text()
+    for line in ('file = "../meshes/two_beams.xdmf"', "increments = 15"):
+        if line not in text:  # the demo changed: these texts would silently keep the demo's values
+            raise ValueError(f"{TWO_BEAMS_DEMO} has no line {line!r}: update tests/problem_files.py")
+    mesh_lines = f'file = "{mesh}"' + (f"\n{mesh_keys}" if mesh_keys else "")
+    text = text.replace('file = "../meshes/two_beams.xdmf"', mesh_lines)
     return text if solver_lines is None else text.replace("increments = 15", solver_lines)
 
 
