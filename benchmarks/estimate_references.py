@@ -68,6 +68,7 @@ def two_beams() -> None:
 
 def cylinder() -> None:
     sys.path.insert(0, str(ROOT / "tests"))
+    sys.path.insert(0, str(ROOT / "tests" / "integration"))  # the test module whose case this runs
     from test_thick_cylinder import A, MATERIAL, cylinder_problem, limit_pressure
 
     p_max = 0.9 * limit_pressure(MATERIAL)

@@ -1,6 +1,6 @@
 """Cost per Newton iteration of each material against linear von Mises, on the same problem in one process.
 
-The pressed and dragged blocks (``tests/test_materials.py``: an upper block pressed 3e7 Pa and
+The pressed and dragged blocks (``tests/integration/test_materials.py``: an upper block pressed 3e7 Pa and
 dragged 0.2 of it onto a lower one, ``--cells`` hexahedra per block edge), both blocks of one
 material: linear von Mises (closed-form UFL), Voce and a table (the return map on arrays at the
 Gauss points, ``material/quadrature_part.py``), linear elasticity (``Elastic``), kinematic

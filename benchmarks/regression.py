@@ -27,6 +27,7 @@ from mpi4py import MPI
 
 ROOT = Path(dolfinx_nnqem.__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
+sys.path.insert(0, str(ROOT / "tests" / "integration"))  # the test modules whose cases this runs
 
 
 def _options(**kwargs):

@@ -44,6 +44,7 @@ from dolfinx_nnqem.solvers import solve_load_steps
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
+sys.path.insert(0, str(ROOT / "tests" / "integration"))  # the test modules whose cases this runs
 
 LAWS = ("alart-curnier", "polar")
 STEEL_LIKE = VonMises(E=2.0e10, nu=0.2, sigma_y0=2.0e7, H=2.0e9)  # the pressed blocks' material

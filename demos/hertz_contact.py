@@ -26,7 +26,7 @@
 #
 # Both results assume elastically similar bodies (no coupling of normal and tangential
 # displacements), which identical materials give. These are verification cases V6 and V7
-# (`tests/test_hertz.py`; the choices are explained in `docs/verification-hertz.md`).
+# (`tests/integration/test_hertz.py`; the choices are explained in `docs/verification-hertz.md`).
 #
 # Outputs, in `--out` (default `results/hertz`):
 #

@@ -159,7 +159,7 @@ KEYS: dict[str, frozenset[str]] = {
     "estimate": frozenset({"enabled", "enrichment", "target_error", "max_cycles", "refine_fraction", "quantities"}),
 }
 """Every key a problem file may hold, by section (the one list the checks below use;
-``docs/problem-file.md`` documents each, and ``tests/test_problem_file_doc.py`` compares the two)."""
+``docs/problem-file.md`` documents each, and ``tests/unit/test_problem_file_doc.py`` compares the two)."""
 SECTIONS = {section.split(".")[0] for section in KEYS}
 XDMF_KEYS = frozenset({"mesh_name", "cell_tags", "facet_tags"})
 """The [mesh] keys that name the grids of an XDMF file (refused with a gmsh .msh file)."""

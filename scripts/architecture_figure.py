@@ -4,7 +4,7 @@ imports which, read from the package itself (so the picture cannot drift from th
     python scripts/architecture_figure.py            # (re)draw the figure
     python scripts/architecture_figure.py --check    # exit 1 if the modules drawn differ from the package's
 
-``tests/test_docs.py`` runs the check.
+``tests/unit/test_docs.py`` runs the check.
 """
 
 from __future__ import annotations

@@ -8,7 +8,7 @@ figure the demo writes (a ``NAME.png`` named in a code cell) follows the cell th
 taken from ``docs/figures`` (the stored output of a run of the demo; :data:`TUTORIALS` maps
 the demo's file names to the stored ones). The demos are not executed at docs build: they take
 minutes on two cores, some need MPI and all need DOLFINx in the docs environment, while the
-pages need only their text and figures. ``tests/test_tutorials.py`` checks that the pages are
+pages need only their text and figures. ``tests/integration/test_tutorials.py`` checks that the pages are
 up to date and that every figure exists.
 """
 

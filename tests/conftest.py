@@ -1,14 +1,18 @@
 """Shared fixtures. ``dolfinx_nnqem`` is imported first (the PyPI wheel needs it before dolfinx)."""
 
 import os
+from pathlib import Path
 
 import dolfinx_nnqem  # noqa: F401  (must precede dolfinx / petsc4py)
 import numpy as np
 import pytest
 from mpi4py import MPI
 
+TESTS = Path(__file__).resolve().parent
+"""The test folder: ``unit/``, ``integration/``, ``reliability/`` and ``mpi/`` (``CONTRIBUTING.md``)."""
+
 # the end-of-run pictures cost seconds per run: off for the suite's many runs, on (the users'
-# default) in tests/test_run_pictures.py, which removes this switch
+# default) in tests/integration/test_run_pictures.py, which removes this switch
 os.environ.setdefault("DOLFINX_NNQEM_PICTURES", "0")
 
 
@@ -37,9 +41,10 @@ def box_factory():
 
 
 FAST_TIER = (
-    "test_api_coverage.py", "test_compat.py", "test_contracts.py", "test_drucker_prager.py",
-    "test_dual_quadratic.py", "test_function_sizes.py", "test_kinematic_hardening.py", "test_laws.py",
-    "test_material.py", "test_mortar_geometry.py", "test_nonsmooth.py", "test_problem_file_doc.py",
+    "unit/test_api_coverage.py", "unit/test_compat.py", "unit/test_contracts.py", "unit/test_drucker_prager.py",
+    "unit/test_dual_quadratic.py", "unit/test_function_sizes.py", "unit/test_kinematic_hardening.py",
+    "unit/test_laws.py", "unit/test_material.py", "unit/test_mortar_geometry.py", "unit/test_nonsmooth.py",
+    "unit/test_problem_file_doc.py",
 )
 """The fast tier (``scripts/run-tests --fast``, under 2 minutes): the unit tests of the layers'
 pieces — the pair laws and their Jacobians, the nonsmooth Newton driver, the return maps and
@@ -69,14 +74,20 @@ def _one_mpi_job_at_a_time(request, tmp_path_factory):
         yield
 
 
+def _in_fast_tier(item: pytest.Item) -> bool:
+    """Whether a test's file is in :data:`FAST_TIER` (paths relative to this folder)."""
+    path = item.path.resolve()
+    return path.is_relative_to(TESTS) and path.relative_to(TESTS).as_posix() in FAST_TIER
+
+
 def pytest_collection_modifyitems(config, items):
     """Tests marked ``slow`` run only when asked for (``-m slow``); the default run deselects them.
     With ``--fast``, only the files of :data:`FAST_TIER` run."""
     if config.getoption("fast"):
-        other = [item for item in items if item.path.name not in FAST_TIER]
+        other = [item for item in items if not _in_fast_tier(item)]
         if other:
             config.hook.pytest_deselected(items=other)
-            items[:] = [item for item in items if item.path.name in FAST_TIER]
+            items[:] = [item for item in items if _in_fast_tier(item)]
     if "slow" in (config.getoption("markexpr") or ""):
         return
     slow = [item for item in items if "slow" in item.keywords]

@@ -9,13 +9,14 @@ import sys
 import time
 from pathlib import Path
 
+from problem_files import TWO_BEAMS_MSH, two_beams_demo
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def problem_file(folder: Path, increments: int = 30, extra: str = "", solver: str = "") -> Path:
-    text = (ROOT / "demos" / "two_beams.toml").read_text()
-    text = text.replace('file = "../meshes/two_beams.xdmf"', f'file = "{(ROOT / "meshes" / "two_beams.msh").as_posix()}"')  # (the .msh: gmsh's reader under test too)
-    text = text.replace("increments = 15", f"increments = {increments}\n{solver}")
+    # the .msh: gmsh's reader under test too
+    text = two_beams_demo(TWO_BEAMS_MSH, solver_lines=f"increments = {increments}\n{solver}")
     text = text.replace('[output]\nfolder = "results/two_beams_toml"', f'[output]\nfolder = "results/two_beams_toml"\n{extra}')
     path = folder / "p.toml"
     path.write_text(text)

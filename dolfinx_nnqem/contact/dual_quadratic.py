@@ -122,7 +122,7 @@ def quadratic_dual_coefficients(x: npt.ArrayLike) -> tuple[np.ndarray, np.ndarra
     M_e and D_e use :func:`~dolfinx_nnqem.contact.quadratic_facets.reference_rule` with the
     quadratic area element: exact on straight-sided flat facets; on curved ones biorthogonality
     holds for that rule, which integrates the rational area element to about 1e-7 relative on a
-    strongly curved, distorted facet (``tests/test_dual_quadratic.py``) and far better on a
+    strongly curved, distorted facet (``tests/unit/test_dual_quadratic.py``) and far better on a
     mesh's facets.
     """
     x = np.asarray(x, dtype=np.float64)

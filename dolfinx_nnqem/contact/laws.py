@@ -359,7 +359,7 @@ class _CompiledWhenItPays:
     numba's disk cache next to this file): never much more than twice the cheaper of the two
     choices in hindsight (the ski-rental rule), and a small run never pays for numba. Both
     perform the same IEEE operations in the same order (numba neither fuses nor reorders them
-    without ``fastmath``): the results are bit for bit the same (``tests/test_laws.py``).
+    without ``fastmath``): the results are bit for bit the same (``tests/unit/test_laws.py``).
     """
 
     def __init__(self, kernel):

@@ -1,7 +1,7 @@
 """The materials, held to the interface's Protocols by the type checker.
 
 Each function returns an implementation as its Protocol; mypy (run by ``.ci/run``) verifies that
-the implementation has every member with compatible signatures, and ``tests/test_contracts.py``
+the implementation has every member with compatible signatures, and ``tests/unit/test_contracts.py``
 calls them on real objects. A new material adds its classes here (``CONTRIBUTING.md``).
 """
 

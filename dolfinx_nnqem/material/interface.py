@@ -2,7 +2,7 @@
 writers reach a bulk material.
 
 Four Protocols (checked by the type checker in :mod:`~dolfinx_nnqem.material.conformance` and by
-``tests/test_contracts.py``). A material module implements the first, third and fourth; the
+``tests/unit/test_contracts.py``). A material module implements the first, third and fourth; the
 second is implemented once, for every material, by :class:`~dolfinx_nnqem.material.state.GaussPointState`,
 built by :func:`~dolfinx_nnqem.material.state.material_state` from ``{cell_tag: material}``:
 

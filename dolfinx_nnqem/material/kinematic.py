@@ -15,7 +15,7 @@ r falls strictly (|α_k| ≤ √(2/3) C_k/γ_k bounds the growth of |ξ|), r(0) 
 √(3/2)(|s_tr| + Σ|α_k,n|)/(3μ): Newton's method kept inside that bracket (bisection where a step
 leaves it) finds the root, as for isotropic hardening alone (:mod:`.isotropic`).
 
-The consistent tangent (derived here; ``tests/test_kinematic_hardening.py`` checks it against
+The consistent tangent (derived here; ``tests/unit/test_kinematic_hardening.py`` checks it against
 central differences). With t = s_tr (coordinates), β(Δp) = Σ α_k,n/(1 + γ_k Δp),
 β' = −Σ γ_k α_k,n/(1 + γ_k Δp)², and r linearised,
 

@@ -67,7 +67,7 @@ lies an order of magnitude below them."""
 POOR_RATIO = 1.0 / 30.0
 """A cell with ρ < this is reported: a second-order cell whose mid-edge node sits 0.235 of its
 edge off the middle (0.015 of the edge from the quarter point, where det J reaches 0 at the
-vertex; measured on a reference tetrahedron and hexahedron, ``tests/test_mesh_quality.py``)."""
+vertex; measured on a reference tetrahedron and hexahedron, ``tests/reliability/test_mesh_quality.py``)."""
 
 CHUNK = 1024
 """Cells per vectorised block: J's entries of a block (CHUNK × points doubles each) stay in the

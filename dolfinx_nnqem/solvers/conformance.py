@@ -2,7 +2,7 @@
 
 Each function below returns an implementation as its Protocol; the type checker (mypy, run by
 ``.ci/run``) verifies that the implementation has every member of the Protocol with compatible
-signatures, and ``tests/test_contracts.py`` calls these functions on real objects to check the
+signatures, and ``tests/unit/test_contracts.py`` calls these functions on real objects to check the
 same at run time. A new solver, pair set or obstacle adds a line here; a material, in
 :mod:`dolfinx_nnqem.material.conformance` (re-exported here) (``CONTRIBUTING.md``).
 """

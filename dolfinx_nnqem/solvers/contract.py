@@ -4,7 +4,7 @@ users may use of a solver.
 A solver takes a problem — :class:`SolvableProblem`, which :class:`~dolfinx_nnqem.problem.ContactProblem`
 implements — and solves one load increment at a time; :func:`~dolfinx_nnqem.solvers.stepping.solve_load_steps`
 drives it. Every solver of the package satisfies :class:`Solver` (the type checker holds them to
-both in :mod:`~dolfinx_nnqem.solvers.conformance`; ``tests/test_contracts.py`` checks them at run
+both in :mod:`~dolfinx_nnqem.solvers.conformance`; ``tests/unit/test_contracts.py`` checks them at run
 time), and frees its PETSc objects when used as a context manager::
 
     with make_solver("monolithic", problem) as solver:

@@ -1,4 +1,4 @@
-"""MPI helper of tests/test_contact_mpi.py: a contact case solved on any number of ranks.
+"""MPI helper of tests/mpi/test_contact_mpi.py: a contact case solved on any number of ranks.
 
     mpiexec -n N python contact_cases.py CASE METHOD OUT.npz
 
@@ -19,6 +19,7 @@ import numpy as np
 from mpi4py import MPI
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "integration"))  # the test module this script runs
 
 from dolfinx_nnqem.io import pair_table  # noqa: E402
 from dolfinx_nnqem.solvers import SolverOptions, make_solver  # noqa: E402

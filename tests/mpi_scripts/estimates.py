@@ -1,4 +1,4 @@
-"""MPI helper of tests/test_error_estimates_mpi.py: a run and its error estimates on any number of ranks.
+"""MPI helper of tests/mpi/test_error_estimates_mpi.py: a run and its error estimates on any number of ranks.
 
     mpiexec -n N python estimates.py CASE OUT.npz
 
@@ -27,7 +27,7 @@ from dolfinx_nnqem.solvers import SolverOptions, make_solver, solve_load_steps  
 
 
 def sphere_problem(comm):
-    """The rigid sphere of tests/test_obstacles.py on its graded block (h = a/2), on ``comm``."""
+    """The rigid sphere of tests/integration/test_obstacles.py on its graded block (h = a/2), on ``comm``."""
     from dolfinx_nnqem.contact.obstacles import Sphere
     from dolfinx_nnqem.material import VonMises
     from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet

@@ -1,4 +1,4 @@
-"""MPI helper of tests/test_symmetry_planes.py: a block on an incline, held at its side, on any number of ranks.
+"""MPI helper of tests/integration/test_symmetry_planes.py: a block on an incline, held at its side, on any number of ranks.
 
     mpiexec -n N python incline_block.py OUT.npz DISCRETISATION METHOD MU_F
 

@@ -1,7 +1,7 @@
-"""MPI helper of tests/test_iteration_log.py: the pressed blocks (level 1) with the package's
+"""MPI helper of tests/integration/test_iteration_log.py: the pressed blocks (level 1) with the package's
 logger at INFO on rank 0 only. Prints rank 0's committed plastic points of the last increment.
 The iterative linear solver: Debian 13's MUMPS (no METIS) fails on this saddle-point matrix on
-2 ranks (tests/test_iterative.py)."""
+2 ranks (tests/integration/test_iterative.py)."""
 
 import logging
 

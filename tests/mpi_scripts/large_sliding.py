@@ -1,4 +1,4 @@
-"""MPI helper of tests/test_large_sliding_mpi.py: large-sliding cases on any number of ranks.
+"""MPI helper of tests/mpi/test_large_sliding_mpi.py: large-sliding cases on any number of ranks.
 
     mpiexec -n N python large_sliding.py OUT.npz [CASE ...]
 

@@ -1,4 +1,4 @@
-"""MPI helper of tests/test_load_paths.py: every row of the load-path matrix, every method, in 1
+"""MPI helper of tests/integration/test_load_paths.py: every row of the load-path matrix, every method, in 1
 and 4 increments, on the ranks it is started with.
 
     mpiexec -n 2 python load_paths.py OUT.json
@@ -16,6 +16,7 @@ import dolfinx_nnqem  # noqa: F401  (first: the PyPI wheel loads MPI/PETSc befor
 from mpi4py import MPI
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "integration"))  # the test module this script runs
 
 from test_load_paths import ROWS, solve  # noqa: E402
 

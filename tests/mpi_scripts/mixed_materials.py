@@ -1,4 +1,4 @@
-"""MPI helper of tests/test_materials.py: the elastic + Voce blocks solved on any number of ranks.
+"""MPI helper of tests/integration/test_materials.py: the elastic + Voce blocks solved on any number of ranks.
 
     mpiexec -n N python mixed_materials.py OUT.npz
 
@@ -13,6 +13,7 @@ import numpy as np
 from mpi4py import MPI
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "integration"))  # the test module this script runs
 
 from test_materials import _solve  # noqa: E402
 

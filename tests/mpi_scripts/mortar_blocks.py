@@ -1,4 +1,4 @@
-"""MPI helper of tests/test_nonmatching_mpi.py: a non-matching block pair (dual mortar) on any number of ranks.
+"""MPI helper of tests/mpi/test_nonmatching_mpi.py: a non-matching block pair (dual mortar) on any number of ranks.
 
     mpiexec -n N python mortar_blocks.py OUT.npz METHOD [METHOD ...]
 

@@ -1,4 +1,4 @@
-"""MPI helper of tests/test_pairs.py: invalid contact input must raise on EVERY rank.
+"""MPI helper of tests/unit/test_pairs.py: invalid contact input must raise on EVERY rank.
 
     mpiexec -n N python pairs_errors.py
 

@@ -1,4 +1,4 @@
-"""MPI helper of tests/test_pairs.py: contact pairs of three models, gathered on every rank.
+"""MPI helper of tests/unit/test_pairs.py: contact pairs of three models, gathered on every rank.
 
     mpiexec -n N python pairs_gather.py OUT.json
 

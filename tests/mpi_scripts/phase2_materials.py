@@ -1,4 +1,4 @@
-"""MPI helper of tests/test_materials_phase2_solvers.py: the blocks with a kinematic or Drucker–Prager upper block.
+"""MPI helper of tests/integration/test_materials_phase2_solvers.py: the blocks with a kinematic or Drucker–Prager upper block.
 
     mpiexec -n N python phase2_materials.py UPPER OUT.npz
 
@@ -13,6 +13,7 @@ import numpy as np
 from mpi4py import MPI
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "integration"))  # the test module this script runs
 
 from test_materials_phase2_solvers import _solve  # noqa: E402
 

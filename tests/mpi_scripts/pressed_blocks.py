@@ -1,4 +1,4 @@
-"""MPI helper of tests/test_iterative.py: the pressed blocks (level 2, or LEVEL) solved by the monolithic solver.
+"""MPI helper of tests/integration/test_iterative.py: the pressed blocks (level 2, or LEVEL) solved by the monolithic solver.
 
     mpiexec -n N python pressed_blocks.py LINEAR_SOLVER OUT.npz [LEVEL]
 

@@ -1,4 +1,4 @@
-"""MPI helper of tests/test_quadratic_contact.py: contact with degree-2 displacements on any number of ranks.
+"""MPI helper of tests/integration/test_quadratic_contact.py: contact with degree-2 displacements on any number of ranks.
 
     mpiexec -n N python quadratic_blocks.py OUT.npz
 

@@ -1,4 +1,4 @@
-"""MPI helper of tests/test_reliability_mpi.py: the command line with a failure on ONE rank.
+"""MPI helper of tests/mpi/test_reliability_mpi.py: the command line with a failure on ONE rank.
 
     mpiexec -n 2 python rank_failure.py CASE RANK -- dolfinx-nnqem arguments...
 

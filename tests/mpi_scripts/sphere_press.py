@@ -1,4 +1,4 @@
-"""MPI helper of tests/test_sphere_press.py: the combined-hardening press and lift, monolithic.
+"""MPI helper of tests/integration/test_sphere_press.py: the combined-hardening press and lift, monolithic.
 
     mpiexec -n N python sphere_press.py OUT.npz
 
@@ -13,6 +13,7 @@ import numpy as np
 from mpi4py import MPI
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "integration"))  # the test module this script runs
 
 from test_sphere_press import press  # noqa: E402
 

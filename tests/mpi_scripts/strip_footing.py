@@ -1,4 +1,4 @@
-"""MPI helper of tests/test_strip_footing.py: the rough footing on Drucker–Prager (φ = 20°), n = 1.
+"""MPI helper of tests/integration/test_strip_footing.py: the rough footing on Drucker–Prager (φ = 20°), n = 1.
 
     mpiexec -n N python strip_footing.py OUT.npz
 
@@ -13,6 +13,7 @@ import numpy as np
 from mpi4py import MPI
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "integration"))  # the test module this script runs
 
 from test_strip_footing import case, footing_run  # noqa: E402
 
