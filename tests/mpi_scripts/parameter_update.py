@@ -1,4 +1,4 @@
-"""MPI helper of tests/test_parameter_update.py: the two beams solved, updated (μ_f = 0.2 and beam
+"""MPI helper of tests/integration/test_parameter_update.py: the two beams solved, updated (μ_f = 0.2 and beam
 2's E = 3e10 Pa) and solved again, against the same problem built afresh, on the ranks it is
 started with (update is collective: the moduli, r and the rigid-mode checks are reduced over ranks).
 
@@ -17,7 +17,7 @@ from mpi4py import MPI
 
 from dolfinx_nnqem.cases.two_beams import MATERIAL, two_beams_problem
 from dolfinx_nnqem.problem import ContactProblem
-from dolfinx_nnqem.problem.meshing import TwoBeamsTags as T
+from dolfinx_nnqem.cases.geometries import TwoBeamsTags as T
 from dolfinx_nnqem.solvers.registry import make_solver
 from dolfinx_nnqem.solvers.stepping import solve_load_steps
 

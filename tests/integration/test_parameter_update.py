@@ -20,7 +20,7 @@ from dolfinx_nnqem.material.elastic import Elastic
 from dolfinx_nnqem.material.hardening import VoceHardening
 from dolfinx_nnqem.material.von_mises import VonMises
 from dolfinx_nnqem.problem import ContactProblem, Dirichlet, Gravity, Traction
-from dolfinx_nnqem.problem.meshing import TwoBeamsTags as T
+from dolfinx_nnqem.cases.geometries import TwoBeamsTags as T
 from dolfinx_nnqem.solvers.registry import make_solver
 from dolfinx_nnqem.solvers.stepping import solve_load_steps
 
@@ -181,8 +181,8 @@ def test_friction_that_alone_holds_a_body_cannot_go_to_zero():
     from mpi4py import MPI
 
     from dolfinx_nnqem.problem import Contact, Pressure
-    from dolfinx_nnqem.problem.meshing import BlockStackTags as B
-    from dolfinx_nnqem.problem.meshing import build_block_stack
+    from dolfinx_nnqem.cases.geometries import BlockStackTags as B
+    from dolfinx_nnqem.cases.geometries import build_block_stack
 
     mesh, cell_tags, facet_tags = build_block_stack(MPI.COMM_WORLD, 1.0, 1.0, [0.5] * 3, [(2, 1, 2)] * 3)
     elastic = VonMises(E=1.0e9, nu=0.3)
@@ -215,7 +215,7 @@ def test_update_on_two_ranks_gives_the_fresh_answer(tmp_path):
 
     from dolfinx_nnqem import compat
 
-    script = Path(__file__).parent / "mpi_scripts" / "parameter_update.py"
+    script = Path(__file__).parents[1] / "mpi_scripts" / "parameter_update.py"
     out = tmp_path / "out.json"
     cmd = [*compat.mpiexec(), "-n", "2", sys.executable, str(script), str(out)]
     result = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env=compat.mpi_environment())
