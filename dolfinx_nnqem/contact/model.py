@@ -41,8 +41,8 @@ from petsc4py import PETSc
 
 from dolfinx_nnqem.contact.laws import ContactLaw, LawEvaluation, Linearisation, get_law
 from dolfinx_nnqem.contact import pair_laws
+from dolfinx_nnqem.contact.constrained_directions import constrained_directions
 from dolfinx_nnqem.contact.pairset import PairRows, PairSet, rows_matrix
-from dolfinx_nnqem.contact.surface_pairs import SurfacePairs
 from dolfinx_nnqem.contact.surfaces import ContactPairError
 from dolfinx_nnqem.contact.current_geometry import remapper
 from dolfinx_nnqem.contact.geometry_tracking import ContactGeometry, Remap, starting_pairs
@@ -164,7 +164,7 @@ class ContactModel:
                                                for k, i in enumerate(interfaces)])
         mu_f = np.concatenate([np.full(i.pairs.num_local, float(i.contact.mu_f)) for i in interfaces])
         self.laws = pair_laws.PairLaws(self._groups(self.interface_index), self.g0, mu_f,
-                                       self._constrained_directions(self._constrained_dofs))
+                                       self._constrained_directions())
         self._gathered_laws: PairLaws | None = None  # gathered_laws(), at its first call
         self._w = self.B.createVecLeft()
 
@@ -173,43 +173,10 @@ class ContactModel:
         return tuple(pair_laws.LawGroup(i.law, i.r, i.r * self.h, np.flatnonzero(interface_index == k))
                      for k, i in enumerate(self.interfaces))
 
-    def _constrained_directions(self, constrained_dofs: PETSc.Vec) -> np.ndarray:
-        """(num_local, 3) bool: rows of B all of whose (significant) columns are constrained dofs."""
-        values = self.rows.values
-        pair = np.repeat(np.arange(len(self.rows.indptr) - 1), np.diff(self.rows.indptr)) // 3
-        largest = np.zeros(self.num_local)
-        np.maximum.at(largest, pair, np.abs(values))
-        involved = (np.abs(values) > 1e-12 * largest[pair]).astype(float)
-        M = rows_matrix(self.comm, self.rows, self.num_global, self.V.dofmap.index_map, involved)
-        free = constrained_dofs.duplicate()
-        with free.localForm() as f, constrained_dofs.localForm() as c:
-            f.array[:] = 1.0 - c.array
-        y = M.createVecLeft()
-        M.mult(free, y)
-        out = y.getArray(readonly=True).reshape(-1, 3) == 0.0
-        for obj in (M, free, y):
-            obj.destroy()
-        for interface in self.interfaces:
-            if interface.pairs.pins_supported_slave_tangents:
-                out[interface.local] |= self._supported_slave_tangents(interface.pairs)
-        return out
-
-    def _supported_slave_tangents(self, pairs: PairSet) -> np.ndarray:
-        """(num_local, 3) bool: the pair directions a support holds (node-to-surface and mortar).
-
-        Such rows couple a slave node to several master nodes, so the friction forces of slave
-        nodes held tangentially by a symmetry plane crossing the interface may combine into forces
-        that act on the supports alone: a null space of the multipliers and a singular Newton
-        matrix. The support carries those components; the contact force there is pinned to zero
-        (``docs/theory.md``). Which directions: :mod:`~dolfinx_nnqem.contact.symmetry_planes` (the
-        symmetry planes of the interface, and supports of the slave side alone only where their
-        rows would over-constrain the master). The normal direction is never pinned this way: a
-        supported slave node still keeps the master out.
-        """
-        assert isinstance(pairs, SurfacePairs)  # the one pair set that pins supported slave tangents
-        if pairs.support_pinned is None:  # built without knowing the supports
-            return np.zeros((pairs.num_local, 3), dtype=bool)
-        return pairs.support_pinned
+    def _constrained_directions(self) -> np.ndarray:
+        """The pair directions a support holds (:func:`constrained_directions`)."""
+        return constrained_directions(self.rows, self.comm, self.num_global, self.V.dofmap.index_map,
+                                      [(i.pairs, i.local) for i in self.interfaces], self._constrained_dofs)
 
     # -- sizes and parallel helpers ------------------------------------------------------------
     @property
@@ -432,7 +399,7 @@ class ContactModel:
             self.rows.values[start:start + len(new.rows.values)] = new.rows.values
         self.B.setValuesCSR(self.rows.indptr, self.rows.columns, self.rows.values)  # type: ignore[arg-type]  # as in scaled_B
         self.B.assemble()
-        self.laws = replace(self.laws, constrained=self._constrained_directions(self._constrained_dofs))
+        self.laws = replace(self.laws, constrained=self._constrained_directions())
         self._gathered_laws = None
         self.w_n = self.relative_displacement(u_n.x.petsc_vec, load_factor_n)
 

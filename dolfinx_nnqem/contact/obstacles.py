@@ -268,7 +268,7 @@ class ObstaclePairs:
     area: np.ndarray
     rows: PairRows
     kind: str = "rigid obstacle"
-    pins_supported_slave_tangents: bool = False  #: see ContactModel._supported_slave_tangents
+    pins_supported_slave_tangents: bool = False  #: see contact.constrained_directions.supported_slave_tangents
 
     def motion(self, load_factor: float) -> np.ndarray:
         """m(ℓ) = −R d(ℓ): the obstacle's translation seen in each pair's frame."""

@@ -223,7 +223,7 @@ class ContactPairs:
     B: PETSc.Mat
     tolerance: float
     kind: str = "node-to-node"
-    pins_supported_slave_tangents: bool = False  #: see ContactModel._supported_slave_tangents
+    pins_supported_slave_tangents: bool = False  #: see contact.constrained_directions.supported_slave_tangents
 
     # ---- the pair-set contract -----------------------------------------------------------
 

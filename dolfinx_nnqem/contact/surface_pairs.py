@@ -95,7 +95,7 @@ class SurfacePairs:
     rows: PairRows
     num_slave_nodes: int
     note: str = ""
-    pins_supported_slave_tangents: bool = True  #: see ContactModel._supported_slave_tangents
+    pins_supported_slave_tangents: bool = True  #: see contact.constrained_directions.supported_slave_tangents
     master_facet: np.ndarray | None = None  #: node-to-surface: (num_local,) the gathered master facet of each pair
     support_pinned: np.ndarray | None = None
     """(num_local, 3) bool: pair directions a support holds, pinned by the contact model

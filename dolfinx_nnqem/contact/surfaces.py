@@ -117,8 +117,8 @@ def symmetry_normals(normals: npt.ArrayLike, supported: npt.ArrayLike) -> np.nda
     out of it, and the tangent frame built on it then mixes the supported axis with a free one:
     the friction force along the support is then nearly undetermined (the support carries it) and
     the Newton matrix nearly singular. With the tilt removed the frame contains the supported axis
-    exactly and the contact model pins that direction (``_supported_slave_tangents`` of
-    :class:`~dolfinx_nnqem.contact.model.ContactModel`). Which supports are symmetry planes (the
+    exactly and the contact model pins that direction
+    (:func:`~dolfinx_nnqem.contact.constrained_directions.supported_slave_tangents`). Which supports are symmetry planes (the
     master held on them too) is decided by :mod:`~dolfinx_nnqem.contact.symmetry_planes`; this
     function removes the components of whatever axes it is given.
 

@@ -25,6 +25,8 @@ import ufl
 from mpi4py import MPI
 
 from dolfinx_nnqem import compat, jit
+from dolfinx_nnqem.material.state_report import maxima_by_body as _maxima_by_body
+from dolfinx_nnqem.material.state_report import yield_function_values as _yield_function_values
 from dolfinx_nnqem.material.composite import CompositeAtPoints
 from dolfinx_nnqem.material.interface import (GaussPointValues, Material, MaterialPart, PointwiseMaterial,
                                               ReturnMapValues)
@@ -408,23 +410,11 @@ class GaussPointState:
 
     # -- outputs ----------------------------------------------------------------------------------------------
     def yield_function_values(self) -> np.ndarray:
-        """f/σ_y at the converged state at every local Gauss point (owned and ghost; −1 where the
-        material cannot yield): 0 on the yield surface, −1 without deviatoric stress for von Mises."""
+        """f/σ_y at the converged state at every local Gauss point:
+        :func:`~dolfinx_nnqem.material.state_report.yield_function_values`."""
         if self._material_at_points is None:
             self._material_at_points = self.at_points()
-        material = self._material_at_points
-        n = self.num_owned_points()
-        sigma = self.sigma_n.x.array[:9 * n].reshape(n, 3, 3)
-        internal = self.internal_at_points()
-        f = material.yield_value(symmetric_coordinates(sigma), internal)
-        size = material.yield_stress(internal)
-        ratio = np.full(n, -1.0)
-        ok = material.yields & np.isfinite(size) & (size > 0.0)
-        ratio[ok] = f[ok] / size[ok]
-        out = fem.Function(self.W_scalar)
-        out.x.array[:n] = ratio
-        out.x.scatter_forward()
-        return out.x.array
+        return _yield_function_values(self, self._material_at_points)
 
     def back_stress_values(self) -> np.ndarray | None:
         """q(α) = √(3/2)|α| of the total back-stress α = Σ_k α_k at the converged state at every local
@@ -436,21 +426,9 @@ class GaussPointState:
         return np.sqrt(1.5 * np.einsum("nij,nij->n", alpha, alpha))
 
     def maxima_by_body(self) -> dict[str, dict[str, float]]:
-        """Per body (cell tag; "all" for a single material), the largest p and f/σ_y of the converged
-        state over all ranks (collective), and the largest q(α) where a material has back-stresses."""
-        n = self.num_owned_points()
-        fields = {"p": (self.p_n.x.array[:n], 0.0), "f_over_sigma_y": (self.yield_function_values()[:n], -1.0)}
-        back_stress = self.back_stress_values()
-        if back_stress is not None:
-            fields["back_stress"] = (back_stress[:n], 0.0)
-        out: dict[str, dict[str, float]] = {key: {} for key in fields}
-        for tag in self.materials:
-            points = self.points_of(self.cells_of(tag))
-            points = points[points < n]
-            name = "all" if tag is None else str(tag)
-            for key, (values, least) in fields.items():
-                out[key][name] = self.mesh.comm.allreduce(float(np.max(values[points], initial=least)), op=MPI.MAX)
-        return out
+        """Per body, the largest p and f/σ_y of the converged state over all ranks (collective):
+        :func:`~dolfinx_nnqem.material.state_report.maxima_by_body`."""
+        return _maxima_by_body(self)
 
 
 def _materials_by_tag(materials, cell_tags, mesh) -> dict:
