@@ -138,14 +138,8 @@ class Linearisation(NamedTuple):
 # ---------------------------------------------------------------------------------------------
 
 
-def alart_curnier_kernel(
-    w: np.ndarray,
-    w_prev: np.ndarray,
-    z: np.ndarray,
-    g0: np.ndarray,
-    mu_f: np.ndarray,
-    r: float,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def alart_curnier_kernel(w: np.ndarray, w_prev: np.ndarray, z: np.ndarray, g0: np.ndarray, mu_f: np.ndarray,
+                         r: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Cartesian Alart--Curnier law, z = (p_n, q1, q2) (``formulation.md`` §3 B).
 
     H_n = p_n - max(0, p_n - r g),  H_t = q - P_D(rho)(q - r s),  rho = mu_f max(0, p_n - r g).
@@ -226,14 +220,8 @@ def alart_curnier_kernel(
     return H, dH_dw, dH_dz, state
 
 
-def polar_kernel(
-    w: np.ndarray,
-    w_prev: np.ndarray,
-    z: np.ndarray,
-    g0: np.ndarray,
-    mu_f: np.ndarray,
-    r: float,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def polar_kernel(w: np.ndarray, w_prev: np.ndarray, z: np.ndarray, g0: np.ndarray, mu_f: np.ndarray,
+                 r: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Polar (seed) law, z = (p_n, p_r, theta) (``formulation.md`` §3 A).
 
     H1 = min(p_n, r g),  H2 = p_r - max(-rho, min(rho, p_r + r s.d)),

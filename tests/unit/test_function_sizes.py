@@ -22,7 +22,7 @@ SPLIT_MODULES = ("numerics/newton.py", "io/run_pictures.py", "problem/meshing.py
                                                                     "spectral")),
                  *(f"problem/{name}.py" for name in ("contact_problem", "assembly", "interfaces", "loads", "predictor",
                                                      "supports", "parameter_study")),
-                 "contact/model.py", "contact/constrained_directions.py", "material/state.py",
+                 "contact/laws.py", "contact/model.py", "contact/constrained_directions.py", "material/state.py",
                  "material/state_report.py", "solvers/prediction.py")
 MAX_FUNCTION_LINES = 80
 MAX_CLASS_LINES = 400
