@@ -7,9 +7,12 @@ A problem file names a mesh with physical tags and everything :class:`ContactPro
     # degree = 2                          # the displacement's degree; default: the mesh's (2 for a
                                           # second-order mesh: 10-node tetrahedra, 27-node hexahedra)
     # quadrature_degree = 2               # the Gauss rule's degree; default 2 × degree
+    # kinematics = "finite"               # "small" (default: ε = sym grad u) or "finite" (total
+                                          # Lagrangian, F = I + grad u; not with NNEQM2)
 
     [materials.1]                         # cell tag → material
-    # model = "von-mises"                 # or "elastic" (E, nu, density only)
+    # model = "von-mises"                 # or "elastic" (E, nu, density only), "neo-hooke" (E, nu,
+                                          # density; kinematics = "finite" only), "drucker-prager"
     E = 2.0e10
     nu = 0.17
     sigma_y0 = 5.0e5                      # inf, or omit it, for an elastic material
@@ -139,7 +142,8 @@ class ProblemFileError(ValueError):
 
 OBSTACLE_KEYS = {kind: obstacle_parameters(kind) for kind in OBSTACLES}
 KEYS: dict[str, frozenset[str]] = {
-    "mesh": frozenset({"file", "mesh_name", "cell_tags", "facet_tags", "degree", "quadrature_degree"}),
+    "mesh": frozenset({"file", "mesh_name", "cell_tags", "facet_tags", "degree", "quadrature_degree",
+                       "kinematics"}),
     "materials.TAG": frozenset({"model", "E", "nu", "sigma_y0", "H", "density", "hardening", "Q", "b", "table",
                                 "kinematic", "cohesion", "friction_angle", "dilatancy_angle", "match"}),
     "contact": frozenset({"surface1", "surface2", "obstacle", "mu_f", "law", "r", "tolerance", "search_distance",
@@ -154,7 +158,7 @@ KEYS: dict[str, frozenset[str]] = {
                          "linear_solver", "petsc_options"}),
     "solver.auto": frozenset({"initial_step", "max_step", "min_step", "easy_iterations", "hard_iterations", "grow",
                               "shrink", "load_factors"}),
-    "checks": frozenset({"rtol", "max_strain", "max_rotation"}),
+    "checks": frozenset({"rtol", "max_strain", "max_rotation", "min_scaled_jacobian"}),
     "output": frozenset({"folder", "fields", "pictures", "probes", "checkpoint_every"}),
     "estimate": frozenset({"enabled", "enrichment", "target_error", "max_cycles", "refine_fraction", "quantities"}),
 }
@@ -309,6 +313,9 @@ def _mesh_section(mesh: dict, folder: Path, where: str) -> dict:
         if mesh["degree"] not in (1, 2):
             raise ProblemFileError(f"{where}: mesh.degree = {mesh['degree']}: the displacement is Lagrange of "
                                    "degree 1 or 2")
+    if mesh.setdefault("kinematics", "small") not in ("small", "finite"):
+        raise ProblemFileError(f"{where}: mesh.kinematics = {mesh['kinematics']!r}: expected \"small\" (ε = sym grad u) "
+                               "or \"finite\" (total Lagrangian, F = I + grad u)")
     if "quadrature_degree" in mesh:  # e.g. 2 with degree 2: 2 × 2 × 2 Gauss points (no locking)
         mesh["quadrature_degree"] = int(_number(mesh["quadrature_degree"], f"{where}: mesh.quadrature_degree",
                                                 integer=True, positive=True, high=8))
@@ -658,21 +665,24 @@ def _estimate_section(estimate: dict, where: str) -> dict:
 
 
 def _checks_section(checks: dict, where: str) -> dict:
-    """[checks]: rtol, max_strain, max_rotation (false disables a small-strain limit)."""
-    from dolfinx_nnqem.solvers.checks import DEFAULT_MAX_ROTATION, DEFAULT_MAX_STRAIN
+    """[checks]: rtol, max_strain, max_rotation (false disables a small-strain limit), min_scaled_jacobian
+    (finite strain; false disables it)."""
+    from dolfinx_nnqem.solvers.checks import DEFAULT_MAX_ROTATION, DEFAULT_MAX_STRAIN, DEFAULT_MIN_SCALED_JACOBIAN
 
     w = f"{where}: [checks]"
     checks = _checked_keys(checks, KEYS["checks"], set(), w)
     if "rtol" in checks:
         checks["rtol"] = float(_number(checks["rtol"], f"{w}.rtol", positive=True, high=1e-2))
-    for key, default in (("max_strain", DEFAULT_MAX_STRAIN), ("max_rotation", DEFAULT_MAX_ROTATION)):
+    for key, default in (("max_strain", DEFAULT_MAX_STRAIN), ("max_rotation", DEFAULT_MAX_ROTATION),
+                         ("min_scaled_jacobian", DEFAULT_MIN_SCALED_JACOBIAN)):
         value = checks.get(key, default)
         if value is False:
             checks[key] = None
         elif value is True:
             raise ProblemFileError(f"{w}.{key} = true: give a number, or false to disable the limit")
         else:
-            checks[key] = float(_number(value, f"{w}.{key}", positive=True))
+            checks[key] = float(_number(value, f"{w}.{key}", positive=True,
+                                        high=1.0 if key == "min_scaled_jacobian" else None))
     return checks
 
 
@@ -804,7 +814,7 @@ def build_problem(spec: ProblemSpec, comm: MPI.Comm) -> ContactProblem:
         dirichlet=[Dirichlet(e["tag"], e.get("value", 0.0), e.get("components"), e.get("amplitude"))
                    for e in spec.dirichlet],
         tractions=loads, body_forces=body, contact=contact or None, degree=spec.mesh.get("degree"),
-        quadrature_degree=spec.mesh.get("quadrature_degree"),
+        quadrature_degree=spec.mesh.get("quadrature_degree"), kinematics=spec.mesh.get("kinematics", "small"),
     )
 
 

@@ -86,7 +86,7 @@ def rebuild_problem(problem: ContactProblem, mesh: dolfinx.mesh.Mesh, cell_tags:
     return ContactProblem(
         mesh, cell_tags, facet_tags, materials=d.materials, dirichlet=d.dirichlet, tractions=d.tractions,
         body_forces=d.body_forces, contact=list(d.contact) or None, degree=degree,
-        quadrature_degree=d.quadrature_degree if degree == d.degree else None)
+        quadrature_degree=d.quadrature_degree if degree == d.degree else None, kinematics=d.kinematics)
 
 
 def enriched_problem(problem: ContactProblem, enrichment: str = "auto") -> ContactProblem:

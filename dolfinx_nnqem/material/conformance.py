@@ -10,7 +10,8 @@ from __future__ import annotations
 from dolfinx_nnqem.material.composite import CompositeAtPoints
 from dolfinx_nnqem.material.drucker_prager import DruckerPrager, DruckerPragerAtPoints, DruckerPragerPart
 from dolfinx_nnqem.material.elastic import Elastic, ElasticAtPoints, ElasticPart
-from dolfinx_nnqem.material.finite_strain import FiniteStrainMaterial, HenckyAtPoints, NeoHookeAtPoints
+from dolfinx_nnqem.material.finite_strain import FiniteStrainMaterial, HenckyAtPoints, NeoHooke, NeoHookeAtPoints
+from dolfinx_nnqem.material.finite_strain.gauss_state import FiniteStrainGaussState
 from dolfinx_nnqem.material.interface import Material, MaterialPart, MaterialState, PointwiseMaterial
 from dolfinx_nnqem.material.isotropic import IsotropicAtPoints, IsotropicHardeningPart
 from dolfinx_nnqem.material.kinematic import KinematicAtPoints, KinematicHardeningPart
@@ -21,7 +22,7 @@ __all__ = ["as_finite_strain_material", "as_material", "as_material_part", "as_m
            "as_pointwise_plasticity"]
 
 
-def as_material(material: VonMises | Elastic | DruckerPrager) -> Material:
+def as_material(material: VonMises | Elastic | DruckerPrager | NeoHooke) -> Material:
     """``material`` as the :class:`~dolfinx_nnqem.material.interface.Material` Protocol."""
     return material
 
@@ -32,7 +33,7 @@ def as_material_part(part: VonMisesPart | IsotropicHardeningPart | KinematicHard
     return part
 
 
-def as_material_state(state: GaussPointState) -> MaterialState:
+def as_material_state(state: GaussPointState | FiniteStrainGaussState) -> MaterialState:
     """``state`` as the :class:`~dolfinx_nnqem.material.interface.MaterialState` Protocol."""
     return state
 

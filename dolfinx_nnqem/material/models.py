@@ -6,7 +6,8 @@ meant); a von Mises table names its hardening law with ``hardening`` ("linear" b
 CalculiX's ``*PLASTIC`` order) and its back-stresses with ``kinematic`` = [[C_1, gamma_1], ...]
 (kinematic hardening). "drucker-prager" takes ``cohesion``, ``friction_angle``, ``dilatancy_angle``
 and ``match``, its cohesion hardening by the same ``hardening`` names ("linear": ``H``; "voce":
-``Q``, ``b``, ``H``; "table": rows [c, p]), ``cohesion`` in the place of ``sigma_y0``. A key that
+``Q``, ``b``, ``H``; "table": rows [c, p]), ``cohesion`` in the place of ``sigma_y0``. "neo-hooke" (E, nu,
+density) is the compressible Neo-Hookean law, for ``kinematics = "finite"`` only. A key that
 the model or the law does not take is refused by name. A new material adds its name and keys to
 :data:`MODELS` and a branch to :func:`material_from_table`.
 """
@@ -18,6 +19,7 @@ from collections.abc import Mapping
 
 from dolfinx_nnqem.material.drucker_prager import DruckerPrager
 from dolfinx_nnqem.material.elastic import Elastic
+from dolfinx_nnqem.material.finite_strain.neo_hooke import NeoHooke
 from dolfinx_nnqem.material.hardening import IsotropicHardening, TabulatedHardening, VoceHardening
 from dolfinx_nnqem.material.interface import Material
 from dolfinx_nnqem.material.von_mises import VonMises
@@ -35,6 +37,7 @@ _DRUCKER_PRAGER = frozenset({"cohesion", "friction_angle", "dilatancy_angle", "m
 MODELS: dict[str, frozenset[str]] = {
     "von-mises": _ELASTIC | {"hardening", "kinematic"} | frozenset().union(*HARDENING_LAWS.values()),
     "elastic": _ELASTIC,
+    "neo-hooke": _ELASTIC,
     "drucker-prager": (_ELASTIC | {"hardening"} | _DRUCKER_PRAGER
                        | frozenset().union(*HARDENING_LAWS.values()) - {"sigma_y0"}),
 }
@@ -62,6 +65,8 @@ def material_from_table(params: Mapping[str, object]) -> Material:
     E, nu, density = number["E"], number["nu"], number.get("density", 0.0)
     if model == "elastic":
         return Elastic(E, nu, density)
+    if model == "neo-hooke":  # finite strain only (kinematics = "finite")
+        return NeoHooke(E, nu, density)
     if model == "drucker-prager":
         return _drucker_prager(params, number)
     law = _hardening_law(params, number, "sigma_y0", extra={"kinematic"})

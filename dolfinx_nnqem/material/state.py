@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import functools
 import operator
-from collections.abc import Iterable, Mapping
+from collections.abc import Mapping
 
 import basix.ufl
 import dolfinx.fem as fem
@@ -25,14 +25,14 @@ import ufl
 from mpi4py import MPI
 
 from dolfinx_nnqem import compat, jit
-from dolfinx_nnqem.material.state_report import maxima_by_body as _maxima_by_body
+from dolfinx_nnqem.material.gauss_fields import GaussPointFields
 from dolfinx_nnqem.material.state_report import yield_function_values as _yield_function_values
 from dolfinx_nnqem.material.composite import CompositeAtPoints
 from dolfinx_nnqem.material.interface import (GaussPointValues, Material, MaterialPart, PointwiseMaterial,
                                               ReturnMapValues)
 from dolfinx_nnqem.material.kinematics import strain, symmetric_coordinates
 
-__all__ = ["GaussPointState", "material_state"]
+__all__ = ["GaussPointState", "material_state", "materials_by_tag"]
 
 
 def material_state(V: fem.FunctionSpace, materials: Material | dict[int, Material],
@@ -41,7 +41,7 @@ def material_state(V: fem.FunctionSpace, materials: Material | dict[int, Materia
     return GaussPointState(V, materials, cell_tags, quadrature_degree)
 
 
-class GaussPointState:
+class GaussPointState(GaussPointFields):
     """Material fields and Gauss-point state of a mesh made of one or more bodies.
 
     Parameters
@@ -59,30 +59,8 @@ class GaussPointState:
     """
 
     def __init__(self, V: fem.FunctionSpace, materials, cell_tags=None, quadrature_degree: int = 2):
-        mesh = V.mesh
-        self.V, self.mesh, self.quadrature_degree, self.cell_tags = V, mesh, quadrature_degree, cell_tags
-        self.materials: dict[int | None, Material] = _materials_by_tag(materials, cell_tags, mesh)
-        # piecewise-constant fields (one value per cell): bodies of different materials share one form
-        self.Q0 = fem.functionspace(mesh, ("DG", 0))
-        self.E = fem.Function(self.Q0, name="E")
-        self.nu = fem.Function(self.Q0, name="nu")
-        self.density = fem.Function(self.Q0, name="density")
-        self.fill_cellwise({"E": self.E, "nu": self.nu, "density": self.density})
-        E, nu = self.E, self.nu
-        self.mu = E / (2 * (1 + nu))
-        self.lmbda = E * nu / ((1 + nu) * (1 - 2 * nu))
-        self.kappa = self.lmbda + 2 * self.mu / 3
-        cell = mesh.topology.cell_name()
-        metadata = {"quadrature_degree": quadrature_degree, "quadrature_scheme": "default"}
-        self.dx = ufl.Measure("dx", domain=mesh, metadata=metadata)
-        self.W_tensor = fem.functionspace(
-            mesh, basix.ufl.quadrature_element(cell, value_shape=(3, 3), degree=quadrature_degree))
-        self.W_scalar = fem.functionspace(
-            mesh, basix.ufl.quadrature_element(cell, value_shape=(), degree=quadrature_degree))
-        self._points = compat.interpolation_points(self.W_scalar)
-        self.version = 0
-        """Counts the changes of the converged state (commits, restores): a part that caches its
-        return map at u (:meth:`evaluate`) recomputes it when this moves."""
+        super().__init__(V, materials_by_tag(materials, cell_tags, V.mesh), cell_tags, quadrature_degree)
+        self.materials: dict[int | None, Material]  # (checked: each a Material)
         # the parts (their cell-wise parameters are created here, before the state's functions,
         # so that UFL orders a closed-form return map's coefficients as it always has)
         groups: dict[str, dict[int | None, Material]] = {}
@@ -97,50 +75,11 @@ class GaussPointState:
         self._others = {name: fem.Function(self._space_of(shape), name=name)
                         for part in self.parts for name, shape in part.internal_variables.items()}
         self._part_of_point = self._point_owners(groups)
-        self._dx_parts = self._part_measure(metadata) if len(self.parts) > 1 else None
+        self._dx_parts = self._part_measure(self._metadata) if len(self.parts) > 1 else None
         self._commit_u: fem.Function | None = None
         self._material_at_points: PointwiseMaterial | None = None
-        self.parameters_version = 0
-        """Counts the changes of the materials' parameters (:meth:`parameters_changed`): what holds the
-        material at the points (:meth:`at_points`) takes it again when this moves."""
 
     # -- set-up ---------------------------------------------------------------------------------------
-    def cells_of(self, tag: int | None) -> np.ndarray:
-        """Local cells (owned and ghost) of the body tagged ``tag`` (None: every cell)."""
-        tdim = self.mesh.topology.dim
-        imap = self.mesh.topology.index_map(tdim)
-        if tag is None:
-            return np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32)
-        return self.cell_tags.find(tag)
-
-    def points_of(self, cells: np.ndarray) -> np.ndarray:
-        """The local Gauss points (indices into the quadrature spaces) of ``cells``."""
-        return np.sort(self.W_scalar.dofmap.list[cells].reshape(-1))
-
-    def fill_cellwise(self, fields: Mapping[str, fem.Function], default: Mapping[str, float] | None = None,
-                      tags: Iterable[int | None] | None = None) -> None:
-        """Set cell-wise (DG 0) ``fields`` from the materials' attributes of the same names (of the
-        bodies ``tags``, all by default; the other cells get ``default``)."""
-        tags = list(self.materials) if tags is None else list(tags)
-        for name, f in fields.items():
-            if default is not None:
-                f.x.array[:] = default[name]
-        assigned = np.zeros(self.Q0.dofmap.index_map.size_local + self.Q0.dofmap.index_map.num_ghosts, dtype=bool)
-        for tag in tags:
-            material = self.materials[tag]
-            dofs = self.Q0.dofmap.list[self.cells_of(tag), 0]
-            assigned[dofs] = True
-            for name, f in fields.items():
-                f.x.array[dofs] = getattr(material, name)
-        if default is None:
-            n_owned = self.Q0.dofmap.index_map.size_local
-            n_missing = self.mesh.comm.allreduce(int(np.count_nonzero(~assigned[:n_owned])), op=MPI.SUM)
-            if n_missing:
-                raise ValueError(f"materials: {n_missing} cells carry none of the tags {sorted(str(t) for t in self.materials)}; "
-                                 "every cell needs a material")
-        for f in fields.values():
-            f.x.scatter_forward()
-
     def parameters_changed(self) -> None:
         """Fill E, ν and the density again from :attr:`materials` after their parameters changed (a
         parameter study, :mod:`dolfinx_nnqem.problem.parameter_study`), and the parts' own cell-wise
@@ -158,15 +97,6 @@ class GaussPointState:
         for f in (self.sigma_n, self.p_n, self.dp_n, self.u_n, *self._others.values()):
             f.x.array[:] = 0.0
         self.version += 1
-
-    def _space_of(self, shape: tuple[int, ...]) -> fem.FunctionSpace:
-        if shape == ():
-            return self.W_scalar
-        if shape == (3, 3):
-            return self.W_tensor
-        cell = self.mesh.topology.cell_name()
-        return fem.functionspace(self.mesh, basix.ufl.quadrature_element(cell, value_shape=shape,
-                                                                          degree=self.quadrature_degree))
 
     def _point_owners(self, groups) -> np.ndarray:
         """The part of every local Gauss point."""
@@ -186,10 +116,6 @@ class GaussPointState:
         return ufl.Measure("dx", domain=self.mesh, subdomain_data=tags, metadata=metadata)
 
     # -- the forms ----------------------------------------------------------------------------------------
-    def elastic_stress(self, eps: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
-        """σ = λ tr(ε) I + 2μ ε."""
-        return self.lmbda * ufl.tr(eps) * ufl.Identity(3) + 2 * self.mu * eps
-
     def _integral(self, integrand) -> ufl.Form:
         """∫ integrand(part) over each part's cells."""
         if self._dx_parts is None:
@@ -204,10 +130,6 @@ class GaussPointState:
     def tangent_form(self, u: fem.Function, du: ufl.core.expr.Expr, v: ufl.Argument) -> ufl.Form:
         """K_t(u)[du, v] = ∫ (C_alg : ε(du)) : ε(v) dx."""
         return self._integral(lambda part: ufl.inner(part.tangent(u, strain(du)), strain(v)))
-
-    def elastic_stiffness_form(self, du: ufl.core.expr.Expr, v: ufl.Argument) -> ufl.Form:
-        """K_e[du, v] = ∫ (C : ε(du)) : ε(v) dx."""
-        return ufl.inner(self.elastic_stress(strain(du)), strain(v)) * self.dx
 
     def evaluate(self, u: fem.Function) -> None:
         """Bring the quadrature data of the forms to ``u`` (the parts' return maps evaluated on arrays)."""
@@ -237,10 +159,6 @@ class GaussPointState:
         n = self.num_owned_points()
         rm = self.local_return_map(u)
         return GaussPointValues(u.x.array.copy(), rm.sigma[:n], rm.dp[:n], rm.deps_p[:n], "backward-euler")
-
-    def num_owned_points(self) -> int:
-        """Number of Gauss points this rank owns."""
-        return self.W_scalar.dofmap.index_map.size_local
 
     # -- commit ---------------------------------------------------------------------------------------------
     def commit(self, u: fem.Function) -> None:
@@ -359,23 +277,11 @@ class GaussPointState:
         self.version += 1
 
     # -- counts and values at points ---------------------------------------------------------------------------
-    def count_plastic_points(self) -> int:
-        """Number of Gauss points (over all ranks) that yielded in the last converged increment."""
-        imap = self.W_scalar.dofmap.index_map
-        n_local = imap.size_local * self.W_scalar.dofmap.index_map_bs
-        local = int(np.count_nonzero(self.dp_n.x.array[:n_local] > 0.0))
-        return self.mesh.comm.allreduce(local, op=MPI.SUM)
-
     def count_trial_plastic_points(self, u: fem.Function) -> int:
         """Number of Gauss points (over all ranks) where the return map at ``u`` is plastic."""
         dp = self._merged([part.trial_dp(u) for part in self.parts])
         n_local = self.W_scalar.dofmap.index_map.size_local * self.W_scalar.dofmap.index_map_bs
         return self.mesh.comm.allreduce(int(np.count_nonzero(dp[:n_local] > 0.0)), op=MPI.SUM)
-
-    def num_gauss_points(self) -> int:
-        """Total number of Gauss points (over all ranks)."""
-        imap = self.W_scalar.dofmap.index_map
-        return imap.size_global * self.W_scalar.dofmap.index_map_bs
 
     def at_points(self) -> PointwiseMaterial:
         """The material at this rank's owned Gauss points."""
@@ -396,18 +302,6 @@ class GaussPointState:
         dev_dsigma = dsigma - np.trace(dsigma, axis1=1, axis2=2)[:, None, None] * np.eye(3) / 3.0
         return dev_increment - dev_dsigma / (2.0 * mu[:, None, None])
 
-    def values_at_points(self, expr: ufl.core.expr.Expr) -> np.ndarray:
-        """A scalar UFL expression (e.g. a material field) at this rank's owned Gauss points."""
-        return self.owned_at_points(jit.expression(expr, self._points)).copy()
-
-    def owned_at_points(self, compiled: fem.Expression, tensor: bool = False) -> np.ndarray:
-        """A compiled expression at this rank's owned Gauss points: (n,) for a scalar, (n, 3, 3) for
-        a ``tensor``; a view of a function of its own (kept alive by the view, dropped with it)."""
-        f = fem.Function(self.W_tensor if tensor else self.W_scalar)
-        compat.interpolate_expression(f, compiled)
-        n = self.W_scalar.dofmap.index_map.size_local
-        return f.x.array[:9 * n].reshape(n, 3, 3) if tensor else f.x.array[:n]
-
     # -- outputs ----------------------------------------------------------------------------------------------
     def yield_function_values(self) -> np.ndarray:
         """f/σ_y at the converged state at every local Gauss point:
@@ -416,22 +310,8 @@ class GaussPointState:
             self._material_at_points = self.at_points()
         return _yield_function_values(self, self._material_at_points)
 
-    def back_stress_values(self) -> np.ndarray | None:
-        """q(α) = √(3/2)|α| of the total back-stress α = Σ_k α_k at the converged state at every local
-        Gauss point (0 where a material has none); None when no material has back-stresses."""
-        names = [name for name in self._others if name.startswith("alpha_")]
-        if not names:
-            return None
-        alpha = sum(self._others[name].x.array.reshape(-1, 3, 3) for name in names)
-        return np.sqrt(1.5 * np.einsum("nij,nij->n", alpha, alpha))
 
-    def maxima_by_body(self) -> dict[str, dict[str, float]]:
-        """Per body, the largest p and f/σ_y of the converged state over all ranks (collective):
-        :func:`~dolfinx_nnqem.material.state_report.maxima_by_body`."""
-        return _maxima_by_body(self)
-
-
-def _materials_by_tag(materials, cell_tags, mesh) -> dict:
+def materials_by_tag(materials, cell_tags, mesh) -> dict:
     """``{tag: material}`` (tag None: one material for every cell), each a Material, each tag present."""
     if isinstance(materials, Material):
         return {None: materials}

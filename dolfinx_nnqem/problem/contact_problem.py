@@ -39,9 +39,9 @@ from dolfinx_nnqem.contact.model import ContactModel
 from dolfinx_nnqem.contact.specification import Contact
 from dolfinx_nnqem.contact.obstacles import Cylinder, Plane, Sphere  # noqa: F401  (the user's imports)
 from dolfinx_nnqem.material.interface import GaussPointValues, Material
-from dolfinx_nnqem.material.state import material_state
 from dolfinx_nnqem.problem.assembly import assemble_matrix, assemble_vector
 from dolfinx_nnqem.problem.loads import BodyForce, ExternalLoads, Gravity, Pressure, Traction
+from dolfinx_nnqem.problem.kinematics_choice import checked_kinematics, material_state_of
 from dolfinx_nnqem.problem.interfaces import build_contact_model, interface_moduli, largest_modulus
 from dolfinx_nnqem.problem.mesh_quality import check_cells
 from dolfinx_nnqem.problem.parameter_study import reset_state, update_parameters
@@ -68,10 +68,11 @@ class ProblemDefinition:
     contact: tuple
     degree: int
     quadrature_degree: int | None  #: as given (None: 2·degree)
+    kinematics: str = "small"  #: "small" or "finite" (:mod:`~dolfinx_nnqem.problem.kinematics_choice`)
 
 
 class ContactProblem:
-    """Quasi-static small-strain elastoplastic problem, with or without contact.
+    """Quasi-static elastoplastic problem at small or finite strain, with or without contact.
 
     Parameters
     ----------
@@ -92,6 +93,9 @@ class ContactProblem:
     quadrature_degree
         Degree of the Gauss rule; default 2·degree (2×2×2 points per Q1 hexahedron, 3×3×3
         per Q2).
+    kinematics
+        "small" (ε = sym ∇u, the default) or "finite" (total Lagrangian, F = I + ∇u;
+        :mod:`~dolfinx_nnqem.problem.kinematics_choice`).
 
     Raises
     ------
@@ -117,6 +121,7 @@ class ContactProblem:
         contact: Contact | Sequence[Contact] | None = None,
         degree: int | None = None,
         quadrature_degree: int | None = None,
+        kinematics: str = "small",
     ):
         check_mesh(mesh)  # a 3D mesh of 3D cells, one cell type
         if degree is None:  # a second-order mesh (10-node tetrahedra, 27-node hexahedra): quadratic elements
@@ -127,8 +132,9 @@ class ContactProblem:
         for c in contacts:
             if not isinstance(c, Contact):
                 raise TypeError(f"contact: {c!r} is not a Contact")
+        self.kinematics = checked_kinematics(kinematics, materials)
         self.definition = ProblemDefinition(materials, tuple(dirichlet), tuple(tractions), tuple(body_forces),
-                                            tuple(contacts), degree, quadrature_degree)
+                                            tuple(contacts), degree, quadrature_degree, self.kinematics)
         check_one_contact_per_pair(contacts)
         if quadrature_degree is None:
             quadrature_degree = 2 * degree  # 2×2×2 Gauss points for Q1, 3×3×3 for Q2
@@ -139,7 +145,7 @@ class ContactProblem:
         self.comm = mesh.comm
         self.V = fem.functionspace(mesh, ("Lagrange", degree, (3,)))
         self.u = fem.Function(self.V, name="u")
-        self.state = material_state(self.V, materials, cell_tags, quadrature_degree)
+        self.state = material_state_of(self.kinematics, self.V, materials, cell_tags, quadrature_degree)
 
         check_facet_tags(facet_tags, self.comm, [d.tag for d in dirichlet] + [t.tag for t in tractions])
         self.dirichlet = list(dirichlet)

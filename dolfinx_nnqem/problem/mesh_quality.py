@@ -118,10 +118,15 @@ def sample_points(mesh: dolfinx.mesh.Mesh, quadrature_degree: int) -> np.ndarray
     return np.concatenate([gauss, basix.geometry(cell)])
 
 
-def cell_measures(mesh: dolfinx.mesh.Mesh, points: np.ndarray, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def cell_measures(mesh: dolfinx.mesh.Mesh, points: np.ndarray, cells: np.ndarray,
+                  displacement: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The smallest s and the Jacobian ratio ρ = min o det J / max o det J of ``cells`` (local
     indices) over the reference ``points``, each (len(cells),), o the cell's orientation (the sign
-    of det J at the reference centroid)."""
+    of det J at the reference centroid).
+
+    With a ``displacement`` of every geometry node (laid out like ``mesh.geometry.x``), the
+    measures are those of the deformed cells, x + displacement, and o stays the undeformed
+    cell's: a cell the deformation turned inside out has s < 0."""
     cmap = compat.coordinate_element(mesh)
     cell = getattr(basix.CellType, mesh.topology.cell_type.name)
     element = basix.create_element(basix.ElementFamily.P, cell, cmap.degree, basix.LagrangeVariant(cmap.variant))
@@ -131,8 +136,11 @@ def cell_measures(mesh: dolfinx.mesh.Mesh, points: np.ndarray, cells: np.ndarray
     s, ratio = np.empty(len(cells)), np.empty(len(cells))
     for start in range(0, len(cells), CHUNK):
         block = cells[start:start + CHUNK]
-        det, scaled = jacobians(mesh.geometry.x[dofmap[block]], dphi)
+        X = mesh.geometry.x[dofmap[block]]
+        det, scaled = jacobians(X, dphi)
         orientation = np.where(det[0] < 0.0, -1.0, 1.0)  # a cell numbered against the reference is not inverted
+        if displacement is not None:
+            det, scaled = jacobians(X + displacement[dofmap[block]], dphi)
         det, scaled = det[1:] * orientation, scaled[1:] * orientation
         s[start:start + len(block)] = scaled.min(axis=0)
         largest = det.max(axis=0)

@@ -37,6 +37,7 @@ from dolfinx_nnqem.problem.loads import load_factor_between
 
 if TYPE_CHECKING:
     from dolfinx_nnqem.contact.model import ContactModel
+    from dolfinx_nnqem.material.finite_strain.gauss_state import FiniteStrainGaussState
     from dolfinx_nnqem.material.state import GaussPointState
     from dolfinx_nnqem.problem.bodies import FrictionHeld, RigidModes
     from dolfinx_nnqem.problem.loads import ExternalLoads
@@ -51,7 +52,7 @@ class StudiedProblem(Protocol):
     (:class:`~dolfinx_nnqem.problem.ContactProblem`, which imports this module)."""
 
     definition: Any  #: the ProblemDefinition
-    state: GaussPointState
+    state: GaussPointState | FiniteStrainGaussState
     supports: Supports
     loads: ExternalLoads
     contact: ContactModel | None
@@ -122,7 +123,7 @@ def update_parameters(problem: StudiedProblem, *, materials: Material | Mapping[
     reset_state(problem)
 
 
-def checked_materials(state: GaussPointState, materials: Material | Mapping[int, Material]
+def checked_materials(state: GaussPointState | FiniteStrainGaussState, materials: Material | Mapping[int, Material]
                       ) -> dict[int | None, Material]:
     """``{tag: material}`` of the bodies whose material changes, each checked against the one it
     replaces (the same kind; only :data:`CHANGEABLE_FIELDS` differ).
@@ -167,7 +168,7 @@ def _check_same_kind(where: str, old: Material, new: Material) -> None:
                          f"parameter study ({why}): build a new ContactProblem")
 
 
-def _refill_materials(state: GaussPointState, new: Mapping[int | None, Material]) -> None:
+def _refill_materials(state: GaussPointState | FiniteStrainGaussState, new: Mapping[int | None, Material]) -> None:
     """The state's and the parts' cell-wise fields from the new materials (no compile)."""
     state.materials.update(new)
     state.parameters_changed()

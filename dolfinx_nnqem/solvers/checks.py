@@ -21,11 +21,18 @@ API only, before committing it:
   material's own yield function; each to tol · σ_u with σ_u the material's stress unit
   (min(σ_y0, 10⁻² E) for von Mises);
 * **finite values**: u and z hold no NaN or infinity;
-* **small strain**: the package solves small-strain problems, so a state with a strain (the
+* **small strain** (kinematics "small"): a state with a strain (the
   largest ‖sym ∇u‖ at a Gauss point, Frobenius norm) above ``max_strain`` or an infinitesimal
   rotation (the axial vector of skew ∇u) above ``max_rotation`` is refused: past a limit load
   (plastic collapse, friction exceeded) a small-strain model keeps finding "equilibria" with
-  ever larger displacements. Both limits can be relaxed (or set to None).
+  ever larger displacements. Both limits can be relaxed (or set to None);
+* **finite strain** (kinematics "finite", :mod:`~dolfinx_nnqem.solvers.finite_strain_check`): J = det F > 0
+  at every Gauss point (named), equilibrium with F_int = ∫ P : ∇v dX on the reference configuration
+  (what the problem assembles), the constitutive law in the logarithmic space (Hencky's law, the flow,
+  the yield function of the Kirchhoff stress τ, consistency) or Neo-Hooke's, and in place of the
+  small-strain limits the shape of the deformed mesh x + u: a cell whose scaled Jacobian falls below
+  ``min_scaled_jacobian`` (inverted, or flattened) is named and refused
+  (:mod:`~dolfinx_nnqem.problem.deformed_mesh`).
 
 The tolerance is ``CheckOptions.rtol`` or, by default, derived from the solver's own ``rtol``:
 ``max(min(max(1e4 · rtol, 1e-7), 1e-3), 10 · rtol)`` (1e-6 for the default rtol = 1e-10; never
@@ -55,8 +62,12 @@ from dolfinx_nnqem.contact.laws import STATE_NAMES
 from dolfinx_nnqem.material.interface import GaussPointValues, PointwiseMaterial
 from dolfinx_nnqem.material.kinematics import strain
 from dolfinx_nnqem.problem.contact_problem import assemble_vector
+from dolfinx_nnqem.problem.deformed_mesh import deformed_cells
+from dolfinx_nnqem.problem.kinematics_choice import kinematics_of
+from dolfinx_nnqem.problem.mesh_quality import INVERTED
 from dolfinx_nnqem.problem.validation import check_real
 from dolfinx_nnqem.solvers.constitutive import ConstitutiveCheck, check_constitutive_law
+from dolfinx_nnqem.solvers.finite_strain_check import check_finite_strain_law, inverted_points
 from dolfinx_nnqem.solvers.options import SolverOptions
 
 if TYPE_CHECKING:
@@ -70,6 +81,9 @@ DEFAULT_MAX_STRAIN = 0.1
 """Largest strain (Frobenius norm of sym ∇u at a Gauss point) accepted by default."""
 DEFAULT_MAX_ROTATION = 0.1
 """Largest infinitesimal rotation (rad, |axial vector of skew ∇u|) accepted by default."""
+DEFAULT_MIN_SCALED_JACOBIAN = 0.05
+"""Smallest scaled Jacobian of a deformed cell accepted by default at finite strain: sin θ for a cube
+sheared to an angle θ; 0.05 is θ ≈ 3° (a shear γ ≈ 20), far past where the cell still resolves anything."""
 
 
 @dataclass(frozen=True)
@@ -82,12 +96,17 @@ class CheckOptions:
         Relative tolerance of the equilibrium and contact checks (against the force scale F);
         None: ``max(min(max(1e4 · solver rtol, 1e-7), 1e-3), 10 · solver rtol)``. Must be in (0, 1e-2].
     max_strain, max_rotation
-        Small-strain limits (see the module docstring); None disables a limit.
+        Small-strain limits (see the module docstring); None disables a limit. Not applied with
+        kinematics "finite".
+    min_scaled_jacobian
+        Finite strain: the smallest scaled Jacobian of a cell of the deformed mesh (see the module
+        docstring); None disables the limit (an inverted cell, s ≤ 0, is refused all the same).
     """
 
     rtol: float | None = None
     max_strain: float | None = DEFAULT_MAX_STRAIN
     max_rotation: float | None = DEFAULT_MAX_ROTATION
+    min_scaled_jacobian: float | None = DEFAULT_MIN_SCALED_JACOBIAN
 
     def __post_init__(self):
         if self.rtol is not None:
@@ -96,6 +115,8 @@ class CheckOptions:
             value = getattr(self, name)
             if value is not None:
                 check_real(f"CheckOptions.{name}", value, low=0.0, high=math.inf)
+        if self.min_scaled_jacobian is not None:
+            check_real("CheckOptions.min_scaled_jacobian", self.min_scaled_jacobian, low=0.0, high=1.0)
 
     def tolerance(self, solver_rtol: float) -> float:
         """The relative tolerance of the check: ``rtol`` if given, else 10⁴ × the solver's rtol within
@@ -124,6 +145,7 @@ class StateCheck:
     constitutive: dict = field(default_factory=dict)  #: each relation's largest violation / σ_u (:class:`ConstitutiveCheck`)
     worst_pairs: list = field(default_factory=list)  #: [{pair, position, state, H/F}] (failed checks)
     worst_nodes: list = field(default_factory=list)  #: [{position, |R|/F}] (failed checks)
+    min_scaled_jacobian: float = math.nan  #: finite strain: the deformed mesh's smallest scaled Jacobian
 
     def as_dict(self) -> dict:
         """The figures as a dictionary of their fields."""
@@ -257,7 +279,13 @@ def check_state(problem: SolvableProblem, report: SolveReport | None = None,
         reasons.append(f"equilibrium residual |R|/F = {eq:.3e} > {tol:.1e} (F = {F:.4g} N){hint}")
 
     # -- the constitutive law at every Gauss point, of the values the commit will store
-    constitutive, yield_violation = _constitutive(problem, forms, values)
+    finite = kinematics_of(problem) == "finite"
+    if finite:
+        constitutive, inverted = _finite_strain_law(problem, forms)
+        reasons += [inverted] if inverted else []
+        yield_violation = constitutive.yield_surface
+    else:
+        constitutive, yield_violation = _constitutive(problem, forms, values)
     if comm.allreduce(int(np.any(np.asarray(values.dp) < 0.0)), op=MPI.MAX):
         yield_violation = math.inf
         reasons.append("the Gauss-point values have Δp < 0")
@@ -278,13 +306,18 @@ def check_state(problem: SolvableProblem, report: SolveReport | None = None,
         if not coulomb <= tol:
             reasons.append(f"Coulomb conditions violated by {coulomb:.3e} F (p_n < 0 or |λ_t| > μ_f p_n)")
 
-    # -- small strain
+    # -- small strain, or the deformed mesh at finite strain
     strain, rotation = _largest_strain_and_rotation(problem, forms)
-    reasons += _beyond_small_strain(strain, rotation, options)
+    min_s = math.nan
+    if finite:
+        min_s, distorted = _deformed_mesh(problem, options)
+        reasons += [distorted] if distorted else []
+    else:
+        reasons += _beyond_small_strain(strain, rotation, options)
 
     result = StateCheck(not reasons, "; ".join(reasons), float(eq), float(contact), float(coulomb),
                         float(strain), float(rotation), float(F), float(tol), own, float(yield_violation),
-                        constitutive._asdict())
+                        constitutive._asdict(), min_scaled_jacobian=float(min_s))
     if reasons:
         result.worst_nodes = _worst_nodes(problem, Rf, F)
         if pair_violation is not None:
@@ -303,6 +336,25 @@ def _beyond_small_strain(strain: float, rotation: float, options: CheckOptions) 
         reasons.append(f"largest rotation {rotation:.3g} rad exceeds max_rotation = {options.max_rotation:g}: "
                        "far outside the small-rotation setting (a mechanism or collapse?)")
     return reasons
+
+
+def _finite_strain_law(problem, forms: _Forms) -> tuple[ConstitutiveCheck, str]:
+    """Finite strain: the constitutive relations in the logarithmic space and why the state is inverted
+    (empty if J > 0 everywhere) (collective; :mod:`~dolfinx_nnqem.solvers.finite_strain_check`)."""
+    F = forms.at_points(forms.grad_expr) + np.eye(3)
+    inverted = inverted_points(problem.state, F)
+    if inverted:
+        return ConstitutiveCheck(*([math.inf] * 5)), inverted
+    return check_finite_strain_law(problem.state, problem.u, F), ""
+
+
+def _deformed_mesh(problem, options: CheckOptions) -> tuple[float, str]:
+    """Finite strain: the deformed mesh's smallest scaled Jacobian and why its cells are refused (empty
+    if none is inverted or below ``options.min_scaled_jacobian``) (collective)."""
+    bound = options.min_scaled_jacobian
+    bound = INVERTED if bound is None else max(bound, INVERTED)
+    cells = deformed_cells(problem.u, problem.cell_tags, problem.state.quadrature_degree, bound)
+    return cells.min_scaled_jacobian, cells.reason(bound)
 
 
 def _finite(problem) -> bool:

@@ -14,7 +14,9 @@ It has no internal variables: the state only records F (and b_e = b, for a unifo
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import NoReturn
 
 import numpy as np
 
@@ -55,6 +57,23 @@ class NeoHooke:
     def lmbda(self) -> float:
         """Lamé's λ = E ν / ((1 + ν)(1 − 2ν))."""
         return lame(self.E, self.nu)[1]
+
+    @property
+    def part_kind(self) -> str:
+        """"neo-hooke": a kind of its own (the :class:`~dolfinx_nnqem.material.interface.Material` Protocol)."""
+        return "neo-hooke"
+
+    def make_part(self, space: object, members: Mapping[int | None, object]) -> NoReturn:
+        """Refused: a Neo-Hookean body has no small-strain state (its law is written in F).
+
+        Raises
+        ------
+        ValueError
+            Always: the problem must be built with ``kinematics = "finite"``.
+        """
+        raise ValueError(f"NeoHooke (E = {self.E:g}, nu = {self.nu:g}) is a finite-strain hyperelastic law "
+                         "(its stress is written in F = I + grad u): it needs kinematics = 'finite'; at small strain "
+                         "use Elastic, its linearisation")
 
     def at_points(self, n: int) -> NeoHookeAtPoints:
         """The material at n Gauss points."""

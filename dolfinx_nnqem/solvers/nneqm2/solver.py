@@ -42,6 +42,7 @@ from dolfinx_nnqem.material.kinematics import deviator_coordinates, deviator_ten
 from dolfinx_nnqem.numerics.linalg import vec_norm
 from dolfinx_nnqem.numerics.newton import solve
 from dolfinx_nnqem.problem.contact_problem import ContactProblem
+from dolfinx_nnqem.problem.kinematics_choice import kinematics_of
 from dolfinx_nnqem.solvers.condensation import Condensation, check_dense_memory
 from dolfinx_nnqem.solvers.contract import ReleasesPETSc
 from dolfinx_nnqem.solvers.convergence import IterationRecord, SolveReport, logger
@@ -68,6 +69,18 @@ def refuse_current_geometry(problem: ContactProblem) -> None:
         "every increment through the elastic stiffness factorised once per run and its pair flexibility, and "
         "rebuilding them in a geometry that moves within the increment is not implemented; use "
         "the monolithic solver or NNEQM1 for large sliding, or geometry = 'reference'")
+
+
+def refuse_finite_strain(problem: ContactProblem) -> None:
+    """NNEQM2 solves small-strain problems only; raise, before anything is built, for kinematics "finite"."""
+    if kinematics_of(problem) != "finite":
+        return
+    raise ValueError(
+        "nneqm2: the problem has kinematics = 'finite', which NNEQM2 cannot take: its Gauss-point unknowns and "
+        "yield rows are the small-strain pointwise form (σ = σ_n + C (Δε − Δε_p) with Δε = sym grad Δu, the "
+        "deviatoric plastic strain in ε), and its condensation uses the elastic stiffness K_e factorised once; at "
+        "finite strain the stress is P(F) by the logarithmic strain and the tangent changes with F. Use the "
+        "monolithic solver or NNEQM1, or kinematics = 'small'")
 
 
 def refuse_material(gp: GaussPointOperators, frozen: bool) -> None:
@@ -115,6 +128,7 @@ class NNEQM2Solver(ReleasesPETSc):
 
     def __init__(self, problem: ContactProblem, options: SolverOptions | None = None,
                  nneqm2: NNEQM2Options | None = None):
+        refuse_finite_strain(problem)
         refuse_current_geometry(problem)
         self.problem = problem
         self.options = options or SolverOptions()
