@@ -6,8 +6,8 @@
 * :mod:`.neo_hooke` — the compressible Neo-Hookean law (:class:`NeoHooke`);
 * :mod:`.spectral` — ln, exp and their derivatives for symmetric tensors, the polar decomposition.
 
-Not wired into the solvers yet: no problem and no option uses these (``docs/materials.md``,
-"Finite strain").
+:mod:`.gauss_state` wires them into the forms (``ContactProblem(..., kinematics="finite")``;
+``docs/materials.md``, "Finite strain").
 """
 
 from __future__ import annotations
