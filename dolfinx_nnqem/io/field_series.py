@@ -53,7 +53,10 @@ class CellMeans:
     the cell's Gauss points that yielded in the last increment ``plastic`` and the yield
     function's value over the yield stress ``yield_function`` (f/σ_y: 0 on the yield surface,
     −1 where the material cannot yield); with a material that has back-stresses, also the
-    equivalent back-stress ``back_stress`` (q(α) = √(3/2)|α|, α = Σ_k α_k)."""
+    equivalent back-stress ``back_stress`` (q(α) = √(3/2)|α|, α = Σ_k α_k). At finite strain
+    (``kinematics = "finite"``) the stresses are Cauchy's, and the cell mean of the Cauchy stress tensor
+    ``cauchy_stress`` is written too (:attr:`tensors`; a field of the reference mesh, like u: the
+    deformed mesh is x = X + u, ParaView's "Warp By Vector" on u)."""
 
     def __init__(self, problem):
         self.problem = problem
@@ -64,6 +67,13 @@ class CellMeans:
         self.yield_function = fem.Function(self.Q0, name="yield_function")
         self.back_stress = (fem.Function(self.Q0, name="back_stress")
                             if problem.state.back_stress_values() is not None else None)
+        self.cauchy = (fem.Function(fem.functionspace(problem.mesh, ("DG", 0, (3, 3))), name="cauchy_stress")
+                       if getattr(problem, "kinematics", "small") == "finite" else None)
+
+    @property
+    def tensors(self) -> tuple[fem.Function, ...]:
+        """The DG 0 tensor fields written besides :attr:`fields`: ``cauchy_stress`` at finite strain."""
+        return () if self.cauchy is None else (self.cauchy,)
 
     @property
     def fields(self) -> tuple[fem.Function, ...]:
@@ -89,6 +99,8 @@ class CellMeans:
         back_stress = state.back_stress_values()
         if self.back_stress is not None and back_stress is not None:
             self.back_stress.x.array[dg] = back_stress[qdofs].mean(axis=1)
+        if self.cauchy is not None:
+            self.cauchy.x.array.reshape(-1, 9)[dg] = sigma[qdofs].mean(axis=1).reshape(-1, 9)
 
 
 class CellField(Protocol):
@@ -161,7 +173,8 @@ class FieldSeriesWriter:
         # the file nor be left to close it at exit (see _write_step), so a disk without room
         # for the step file is refused here, with the figures
         on_rank0(self.comm, check_free_space, path.with_suffix(".h5"), self._bytes_needed())
-        self._write_step(path, [u, *self._means.fields, *(f.function for f in self.cell_fields)], t)
+        self._write_step(path, [u, *self._means.fields, *self._means.tensors, *(f.function for f in self.cell_fields)],
+                         t)
         if self.keep_last:  # a copy: problem.u moves on in the next increment
             self.last_written = (t, u.function_space, u.x.array.copy())
         self.steps = [s for s in self.steps if s[0] < result.index] + [(result.index, t)]

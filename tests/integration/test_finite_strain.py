@@ -238,6 +238,33 @@ def test_the_check_names_an_inverted_state_and_a_flattened_cell():
     assert abs(sheared.min_scaled_jacobian - 1 / math.sqrt(1 + 30.0**2)) < 1e-12
 
 
+def test_the_output_files_hold_the_cauchy_stress_at_finite_strain(tmp_path):
+    """fields.xdmf of a finite-strain run holds the cell means of the Cauchy stress (``cauchy_stress``,
+    the closed form of the uniaxial stretch at λ = 2, 1e-10), and its ``von_mises`` is Cauchy's; a
+    small-strain run's fields are as before (no ``cauchy_stress``)."""
+    from dolfinx_nnqem.io.output import ResultsWriter
+    from dolfinx_nnqem.io.reader import read_fields
+
+    names = {}
+    for kinematics in ("finite", "small"):
+        problem = uniaxial_problem(LAWS["linear"][0], 1.0 if kinematics == "finite" else 1e-3, kinematics)
+        writer = ResultsWriter(problem, "monolithic", tmp_path / kinematics, 4)
+        solve_load_steps(problem, make_solver("monolithic", problem, SolverOptions(rtol=1e-12)), 4, check=LARGE,
+                         callbacks=[writer])
+        writer.close()
+        last = read_fields(tmp_path / kinematics)[-1]
+        names[kinematics] = sorted(last)
+        if kinematics == "finite":
+            expected = uniaxial_cauchy(LAWS["linear"][1], math.log(2.0))
+            sigma = np.asarray(last["cauchy_stress"]).reshape(-1, 3, 3)
+            error = max(np.abs(sigma[:, 0, 0] - expected).max(), np.abs(np.asarray(last["von_mises"]) - expected).max(),
+                        np.abs(sigma.reshape(-1, 9)[:, 1:]).max()) / expected
+    print(f"\n  fields written: finite {names['finite']}, small {names['small']}; cauchy_stress and von_mises against "
+          f"the closed form {error:.1e} (tolerance 1e-10)")
+    assert error < 1e-10 and "cauchy_stress" not in names["small"]
+    assert set(names["finite"]) - set(names["small"]) == {"cauchy_stress"}
+
+
 # -- refusals --------------------------------------------------------------------------------------------
 def test_a_kinematics_that_does_not_exist_is_refused_by_name():
     with pytest.raises(ValueError, match=r"kinematics = 'large': expected 'small' .* or 'finite'"):
