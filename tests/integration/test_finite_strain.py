@@ -265,6 +265,53 @@ def test_the_output_files_hold_the_cauchy_stress_at_finite_strain(tmp_path):
     assert set(names["finite"]) - set(names["small"]) == {"cauchy_stress"}
 
 
+def test_a_restart_from_a_checkpoint_equals_an_uninterrupted_run(tmp_path):
+    """Kinematic hardening (Armstrong–Frederick + Prager) stretched to λ = 1.5: interrupted after
+    increment 3 of 6 and resumed from the checkpoint in a fresh problem (F_n, b_e,n, p and the
+    back-stresses restored): σ, p, the back-stresses, F_n and b_e,n equal the uninterrupted run's."""
+    from dolfinx_nnqem.io import checkpoint
+    from dolfinx_nnqem.material import BackStress
+
+    material = VonMises(E=E, nu=NU, sigma_y0=SIGMA_Y0, kinematic=[BackStress(2.0e10, 100.0), BackStress(2.0e9)])
+    ref = uniaxial_problem(material, 0.5)
+    solve_load_steps(ref, make_solver("monolithic", ref, SolverOptions(rtol=1e-12)), 6, check=LARGE)
+    first = uniaxial_problem(material, 0.5)
+    checkpointer = checkpoint.Checkpointer(tmp_path)
+
+    def stop_after_3(problem, stepper_state, result):
+        checkpointer(problem, stepper_state, result)
+        if result.index == 3:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        solve_load_steps(first, make_solver("monolithic", first, SolverOptions(rtol=1e-12)), 6, check=LARGE,
+                         checkpoint=stop_after_3)
+    second = uniaxial_problem(material, 0.5)
+    state, _ = checkpoint.restore(second, tmp_path)
+    solve_load_steps(second, make_solver("monolithic", second, SolverOptions(rtol=1e-12)), 6, check=LARGE, resume=state)
+    arrays = {name: (second.state.checkpoint_arrays()[name], a) for name, a in ref.state.checkpoint_arrays().items()}
+    worst = {name: float(np.max(np.abs(b - a)) / max(np.max(np.abs(a)), 1e-300)) for name, (b, a) in arrays.items()}
+    print(f"\n  resumed at increment {state.index}; relative differences {worst}")
+    assert state.index == 3 and {"F_n", "b_e_n", "internal_alpha_1", "internal_alpha_2"} <= set(worst)
+    assert ref.state.p_n.x.array.min() > 0.1 and all(v <= 1e-12 for v in worst.values())
+
+
+def test_a_parameter_study_at_finite_strain_takes_the_new_yield_stress():
+    """``problem.update(materials=...)`` with another σ_y0 and H (linear von Mises), solved again: the
+    closed form of the new material at λ = 2, 1e-10 (the bodies' finite-strain materials are rebuilt)."""
+    problem = uniaxial_problem(LAWS["linear"][0], 1.0)
+    solve_load_steps(problem, make_solver("monolithic", problem), 4, check=LARGE)
+    first = problem.state.sigma_n.x.array[0]
+    sigma_y0, H = 4.0e8, 2.0e9
+    problem.update(materials=VonMises(E=E, nu=NU, sigma_y0=sigma_y0, H=H))
+    solve_load_steps(problem, make_solver("monolithic", problem, SolverOptions(rtol=1e-12)), 4, check=LARGE)
+    expected = uniaxial_cauchy(lambda p: sigma_y0 + H * p, math.log(2.0))
+    error = np.abs(problem.state.sigma_n.x.array.reshape(-1, 9)[:, 0] - expected).max() / expected
+    print(f"\n  σ_xx at λ = 2: {first:.6e} (σ_y0 = {SIGMA_Y0:g}), then {expected:.6e} (σ_y0 = {sigma_y0:g}): "
+          f"error {error:.1e} (tolerance 1e-10)")
+    assert error < 1e-10 and abs(first - expected) > 1e7
+
+
 # -- refusals --------------------------------------------------------------------------------------------
 def test_a_kinematics_that_does_not_exist_is_refused_by_name():
     with pytest.raises(ValueError, match=r"kinematics = 'large': expected 'small' .* or 'finite'"):

@@ -115,8 +115,6 @@ class FiniteStrainGaussState(GaussPointFields):
         Degree of the Gauss rule used by the forms and the state.
     """
 
-    kinematics = "finite"
-
     def __init__(self, V: fem.FunctionSpace, materials, cell_tags=None, quadrature_degree: int = 2):
         super().__init__(V, materials_by_tag(materials, cell_tags, V.mesh), cell_tags, quadrature_degree)
         mesh = V.mesh
