@@ -15,7 +15,9 @@
 
 from __future__ import annotations
 
+import logging
 import math
+import re
 import sys
 from pathlib import Path
 
@@ -193,34 +195,55 @@ def _superlinear(residuals: list[float]) -> bool:
     return len(r) >= 3 and r[-1] < 1e-2 * r[-2] and r[-2] < 1e-2 * r[-3] and r[-1] / r[-2] < r[-2] / r[-3]
 
 
+class _NewtonSolves(logging.Handler):
+    """The iteration log's residuals max(|R|/F, |H|/F), one list per Newton solve (a solve starts at "it 0")."""
+
+    def __init__(self):
+        super().__init__(logging.INFO)
+        self.solves: list[list[float]] = []
+
+    def emit(self, record):
+        found = re.search(r"\] it +(\d+) +\|R\|/F ([0-9.e+-]+) +\|H\|/F ([0-9.e+-]+)", record.getMessage())
+        if found:
+            if int(found.group(1)) == 0:
+                self.solves.append([])
+            self.solves[-1].append(max(float(found.group(2)), float(found.group(3))))
+
+
 def test_sphere_into_an_elastoplastic_block_every_method_and_law_agree():
     """A rigid sphere pressed 10 % of the block's height (current contact geometry, von Mises with
     linear hardening): monolithic and NNEQM1, "polar" and "alart-curnier", the sphere's force, u and the
-    Cauchy stress agree to 1e-8; the monolithic Newton residuals (|R|/F) of the last increment and
-    NNEQM1's outer residuals (|H|/F) are superlinear at the end."""
+    Cauchy stress agree to 1e-8; the last Newton solve of each run that took three iterations or more
+    (NNEQM1 solves an increment again once its pairs moved: its last solve starts converged) has
+    residuals max(|R|/F, |H|/F) falling superlinearly at its end."""
     runs = {}
+    logger = logging.getLogger("dolfinx_nnqem")
     for method in ("monolithic", "nneqm1"):
         for law in ("polar", "alart-curnier"):
             problem = sphere_into_block(law)
-            with make_solver(method, problem, SolverOptions(rtol=1e-11)) as solver:
-                results = solve_load_steps(problem, solver, 5)
-            history = results[-1].report.history
-            residuals = [h.equilibrium if method == "monolithic" else max(h.equilibrium, h.contact) for h in history]
+            log, level = _NewtonSolves(), logger.level
+            logger.addHandler(log)
+            logger.setLevel(logging.INFO)
+            try:
+                with make_solver(method, problem, SolverOptions(rtol=1e-11)) as solver:
+                    results = solve_load_steps(problem, solver, 5)
+            finally:
+                logger.removeHandler(log)
+                logger.setLevel(level)
+            last = [solve for solve in log.solves if len(solve) >= 3][-1]
             force = problem.assemble_internal_force()
             total = problem.comm.allreduce(float(np.abs(force.array).sum()), op=MPI.SUM)
-            runs[method, law] = (problem.u.x.array.copy(), problem.state.sigma_n.x.array.copy(), total, residuals,
+            runs[method, law] = (problem.u.x.array.copy(), problem.state.sigma_n.x.array.copy(), total, last,
                                  problem.state.p_n.x.array.max(), [r.iterations for r in results])
     u0, s0, f0, _, _, _ = runs["monolithic", "alart-curnier"]
     print()
     for (method, law), (u, s, f, residuals, p, iterations) in runs.items():
         du, ds = np.abs(u - u0).max() / np.abs(u0).max(), np.abs(s - s0).max() / np.abs(s0).max()
-        print(f"  {method}/{law}: iterations {iterations}, last increment's residuals "
+        print(f"  {method}/{law}: iterations {iterations}, the last Newton solve's residuals "
               f"{[f'{r:.1e}' for r in residuals]}; u {du:.1e}, σ {ds:.1e} from monolithic/alart-curnier; "
               f"largest p {p:.3f}")
         assert du < 1e-8 and ds < 1e-8 and abs(f - f0) < 1e-8 * f0 and p > 0.0
-        if method == "monolithic":
-            assert _superlinear(residuals), residuals
-    assert all(r[-1] < 1e-10 for (_, _, _, r, _, _) in runs.values())
+        assert _superlinear(residuals), residuals
 
 
 def test_the_check_names_an_inverted_state_and_a_flattened_cell():
