@@ -15,6 +15,7 @@
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 import re
@@ -263,8 +264,9 @@ def test_the_check_names_an_inverted_state_and_a_flattened_cell():
 
 def test_the_output_files_hold_the_cauchy_stress_at_finite_strain(tmp_path):
     """fields.xdmf of a finite-strain run holds the cell means of the Cauchy stress (``cauchy_stress``,
-    the closed form of the uniaxial stretch at λ = 2, 1e-10), and its ``von_mises`` is Cauchy's; a
-    small-strain run's fields are as before (no ``cauchy_stress``)."""
+    the closed form of the uniaxial stretch at λ = 2, 1e-10), and its ``von_mises`` is Cauchy's;
+    summary.json's checks hold the deformed mesh's smallest scaled Jacobian; a small-strain run's
+    fields and summary keys are as before."""
     from dolfinx_nnqem.io.output import ResultsWriter
     from dolfinx_nnqem.io.reader import read_fields
 
@@ -275,6 +277,8 @@ def test_the_output_files_hold_the_cauchy_stress_at_finite_strain(tmp_path):
         solve_load_steps(problem, make_solver("monolithic", problem, SolverOptions(rtol=1e-12)), 4, check=LARGE,
                          callbacks=[writer])
         writer.close()
+        checks = json.loads((tmp_path / kinematics / "summary.json").read_text())["checks"]
+        names[f"{kinematics} checks"] = sorted(checks[-1])
         last = read_fields(tmp_path / kinematics)[-1]
         names[kinematics] = sorted(last)
         if kinematics == "finite":
@@ -285,6 +289,7 @@ def test_the_output_files_hold_the_cauchy_stress_at_finite_strain(tmp_path):
     print(f"\n  fields written: finite {names['finite']}, small {names['small']}; cauchy_stress and von_mises against "
           f"the closed form {error:.1e} (tolerance 1e-10)")
     assert error < 1e-10 and "cauchy_stress" not in names["small"]
+    assert set(names["finite checks"]) - set(names["small checks"]) == {"min_scaled_jacobian"}
     assert set(names["finite"]) - set(names["small"]) == {"cauchy_stress"}
 
 
