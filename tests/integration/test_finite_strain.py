@@ -247,6 +247,36 @@ def test_sphere_into_an_elastoplastic_block_every_method_and_law_agree():
         assert _superlinear(residuals), residuals
 
 
+def test_two_bodies_of_different_materials_pressed_together():
+    """A Neo-Hookean block pressed (dead load p = 0.05 E on its top) onto a von Mises block (Hencky,
+    elastic at this load) through a frictionless node-to-surface interface in the current geometry,
+    both on rollers: uniaxial compression of each, P_yy = −p and every other component of P 0 at every
+    Gauss point of both bodies, 1e-10, monolithic and NNEQM1."""
+    from dolfinx_nnqem.cases.geometries import BlockStackTags as B
+    from dolfinx_nnqem.cases.geometries import build_block_stack
+    from dolfinx_nnqem.problem import Contact, Pressure
+
+    E_b, p = 1.0e9, 5.0e7
+    for method in ("monolithic", "nneqm1"):
+        mesh, ct, ft = build_block_stack(MPI.COMM_WORLD, 1.0, 1.0, (0.5, 0.5), ((2, 1, 2), (2, 1, 2)))
+        problem = ContactProblem(
+            mesh, ct, ft, kinematics="finite",
+            materials={B.body(1): VonMises(E=E_b, nu=0.3, sigma_y0=5.0e7, H=1.0e8), B.body(2): NeoHooke(E=E_b, nu=0.3)},
+            dirichlet=[Dirichlet(B.bottom(1), 0.0, [1])] + [Dirichlet(f(k), 0.0, [c]) for k in (1, 2)
+                                                            for f, c in ((B.xmin, 0), (B.zmin, 2))],
+            tractions=[Pressure(B.top(2), p)],
+            contact=Contact(B.top(1), B.bottom(2), mu_f=0.0, discretisation="node-to-surface", geometry="current"))
+        results = solve_load_steps(problem, make_solver(method, problem, SolverOptions(rtol=1e-12)), 5)
+        P = problem.state.P_q.x.array.reshape(-1, 9)
+        axial, others = np.abs(P[:, 4] + p).max() / p, np.abs(P[:, [0, 1, 2, 3, 5, 6, 7, 8]]).max() / p
+        sigma = problem.state.sigma_n.x.array.reshape(-1, 9)[:, 4]
+        print(f"\n  {method}: iterations {[r.iterations for r in results]}; |P_yy + p|/p = {axial:.1e}, other P "
+              f"{others:.1e} (tolerance 1e-10); Cauchy σ_yy from {sigma.min():.4e} to {sigma.max():.4e} (the "
+              "bodies' lateral stretches differ)")
+        assert axial < 1e-10 and others < 1e-10
+        assert np.ptp(sigma) > 1e-4 * p  # two materials: two Cauchy stresses for one nominal one
+
+
 def test_the_check_names_an_inverted_state_and_a_flattened_cell():
     """The check at finite strain, on u set by hand: a cell squeezed through itself (F_xx = −0.5) fails
     with det F <= 0 named; a cell sheared to γ = 30 (s = 0.033 < 0.05) with the deformed mesh named."""
