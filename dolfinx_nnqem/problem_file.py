@@ -158,7 +158,7 @@ KEYS: dict[str, frozenset[str]] = {
                          "linear_solver", "petsc_options"}),
     "solver.auto": frozenset({"initial_step", "max_step", "min_step", "easy_iterations", "hard_iterations", "grow",
                               "shrink", "load_factors"}),
-    "checks": frozenset({"rtol", "max_strain", "max_rotation", "min_scaled_jacobian"}),
+    "checks": frozenset({"rtol", "max_strain", "max_rotation", "min_shape_ratio"}),
     "output": frozenset({"folder", "fields", "pictures", "probes", "checkpoint_every"}),
     "estimate": frozenset({"enabled", "enrichment", "target_error", "max_cycles", "refine_fraction", "quantities"}),
 }
@@ -665,16 +665,16 @@ def _estimate_section(estimate: dict, where: str) -> dict:
 
 
 def _checks_section(checks: dict, where: str) -> dict:
-    """[checks]: rtol, max_strain, max_rotation (false disables a small-strain limit), min_scaled_jacobian
+    """[checks]: rtol, max_strain, max_rotation (false disables a small-strain limit), min_shape_ratio
     (finite strain; false disables it)."""
-    from dolfinx_nnqem.solvers.checks import DEFAULT_MAX_ROTATION, DEFAULT_MAX_STRAIN, DEFAULT_MIN_SCALED_JACOBIAN
+    from dolfinx_nnqem.solvers.checks import DEFAULT_MAX_ROTATION, DEFAULT_MAX_STRAIN, DEFAULT_MIN_SHAPE_RATIO
 
     w = f"{where}: [checks]"
     checks = _checked_keys(checks, KEYS["checks"], set(), w)
     if "rtol" in checks:
         checks["rtol"] = float(_number(checks["rtol"], f"{w}.rtol", positive=True, high=1e-2))
     for key, default in (("max_strain", DEFAULT_MAX_STRAIN), ("max_rotation", DEFAULT_MAX_ROTATION),
-                         ("min_scaled_jacobian", DEFAULT_MIN_SCALED_JACOBIAN)):
+                         ("min_shape_ratio", DEFAULT_MIN_SHAPE_RATIO)):
         value = checks.get(key, default)
         if value is False:
             checks[key] = None
@@ -682,7 +682,7 @@ def _checks_section(checks: dict, where: str) -> dict:
             raise ProblemFileError(f"{w}.{key} = true: give a number, or false to disable the limit")
         else:
             checks[key] = float(_number(value, f"{w}.{key}", positive=True,
-                                        high=1.0 if key == "min_scaled_jacobian" else None))
+                                        high=1.0 if key == "min_shape_ratio" else None))
     return checks
 
 

@@ -232,8 +232,8 @@ class SummaryWriter:
                                 "max_strain": c.max_strain, "max_rotation": c.max_rotation,
                                 "force_scale": c.force_scale, "tolerance": c.tolerance,
                                 "own_stresses": c.own_stresses})
-            if not math.isnan(c.min_scaled_jacobian):  # finite strain: the deformed mesh's smallest
-                d["checks"][-1]["min_scaled_jacobian"] = c.min_scaled_jacobian
+            if not math.isnan(c.min_shape_ratio):  # finite strain: the deformed mesh's smallest
+                d["checks"][-1]["min_shape_ratio"] = c.min_shape_ratio
         eq = res.equilibrium_check(p)
         d["applied_load"] = eq["applied_load"].tolist()
         d["reactions"] = {str(k): v.tolist() for k, v in eq["reactions"].items()}

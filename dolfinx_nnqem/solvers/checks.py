@@ -30,9 +30,9 @@ API only, before committing it:
   at every Gauss point (named), equilibrium with F_int = ∫ P : ∇v dX on the reference configuration
   (what the problem assembles), the constitutive law in the logarithmic space (Hencky's law, the flow,
   the yield function of the Kirchhoff stress τ, consistency) or Neo-Hooke's, and in place of the
-  small-strain limits the shape of the deformed mesh x + u: a cell whose scaled Jacobian falls below
-  ``min_scaled_jacobian`` (inverted, or flattened) is named and refused
-  (:mod:`~dolfinx_nnqem.problem.deformed_mesh`).
+  small-strain limits the shape of the deformed mesh x + u: a cell the deformation inverted, or whose
+  scaled Jacobian fell below ``min_shape_ratio`` times its undeformed one (flattened), is named and
+  refused (:mod:`~dolfinx_nnqem.problem.deformed_mesh`).
 
 The tolerance is ``CheckOptions.rtol`` or, by default, derived from the solver's own ``rtol``:
 ``max(min(max(1e4 · rtol, 1e-7), 1e-3), 10 · rtol)`` (1e-6 for the default rtol = 1e-10; never
@@ -64,7 +64,6 @@ from dolfinx_nnqem.material.kinematics import strain
 from dolfinx_nnqem.problem.contact_problem import assemble_vector
 from dolfinx_nnqem.problem.deformed_mesh import deformed_cells
 from dolfinx_nnqem.problem.kinematics_choice import kinematics_of
-from dolfinx_nnqem.problem.mesh_quality import INVERTED
 from dolfinx_nnqem.problem.validation import check_real
 from dolfinx_nnqem.solvers.constitutive import ConstitutiveCheck, check_constitutive_law
 from dolfinx_nnqem.solvers.finite_strain_check import check_finite_strain_law, inverted_points
@@ -81,9 +80,9 @@ DEFAULT_MAX_STRAIN = 0.1
 """Largest strain (Frobenius norm of sym ∇u at a Gauss point) accepted by default."""
 DEFAULT_MAX_ROTATION = 0.1
 """Largest infinitesimal rotation (rad, |axial vector of skew ∇u|) accepted by default."""
-DEFAULT_MIN_SCALED_JACOBIAN = 0.05
-"""Smallest scaled Jacobian of a deformed cell accepted by default at finite strain: sin θ for a cube
-sheared to an angle θ; 0.05 is θ ≈ 3° (a shear γ ≈ 20), far past where the cell still resolves anything."""
+DEFAULT_MIN_SHAPE_RATIO = 0.05
+"""Smallest shape ratio s(x + u)/s(x) of a deformed cell accepted by default at finite strain: sin θ for a
+cube sheared to an angle θ; 0.05 is θ ≈ 3° (a shear γ ≈ 20), far past where the cell still resolves anything."""
 
 
 @dataclass(frozen=True)
@@ -98,15 +97,15 @@ class CheckOptions:
     max_strain, max_rotation
         Small-strain limits (see the module docstring); None disables a limit. Not applied with
         kinematics "finite".
-    min_scaled_jacobian
-        Finite strain: the smallest scaled Jacobian of a cell of the deformed mesh (see the module
-        docstring); None disables the limit (an inverted cell, s ≤ 0, is refused all the same).
+    min_shape_ratio
+        Finite strain: the smallest ratio of a deformed cell's scaled Jacobian to its undeformed one
+        (see the module docstring); None disables the limit (an inverted cell is refused all the same).
     """
 
     rtol: float | None = None
     max_strain: float | None = DEFAULT_MAX_STRAIN
     max_rotation: float | None = DEFAULT_MAX_ROTATION
-    min_scaled_jacobian: float | None = DEFAULT_MIN_SCALED_JACOBIAN
+    min_shape_ratio: float | None = DEFAULT_MIN_SHAPE_RATIO
 
     def __post_init__(self):
         if self.rtol is not None:
@@ -115,8 +114,8 @@ class CheckOptions:
             value = getattr(self, name)
             if value is not None:
                 check_real(f"CheckOptions.{name}", value, low=0.0, high=math.inf)
-        if self.min_scaled_jacobian is not None:
-            check_real("CheckOptions.min_scaled_jacobian", self.min_scaled_jacobian, low=0.0, high=1.0)
+        if self.min_shape_ratio is not None:
+            check_real("CheckOptions.min_shape_ratio", self.min_shape_ratio, low=0.0, high=1.0)
 
     def tolerance(self, solver_rtol: float) -> float:
         """The relative tolerance of the check: ``rtol`` if given, else 10⁴ × the solver's rtol within
@@ -145,7 +144,7 @@ class StateCheck:
     constitutive: dict = field(default_factory=dict)  #: each relation's largest violation / σ_u (:class:`ConstitutiveCheck`)
     worst_pairs: list = field(default_factory=list)  #: [{pair, position, state, H/F}] (failed checks)
     worst_nodes: list = field(default_factory=list)  #: [{position, |R|/F}] (failed checks)
-    min_scaled_jacobian: float = math.nan  #: finite strain: the deformed mesh's smallest scaled Jacobian
+    min_shape_ratio: float = math.nan  #: finite strain: the smallest s(x + u)/s(x) of the deformed mesh's cells
 
     def as_dict(self) -> dict:
         """The figures as a dictionary of their fields."""
@@ -308,16 +307,16 @@ def check_state(problem: SolvableProblem, report: SolveReport | None = None,
 
     # -- small strain, or the deformed mesh at finite strain
     strain, rotation = _largest_strain_and_rotation(problem, forms)
-    min_s = math.nan
+    shape_ratio = math.nan
     if finite:
-        min_s, distorted = _deformed_mesh(problem, options)
+        shape_ratio, distorted = _deformed_mesh(problem, options)
         reasons += [distorted] if distorted else []
     else:
         reasons += _beyond_small_strain(strain, rotation, options)
 
     result = StateCheck(not reasons, "; ".join(reasons), float(eq), float(contact), float(coulomb),
                         float(strain), float(rotation), float(F), float(tol), own, float(yield_violation),
-                        constitutive._asdict(), min_scaled_jacobian=float(min_s))
+                        constitutive._asdict(), min_shape_ratio=float(shape_ratio))
     if reasons:
         result.worst_nodes = _worst_nodes(problem, Rf, F)
         if pair_violation is not None:
@@ -349,12 +348,11 @@ def _finite_strain_law(problem, forms: _Forms) -> tuple[ConstitutiveCheck, str]:
 
 
 def _deformed_mesh(problem, options: CheckOptions) -> tuple[float, str]:
-    """Finite strain: the deformed mesh's smallest scaled Jacobian and why its cells are refused (empty
-    if none is inverted or below ``options.min_scaled_jacobian``) (collective)."""
-    bound = options.min_scaled_jacobian
-    bound = INVERTED if bound is None else max(bound, INVERTED)
+    """Finite strain: the deformed mesh's smallest shape ratio and why its cells are refused (empty if
+    none is inverted or below ``options.min_shape_ratio``) (collective)."""
+    bound = 0.0 if options.min_shape_ratio is None else options.min_shape_ratio  # inverted cells: always
     cells = deformed_cells(problem.u, problem.cell_tags, problem.state.quadrature_degree, bound)
-    return cells.min_scaled_jacobian, cells.reason(bound)
+    return cells.min_shape_ratio, cells.reason(bound)
 
 
 def _finite(problem) -> bool:

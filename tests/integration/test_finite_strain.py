@@ -98,13 +98,13 @@ def test_uniaxial_stretch_to_100_percent_matches_the_closed_form(law):
           f"(max_strain not applied), constitutive {results[-1].check.constitutive}")
     assert len(path) == 10 and worst < 1e-10
     assert problem.state.p_n.x.array.min() > 0.5  # far into the plastic range
-    assert all(r.check.ok and r.check.min_scaled_jacobian > 0.999 for r in results)
+    assert all(r.check.ok and r.check.min_shape_ratio > 0.999 for r in results)
 
 
 def test_simple_shear_of_neo_hooke_matches_the_closed_form():
     """One hexahedron, its bottom held and its top moved by ℓ γ e_x (every node prescribed: F = I + ℓγ
     e_x⊗e_y at every Gauss point): σ = μ (b − I) (J = 1): σ_xy = μγ, σ_xx = μγ², the rest 0, 1e-10; the
-    check's smallest scaled Jacobian of the deformed cell is sin θ = 1/√(1 + γ²)."""
+    check's shape ratio of the deformed cell is sin θ = 1/√(1 + γ²)."""
     gamma, mu = 1.0, E / (2 * (1 + NU))
     mesh, ft = box_with_face_tags((1, 1, 1))
     problem = ContactProblem(mesh, None, ft, materials=NeoHooke(E=E, nu=NU), kinematics="finite",
@@ -115,7 +115,7 @@ def test_simple_shear_of_neo_hooke_matches_the_closed_form():
     expected[0, 1] = expected[1, 0] = mu * gamma
     expected[0, 0] = mu * gamma**2
     error = np.abs(sigma - expected).max() / (mu * gamma)
-    s = results[-1].check.min_scaled_jacobian
+    s = results[-1].check.min_shape_ratio
     print(f"\n  simple shear γ = {gamma}: σ (FE) {sigma[0].round(1).tolist()}, closed form "
           f"{expected.round(1).tolist()}, relative error {error:.1e} (tolerance 1e-10); deformed cell s = {s:.15f}, "
           f"1/√(1 + γ²) = {1 / math.sqrt(1 + gamma**2):.15f}")
@@ -279,17 +279,17 @@ def test_two_bodies_of_different_materials_pressed_together():
 
 def test_the_check_names_an_inverted_state_and_a_flattened_cell():
     """The check at finite strain, on u set by hand: a cell squeezed through itself (F_xx = −0.5) fails
-    with det F <= 0 named; a cell sheared to γ = 30 (s = 0.033 < 0.05) with the deformed mesh named."""
+    with det F <= 0 named; a cell sheared to γ = 30 (shape ratio 0.033 < 0.05) with the deformed mesh named."""
     problem = uniaxial_problem(NeoHooke(E=E, nu=NU), 1.0)
     X = problem.V.tabulate_dof_coordinates()
     problem.u.x.array[:] = np.column_stack([-1.5 * X[:, 0], 0 * X[:, 1], 0 * X[:, 2]]).reshape(-1)
     inverted = check_state(problem)
     problem.u.x.array[:] = np.column_stack([30.0 * X[:, 1], 0 * X[:, 1], 0 * X[:, 2]]).reshape(-1)
     sheared = check_state(problem)
-    print(f"\n  inverted: {inverted.reason[:160]}...\n  sheared: {sheared.reason[-260:]}")
+    print(f"\n  inverted: {inverted.reason[:160]}...\n  sheared: {sheared.reason[-300:]}")
     assert not inverted.ok and "det F <= 0 at 8 Gauss point(s)" in inverted.reason and "input cell(s) [0]" in inverted.reason
     assert not sheared.ok and "deformed mesh" in sheared.reason and "input cell 0" in sheared.reason
-    assert abs(sheared.min_scaled_jacobian - 1 / math.sqrt(1 + 30.0**2)) < 1e-12
+    assert abs(sheared.min_shape_ratio - 1 / math.sqrt(1 + 30.0**2)) < 1e-12
 
 
 def test_the_output_files_hold_the_cauchy_stress_at_finite_strain(tmp_path):
@@ -319,7 +319,7 @@ def test_the_output_files_hold_the_cauchy_stress_at_finite_strain(tmp_path):
     print(f"\n  fields written: finite {names['finite']}, small {names['small']}; cauchy_stress and von_mises against "
           f"the closed form {error:.1e} (tolerance 1e-10)")
     assert error < 1e-10 and "cauchy_stress" not in names["small"]
-    assert set(names["finite checks"]) - set(names["small checks"]) == {"min_scaled_jacobian"}
+    assert set(names["finite checks"]) - set(names["small checks"]) == {"min_shape_ratio"}
     assert set(names["finite"]) - set(names["small"]) == {"cauchy_stress"}
 
 
@@ -368,6 +368,23 @@ def test_a_parameter_study_at_finite_strain_takes_the_new_yield_stress():
     print(f"\n  σ_xx at λ = 2: {first:.6e} (σ_y0 = {SIGMA_Y0:g}), then {expected:.6e} (σ_y0 = {sigma_y0:g}): "
           f"error {error:.1e} (tolerance 1e-10)")
     assert error < 1e-10 and abs(first - expected) > 1e7
+
+
+def test_the_shape_ratio_is_relative_to_the_undeformed_cell():
+    """Tetrahedra of a box (their own s down to 0.41 undeformed) stretched to twice their length: the
+    smallest shape ratio falls to 0.32; the check passes with the default bound 0.05 and names the
+    cells with a bound of 0.4."""
+    mesh, ft = box_with_face_tags((2, 2, 2), cell="tetrahedron")
+    problem = ContactProblem(mesh, None, ft, materials=NeoHooke(E=E, nu=NU), kinematics="finite",
+                             dirichlet=[Dirichlet(1, 0.0, components=[0]), Dirichlet(3, 0.0, components=[1]),
+                                        Dirichlet(5, 0.0, components=[2]), Dirichlet(2, 1.0, components=[0])])
+    results = solve_load_steps(problem, make_solver("monolithic", problem), 4)
+    ratio = results[-1].check.min_shape_ratio
+    strict = check_state(problem, options=CheckOptions(min_shape_ratio=0.4))
+    print(f"\n  undeformed smallest s {problem.mesh_quality.min_scaled_jacobian:.3f}; shape ratio at λ = 2: {ratio:.4f}; "
+          f"with min_shape_ratio = 0.4: {strict.reason[-200:]}")
+    assert results[-1].check.ok and 0.25 < ratio < 0.4 and problem.mesh_quality.min_scaled_jacobian < 0.5
+    assert not strict.ok and "below min_shape_ratio = 0.4" in strict.reason and "input cell" in strict.reason
 
 
 # -- refusals --------------------------------------------------------------------------------------------
