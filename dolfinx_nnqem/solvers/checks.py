@@ -278,13 +278,7 @@ def check_state(problem: SolvableProblem, report: SolveReport | None = None,
         reasons.append(f"equilibrium residual |R|/F = {eq:.3e} > {tol:.1e} (F = {F:.4g} N){hint}")
 
     # -- the constitutive law at every Gauss point, of the values the commit will store
-    finite = kinematics_of(problem) == "finite"
-    if finite:
-        constitutive, inverted = _finite_strain_law(problem, forms)
-        reasons += [inverted] if inverted else []
-        yield_violation = constitutive.yield_surface
-    else:
-        constitutive, yield_violation = _constitutive(problem, forms, values)
+    constitutive, yield_violation = _law(problem, forms, values, reasons)
     if comm.allreduce(int(np.any(np.asarray(values.dp) < 0.0)), op=MPI.MAX):
         yield_violation = math.inf
         reasons.append("the Gauss-point values have Δp < 0")
@@ -306,13 +300,7 @@ def check_state(problem: SolvableProblem, report: SolveReport | None = None,
             reasons.append(f"Coulomb conditions violated by {coulomb:.3e} F (p_n < 0 or |λ_t| > μ_f p_n)")
 
     # -- small strain, or the deformed mesh at finite strain
-    strain, rotation = _largest_strain_and_rotation(problem, forms)
-    shape_ratio = math.nan
-    if finite:
-        shape_ratio, distorted = _deformed_mesh(problem, options)
-        reasons += [distorted] if distorted else []
-    else:
-        reasons += _beyond_small_strain(strain, rotation, options)
+    strain, rotation, shape_ratio = _shape(problem, forms, options, reasons)
 
     result = StateCheck(not reasons, "; ".join(reasons), float(eq), float(contact), float(coulomb),
                         float(strain), float(rotation), float(F), float(tol), own, float(yield_violation),
@@ -335,6 +323,28 @@ def _beyond_small_strain(strain: float, rotation: float, options: CheckOptions) 
         reasons.append(f"largest rotation {rotation:.3g} rad exceeds max_rotation = {options.max_rotation:g}: "
                        "far outside the small-rotation setting (a mechanism or collapse?)")
     return reasons
+
+
+def _law(problem, forms: _Forms, values: GaussPointValues, reasons: list[str]) -> tuple[ConstitutiveCheck, float]:
+    """(each relation's largest violation, the yield-surface figure) of the problem's kinematics; at
+    finite strain, why the state is inverted is appended to ``reasons`` (collective)."""
+    if kinematics_of(problem) != "finite":
+        return _constitutive(problem, forms, values)
+    constitutive, inverted = _finite_strain_law(problem, forms)
+    reasons += [inverted] if inverted else []
+    return constitutive, constitutive.yield_surface
+
+
+def _shape(problem, forms: _Forms, options: CheckOptions, reasons: list[str]) -> tuple[float, float, float]:
+    """(the largest strain, rotation, and at finite strain the smallest shape ratio, else NaN); why they
+    are out of bounds is appended to ``reasons``: the small-strain limits, or the deformed mesh (collective)."""
+    strain, rotation = _largest_strain_and_rotation(problem, forms)
+    if kinematics_of(problem) != "finite":
+        reasons += _beyond_small_strain(strain, rotation, options)
+        return strain, rotation, math.nan
+    shape_ratio, distorted = _deformed_mesh(problem, options)
+    reasons += [distorted] if distorted else []
+    return strain, rotation, shape_ratio
 
 
 def _finite_strain_law(problem, forms: _Forms) -> tuple[ConstitutiveCheck, str]:
