@@ -1,0 +1,323 @@
+r"""The consistent linearisation of node-to-surface pairs in the current geometry (issues 41 and 43).
+
+With ``Contact(..., discretisation="node-to-surface", geometry="current")`` the monolithic solver
+re-evaluates the pairs at every Newton iterate, as it does a rigid obstacle's
+(:meth:`~dolfinx_nnqem.contact.geometry_tracking.ContactGeometry.refresh_surfaces`): every pair
+keeps its slave node s, and its closest point is found again on the moved master surface,
+ξ on master facet f (which may be another facet than before), with the master's outward unit
+normal n there and the frame R = (n, t1, t2). With the pair's nodes j = s, k₁ … k_m and the
+weights c_s = 1, c_k = −N_k(ξ) (degree-1 facets: triangles, bilinear quadrilaterals), the
+residuals of the pair are
+
+    gap   g = n · d,      d = x_s − Σ_k N_k(ξ) x_k,
+    slip  s_α = t_α · a,  a = Σ_j c_j Δu_j   (Δu = u − u_n: w_n is measured with the current rows),
+    force F_j = c_j Rᵀλ   on node j (Bᵀλ: the slave node and the master nodes).
+
+B holds R c_j in node j's columns; the consistent Newton matrix adds what B leaves out, the
+motion of ξ and of n with the nodes x_j = X_j + u_j:
+
+* the closest point. Stationarity d · a_α = 0 (a_α = ∂x/∂ξ_α = Σ_k ∂N_k/∂ξ_α x_k) gives
+
+      A δξ = Σ_j G_j δx_j,   A_αβ = a_α · a_β − d · x_,αβ,   G_αj = a_α c_j + d ∂N_j/∂ξ_α
+
+  (∂N_s = 0; x_,12 = Σ_k ¼ s_k t_k x_k for a quadrilateral, zero for a triangle). A slave node
+  whose closest point is clamped to an edge or corner of its facet (beyond the master's
+  boundary, within the edge allowance) keeps ξ: δξ = 0.
+* the normal n = ν/|ν|, ν = a₁ × a₂:  δn = (I − n nᵀ)/|ν| (δa₁ × a₂ + a₁ × δa₂),
+  δa_α = Σ_k ∂N_k/∂ξ_α δx_k + x_,αβ δξ_β; the frame follows, δr_i = ∂r_i/∂n δn
+  (:func:`~dolfinx_nnqem.contact.surfaces.local_frames_derivative`).
+
+Then, per pair, with columns the 3 (1 + m) dofs of its nodes,
+
+    W_n = −n · a_β ∂ξ_β/∂x + dᵀ ∂n/∂x                    (zero at an interior closest point),
+    W_α = aᵀ ∂t_α/∂x − (t_α · Σ_k ∂N_k/∂ξ_β Δu_k) ∂ξ_β/∂x,
+    K_j = c_j Σ_i λ_i ∂r_i/∂x − Rᵀλ (∂N_j/∂ξ_β ∂ξ_β/∂x)  (the rows of node j),
+
+∂(gap, slip)/∂u = R c + W (the H rows get ∂H/∂w (B + W)) and ∂(Bᵀλ)/∂u = K at fixed λ (the u rows
+get K_t − K). The same terms for a rigid obstacle are in
+:mod:`~dolfinx_nnqem.contact.geometric_stiffness`; unlike those, K couples the slave node with the
+master nodes, which the tangent's pattern does not hold (:meth:`SurfaceTerms.stiffness_matrix`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+from petsc4py import PETSc
+
+from dolfinx_nnqem.contact.pairset import PairRows
+from dolfinx_nnqem.contact.projection import cyclic_order, project_points, shape_derivatives, shape_functions
+from dolfinx_nnqem.contact.surfaces import local_frames, local_frames_derivative
+
+__all__ = ["ClosestPoints", "SurfaceTerms", "closest_point_derivatives", "closest_points", "no_surface_terms",
+           "pair_terms", "reprojected_pairs", "surface_terms"]
+
+INTERIOR = 1e-8
+"""A closest point whose tangential offset (:attr:`~dolfinx_nnqem.contact.projection.Projection.tangential_offset`)
+is at most this times the master's facet size is the foot of the normal (stationary: ξ moves with the
+nodes); a larger one is clamped to the facet's boundary (ξ held)."""
+
+
+def _twist(k: int) -> np.ndarray:
+    """∂²N_a/∂ξ₁∂ξ₂ of the cyclic vertices: ¼ s_a t_a for a quadrilateral, 0 for a triangle."""
+    if k == 3:
+        return np.zeros(3)
+    return 0.25 * np.array([1.0, -1.0, 1.0, -1.0])  # corners (−1,−1), (1,−1), (1,1), (−1,1)
+
+
+def _cross_matrix(a: np.ndarray) -> np.ndarray:
+    """[a]× (p, 3, 3): [a]× b = a × b."""
+    out = np.zeros(a.shape[:-1] + (3, 3))
+    out[..., 0, 1], out[..., 0, 2] = -a[..., 2], a[..., 1]
+    out[..., 1, 0], out[..., 1, 2] = a[..., 2], -a[..., 0]
+    out[..., 2, 0], out[..., 2, 1] = -a[..., 1], a[..., 0]
+    return out
+
+
+def _node_weights(N: np.ndarray, dN: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(c_j (p, 1 + m), ∂N_j/∂ξ (p, 1 + m, 2)) over the pair's nodes: the slave node, then the master's."""
+    p = len(N)
+    c = np.concatenate([np.ones((p, 1)), -N], axis=1)
+    dNj = np.concatenate([np.zeros((p, 1, 2)), dN], axis=1)
+    return c, dNj
+
+
+def closest_point_derivatives(x_s: np.ndarray, x_m: np.ndarray, xi: np.ndarray, interior: np.ndarray
+                              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """∂ξ/∂x and ∂n/∂x of closest points on degree-1 facets (module docstring).
+
+    Parameters
+    ----------
+    x_s
+        (p, 3) the slave nodes.
+    x_m
+        (p, m, 3) their master facets' vertices in cyclic order
+        (:func:`~dolfinx_nnqem.contact.projection.cyclic_order`), m = 3 or 4.
+    xi
+        (p, 2) the closest points' local coordinates on those facets (cyclic order).
+    interior
+        (p,) True where ξ is the foot of the normal; elsewhere it is held (δξ = 0).
+
+    Returns
+    -------
+    (dxi (p, 2, c), dn (p, 3, c), n (p, 3)): the derivatives with respect to the c = 3 (1 + m) node
+    coordinates (the slave node's, then the master vertices', each x, y, z), and n = a₁ × a₂ / |a₁ × a₂|.
+    """
+    p, m = x_m.shape[:2]
+    N, dN = shape_functions(m, xi), shape_derivatives(m, xi)
+    a = np.einsum("pka,pkj->paj", dN, x_m)  # a_α
+    x12 = np.einsum("k,pkj->pj", _twist(m), x_m)  # x_,12
+    d = x_s - np.einsum("pk,pkj->pj", N, x_m)
+    c, dNj = _node_weights(N, dN)
+    G = (a[:, :, None, :] * c[:, None, :, None]
+         + d[:, None, None, :] * np.transpose(dNj, (0, 2, 1))[:, :, :, None]).reshape(p, 2, -1)
+    A = np.einsum("paj,pbj->pab", a, a)
+    twist = np.einsum("pj,pj->p", d, x12)
+    A[:, 0, 1] -= twist
+    A[:, 1, 0] -= twist
+    dxi = np.linalg.solve(A, G) if p else np.zeros((0, 2, G.shape[2]))
+    dxi[~interior] = 0.0
+    # δa_α = Σ_k ∂N_k/∂ξ_α δx_k + x_,12 δξ_(other)
+    da = np.einsum("pja,il->paijl", dNj, np.eye(3)).reshape(p, 2, 3, -1)
+    da[:, 0] += x12[:, :, None] * dxi[:, 1][:, None, :]
+    da[:, 1] += x12[:, :, None] * dxi[:, 0][:, None, :]
+    nu = np.cross(a[:, 0], a[:, 1])
+    length = np.linalg.norm(nu, axis=1)
+    n = nu / length[:, None]
+    dnu = -_cross_matrix(a[:, 1]) @ da[:, 0] + _cross_matrix(a[:, 0]) @ da[:, 1]
+    projector = (np.eye(3) - n[:, :, None] * n[:, None, :]) / length[:, None, None]
+    return dxi, projector @ dnu, n
+
+
+@dataclass(frozen=True)
+class ClosestPoints:
+    """Where the pairs of an interface project at the iterate (what :func:`pair_terms` needs).
+
+    Attributes
+    ----------
+    x_s
+        (p, 3) slave nodes.
+    x_m
+        (p, m, 3) their master facets' vertices, cyclic order.
+    xi, interior
+        (p, 2) the closest points (cyclic local coordinates); (p,) True where ξ is the foot of the normal.
+    normal
+        (p, 3) the pairs' normals (the master's outward normal at ξ).
+    du_s, du_m
+        (p, 3) and (p, m, 3): u − u_n at the slave node and the master vertices (cyclic order).
+    blocks
+        (p, 1 + m) global dof blocks of the slave node and the master vertices (cyclic order).
+    """
+
+    x_s: np.ndarray
+    x_m: np.ndarray
+    xi: np.ndarray
+    interior: np.ndarray
+    normal: np.ndarray
+    du_s: np.ndarray
+    du_m: np.ndarray
+    blocks: np.ndarray
+
+
+def pair_terms(points: ClosestPoints, lam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(K (p, c, c), W (p, 3, c)) of the pairs at ``points`` with local forces ``lam`` (p, 3) (module
+    docstring), columns as in :func:`closest_point_derivatives` (the slave node, then the master
+    vertices in cyclic order)."""
+    q = points
+    m = q.x_m.shape[1]
+    dxi, dn, n_facet = closest_point_derivatives(q.x_s, q.x_m, q.xi, q.interior)
+    dn *= np.sign(np.einsum("pj,pj->p", q.normal, n_facet))[:, None, None]  # the pair's orientation
+    R = local_frames(q.normal)
+    dR = np.einsum("pikl,plc->pikc", local_frames_derivative(q.normal), dn)
+    N, dN = shape_functions(m, q.xi), shape_derivatives(m, q.xi)
+    a_facet = np.einsum("pka,pkj->paj", dN, q.x_m)
+    d = q.x_s - np.einsum("pk,pkj->pj", N, q.x_m)
+    W = np.empty((len(N), 3, dxi.shape[2]))
+    W[:, 0] = (-np.einsum("pj,paj,pac->pc", q.normal, a_facet, dxi) + np.einsum("pj,pjc->pc", d, dn))
+    a = q.du_s - np.einsum("pk,pkj->pj", N, q.du_m)
+    s = np.einsum("pij,pbj->pib", R[:, 1:], np.einsum("pkb,pkj->pbj", dN, q.du_m))
+    W[:, 1:] = np.einsum("pk,pikc->pic", a, dR[:, 1:]) - np.einsum("pib,pbc->pic", s, dxi)
+    c, dNj = _node_weights(N, dN)
+    v = np.einsum("pi,pij->pj", lam, R)
+    dv = np.einsum("pi,pijc->pjc", lam, dR)
+    K = (np.einsum("pj,pic->pjic", c, dv)
+         - np.einsum("pi,pjb,pbc->pjic", v, dNj, dxi)).reshape(len(N), -1, dxi.shape[2])
+    return K, W
+
+
+@dataclass(frozen=True)
+class SurfaceTerms:
+    """The geometric blocks of node-to-surface pairs, in the columns of their rows of B.
+
+    Attributes
+    ----------
+    pairs
+        (k,) local pair indices (into the model's pairs).
+    columns
+        (k, c) the pairs' global columns, ascending (B's order for the pair).
+    K
+        (k, c, c) ∂(Bᵀλ)/∂u at fixed λ, rows and columns ``columns``.
+    W
+        (k, 3, c) ∂(gap, slip)/∂u − B.
+    """
+
+    pairs: np.ndarray
+    columns: np.ndarray
+    K: np.ndarray
+    W: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.pairs)
+
+    def add_rows(self, values: np.ndarray, rows: PairRows) -> np.ndarray:
+        """``values`` in B's layout ``rows`` with W added on these pairs' rows (in place; returned)."""
+        if len(self):
+            c = self.columns.shape[1]
+            start = rows.indptr[3 * self.pairs]
+            if np.any(rows.indptr[3 * self.pairs + 3] - start != 3 * c):
+                raise ValueError("SurfaceTerms: a pair's rows of B have other columns than its nodes'")
+            values[start[:, None] + np.arange(3 * c)] += self.W.reshape(len(self), -1)
+        return values
+
+    def stiffness_matrix(self, template: PETSc.Mat, free: np.ndarray) -> PETSc.Mat:
+        """K of every pair as a new matrix laid out like ``template`` (the tangent), rows and columns
+        of constrained dofs left out (``free``: (k, c) 1 at free columns, 0 at constrained ones;
+        collective: a master node's rows may belong to another rank)."""
+        G = PETSc.Mat().createAIJ(template.getSizes(), nnz=(60, 60), comm=template.getComm())
+        G.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+        G.setUp()
+        blocks = free[:, :, None] * self.K * free[:, None, :]
+        for index, block in zip(self.columns.astype(PETSc.IntType), blocks):
+            G.setValues(index, index, block, addv=PETSc.InsertMode.ADD_VALUES)
+        G.assemble()
+        return G
+
+
+def no_surface_terms() -> SurfaceTerms:
+    """No pair with node-to-surface geometric terms."""
+    return SurfaceTerms(np.zeros(0, dtype=np.int64), np.zeros((0, 12), dtype=np.int64), np.zeros((0, 12, 12)),
+                        np.zeros((0, 3, 12)))
+
+
+def surface_terms(points: ClosestPoints, lam: np.ndarray, pairs: np.ndarray) -> SurfaceTerms:
+    """The :class:`SurfaceTerms` of the local pairs ``pairs`` at ``points`` with forces ``lam``, their
+    columns put in B's (ascending) order."""
+    K, W = pair_terms(points, lam)
+    order = np.argsort(points.blocks, axis=1, kind="stable")
+    take = (3 * order[:, :, None] + np.arange(3)).reshape(len(order), -1)
+    K = np.take_along_axis(np.take_along_axis(K, take[:, :, None], axis=1), take[:, None, :], axis=2)
+    W = np.take_along_axis(W, take[:, None, :], axis=2)
+    blocks = np.take_along_axis(points.blocks, order, axis=1)
+    columns = (3 * blocks[:, :, None] + np.arange(3)).reshape(len(order), -1)
+    return SurfaceTerms(np.asarray(pairs, dtype=np.int64), columns.astype(np.int64), K, W)
+
+
+def closest_points(x_s: np.ndarray, master_x: np.ndarray, master_area: np.ndarray, preferred: np.ndarray,
+                   allowance: float, size: float):
+    """The slave nodes ``x_s`` projected onto the master facets (``master_x`` (m, k, 3) at their current
+    positions, ``master_area`` the outward area vectors), a node kept on its ``preferred`` facet where it
+    still projects onto it within ``allowance``; (projection, cyclic vertex order of each node's facet,
+    interior flags)."""
+    from dolfinx_nnqem.contact.node_to_surface import keep_preferred  # numba: only when used
+
+    p = project_points(x_s, master_x, master_area)
+    p = keep_preferred(p, x_s, _FacetsView(master_x, master_area), preferred, allowance)
+    order = cyclic_order(master_x[p.facet], master_area[p.facet])
+    return p, order, p.tangential_offset <= INTERIOR * size
+
+
+@dataclass(frozen=True)
+class _FacetsView:
+    """What :func:`~dolfinx_nnqem.contact.node_to_surface.keep_preferred` reads of the master facets."""
+
+    x: np.ndarray
+    area: np.ndarray
+
+
+def reprojected_pairs(pairs, reference, moved, u_n_slave: np.ndarray, u_n_master: np.ndarray, gap_rounding: float,
+                      allowance: float, size: float):
+    """The node-to-surface ``pairs`` (the same slave nodes, in the same order) projected again onto the
+    moved master surface, and their :class:`ClosestPoints`.
+
+    Parameters
+    ----------
+    pairs
+        The interface's :class:`~dolfinx_nnqem.contact.surface_pairs.SurfacePairs`.
+    reference, moved
+        The gathered surfaces (master, slave) at rest and at X + u.
+    u_n_slave, u_n_master
+        (p, 3) u_n at the pairs' slave nodes; (m, k, 3) at the master facets' vertices (gathered order).
+    gap_rounding, allowance, size
+        Gaps within ``gap_rounding`` are zero; the edge allowance of a preferred facet; the master's
+        facet size.
+
+    Returns
+    -------
+    (SurfacePairs, ClosestPoints): the pairs with their facets, weights N_k(ξ), frames, rows and
+    gaps g0 = g − (B u)_n of the iterate (so that g0 + (B u)_n is the current gap g), and where they
+    project.
+    """
+    master, master_ref = moved.facets_of(0), reference.facets_of(0)
+    slaves = np.searchsorted(moved.nodes[1].index, pairs.slave_blocks)
+    x_s = moved.nodes[1].x[slaves]
+    u_s = x_s - reference.nodes[1].x[slaves]
+    p, order, interior = closest_points(x_s, master.x, master.area, pairs.master_facet, allowance, size)
+    f, k = p.facet, master.x.shape[1]
+    u_m = master.x[f] - master_ref.x[f]  # caller's vertex order, like N
+    g = np.where(np.abs(p.g0) <= gap_rounding, 0.0, p.g0)
+    g0 = g - np.einsum("pj,pj->p", p.normal, u_s - np.einsum("pk,pkj->pj", p.N, u_m))
+    R = local_frames(p.normal) if len(f) else np.zeros((0, 3, 3))
+    nodes = np.concatenate([pairs.slave_blocks[:, None], master.nodes[f]], axis=1)
+    coefficients = np.concatenate([np.ones((len(f), 1)), -p.N], axis=1)
+    rows = PairRows.from_weighted_nodes(R, np.arange(0, (k + 1) * len(f) + 1, k + 1), nodes.ravel(),
+                                        coefficients.ravel())
+    new = replace(pairs, master_blocks=master.nodes[f].ravel(), weights=p.N.ravel(), X_master=p.point, R=R,
+                  g0=g0, rows=rows, master_facet=f.copy())
+    cyclic = order[:, :, None]
+    du_m = np.take_along_axis(u_m - u_n_master[f], cyclic, axis=1)
+    points = ClosestPoints(x_s, np.take_along_axis(master.x[f], cyclic, axis=1), p.xi, interior, p.normal,
+                           u_s - u_n_slave, du_m,
+                           np.concatenate([pairs.slave_blocks[:, None], np.take_along_axis(master.nodes[f], order,
+                                                                                           axis=1)], axis=1))
+    return new, points
