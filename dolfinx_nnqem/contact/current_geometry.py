@@ -208,10 +208,10 @@ class SurfaceTracker:
                                       search_distance=self.search_distance, note=self.note,
                                       supported=self.supported, edge_allowance=EDGE_ALLOWANCE * master_size,
                                       preferred=self.facets)
-        self.facets = self._gathered_facets(pairs)
+        self.facets = self.gathered_facets(pairs)
         return rebased(pairs, self.V, u)
 
-    def _gathered_facets(self, pairs: SurfacePairs) -> np.ndarray:
+    def gathered_facets(self, pairs: SurfacePairs) -> np.ndarray:
         """Every slave node's master facet (−1: no pair), the same on every rank (collective)."""
         assert pairs.master_facet is not None  # node-to-surface pairs carry it
         blocks = np.concatenate(pairs.comm.allgather(pairs.slave_blocks))

@@ -21,8 +21,9 @@ motion of ξ and of n with the nodes x_j = X_j + u_j:
       A δξ = Σ_j G_j δx_j,   A_αβ = a_α · a_β − d · x_,αβ,   G_αj = a_α c_j + d ∂N_j/∂ξ_α
 
   (∂N_s = 0; x_,12 = Σ_k ¼ s_k t_k x_k for a quadrilateral, zero for a triangle). A slave node
-  whose closest point is clamped to an edge or corner of its facet (beyond the master's
-  boundary, within the edge allowance) keeps ξ: δξ = 0.
+  whose closest point is clamped to an edge of its facet (beyond the master's boundary, or kept
+  on its facet past a shared edge, within the edge allowance) moves along the edge:
+  ξ = (1 − t) ξ_e + t ξ_f, t = (x_s − x_e) · e / e · e with e = x_f − x_e; at a corner ξ is held.
 * the normal n = ν/|ν|, ν = a₁ × a₂:  δn = (I − n nᵀ)/|ν| (δa₁ × a₂ + a₁ × δa₂),
   δa_α = Σ_k ∂N_k/∂ξ_α δx_k + x_,αβ δξ_β; the frame follows, δr_i = ∂r_i/∂n δn
   (:func:`~dolfinx_nnqem.contact.surfaces.local_frames_derivative`).
@@ -36,22 +37,24 @@ Then, per pair, with columns the 3 (1 + m) dofs of its nodes,
 ∂(gap, slip)/∂u = R c + W (the H rows get ∂H/∂w (B + W)) and ∂(Bᵀλ)/∂u = K at fixed λ (the u rows
 get K_t − K). The same terms for a rigid obstacle are in
 :mod:`~dolfinx_nnqem.contact.geometric_stiffness`; unlike those, K couples the slave node with the
-master nodes, which the tangent's pattern does not hold (:meth:`SurfaceTerms.stiffness_matrix`).
+master nodes, which the tangent's pattern does not hold (:func:`stiffness_matrix`).
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
 from petsc4py import PETSc
 
 from dolfinx_nnqem.contact.pairset import PairRows
-from dolfinx_nnqem.contact.projection import cyclic_order, project_points, shape_derivatives, shape_functions
+from dolfinx_nnqem.contact.projection import (cyclic_order, project_points, reference_vertices, shape_derivatives,
+                                             shape_functions)
 from dolfinx_nnqem.contact.surfaces import local_frames, local_frames_derivative
 
 __all__ = ["ClosestPoints", "SurfaceTerms", "closest_point_derivatives", "closest_points", "no_surface_terms",
-           "pair_terms", "reprojected_pairs", "surface_terms"]
+           "pair_terms", "reprojected_pairs", "stiffness_matrix", "surface_terms"]
 
 INTERIOR = 1e-8
 """A closest point whose tangential offset (:attr:`~dolfinx_nnqem.contact.projection.Projection.tangential_offset`)
@@ -83,6 +86,36 @@ def _node_weights(N: np.ndarray, dN: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return c, dNj
 
 
+def _edge_derivative(x_s: np.ndarray, x_m: np.ndarray, xi: np.ndarray) -> np.ndarray:
+    """∂ξ/∂x (p, 2, c) of closest points clamped to the boundary of their facets.
+
+    On an edge from vertex e to vertex f (straight, for either facet), ξ = (1 − t) ξ_e + t ξ_f with
+    t = p · e / e · e, p = x_s − x_e, e = x_f − x_e, so δt e · e = e · (δx_s − δx_e) + (p − 2 t e) · (δx_f − δx_e);
+    at a corner (t = 0 or 1) ξ is held.
+    """
+    q, m = x_m.shape[:2]
+    corners = reference_vertices(m)
+    start, end = corners, np.roll(corners, -1, axis=0)
+    along = end - start  # (m, 2)
+    t = np.einsum("pma,ma->pm", xi[:, None, :] - start[None], along) / np.sum(along ** 2, axis=1)
+    off = np.linalg.norm(xi[:, None, :] - start[None] - np.clip(t, 0.0, 1.0)[:, :, None] * along[None], axis=2)
+    edge = np.argmin(off, axis=1)
+    rows = np.arange(q)
+    t_e = np.clip(t[rows, edge], 0.0, 1.0)
+    corner = (t_e < 1e-12) | (t_e > 1.0 - 1e-12)
+    e_vertex, f_vertex = edge, (edge + 1) % m
+    x_e, x_f = x_m[rows, e_vertex], x_m[rows, f_vertex]
+    e = x_f - x_e
+    r = x_s - x_e - 2.0 * t_e[:, None] * e
+    dt = np.zeros((q, 1 + m, 3))
+    dt[rows, 0] = e
+    dt[rows, 1 + e_vertex] = -e - r
+    dt[rows, 1 + f_vertex] += r
+    dt /= np.sum(e * e, axis=1)[:, None, None]
+    dt[corner] = 0.0
+    return (along[edge][:, :, None, None] * dt[:, None]).reshape(q, 2, 3 * (1 + m))
+
+
 def closest_point_derivatives(x_s: np.ndarray, x_m: np.ndarray, xi: np.ndarray, interior: np.ndarray
                               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """∂ξ/∂x and ∂n/∂x of closest points on degree-1 facets (module docstring).
@@ -97,7 +130,7 @@ def closest_point_derivatives(x_s: np.ndarray, x_m: np.ndarray, xi: np.ndarray, 
     xi
         (p, 2) the closest points' local coordinates on those facets (cyclic order).
     interior
-        (p,) True where ξ is the foot of the normal; elsewhere it is held (δξ = 0).
+        (p,) True where ξ is the foot of the normal; elsewhere it is clamped to the facet's boundary.
 
     Returns
     -------
@@ -117,7 +150,7 @@ def closest_point_derivatives(x_s: np.ndarray, x_m: np.ndarray, xi: np.ndarray, 
     A[:, 0, 1] -= twist
     A[:, 1, 0] -= twist
     dxi = np.linalg.solve(A, G) if p else np.zeros((0, 2, G.shape[2]))
-    dxi[~interior] = 0.0
+    dxi[~interior] = _edge_derivative(x_s[~interior], x_m[~interior], xi[~interior])
     # δa_α = Σ_k ∂N_k/∂ξ_α δx_k + x_,12 δξ_(other)
     da = np.einsum("pja,il->paijl", dNj, np.eye(3)).reshape(p, 2, 3, -1)
     da[:, 0] += x12[:, :, None] * dxi[:, 1][:, None, :]
@@ -220,18 +253,20 @@ class SurfaceTerms:
             values[start[:, None] + np.arange(3 * c)] += self.W.reshape(len(self), -1)
         return values
 
-    def stiffness_matrix(self, template: PETSc.Mat, free: np.ndarray) -> PETSc.Mat:
-        """K of every pair as a new matrix laid out like ``template`` (the tangent), rows and columns
-        of constrained dofs left out (``free``: (k, c) 1 at free columns, 0 at constrained ones;
-        collective: a master node's rows may belong to another rank)."""
-        G = PETSc.Mat().createAIJ(template.getSizes(), nnz=(60, 60), comm=template.getComm())
-        G.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
-        G.setUp()
-        blocks = free[:, :, None] * self.K * free[:, None, :]
-        for index, block in zip(self.columns.astype(PETSc.IntType), blocks):
+
+def stiffness_matrix(terms: Sequence[SurfaceTerms], free: Sequence[np.ndarray], template: PETSc.Mat) -> PETSc.Mat:
+    """The blocks K of every pair of ``terms`` as a new matrix laid out like ``template`` (the tangent),
+    rows and columns of constrained dofs left out (``free``: per terms, (k, c) 1 at free columns, 0 at
+    constrained ones). Collective: a master node's rows may belong to another rank."""
+    G = PETSc.Mat().createAIJ(template.getSizes(), nnz=(60, 60), comm=template.getComm())
+    G.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+    G.setUp()
+    for part, mask in zip(terms, free):
+        blocks = mask[:, :, None] * part.K * mask[:, None, :]
+        for index, block in zip(part.columns.astype(PETSc.IntType), blocks):
             G.setValues(index, index, block, addv=PETSc.InsertMode.ADD_VALUES)
-        G.assemble()
-        return G
+    G.assemble()
+    return G
 
 
 def no_surface_terms() -> SurfaceTerms:

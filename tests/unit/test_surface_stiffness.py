@@ -94,12 +94,34 @@ def test_gap_slip_and_force_derivatives_match_finite_differences(facet):
     assert np.abs(W[0, 1:]).max() > 1e-2 and np.abs(K).max() > 1e-2  # the terms are there
 
 
-def test_clamped_closest_point_holds_xi():
-    """A slave node beyond the facet's edge: ξ clamped to the edge is held, the normal still turns with
-    the facet's vertices (the gap's derivative then has the normal's term d · ∂n/∂x)."""
+@pytest.mark.parametrize("facet", [TRIANGLE, QUADRILATERAL], ids=["tri3", "quad4"])
+def test_closest_point_clamped_to_an_edge_matches_finite_differences(facet):
+    """A slave node beyond the facet's edge (kept on its facet, as past a shared edge within the edge
+    allowance): ξ slides along the edge, and the gap (d no longer along n), slips and forces follow."""
+    x, x_n, lam = _state(facet)
+    x[0] = 0.5 * (x[2] + x[3]) + np.array([0.15, 0.1, 0.3])  # beyond the edge from vertex 1 to vertex 2
+    p = project_points(x[0][None], x[1:][None], newell_area_vectors(x[1:][None]))
+    assert p.tangential_offset[0] > 0.05
+    points = _points(x, x_n)
+    points = ClosestPoints(points.x_s, points.x_m, points.xi, np.array([False]), points.normal, points.du_s,
+                           points.du_m, points.blocks)
+    dxi, dn, _ = closest_point_derivatives(points.x_s, points.x_m, points.xi, points.interior)
+    np.testing.assert_allclose(dxi[0], _central(lambda y: _exact(y, x_n, lam)[0], x), atol=1e-8)
+    np.testing.assert_allclose(dn[0], _central(lambda y: _exact(y, x_n, lam)[1], x), atol=1e-8)
+    K, W = pair_terms(points, lam[None])
+    _, _, _, _, R, c = _exact(x, x_n, lam)
+    B = np.einsum("ik,j->ijk", R, c).reshape(3, -1)
+    np.testing.assert_allclose(B + W[0], _central(lambda y: _exact(y, x_n, lam)[2], x), atol=1e-8)
+    np.testing.assert_allclose(K[0], _central(lambda y: _exact(y, x_n, lam)[3], x), atol=1e-8)
+    assert np.abs(W[0, 0]).max() > 1e-3  # the gap's derivative is not B's row alone here
+
+
+def test_closest_point_at_a_corner_holds_xi():
+    """A slave node beyond a corner: ξ stays at the corner (δξ = 0), the normal still turns."""
     x, x_n, lam = _state(TRIANGLE)
-    x[0] = np.array([1.3, 1.2, 0.3])  # beyond the edge (1, 0.1) – (0.2, 0.9)
+    x[0] = x[2] + np.array([0.3, -0.2, 0.2])  # beyond vertex 1 (1, 0.1, 0.05)
     p = project_points(x[0][None], x[1:][None], newell_area_vectors(x[1:][None]))
     assert p.tangential_offset[0] > 0.1
     dxi, dn, _ = closest_point_derivatives(x[0][None], x[1:][None], p.xi, np.array([False]))
+    np.testing.assert_allclose(p.xi[0], [1.0, 0.0], atol=1e-14)
     assert np.all(dxi == 0.0) and np.abs(dn).max() > 0.1
