@@ -181,6 +181,9 @@ class ClosestPoints:
         (p, 3) and (p, m, 3): u − u_n at the slave node and the master vertices (cyclic order).
     blocks
         (p, 1 + m) global dof blocks of the slave node and the master vertices (cyclic order).
+    beyond
+        (p,) True where the slave node lies beyond the master's boundary by more than the edge
+        allowance: the pair is held open (its gap a constant, :func:`reprojected_pairs`), None: none.
     """
 
     x_s: np.ndarray
@@ -191,6 +194,7 @@ class ClosestPoints:
     du_s: np.ndarray
     du_m: np.ndarray
     blocks: np.ndarray
+    beyond: np.ndarray | None = None
 
 
 def pair_terms(points: ClosestPoints, lam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -206,12 +210,14 @@ def pair_terms(points: ClosestPoints, lam: np.ndarray) -> tuple[np.ndarray, np.n
     N, dN = shape_functions(m, q.xi), shape_derivatives(m, q.xi)
     a_facet = np.einsum("pka,pkj->paj", dN, q.x_m)
     d = q.x_s - np.einsum("pk,pkj->pj", N, q.x_m)
+    c, dNj = _node_weights(N, dN)
     W = np.empty((len(N), 3, dxi.shape[2]))
     W[:, 0] = (-np.einsum("pj,paj,pac->pc", q.normal, a_facet, dxi) + np.einsum("pj,pjc->pc", d, dn))
+    if q.beyond is not None:  # a constant gap: W cancels B's normal row
+        W[q.beyond, 0] = -np.einsum("pj,pl->pjl", c, q.normal)[q.beyond].reshape(-1, dxi.shape[2])
     a = q.du_s - np.einsum("pk,pkj->pj", N, q.du_m)
     s = np.einsum("pij,pbj->pib", R[:, 1:], np.einsum("pkb,pkj->pbj", dN, q.du_m))
     W[:, 1:] = np.einsum("pk,pikc->pic", a, dR[:, 1:]) - np.einsum("pib,pbc->pic", s, dxi)
-    c, dNj = _node_weights(N, dN)
     v = np.einsum("pi,pij->pj", lam, R)
     dv = np.einsum("pi,pijc->pjc", lam, dR)
     K = (np.einsum("pj,pic->pjic", c, dv)
@@ -331,7 +337,11 @@ def reprojected_pairs(pairs, reference, moved, u_n_slave: np.ndarray, u_n_master
     -------
     (SurfacePairs, ClosestPoints): the pairs with their facets, weights N_k(ξ), frames, rows and
     gaps g0 = g − (B u)_n of the iterate (so that g0 + (B u)_n is the current gap g), and where they
-    project.
+    project. A slave node now beyond the master's boundary by more than ``allowance`` keeps its pair
+    within the solve (the pair unknowns' layout is fixed) with the gap g = ``size``: the pair opens, as
+    if dropped, which the re-evaluation between solves then does
+    (:func:`~dolfinx_nnqem.contact.node_to_surface.node_to_surface_pairs`), so that the next solve
+    starts converged.
     """
     master, master_ref = moved.facets_of(0), reference.facets_of(0)
     slaves = np.searchsorted(moved.nodes[1].index, pairs.slave_blocks)
@@ -341,6 +351,8 @@ def reprojected_pairs(pairs, reference, moved, u_n_slave: np.ndarray, u_n_master
     f, k = p.facet, master.x.shape[1]
     u_m = master.x[f] - master_ref.x[f]  # caller's vertex order, like N
     g = np.where(np.abs(p.g0) <= gap_rounding, 0.0, p.g0)
+    beyond = p.tangential_offset > allowance
+    g[beyond] = size  # held open: the next re-evaluation between solves drops the pair
     g0 = g - np.einsum("pj,pj->p", p.normal, u_s - np.einsum("pk,pkj->pj", p.N, u_m))
     R = local_frames(p.normal) if len(f) else np.zeros((0, 3, 3))
     nodes = np.concatenate([pairs.slave_blocks[:, None], master.nodes[f]], axis=1)
@@ -354,5 +366,6 @@ def reprojected_pairs(pairs, reference, moved, u_n_slave: np.ndarray, u_n_master
     points = ClosestPoints(x_s, np.take_along_axis(master.x[f], cyclic, axis=1), p.xi, interior, p.normal,
                            u_s - u_n_slave, du_m,
                            np.concatenate([pairs.slave_blocks[:, None], np.take_along_axis(master.nodes[f], order,
-                                                                                           axis=1)], axis=1))
+                                                                                           axis=1)], axis=1),
+                           beyond)
     return new, points
