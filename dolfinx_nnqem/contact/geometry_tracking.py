@@ -257,6 +257,7 @@ class ContactGeometry:
         if self._trackers[k] is not None:
             return
         interface = self._model.interfaces[k]
+        self._reprojecting = None  # asked again with the new tracker
         with self._constrained_dofs.localForm() as c:
             self._trackers[k] = tracker_of(interface.contact, self._V, self._facet_tags, supported=c.array.copy(),
                                            reference=interface.pairs)
@@ -375,7 +376,7 @@ class ContactGeometry:
         if self._reprojecting is None:
             self._reprojecting = [isinstance(t, SurfaceTracker) and not self._comm.allreduce(
                 _slave_supported(t, self._V), op=MPI.LOR) for t in self._trackers]
-        return [r and isinstance(t, SurfaceTracker) for r, t in zip(self._reprojecting, self._trackers)]
+        return self._reprojecting
 
     def refresh_surfaces(self, u: dolfinx.fem.Function, u_n: dolfinx.fem.Function, load_factor_n: float) -> None:
         """Re-evaluate the node-to-surface interfaces of :attr:`reprojecting` at u, keeping their pairs

@@ -49,12 +49,13 @@ import numpy as np
 from petsc4py import PETSc
 
 from dolfinx_nnqem.contact.pairset import PairRows
-from dolfinx_nnqem.contact.projection import (cyclic_order, project_points, reference_vertices, shape_derivatives,
-                                             shape_functions)
-from dolfinx_nnqem.contact.surfaces import local_frames, local_frames_derivative
+from dolfinx_nnqem.contact.projection import (Projection, cyclic_order, project_points, reference_vertices,
+                                             shape_derivatives, shape_functions)
+from dolfinx_nnqem.contact.surface_pairs import SurfacePairs
+from dolfinx_nnqem.contact.surfaces import Facets, GatheredSurfaces, local_frames, local_frames_derivative
 
-__all__ = ["ClosestPoints", "SurfaceTerms", "closest_point_derivatives", "closest_points", "no_surface_terms",
-           "pair_terms", "reprojected_pairs", "stiffness_matrix", "surface_terms"]
+__all__ = ["ClosestPoints", "SurfaceTerms", "closest_point_derivatives", "closest_points", "pair_terms",
+           "reprojected_pairs", "stiffness_matrix", "surface_terms"]
 
 INTERIOR = 1e-8
 """A closest point whose tangential offset (:attr:`~dolfinx_nnqem.contact.projection.Projection.tangential_offset`)
@@ -265,7 +266,7 @@ def stiffness_matrix(terms: Sequence[SurfaceTerms], free: Sequence[np.ndarray], 
     rows and columns of constrained dofs left out (``free``: per terms, (k, c) 1 at free columns, 0 at
     constrained ones). Collective: a master node's rows may belong to another rank."""
     G = PETSc.Mat().createAIJ(template.getSizes(), nnz=(60, 60), comm=template.getComm())
-    G.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+    G.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)  # type: ignore[arg-type]  # petsc4py's stub types the Option constants as int
     G.setUp()
     for part, mask in zip(terms, free):
         blocks = mask[:, :, None] * part.K * mask[:, None, :]
@@ -273,12 +274,6 @@ def stiffness_matrix(terms: Sequence[SurfaceTerms], free: Sequence[np.ndarray], 
             G.setValues(index, index, block, addv=PETSc.InsertMode.ADD_VALUES)
     G.assemble()
     return G
-
-
-def no_surface_terms() -> SurfaceTerms:
-    """No pair with node-to-surface geometric terms."""
-    return SurfaceTerms(np.zeros(0, dtype=np.int64), np.zeros((0, 12), dtype=np.int64), np.zeros((0, 12, 12)),
-                        np.zeros((0, 3, 12)))
 
 
 def surface_terms(points: ClosestPoints, lam: np.ndarray, pairs: np.ndarray) -> SurfaceTerms:
@@ -294,30 +289,23 @@ def surface_terms(points: ClosestPoints, lam: np.ndarray, pairs: np.ndarray) -> 
     return SurfaceTerms(np.asarray(pairs, dtype=np.int64), columns.astype(np.int64), K, W)
 
 
-def closest_points(x_s: np.ndarray, master_x: np.ndarray, master_area: np.ndarray, preferred: np.ndarray,
-                   allowance: float, size: float):
-    """The slave nodes ``x_s`` projected onto the master facets (``master_x`` (m, k, 3) at their current
-    positions, ``master_area`` the outward area vectors), a node kept on its ``preferred`` facet where it
-    still projects onto it within ``allowance``; (projection, cyclic vertex order of each node's facet,
-    interior flags)."""
+def closest_points(x_s: np.ndarray, master: Facets, preferred: np.ndarray, allowance: float,
+                   size: float) -> tuple[Projection, np.ndarray, np.ndarray]:
+    """The slave nodes ``x_s`` projected onto the ``master`` facets (at their current positions), a node
+    kept on its ``preferred`` facet where it still projects onto it within ``allowance``; (projection,
+    cyclic vertex order of each node's facet, interior flags: the foot of the normal, within
+    :data:`INTERIOR` × ``size``)."""
     from dolfinx_nnqem.contact.node_to_surface import keep_preferred  # numba: only when used
 
-    p = project_points(x_s, master_x, master_area)
-    p = keep_preferred(p, x_s, _FacetsView(master_x, master_area), preferred, allowance)
-    order = cyclic_order(master_x[p.facet], master_area[p.facet])
+    p = project_points(x_s, master.x, master.area)
+    p = keep_preferred(p, x_s, master, preferred, allowance)
+    order = cyclic_order(master.x[p.facet], master.area[p.facet])
     return p, order, p.tangential_offset <= INTERIOR * size
 
 
-@dataclass(frozen=True)
-class _FacetsView:
-    """What :func:`~dolfinx_nnqem.contact.node_to_surface.keep_preferred` reads of the master facets."""
-
-    x: np.ndarray
-    area: np.ndarray
-
-
-def reprojected_pairs(pairs, reference, moved, u_n_slave: np.ndarray, u_n_master: np.ndarray, gap_rounding: float,
-                      allowance: float, size: float):
+def reprojected_pairs(pairs: SurfacePairs, reference: GatheredSurfaces, moved: GatheredSurfaces, u_n_slave: np.ndarray,
+                      u_n_master: np.ndarray, gap_rounding: float, allowance: float,
+                      size: float) -> tuple[SurfacePairs, ClosestPoints]:
     """The node-to-surface ``pairs`` (the same slave nodes, in the same order) projected again onto the
     moved master surface, and their :class:`ClosestPoints`.
 
@@ -347,7 +335,8 @@ def reprojected_pairs(pairs, reference, moved, u_n_slave: np.ndarray, u_n_master
     slaves = np.searchsorted(moved.nodes[1].index, pairs.slave_blocks)
     x_s = moved.nodes[1].x[slaves]
     u_s = x_s - reference.nodes[1].x[slaves]
-    p, order, interior = closest_points(x_s, master.x, master.area, pairs.master_facet, allowance, size)
+    assert pairs.master_facet is not None  # node-to-surface pairs carry it
+    p, order, interior = closest_points(x_s, master, pairs.master_facet, allowance, size)
     f, k = p.facet, master.x.shape[1]
     u_m = master.x[f] - master_ref.x[f]  # caller's vertex order, like N
     g = np.where(np.abs(p.g0) <= gap_rounding, 0.0, p.g0)

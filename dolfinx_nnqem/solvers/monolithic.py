@@ -356,7 +356,7 @@ class MonolithicSolver(ReleasesPETSc):
         if self._K_surface is not None:
             self._K_surface.destroy()
         self._K_surface = self._K.copy()
-        self._K_surface.axpy(-1.0, G, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+        self._K_surface.axpy(-1.0, G, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)  # type: ignore[arg-type]  # petsc4py's stub types the Structure constants as int
         G.destroy()
         return self._K_surface, values
 
