@@ -9,6 +9,9 @@ The cases (``dolfinx_nnqem.cases.large_sliding``):
 * ``blocks``, ``blocks-friction``: the upper block slid 1.6 master facets over the lower one
   (node-to-surface, 12 increments), μ_f = 0 and 0.3;
 * ``mortar``, ``mortar-friction``: the same slide with dual mortar pairs;
+* ``blocks-fine``, ``blocks-friction-fine``: the node-to-surface slides in the ``slide``'s load
+  stepping (5 × ``increments`` increments, a quarter of them pressing): per increment the same
+  steps of the load path as the rigid obstacle's slide it is compared with;
 * ``ironing``: the cylinder dragged 8 facets over the elastoplastic strip (nx = 16, 40 increments,
   μ_f = 0.1).
 
@@ -23,7 +26,8 @@ and ``--compare DIR`` prints the largest differences from such a saved run (befo
 of the solver: the converged states must agree to the solver's tolerance)::
 
     python benchmarks/large_sliding.py [--n 8] [--increments 4] [--methods monolithic,nneqm1]
-                                       [--cases press,slide,blocks,blocks-friction,mortar,mortar-friction,ironing]
+                                       [--cases press,slide,blocks,blocks-friction,mortar,mortar-friction,
+                                                blocks-fine,blocks-friction-fine,ironing]
                                        [--rtol 1e-10] [--linearisations consistent] [--frozen]
                                        [--save DIR] [--compare DIR]
 """
@@ -41,7 +45,8 @@ from dolfinx_nnqem.cases.large_sliding import (PRESSED_AT, ironing, obstacle_for
                                                sliding_sphere)
 from dolfinx_nnqem.solvers import ConvergenceError, MonolithicOptions, SolverOptions, make_solver, solve_load_steps
 
-CASES = ("press", "slide", "blocks", "blocks-friction", "mortar", "mortar-friction", "ironing")
+CASES = ("press", "slide", "blocks", "blocks-friction", "mortar", "mortar-friction", "blocks-fine",
+         "blocks-friction-fine", "ironing")
 
 
 def _cases(n: int, increments: int) -> dict[str, tuple[Callable[[str], object], int, Callable]]:
@@ -54,6 +59,9 @@ def _cases(n: int, increments: int) -> dict[str, tuple[Callable[[str], object], 
         "mortar": (lambda g: sliding_blocks(slide=0.4, geometry=g, discretisation="mortar"), 12, slave_force),
         "mortar-friction": (lambda g: sliding_blocks(slide=0.4, mu_f=0.3, geometry=g, discretisation="mortar"), 12,
                             slave_force),
+        "blocks-fine": (lambda g: sliding_blocks(slide=0.4, geometry=g), 5 * increments, slave_force),
+        "blocks-friction-fine": (lambda g: sliding_blocks(slide=0.4, mu_f=0.3, geometry=g), 5 * increments,
+                                 slave_force),
         "ironing": (lambda g: ironing(16), 40, obstacle_force),
     }
 
