@@ -31,7 +31,9 @@ from dolfinx_nnqem.contact.obstacles import ObstaclePairs, RigidObstacle, obstac
 from dolfinx_nnqem.contact.pairset import PairSet
 from dolfinx_nnqem.contact.slip_check import Slip, facet_size_of, slipped_interfaces
 from dolfinx_nnqem.contact.surface_pairs import SurfacePairs, facet_size
-from dolfinx_nnqem.contact.surface_stiffness import ClosestPoints, SurfaceTerms, reprojected_pairs, surface_terms
+from dolfinx_nnqem.contact.surface_stiffness import (ClosestPoints, Supports, SurfaceTerms, reprojected_pairs,
+                                                     surface_terms)
+from dolfinx_nnqem.contact.symmetry_planes import IN_PLANE, supports_of
 from dolfinx_nnqem.contact.specification import Contact
 from dolfinx_nnqem.contact.surfaces import ContactPairError, NoPairsError, mesh_tolerance, space_degree
 
@@ -200,7 +202,7 @@ class ContactGeometry:
         self.version = 0
         self._refreshed_at: np.ndarray | None = None  # where refresh_obstacles last evaluated
         self._facet_sizes: list[float] | None = None  # of the interfaces' slave surfaces, at the first slip check
-        self._reprojecting: list[bool] | None = None  # per interface: refresh_surfaces re-evaluates it (at first use)
+        self._supports: dict[int, tuple[np.ndarray, np.ndarray] | None] = {}  # per interface: its nodes' supports
         self._surfaces_at: np.ndarray | None = None  # where refresh_surfaces last evaluated
         self._closest_points: dict[int, ClosestPoints] = {}  # of the interfaces refresh_surfaces evaluated
 
@@ -257,7 +259,6 @@ class ContactGeometry:
         if self._trackers[k] is not None:
             return
         interface = self._model.interfaces[k]
-        self._reprojecting = None  # asked again with the new tracker
         with self._constrained_dofs.localForm() as c:
             self._trackers[k] = tracker_of(interface.contact, self._V, self._facet_tags, supported=c.array.copy(),
                                            reference=interface.pairs)
@@ -368,15 +369,9 @@ class ContactGeometry:
 
     @property
     def reprojecting(self) -> list[bool]:
-        """Per interface: True if :meth:`refresh_surfaces` re-evaluates it, a node-to-surface interface in
-        the current geometry none of whose slave nodes is supported (collective at the first call; the
-        normals of slave nodes on a symmetry plane are put in the plane, which the consistent terms of
-        :mod:`~dolfinx_nnqem.contact.surface_stiffness` do not follow: those interfaces keep their
-        geometry frozen within a solve)."""
-        if self._reprojecting is None:
-            self._reprojecting = [isinstance(t, SurfaceTracker) and not self._comm.allreduce(
-                _slave_supported(t, self._V), op=MPI.LOR) for t in self._trackers]
-        return self._reprojecting
+        """Per interface: True if :meth:`refresh_surfaces` re-evaluates it (node-to-surface in the
+        current geometry)."""
+        return [isinstance(t, SurfaceTracker) for t in self._trackers]
 
     def refresh_surfaces(self, u: dolfinx.fem.Function, u_n: dolfinx.fem.Function, load_factor_n: float) -> None:
         """Re-evaluate the node-to-surface interfaces of :attr:`reprojecting` at u, keeping their pairs
@@ -395,7 +390,8 @@ class ContactGeometry:
         for k, tracker in enumerate(self._trackers):
             if self.reprojecting[k]:
                 assert isinstance(tracker, SurfaceTracker)  # reprojecting: a node-to-surface tracker
-                new[k], self._closest_points[k] = _reprojected(interfaces[k].pairs, tracker, u, u_n)
+                new[k], self._closest_points[k] = _reprojected(interfaces[k].pairs, tracker, u, u_n,
+                                                               self._supports_of(k, tracker))
         kept = all(np.array_equal(p.rows.indptr, interfaces[k].pairs.rows.indptr)
                    and np.array_equal(p.rows.columns, interfaces[k].pairs.rows.columns) for k, p in new.items())
         if self._comm.allreduce(kept, op=MPI.LAND):
@@ -408,6 +404,16 @@ class ContactGeometry:
             assert isinstance(tracker, SurfaceTracker)
             tracker.facets = tracker.gathered_facets(pairs)
         self._surfaces_at = key
+
+    def _supports_of(self, k: int, tracker: SurfaceTracker) -> tuple[np.ndarray, np.ndarray] | None:
+        """The prescribed components of interface ``k``'s slave nodes (sorted blocks) and master facets'
+        vertices (collective at the first call; None if no support is known)."""
+        if k not in self._supports:
+            master = tracker.surfaces.facets_of(0)
+            self._supports[k] = None if tracker.supported is None else (
+                supports_of(self._V, tracker.supported, tracker.surfaces.nodes[1].index),
+                supports_of(self._V, tracker.supported, master.nodes.ravel()).reshape(master.x.shape))
+        return self._supports[k]
 
     def surface_terms(self, lam: np.ndarray | None = None) -> list[SurfaceTerms]:
         """The geometric blocks of the pairs :meth:`refresh_surfaces` evaluated last, one per interface,
@@ -432,27 +438,22 @@ class ContactGeometry:
                 tracker.facets = np.asarray(facets, dtype=np.int64).copy()
 
 
-def _slave_supported(tracker: SurfaceTracker, V) -> bool:
-    """True if a slave node of the tracker's interface owned by this rank has a prescribed dof."""
-    if tracker.supported is None:
-        return False
-    start, end = V.dofmap.index_map.local_range
-    blocks = tracker.surfaces.nodes[1].index
-    owned = blocks[(blocks >= start) & (blocks < end)] - start
-    dofs = (3 * owned[:, None] + np.arange(3)).ravel()
-    return bool(np.any(tracker.supported[dofs] != 0))
-
-
-def _reprojected(pairs: PairSet, tracker: SurfaceTracker, u, u_n) -> tuple[SurfacePairs, ClosestPoints]:
-    """The interface's pairs projected again at u, and where they project (collective)."""
+def _reprojected(pairs: PairSet, tracker: SurfaceTracker, u, u_n, supports: tuple[np.ndarray, np.ndarray] | None
+                 ) -> tuple[SurfacePairs, ClosestPoints]:
+    """The interface's pairs projected again at u, and where they project (collective); ``supports``:
+    the prescribed components of its slave nodes and master vertices (:meth:`ContactGeometry._supports_of`)."""
     assert isinstance(pairs, SurfacePairs)  # a node-to-surface tracker's pairs
     master = tracker.surfaces.facets_of(0)
     u_n_master = displacement_at(u_n, master.nodes.ravel()).reshape(master.x.shape)
     start = u.function_space.dofmap.index_map.local_range[0]
     u_n_slave = u_n.x.array.reshape(-1, 3)[pairs.slave_blocks - start]  # the pairs' slave nodes are owned
     size = facet_size(master)
+    known = None
+    if supports is not None:
+        slave = supports[0][np.searchsorted(tracker.surfaces.nodes[1].index, pairs.slave_blocks)]
+        known = Supports(slave, supports[1], IN_PLANE * size)
     return reprojected_pairs(pairs, tracker.surfaces, moved_surfaces(tracker.surfaces, u), u_n_slave, u_n_master,
-                             tracker.gap_rounding, EDGE_ALLOWANCE * size, size)
+                             tracker.gap_rounding, EDGE_ALLOWANCE * size, size, known)
 
 
 def _pairs_or_lost(interface: TrackedInterface, tracker: GeometryTracker, u, load_factor: float) -> PairSet:

@@ -52,10 +52,12 @@ from dolfinx_nnqem.contact.pairset import PairRows
 from dolfinx_nnqem.contact.projection import (Projection, cyclic_order, project_points, reference_vertices,
                                              shape_derivatives, shape_functions)
 from dolfinx_nnqem.contact.surface_pairs import SurfacePairs
-from dolfinx_nnqem.contact.surfaces import Facets, GatheredSurfaces, local_frames, local_frames_derivative
+from dolfinx_nnqem.contact.surfaces import (Facets, GatheredSurfaces, local_frames, local_frames_derivative,
+                                            symmetry_normals)
+from dolfinx_nnqem.contact.symmetry_planes import symmetry_axes
 
 __all__ = ["ClosestPoints", "SurfaceTerms", "closest_point_derivatives", "closest_points", "pair_terms",
-           "reprojected_pairs", "stiffness_matrix", "surface_terms"]
+           "Supports", "reprojected_pairs", "stiffness_matrix", "surface_terms"]
 
 INTERIOR = 1e-8
 """A closest point whose tangential offset (:attr:`~dolfinx_nnqem.contact.projection.Projection.tangential_offset`)
@@ -185,6 +187,10 @@ class ClosestPoints:
     beyond
         (p,) True where the slave node lies beyond the master's boundary by more than the edge
         allowance: the pair is held open (its gap a constant, :func:`reprojected_pairs`), None: none.
+    turned
+        (p, 3) True at the axes of a symmetry plane the pair's normal was turned into
+        (:func:`~dolfinx_nnqem.contact.surfaces.symmetry_normals`: ``normal`` is then the turned one,
+        the gap still n_f · d with the facet's normal n_f), None: no normal turned.
     """
 
     x_s: np.ndarray
@@ -196,6 +202,20 @@ class ClosestPoints:
     du_m: np.ndarray
     blocks: np.ndarray
     beyond: np.ndarray | None = None
+    turned: np.ndarray | None = None
+
+
+def _turned_derivative(n_facet: np.ndarray, dn_facet: np.ndarray, turned: np.ndarray, axes: np.ndarray) -> np.ndarray:
+    """∂n/∂x of normals turned into symmetry planes: n = P n_f / |P n_f| (P drops the components of
+    ``axes``) moves by (I − n nᵀ) P δn_f / |P n_f| where it was turned, by δn_f elsewhere."""
+    P = (~axes).astype(float)
+    projected = P * n_facet
+    moved = np.linalg.norm(turned - n_facet, axis=1) > 0.0
+    out = dn_facet.copy()
+    length = np.linalg.norm(projected[moved], axis=1)
+    projector = np.eye(3) - turned[moved][:, :, None] * turned[moved][:, None, :]
+    out[moved] = projector @ (P[moved][:, :, None] * dn_facet[moved]) / length[:, None, None]
+    return out
 
 
 def pair_terms(points: ClosestPoints, lam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -204,8 +224,10 @@ def pair_terms(points: ClosestPoints, lam: np.ndarray) -> tuple[np.ndarray, np.n
     vertices in cyclic order)."""
     q = points
     m = q.x_m.shape[1]
-    dxi, dn, n_facet = closest_point_derivatives(q.x_s, q.x_m, q.xi, q.interior)
-    dn *= np.sign(np.einsum("pj,pj->p", q.normal, n_facet))[:, None, None]  # the pair's orientation
+    dxi, dn_facet, n_facet = closest_point_derivatives(q.x_s, q.x_m, q.xi, q.interior)
+    sign = np.sign(np.einsum("pj,pj->p", q.normal, n_facet))  # the pair's orientation
+    n_facet, dn_facet = sign[:, None] * n_facet, sign[:, None, None] * dn_facet
+    dn = dn_facet if q.turned is None else _turned_derivative(n_facet, dn_facet, q.normal, q.turned)
     R = local_frames(q.normal)
     dR = np.einsum("pikl,plc->pikc", local_frames_derivative(q.normal), dn)
     N, dN = shape_functions(m, q.xi), shape_derivatives(m, q.xi)
@@ -213,7 +235,9 @@ def pair_terms(points: ClosestPoints, lam: np.ndarray) -> tuple[np.ndarray, np.n
     d = q.x_s - np.einsum("pk,pkj->pj", N, q.x_m)
     c, dNj = _node_weights(N, dN)
     W = np.empty((len(N), 3, dxi.shape[2]))
-    W[:, 0] = (-np.einsum("pj,paj,pac->pc", q.normal, a_facet, dxi) + np.einsum("pj,pjc->pc", d, dn))
+    # g = n_f · d; B's normal row is n c_j (n = n_f unless turned into a symmetry plane)
+    W[:, 0] = (-np.einsum("pj,paj,pac->pc", n_facet, a_facet, dxi) + np.einsum("pj,pjc->pc", d, dn_facet)
+               + np.einsum("pj,pl->pjl", c, n_facet - q.normal).reshape(len(N), -1))
     if q.beyond is not None:  # a constant gap: W cancels B's normal row
         W[q.beyond, 0] = -np.einsum("pj,pl->pjl", c, q.normal)[q.beyond].reshape(-1, dxi.shape[2])
     a = q.du_s - np.einsum("pk,pkj->pj", N, q.du_m)
@@ -304,8 +328,8 @@ def closest_points(x_s: np.ndarray, master: Facets, preferred: np.ndarray, allow
 
 
 def reprojected_pairs(pairs: SurfacePairs, reference: GatheredSurfaces, moved: GatheredSurfaces, u_n_slave: np.ndarray,
-                      u_n_master: np.ndarray, gap_rounding: float, allowance: float,
-                      size: float) -> tuple[SurfacePairs, ClosestPoints]:
+                      u_n_master: np.ndarray, gap_rounding: float, allowance: float, size: float,
+                      supports: Supports | None = None) -> tuple[SurfacePairs, ClosestPoints]:
     """The node-to-surface ``pairs`` (the same slave nodes, in the same order) projected again onto the
     moved master surface, and their :class:`ClosestPoints`.
 
@@ -320,6 +344,11 @@ def reprojected_pairs(pairs: SurfacePairs, reference: GatheredSurfaces, moved: G
     gap_rounding, allowance, size
         Gaps within ``gap_rounding`` are zero; the edge allowance of a preferred facet; the master's
         facet size.
+    supports
+        The prescribed components of the pairs' slave nodes and of the master's vertices: the
+        normals of slave nodes on a symmetry plane of the interface are turned into it, as the
+        re-evaluation between solves does (:mod:`~dolfinx_nnqem.contact.symmetry_planes`). None: no
+        support is known.
 
     Returns
     -------
@@ -342,8 +371,9 @@ def reprojected_pairs(pairs: SurfacePairs, reference: GatheredSurfaces, moved: G
     g = np.where(np.abs(p.g0) <= gap_rounding, 0.0, p.g0)
     beyond = p.tangential_offset > allowance
     g[beyond] = size  # held open: the next re-evaluation between solves drops the pair
-    g0 = g - np.einsum("pj,pj->p", p.normal, u_s - np.einsum("pk,pkj->pj", p.N, u_m))
-    R = local_frames(p.normal) if len(f) else np.zeros((0, 3, 3))
+    normal, turned = _pair_normals(p, x_s, master, supports)
+    g0 = g - np.einsum("pj,pj->p", normal, u_s - np.einsum("pk,pkj->pj", p.N, u_m))
+    R = local_frames(normal) if len(f) else np.zeros((0, 3, 3))
     nodes = np.concatenate([pairs.slave_blocks[:, None], master.nodes[f]], axis=1)
     coefficients = np.concatenate([np.ones((len(f), 1)), -p.N], axis=1)
     rows = PairRows.from_weighted_nodes(R, np.arange(0, (k + 1) * len(f) + 1, k + 1), nodes.ravel(),
@@ -352,9 +382,42 @@ def reprojected_pairs(pairs: SurfacePairs, reference: GatheredSurfaces, moved: G
                   g0=g0, rows=rows, master_facet=f.copy())
     cyclic = order[:, :, None]
     du_m = np.take_along_axis(u_m - u_n_master[f], cyclic, axis=1)
-    points = ClosestPoints(x_s, np.take_along_axis(master.x[f], cyclic, axis=1), p.xi, interior, p.normal,
+    points = ClosestPoints(x_s, np.take_along_axis(master.x[f], cyclic, axis=1), p.xi, interior, normal,
                            u_s - u_n_slave, du_m,
                            np.concatenate([pairs.slave_blocks[:, None], np.take_along_axis(master.nodes[f], order,
                                                                                            axis=1)], axis=1),
-                           beyond)
+                           beyond, turned)
     return new, points
+
+
+@dataclass(frozen=True)
+class Supports:
+    """The prescribed components of an interface's nodes (for its symmetry planes).
+
+    Attributes
+    ----------
+    slave
+        (p, 3) bool: of the pairs' slave nodes.
+    master
+        (m, k, 3) bool: of the gathered master facets' vertices.
+    in_plane
+        The distance within which a master node lies in a slave node's plane
+        (:data:`~dolfinx_nnqem.contact.symmetry_planes.IN_PLANE` × the master's facet size).
+    """
+
+    slave: np.ndarray
+    master: np.ndarray
+    in_plane: float
+
+
+def _pair_normals(p: Projection, x_s: np.ndarray, master: Facets, supports: Supports | None
+                  ) -> tuple[np.ndarray, np.ndarray | None]:
+    """(the pairs' normals, the symmetry axes they were turned into or None): the facet normals, turned
+    into the symmetry planes of the interface where a slave node lies on one
+    (:func:`~dolfinx_nnqem.contact.symmetry_planes.symmetry_axes`)."""
+    if supports is None or not supports.slave.any():
+        return p.normal, None
+    f, k = p.facet, master.x.shape[1]
+    axes = symmetry_axes(supports.slave, x_s, np.arange(0, k * len(f) + 1, k), master.x[f].reshape(-1, 3),
+                         supports.master[f].reshape(-1, 3), supports.in_plane)
+    return symmetry_normals(p.normal, axes), axes

@@ -12,7 +12,7 @@ import pytest
 
 from dolfinx_nnqem.contact.projection import facet_normals, newell_area_vectors, project_points, shape_functions
 from dolfinx_nnqem.contact.surface_stiffness import ClosestPoints, closest_point_derivatives, pair_terms
-from dolfinx_nnqem.contact.surfaces import local_frames
+from dolfinx_nnqem.contact.surfaces import local_frames, symmetry_normals
 
 TRIANGLE = np.array([[0.0, 0.0, 0.0], [1.0, 0.1, 0.05], [0.2, 0.9, -0.1]])
 QUADRILATERAL = np.array([[0.0, 0.0, 0.0], [1.1, 0.05, 0.1], [1.0, 1.0, -0.15], [-0.1, 0.9, 0.05]])  # warped
@@ -27,18 +27,20 @@ def _state(facet: np.ndarray):
     return x, x_n, lam
 
 
-def _exact(x: np.ndarray, x_n: np.ndarray, lam: np.ndarray):
+def _exact(x: np.ndarray, x_n: np.ndarray, lam: np.ndarray, axes: np.ndarray | None = None):
     """ξ, n, (gap, slip1, slip2) and the nodal forces (c_j Rᵀλ) at node positions ``x`` (slave, then the
-    facet's cyclic vertices), the closest point found by the package's projection."""
+    facet's cyclic vertices), the closest point found by the package's projection; ``axes``: the
+    normal turned into the symmetry planes of these axes (the frame's, the gap stays n_f · d)."""
     x_s, x_m = x[0], x[1:]
     p = project_points(x_s[None], x_m[None], newell_area_vectors(x_m[None]))
     xi, N = p.xi[0], shape_functions(len(x_m), p.xi)[0]
-    n = facet_normals(x_m[None], p.xi)[0]
+    n_f = facet_normals(x_m[None], p.xi)[0]
+    n = n_f if axes is None else symmetry_normals(n_f[None], axes[None])[0]
     R = local_frames(n[None])[0]
     d = x_s - N @ x_m
     du = x - x_n
     a = du[0] - N @ du[1:]
-    residual = np.array([n @ d, R[1] @ a, R[2] @ a])
+    residual = np.array([n_f @ d, R[1] @ a, R[2] @ a])
     c = np.concatenate([[1.0], -N])
     force = (c[:, None] * (R.T @ lam)[None, :]).ravel()
     return xi, n, residual, force, R, c
@@ -125,3 +127,21 @@ def test_closest_point_at_a_corner_holds_xi():
     dxi, dn, _ = closest_point_derivatives(x[0][None], x[1:][None], p.xi, np.array([False]))
     np.testing.assert_allclose(p.xi[0], [1.0, 0.0], atol=1e-14)
     assert np.all(dxi == 0.0) and np.abs(dn).max() > 0.1
+
+
+def test_normal_turned_into_a_symmetry_plane_matches_finite_differences():
+    """A slave node on a symmetry plane y = const (its frame's normal has the y component removed,
+    as :func:`~dolfinx_nnqem.contact.surfaces.symmetry_normals` does; the gap stays n_f · d): the
+    frame, slips and forces turn with the projected normal."""
+    x, x_n, lam = _state(QUADRILATERAL)
+    axes = np.array([False, True, False])
+    points = _points(x, x_n)
+    turned = symmetry_normals(points.normal, axes[None])
+    assert np.linalg.norm(turned - points.normal) > 1e-2  # the facet's normal has a y component
+    points = ClosestPoints(points.x_s, points.x_m, points.xi, points.interior, turned, points.du_s, points.du_m,
+                           points.blocks, None, axes[None])
+    K, W = pair_terms(points, lam[None])
+    _, _, _, _, R, c = _exact(x, x_n, lam, axes)
+    B = np.einsum("ik,j->ijk", R, c).reshape(3, -1)
+    np.testing.assert_allclose(B + W[0], _central(lambda y: _exact(y, x_n, lam, axes)[2], x), atol=1e-8)
+    np.testing.assert_allclose(K[0], _central(lambda y: _exact(y, x_n, lam, axes)[3], x), atol=1e-8)
