@@ -49,7 +49,8 @@ import numpy as np
 from petsc4py import PETSc
 
 from dolfinx_nnqem.contact.pairset import PairRows
-from dolfinx_nnqem.contact.projection import (Projection, cyclic_order, project_points, reference_vertices,
+from dolfinx_nnqem.contact.projection import (Projection, cyclic_order, project_onto_facets, project_points,
+                                             reference_vertices,
                                              shape_derivatives, shape_functions)
 from dolfinx_nnqem.contact.surface_pairs import SurfacePairs
 from dolfinx_nnqem.contact.surfaces import (Facets, GatheredSurfaces, local_frames, local_frames_derivative,
@@ -288,14 +289,20 @@ class SurfaceTerms:
 def stiffness_matrix(terms: Sequence[SurfaceTerms], free: Sequence[np.ndarray], template: PETSc.Mat) -> PETSc.Mat:
     """The blocks K of every pair of ``terms`` as a new matrix laid out like ``template`` (the tangent),
     rows and columns of constrained dofs left out (``free``: per terms, (k, c) 1 at free columns, 0 at
-    constrained ones). Collective: a master node's rows may belong to another rank."""
-    G = PETSc.Mat().createAIJ(template.getSizes(), nnz=(60, 60), comm=template.getComm())
-    G.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)  # type: ignore[arg-type]  # petsc4py's stub types the Option constants as int
-    G.setUp()
+    constrained ones). Collective: a master node's rows may belong to another rank (COO assembly
+    sends them there and sums the pairs' shares)."""
+    rows, columns, values = [np.zeros(0, dtype=np.int64)], [np.zeros(0, dtype=np.int64)], [np.zeros(0)]
     for part, mask in zip(terms, free):
         blocks = mask[:, :, None] * part.K * mask[:, None, :]
-        for index, block in zip(part.columns.astype(PETSc.IntType), blocks):
-            G.setValues(index, index, block, addv=PETSc.InsertMode.ADD_VALUES)
+        rows.append(np.broadcast_to(part.columns[:, :, None], blocks.shape).ravel())
+        columns.append(np.broadcast_to(part.columns[:, None, :], blocks.shape).ravel())
+        values.append(blocks.ravel())
+    G = PETSc.Mat().create(comm=template.getComm())
+    G.setSizes(template.getSizes())
+    G.setType(PETSc.Mat.Type.AIJ)
+    i, j = np.concatenate(rows).astype(PETSc.IntType), np.concatenate(columns).astype(PETSc.IntType)
+    G.setPreallocationCOO(i, j)  # type: ignore[arg-type]  # petsc4py's stub asks Sequence; arrays are what it takes
+    G.setValuesCOO(np.concatenate(values), addv=PETSc.InsertMode.ADD_VALUES)  # type: ignore[arg-type]  # as above
     G.assemble()
     return G
 
@@ -316,13 +323,20 @@ def surface_terms(points: ClosestPoints, lam: np.ndarray, pairs: np.ndarray) -> 
 def closest_points(x_s: np.ndarray, master: Facets, preferred: np.ndarray, allowance: float,
                    size: float) -> tuple[Projection, np.ndarray, np.ndarray]:
     """The slave nodes ``x_s`` projected onto the ``master`` facets (at their current positions), a node
-    kept on its ``preferred`` facet where it still projects onto it within ``allowance``; (projection,
-    cyclic vertex order of each node's facet, interior flags: the foot of the normal, within
-    :data:`INTERIOR` × ``size``)."""
-    from dolfinx_nnqem.contact.node_to_surface import keep_preferred  # numba: only when used
-
+    kept on its ``preferred`` facet where its closest point there is within ``allowance`` of the facet
+    and of the best distance (the rule of :func:`~dolfinx_nnqem.contact.node_to_surface.keep_preferred`,
+    for all nodes at once); (projection, cyclic vertex order of each node's facet, interior flags: the
+    foot of the normal, within :data:`INTERIOR` × ``size``)."""
     p = project_points(x_s, master.x, master.area)
-    p = keep_preferred(p, x_s, master, preferred, allowance)
+    changed = np.flatnonzero((preferred >= 0) & (p.facet != preferred))
+    if len(changed):
+        q = project_onto_facets(x_s[changed], master.x, master.area, preferred[changed])
+        best = np.where(p.facet[changed] >= 0, p.distance[changed], np.inf)
+        keep = (q.tangential_offset <= allowance) & (q.distance <= best + allowance)
+        p = Projection(*(np.array(a, copy=True) for a in (p.facet, p.xi, p.N, p.point, p.normal, p.g0, p.distance,
+                                                            p.tangential_offset)))
+        for name in ("facet", "xi", "N", "point", "normal", "g0", "distance", "tangential_offset"):
+            getattr(p, name)[changed[keep]] = getattr(q, name)[keep]
     order = cyclic_order(master.x[p.facet], master.area[p.facet])
     return p, order, p.tangential_offset <= INTERIOR * size
 
