@@ -145,3 +145,22 @@ def test_normal_turned_into_a_symmetry_plane_matches_finite_differences():
     B = np.einsum("ik,j->ijk", R, c).reshape(3, -1)
     np.testing.assert_allclose(B + W[0], _central(lambda y: _exact(y, x_n, lam, axes)[2], x), atol=1e-8)
     np.testing.assert_allclose(K[0], _central(lambda y: _exact(y, x_n, lam, axes)[3], x), atol=1e-8)
+
+
+@pytest.mark.parametrize("facet", [TRIANGLE, QUADRILATERAL], ids=["tri3", "quad4"])
+def test_projection_onto_given_facets_is_the_single_facet_projection(facet):
+    """project_onto_facets (all points at once, each on its own facet) gives, bit for bit, what
+    project_points gives on that facet alone (keep_preferred's per-node projection)."""
+    from dolfinx_nnqem.contact.projection import project_onto_facets
+
+    rng = np.random.default_rng(3)
+    facets = np.stack([facet + 0.3 * rng.standard_normal(3) for _ in range(4)])
+    outward = newell_area_vectors(facets)
+    points = facet.mean(axis=0) + 0.8 * rng.standard_normal((12, 3))
+    which = rng.integers(0, 4, 12)
+    q = project_onto_facets(points, facets, outward, which)
+    for i, f in enumerate(which):
+        one = project_points(points[i:i + 1], facets[f:f + 1], outward[f:f + 1])
+        for name in ("xi", "N", "point", "normal", "g0", "distance", "tangential_offset"):
+            assert np.array_equal(getattr(q, name)[i], getattr(one, name)[0]), name
+    assert np.array_equal(q.facet, which)
