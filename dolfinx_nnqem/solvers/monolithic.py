@@ -166,8 +166,9 @@ class MonolithicSolver(ReleasesPETSc):
         self._augmented = self._augmented_system_of_pairs()
 
     def _refresh_geometry(self) -> None:
-        """The current-geometry obstacles' pairs re-evaluated at the iterate (u, ℓ) (collective; nothing
-        to do unless :attr:`consistent_geometry`, or if the iterate has not moved)."""
+        """The current-geometry obstacles' and node-to-surface pairs re-evaluated at the iterate (u, ℓ)
+        (collective; nothing to do unless :attr:`consistent_geometry` or :attr:`consistent_surfaces`,
+        or if the iterate has not moved)."""
         p = self.problem
         if self.consistent_geometry:
             assert p.contact is not None  # consistent_geometry: with contact
