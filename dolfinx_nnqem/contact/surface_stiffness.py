@@ -289,21 +289,36 @@ class SurfaceTerms:
 def stiffness_matrix(terms: Sequence[SurfaceTerms], free: Sequence[np.ndarray], template: PETSc.Mat) -> PETSc.Mat:
     """The blocks K of every pair of ``terms`` as a new matrix laid out like ``template`` (the tangent),
     rows and columns of constrained dofs left out (``free``: per terms, (k, c) 1 at free columns, 0 at
-    constrained ones). Collective: a master node's rows may belong to another rank (COO assembly
-    sends them there and sums the pairs' shares)."""
-    rows, columns, values = [np.zeros(0, dtype=np.int64)], [np.zeros(0, dtype=np.int64)], [np.zeros(0)]
-    for part, mask in zip(terms, free):
-        blocks = mask[:, :, None] * part.K * mask[:, None, :]
-        rows.append(np.broadcast_to(part.columns[:, :, None], blocks.shape).ravel())
-        columns.append(np.broadcast_to(part.columns[:, None, :], blocks.shape).ravel())
-        values.append(blocks.ravel())
-    G = PETSc.Mat().create(comm=template.getComm())
-    G.setSizes(template.getSizes())
-    G.setType(PETSc.Mat.Type.AIJ)
-    i, j = np.concatenate(rows).astype(PETSc.IntType), np.concatenate(columns).astype(PETSc.IntType)
-    G.setPreallocationCOO(i, j)  # type: ignore[arg-type]  # petsc4py's stub asks Sequence; arrays are what it takes
-    G.setValuesCOO(np.concatenate(values), addv=PETSc.InsertMode.ADD_VALUES)  # type: ignore[arg-type]  # as above
-    G.assemble()
+    constrained ones).
+
+    Made as Sᵀ blockdiag(K_p) S, S picking each pair's columns (one 1 per row): PETSc's product sums
+    the pairs' shares and sends the rows of master nodes owned by another rank there (collective).
+    """
+    comm = template.getComm()
+    blocks = [mask[:, :, None] * part.K * mask[:, None, :] for part, mask in zip(terms, free)]
+    columns = np.concatenate([np.zeros(0, dtype=np.int64)] + [part.columns.ravel() for part in terms])
+    n = len(columns)
+    offset = comm.tompi4py().exscan(n) or 0
+    total = comm.tompi4py().allreduce(n)
+    S = PETSc.Mat().createAIJWithArrays(
+        size=((n, total), template.getSizes()[1]),
+        csr=(np.arange(n + 1, dtype=PETSc.IntType), columns.astype(PETSc.IntType), np.ones(n)), comm=comm)
+    indptr, index, values = [np.zeros(1, dtype=np.int64)], [np.zeros(0, dtype=np.int64)], [np.zeros(0)]
+    start = offset
+    for block in blocks:  # row r of pair p's block: the c columns of the pair
+        k, c = block.shape[:2]
+        first = start + c * np.arange(k)
+        index.append(np.repeat(first, c * c) + np.tile(np.arange(c), k * c))
+        indptr.append(indptr[-1][-1] + c * np.arange(1, k * c + 1))
+        values.append(block.ravel())
+        start += k * c
+    K_pairs = PETSc.Mat().createAIJWithArrays(
+        size=((n, total), (n, total)),
+        csr=(np.concatenate(indptr).astype(PETSc.IntType), np.concatenate(index).astype(PETSc.IntType),
+             np.concatenate(values)), comm=comm)
+    G = K_pairs.PtAP(S)
+    for m in (S, K_pairs):
+        m.destroy()
     return G
 
 
