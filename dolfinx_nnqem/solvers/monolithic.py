@@ -308,7 +308,7 @@ class MonolithicSolver(ReleasesPETSc):
         R = p.residual(F_int=F_int, F_ext=F_ext, contact_force=contact_force,
                        out=self._vector("R", lambda: compat.create_vector(p.V)))
         R_free = p.free_residual(R)
-        law, lin, H, geometric = None, None, np.zeros((0, 3)), None
+        law, lin, H, geometric, surface = None, None, np.zeros((0, 3)), None, None
         if p.contact is not None:
             t0 = time.perf_counter()
             law = p.contact.evaluate(p.relative_displacement())
