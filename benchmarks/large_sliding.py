@@ -8,17 +8,28 @@ The cases (``dolfinx_nnqem.cases.large_sliding``):
   reference one cannot finish it);
 * ``blocks``, ``blocks-friction``: the upper block slid 1.6 master facets over the lower one
   (node-to-surface, 12 increments), μ_f = 0 and 0.3;
+* ``mortar``, ``mortar-friction``: the same slide with dual mortar pairs;
+* ``blocks-fine``, ``blocks-friction-fine``: the node-to-surface slides in the ``slide``'s load
+  stepping (5 × ``increments`` increments, a quarter of them pressing): per increment the same
+  steps of the load path as the rigid obstacle's slide it is compared with;
 * ``ironing``: the cylinder dragged 8 facets over the elastoplastic strip (nx = 16, 40 increments,
   μ_f = 0.1).
 
-Prints Newton iterations, solves and seconds per case; asserts nothing. With ``--save DIR`` every
+Prints Newton iterations, solves and seconds per case, and at the end the Newton iterations per
+increment of every case against the rigid obstacle's slide (``slide``) of the same method (issue 43:
+node-to-surface and mortar slides at most 1.5 times as many); asserts nothing.
+``--linearisations frozen,consistent`` runs the monolithic solver with the geometry frozen within a
+solve (``consistent_geometry=False``: the earlier behaviour) and consistent (the default), in the
+same run. With ``--save DIR`` every
 case's displacements, pair forces and contact force go to ``DIR/<method>-<case>-<geometry>.npz``,
 and ``--compare DIR`` prints the largest differences from such a saved run (before/after a change
 of the solver: the converged states must agree to the solver's tolerance)::
 
     python benchmarks/large_sliding.py [--n 8] [--increments 4] [--methods monolithic,nneqm1]
-                                       [--cases press,slide,blocks,blocks-friction,ironing]
-                                       [--rtol 1e-10] [--frozen] [--save DIR] [--compare DIR]
+                                       [--cases press,slide,blocks,blocks-friction,mortar,mortar-friction,
+                                                blocks-fine,blocks-friction-fine,ironing]
+                                       [--rtol 1e-10] [--linearisations consistent] [--frozen]
+                                       [--save DIR] [--compare DIR]
 """
 
 from __future__ import annotations
@@ -34,7 +45,8 @@ from dolfinx_nnqem.cases.large_sliding import (PRESSED_AT, ironing, obstacle_for
                                                sliding_sphere)
 from dolfinx_nnqem.solvers import ConvergenceError, MonolithicOptions, SolverOptions, make_solver, solve_load_steps
 
-CASES = ("press", "slide", "blocks", "blocks-friction", "ironing")
+CASES = ("press", "slide", "blocks", "blocks-friction", "mortar", "mortar-friction", "blocks-fine",
+         "blocks-friction-fine", "ironing")
 
 
 def _cases(n: int, increments: int) -> dict[str, tuple[Callable[[str], object], int, Callable]]:
@@ -44,13 +56,20 @@ def _cases(n: int, increments: int) -> dict[str, tuple[Callable[[str], object], 
         "slide": (lambda g: sliding_sphere(n, start=0.3, end=0.7, geometry=g), 5 * increments, obstacle_force),
         "blocks": (lambda g: sliding_blocks(slide=0.4, geometry=g), 12, slave_force),
         "blocks-friction": (lambda g: sliding_blocks(slide=0.4, mu_f=0.3, geometry=g), 12, slave_force),
+        "mortar": (lambda g: sliding_blocks(slide=0.4, geometry=g, discretisation="mortar"), 12, slave_force),
+        "mortar-friction": (lambda g: sliding_blocks(slide=0.4, mu_f=0.3, geometry=g, discretisation="mortar"), 12,
+                            slave_force),
+        "blocks-fine": (lambda g: sliding_blocks(slide=0.4, geometry=g), 5 * increments, slave_force),
+        "blocks-friction-fine": (lambda g: sliding_blocks(slide=0.4, mu_f=0.3, geometry=g), 5 * increments,
+                                 slave_force),
         "ironing": (lambda g: ironing(16), 40, obstacle_force),
     }
 
 
 def run(case: str, n: int, increments: int, geometry: str, method: str, save: pathlib.Path | None,
-        compare: pathlib.Path | None, rtol: float = 1e-10, consistent: bool = True) -> str:
-    """One case solved; its figures as a line (and its state saved or compared)."""
+        compare: pathlib.Path | None, rtol: float = 1e-10, consistent: bool = True) -> tuple[str, list[int]]:
+    """One case solved; its figures as a line (and its state saved or compared), and its Newton
+    iterations per increment (empty if it failed)."""
     make, steps, force_of = _cases(n, increments)[case]
     problem = make(geometry)
     final = PRESSED_AT if case == "press" else 1.0
@@ -60,7 +79,7 @@ def run(case: str, n: int, increments: int, geometry: str, method: str, save: pa
         with make_solver(method, problem, SolverOptions(rtol=rtol, max_iterations=40), **settings) as solver:
             results = solve_load_steps(problem, solver, steps, final_load_factor=final)
     except ConvergenceError as error:
-        return f"failed: {str(error).splitlines()[0][:90]}... ({time.perf_counter() - t0:.2f} s)"
+        return f"failed: {str(error).splitlines()[0][:90]}... ({time.perf_counter() - t0:.2f} s)", []
     seconds = time.perf_counter() - t0
     model = problem.contact
     assert model is not None
@@ -71,13 +90,13 @@ def run(case: str, n: int, increments: int, geometry: str, method: str, save: pa
             f"{seconds:.2f} s; F = {np.array2string(force, precision=9)}; per increment {iterations}")
     state = {"u": problem.u.x.array.copy(), "lam": model.force(), "force": force,
              "load_factors": np.array([r.load_factor for r in results])}
-    name = f"{method}-{case}-{geometry}.npz"
+    name = f"{method}-{case}-{geometry}{'' if consistent else '-frozen'}.npz"
     if save is not None:
         save.mkdir(parents=True, exist_ok=True)
         np.savez(save / name, **state)
     if compare is not None and (compare / name).exists():
         line += "; " + _differences(state, dict(np.load(compare / name)))
-    return line
+    return line, iterations
 
 
 def _differences(state: dict, before: dict) -> str:
@@ -99,18 +118,36 @@ def main() -> None:
     parser.add_argument("--methods", default="monolithic,nneqm1")
     parser.add_argument("--cases", default=",".join(CASES))
     parser.add_argument("--rtol", type=float, default=1e-10)
-    parser.add_argument("--frozen", action="store_true",
-                        help="monolithic: the geometry frozen within a solve (consistent_geometry=False)")
+    parser.add_argument("--linearisations", default="consistent",
+                        help="monolithic: 'consistent' (the geometry re-evaluated at every Newton iterate, its "
+                             "derivatives in J), 'frozen' (within a solve: consistent_geometry=False), or both")
+    parser.add_argument("--frozen", action="store_true", help="the same as --linearisations frozen")
     parser.add_argument("--save", type=pathlib.Path)
     parser.add_argument("--compare", type=pathlib.Path)
     args = parser.parse_args()
+    linearisations = ["frozen"] if args.frozen else args.linearisations.split(",")
+    per_increment: dict[tuple[str, str, str], float] = {}
     for method in args.methods.split(","):
-        for case in args.cases.split(","):
-            geometries = ("reference", "current") if case == "press" else ("current",)
-            for geometry in geometries:
-                print(f"{method:10s} {case:16s} {geometry:9s}: "
-                      f"{run(case, args.n, args.increments, geometry, method, args.save, args.compare, args.rtol, not args.frozen)}",
-                      flush=True)
+        for linearisation in (linearisations if method == "monolithic" else ["frozen"]):
+            label = f"{method}/{linearisation}" if method == "monolithic" else method
+            for case in args.cases.split(","):
+                geometries = ("reference", "current") if case == "press" else ("current",)
+                for geometry in geometries:
+                    line, iterations = run(case, args.n, args.increments, geometry, method, args.save, args.compare,
+                                           args.rtol, linearisation == "consistent")
+                    print(f"{label:21s} {case:16s} {geometry:9s}: {line}", flush=True)
+                    if iterations and geometry == "current":
+                        per_increment[(label, case, geometry)] = sum(iterations) / len(iterations)
+    _print_ratios(per_increment)
+
+
+def _print_ratios(per_increment: dict[tuple[str, str, str], float]) -> None:
+    """Newton iterations per increment of every case, and against the obstacle slide of the same solver."""
+    print("\nNewton iterations per increment (current geometry), and the ratio to the rigid obstacle's slide:")
+    for (label, case, _), mean in per_increment.items():
+        slide = per_increment.get((label, "slide", "current"))
+        ratio = f"{mean / slide:.2f} x the slide" if slide and case != "slide" else ""
+        print(f"  {label:21s} {case:16s} {mean:5.2f}  {ratio}")
 
 
 if __name__ == "__main__":

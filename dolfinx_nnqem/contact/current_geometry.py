@@ -19,7 +19,10 @@ N_k(ξ*) of the evaluation point u*, and the gap is its first-order expansion ab
 so that the model's g = g0 + (B u + m)_n equals the current distance at u = u*. For a rigid
 obstacle n* is the exact derivative of the signed distance, so re-evaluating at the converged u
 and solving again is a Newton iteration on the geometry (:func:`dolfinx_nnqem.solvers.stepping`
-repeats the increment until a solve starts converged).
+repeats the increment until a solve starts converged). The monolithic solver evaluates obstacles
+and node-to-surface pairs at every Newton iterate instead, with the derivatives of the geometry in
+its Newton matrix (:mod:`~dolfinx_nnqem.contact.geometric_stiffness`,
+:mod:`~dolfinx_nnqem.contact.surface_stiffness`).
 
 Pairs are known by their slave node (per interface): the pair unknowns z (in the pair's local
 frame) and the states follow the slave node from one evaluation to the next; a new pair starts
@@ -208,10 +211,10 @@ class SurfaceTracker:
                                       search_distance=self.search_distance, note=self.note,
                                       supported=self.supported, edge_allowance=EDGE_ALLOWANCE * master_size,
                                       preferred=self.facets)
-        self.facets = self._gathered_facets(pairs)
+        self.facets = self.gathered_facets(pairs)
         return rebased(pairs, self.V, u)
 
-    def _gathered_facets(self, pairs: SurfacePairs) -> np.ndarray:
+    def gathered_facets(self, pairs: SurfacePairs) -> np.ndarray:
         """Every slave node's master facet (−1: no pair), the same on every rank (collective)."""
         assert pairs.master_facet is not None  # node-to-surface pairs carry it
         blocks = np.concatenate(pairs.comm.allgather(pairs.slave_blocks))

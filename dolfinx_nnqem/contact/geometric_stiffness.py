@@ -23,8 +23,9 @@ normal row. ∂r_i/∂x = ∂r_i/∂n · ∂n/∂x with ∂n/∂x the obstacle's
 (:func:`~dolfinx_nnqem.contact.surfaces.local_frames_derivative`). For a frictionless pair only
 p_n ∂n/∂x remains; the frame's rotation enters with friction (q ≠ 0, and the slip a ≠ 0).
 
-Node-to-surface pairs have no terms here (their closest point, facet normal and weights stay
-frozen within a solve: ``docs/theory.md``, "Large sliding").
+Node-to-surface pairs have theirs in :mod:`~dolfinx_nnqem.contact.surface_stiffness` (their closest
+point moves too, and the force acts on the master nodes); mortar pairs stay frozen within a solve
+(``docs/theory.md``, "Large sliding").
 """
 
 from __future__ import annotations

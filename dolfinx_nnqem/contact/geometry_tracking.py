@@ -23,12 +23,17 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from dolfinx_nnqem.contact.current_geometry import MortarTracker, ObstacleTracker, SurfaceTracker, surface_tracker
+from dolfinx_nnqem.contact.current_geometry import (EDGE_ALLOWANCE, MortarTracker, ObstacleTracker, SurfaceTracker,
+                                                     displacement_at, moved_surfaces, surface_tracker)
 from dolfinx_nnqem.contact.discretisation import discretise
 from dolfinx_nnqem.contact.geometric_stiffness import GeometricTerms, no_terms, obstacle_terms
 from dolfinx_nnqem.contact.obstacles import ObstaclePairs, RigidObstacle, obstacle_pairs
 from dolfinx_nnqem.contact.pairset import PairSet
 from dolfinx_nnqem.contact.slip_check import Slip, facet_size_of, slipped_interfaces
+from dolfinx_nnqem.contact.surface_pairs import SurfacePairs, facet_size
+from dolfinx_nnqem.contact.surface_stiffness import (ClosestPoints, Supports, SurfaceTerms, reprojected_pairs,
+                                                     surface_terms)
+from dolfinx_nnqem.contact.symmetry_planes import IN_PLANE, supports_of
 from dolfinx_nnqem.contact.specification import Contact
 from dolfinx_nnqem.contact.surfaces import ContactPairError, NoPairsError, mesh_tolerance, space_degree
 
@@ -197,6 +202,9 @@ class ContactGeometry:
         self.version = 0
         self._refreshed_at: np.ndarray | None = None  # where refresh_obstacles last evaluated
         self._facet_sizes: list[float] | None = None  # of the interfaces' slave surfaces, at the first slip check
+        self._supports: dict[int, tuple[np.ndarray, np.ndarray] | None] = {}  # per interface: its nodes' supports
+        self._surfaces_at: np.ndarray | None = None  # where refresh_surfaces last evaluated
+        self._closest_points: dict[int, ClosestPoints] = {}  # of the interfaces refresh_surfaces evaluated
 
     # -- which interfaces follow the bodies ---------------------------------------------------------
     @property
@@ -295,7 +303,8 @@ class ContactGeometry:
         # every interface evaluated before anything changes: if one has lost its pairs, the model stays
         pairs = [i.pairs if t is None else _pairs_or_lost(i, t, u, load_factor)
                  for i, t in zip(self._model.interfaces, self._trackers)]
-        self._refreshed_at = None
+        self._refreshed_at = self._surfaces_at = None
+        self._closest_points = {}
         remap = self._model.replace_pairs(pairs, u_n, load_factor_n)
         self.version += 1
         return remap
@@ -358,6 +367,64 @@ class ContactGeometry:
         return GeometricTerms(np.concatenate(pairs_), np.concatenate(blocks).astype(np.int64), np.concatenate(Ks),
                               np.concatenate(Ws))
 
+    @property
+    def reprojecting(self) -> list[bool]:
+        """Per interface: True if :meth:`refresh_surfaces` re-evaluates it (node-to-surface in the
+        current geometry)."""
+        return [isinstance(t, SurfaceTracker) for t in self._trackers]
+
+    def refresh_surfaces(self, u: dolfinx.fem.Function, u_n: dolfinx.fem.Function, load_factor_n: float) -> None:
+        """Re-evaluate the node-to-surface interfaces of :attr:`reprojecting` at u, keeping their pairs
+        (collective): every slave node is projected again onto the moved master (onto another facet
+        if it slid there), its frame, weights and gap follow; w_n is measured again. Where B's pattern
+        stays the model is refilled in place, else its pairs are replaced (the same pairs, in the same
+        order: z stays) and :attr:`version` moves on. This is what the monolithic solver calls at every
+        Newton iterate (:mod:`~dolfinx_nnqem.contact.surface_stiffness`); nothing is done when u and
+        u_n are where the last refresh had them."""
+        key = np.concatenate([u.x.array, u_n.x.array])
+        same = (self._surfaces_at is not None and len(key) == len(self._surfaces_at)
+                and bool(np.array_equal(key, self._surfaces_at)))
+        if self._comm.allreduce(same, op=MPI.LAND):
+            return
+        interfaces, new = self._model.interfaces, {}
+        for k, tracker in enumerate(self._trackers):
+            if self.reprojecting[k]:
+                assert isinstance(tracker, SurfaceTracker)  # reprojecting: a node-to-surface tracker
+                new[k], self._closest_points[k] = _reprojected(interfaces[k].pairs, tracker, u, u_n,
+                                                               self._supports_of(k, tracker))
+        kept = all(np.array_equal(p.rows.indptr, interfaces[k].pairs.rows.indptr)
+                   and np.array_equal(p.rows.columns, interfaces[k].pairs.rows.columns) for k, p in new.items())
+        if self._comm.allreduce(kept, op=MPI.LAND):
+            self._model.refill_pairs(new, u_n, load_factor_n)
+        else:
+            self._model.replace_pairs([new.get(k, i.pairs) for k, i in enumerate(interfaces)], u_n, load_factor_n)
+            self.version += 1
+        for k, pairs in new.items():
+            tracker = self._trackers[k]
+            assert isinstance(tracker, SurfaceTracker)
+            tracker.facets = tracker.gathered_facets(pairs)
+        self._surfaces_at = key
+
+    def _supports_of(self, k: int, tracker: SurfaceTracker) -> tuple[np.ndarray, np.ndarray] | None:
+        """The prescribed components of interface ``k``'s slave nodes (sorted blocks) and master facets'
+        vertices (collective at the first call; None if no support is known)."""
+        if k not in self._supports:
+            master = tracker.surfaces.facets_of(0)
+            self._supports[k] = None if tracker.supported is None else (
+                supports_of(self._V, tracker.supported, tracker.surfaces.nodes[1].index),
+                supports_of(self._V, tracker.supported, master.nodes.ravel()).reshape(master.x.shape))
+        return self._supports[k]
+
+    def surface_terms(self, lam: np.ndarray | None = None) -> list[SurfaceTerms]:
+        """The geometric blocks of the pairs :meth:`refresh_surfaces` evaluated last, one per interface,
+        at the forces ``lam`` (default: the model's λ(z))."""
+        lam = self._model.force() if lam is None else lam
+        out = []
+        for k, points in sorted(self._closest_points.items()):
+            local = self._model.interfaces[k].local
+            out.append(surface_terms(points, lam[local], np.arange(local.start, local.stop)))
+        return out
+
     # -- checkpoints --------------------------------------------------------------------------------
     def state(self) -> list[np.ndarray | None]:
         """Per interface, what its next evaluation depends on besides u (for checkpoints): the master
@@ -369,6 +436,24 @@ class ContactGeometry:
         for tracker, facets in zip(self._trackers, state):
             if isinstance(tracker, SurfaceTracker) and facets is not None:
                 tracker.facets = np.asarray(facets, dtype=np.int64).copy()
+
+
+def _reprojected(pairs: PairSet, tracker: SurfaceTracker, u, u_n, supports: tuple[np.ndarray, np.ndarray] | None
+                 ) -> tuple[SurfacePairs, ClosestPoints]:
+    """The interface's pairs projected again at u, and where they project (collective); ``supports``:
+    the prescribed components of its slave nodes and master vertices (:meth:`ContactGeometry._supports_of`)."""
+    assert isinstance(pairs, SurfacePairs)  # a node-to-surface tracker's pairs
+    master = tracker.surfaces.facets_of(0)
+    u_n_master = displacement_at(u_n, master.nodes.ravel()).reshape(master.x.shape)
+    start = u.function_space.dofmap.index_map.local_range[0]
+    u_n_slave = u_n.x.array.reshape(-1, 3)[pairs.slave_blocks - start]  # the pairs' slave nodes are owned
+    size = facet_size(master)
+    known = None
+    if supports is not None:
+        slave = supports[0][np.searchsorted(tracker.surfaces.nodes[1].index, pairs.slave_blocks)]
+        known = Supports(slave, supports[1], IN_PLANE * size)
+    return reprojected_pairs(pairs, tracker.surfaces, moved_surfaces(tracker.surfaces, u), u_n_slave, u_n_master,
+                             tracker.gap_rounding, EDGE_ALLOWANCE * size, size, known)
 
 
 def _pairs_or_lost(interface: TrackedInterface, tracker: GeometryTracker, u, load_factor: float) -> PairSet:

@@ -46,6 +46,7 @@ __all__ = [
     "cyclic_order",
     "facet_normals",
     "newell_area_vectors",
+    "project_onto_facets",
     "project_points",
     "reference_vertices",
     "shape_derivatives",
@@ -519,8 +520,42 @@ def project_points(points: npt.ArrayLike, x: npt.ArrayLike, outward: npt.ArrayLi
     facet, xi, dist = _project_kernel(points, xc, offsets, candidates, tie, NEWTON_MAX_ITERATIONS)
     if max_distance is not None:
         facet[dist > max_distance] = -1
+    return _projection(points, xc, perm, outward, facet, xi, dist)
 
+
+def project_onto_facets(points: npt.ArrayLike, x: npt.ArrayLike, outward: npt.ArrayLike,
+                        facets: npt.ArrayLike) -> Projection:
+    """Closest-point projection of every point onto one given facet: point i onto facet ``facets[i]``
+    (clamped to its boundary where the foot of the normal lies outside), as :func:`project_points`
+    finds it on that facet alone.
+
+    Parameters
+    ----------
+    points
+        (n, 3) points.
+    x, outward
+        (m, k, 3) the facets' vertices in any order and (m, 3) their outward area vectors.
+    facets
+        (n,) the facet of each point.
+    """
+    points = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
+    x = np.asarray(x, dtype=np.float64)
+    outward = np.asarray(outward, dtype=np.float64)
+    facets = np.asarray(facets, dtype=np.int64)
+    xc, perm = _cyclic(x, outward)
     n = len(points)
+    local, xi, dist = _project_kernel(points, np.ascontiguousarray(xc[facets]), np.arange(n + 1),
+                                      np.arange(n), 0.0, NEWTON_MAX_ITERATIONS)
+    facet = np.where(local >= 0, facets, -1)
+    return _projection(points, xc, perm, outward, facet, xi, dist)
+
+
+def _projection(points: np.ndarray, xc: np.ndarray, perm: np.ndarray, outward: np.ndarray, facet: np.ndarray,
+                xi: np.ndarray, dist: np.ndarray) -> Projection:
+    """The :class:`Projection` of ``points`` onto the facets ``facet`` (−1: none) at local coordinates
+    ``xi`` (cyclic vertices ``xc``, their permutation ``perm`` from the caller's order)."""
+    n = len(points)
+    k = xc.shape[1]
     found = facet >= 0
     xi[~found] = np.nan
     f = facet[found]

@@ -162,18 +162,32 @@ class MonolithicMatrix:
     def __init__(self, model, free_mask: PETSc.Vec):
         self._blocks = _ContactBlocks(model, free_mask)
         self._nest: PETSc.Mat | None = None  # made at the first assemble, refilled afterwards
+        self._K: PETSc.Mat | None = None  # the u block of the nest
         self.J: PETSc.Mat | None = None
 
     def slave_free(self, terms: GeometricTerms) -> np.ndarray:
         """(k, 3): 1 at the free dofs of the slave nodes of ``terms``' pairs."""
         return self._blocks.slave_free(terms)
 
+    def pair_free(self, pairs: np.ndarray, c: int) -> np.ndarray:
+        """(k, c): 1 at the free columns of the local pairs ``pairs`` (each with c columns), 0 at constrained ones."""
+        start = self._blocks.model.rows.indptr[3 * np.asarray(pairs, dtype=np.int64)]
+        return self._blocks.column_free[start[:, None] + np.arange(c)]
+
     def assemble(self, K: PETSc.Mat, dH_dw: np.ndarray, dH_dz: np.ndarray, dlam_dz: np.ndarray,
-                 B_values: np.ndarray | None = None) -> PETSc.Mat:
+                 B_values: np.ndarray | None = None, new_pattern: bool = False) -> PETSc.Mat:
         """J at the current law evaluation; ``K`` is the tangent, assembled into the same matrix each time
-        (with the geometric blocks already added, if any); ``B_values``: B + W for the pair rows."""
+        (with the geometric blocks already added, if any); ``B_values``: B + W for the pair rows;
+        ``new_pattern``: K is another matrix than last time, with its own pattern (the tangent with
+        node-to-surface geometric blocks, which couple the two bodies): J is made anew."""
         A01, A10, A11 = self._blocks.fill(-dlam_dz, dH_dw, dH_dz, B_values)
+        if new_pattern or (self._nest is not None and K is not self._K):
+            for m in (self._nest, self.J):
+                if m is not None:
+                    m.destroy()
+            self._nest = self.J = None
         if self._nest is None:
+            self._K = K
             self._nest = PETSc.Mat().createNest([[K, A01], [A10, A11]], comm=K.getComm())
         self._nest.assemble()
         if self.J is None:

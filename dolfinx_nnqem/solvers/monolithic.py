@@ -26,11 +26,13 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+from mpi4py import MPI
 from petsc4py import PETSc
 
 from dolfinx_nnqem import compat
 from dolfinx_nnqem.contact.geometric_stiffness import GeometricTerms
 from dolfinx_nnqem.contact.laws import LawEvaluation, Linearisation
+from dolfinx_nnqem.contact.surface_stiffness import SurfaceTerms, stiffness_matrix
 from dolfinx_nnqem.solvers.block_system import AugmentedSystem, MonolithicMatrix, free_mask
 from dolfinx_nnqem.solvers.contract import ReleasesPETSc
 from dolfinx_nnqem.solvers.convergence import IterationRecord, SolveReport, count_states, iteration_log_on, logger
@@ -59,6 +61,7 @@ class _Evaluation:
     norm_H: float
     lin: Linearisation | None = None  #: the laws' Linearisation (Newton step coordinates), or None without contact
     geometric: GeometricTerms | None = None  #: the obstacle pairs' geometric blocks at the iterate (consistent geometry)
+    surface: list[SurfaceTerms] | None = None  #: the node-to-surface pairs' geometric blocks (consistent geometry)
 
 
 class MonolithicSolver(ReleasesPETSc):
@@ -87,6 +90,8 @@ class MonolithicSolver(ReleasesPETSc):
         self.iterative = self._use_iterative()
         self.linear: IterativeSolver | DirectSolver = self._linear_solver()
         self._K: PETSc.Mat | None = None
+        self._K_surface: PETSc.Mat | None = None  # K_t − K of the node-to-surface pairs (its own pattern)
+        self._surface_columns: np.ndarray | None = None  # the pairs' columns that made its pattern
         self._mask = free_mask(problem) if problem.has_contact else None
         self._matrix: MonolithicMatrix | None = None  # the direct Newton matrix (also the LM fallback's)
         self._augmented: AugmentedSystem | None = self._augmented_system_of_pairs()
@@ -103,6 +108,16 @@ class MonolithicSolver(ReleasesPETSc):
         during a run)."""
         model = self.problem.contact
         return self.settings.consistent_geometry and model is not None and model.geometry.obstacles_follow
+
+    @property
+    def consistent_surfaces(self) -> bool:
+        """True if current-geometry node-to-surface pairs are re-evaluated at every iterate, their geometric
+        terms in J (:mod:`~dolfinx_nnqem.contact.surface_stiffness`; the direct solver: the iterative one's
+        augmented system has no room for blocks that couple the two bodies, so it keeps their geometry
+        frozen within a solve)."""
+        model = self.problem.contact
+        return (self.settings.consistent_geometry and not self.iterative and model is not None
+                and any(model.geometry.reprojecting))
 
     @property
     def timings(self) -> dict[str, float]:
@@ -151,12 +166,16 @@ class MonolithicSolver(ReleasesPETSc):
         self._augmented = self._augmented_system_of_pairs()
 
     def _refresh_geometry(self) -> None:
-        """The current-geometry obstacles' pairs re-evaluated at the iterate (u, ℓ) (collective; nothing
-        to do unless :attr:`consistent_geometry`, or if the iterate has not moved)."""
+        """The current-geometry obstacles' and node-to-surface pairs re-evaluated at the iterate (u, ℓ)
+        (collective; nothing to do unless :attr:`consistent_geometry` or :attr:`consistent_surfaces`,
+        or if the iterate has not moved)."""
+        p = self.problem
         if self.consistent_geometry:
-            p = self.problem
             assert p.contact is not None  # consistent_geometry: with contact
             p.contact.geometry.refresh_obstacles(p.u, p.load_factor, p.state.u_n, p.load_factor_n)
+        if self.consistent_surfaces:
+            assert p.contact is not None  # consistent_surfaces: with contact
+            p.contact.geometry.refresh_surfaces(p.u, p.state.u_n, p.load_factor_n)
 
     def _geometric_terms(self) -> GeometricTerms | None:
         """The obstacle pairs' geometric blocks at the iterate, or None (:attr:`consistent_geometry` off)."""
@@ -289,16 +308,17 @@ class MonolithicSolver(ReleasesPETSc):
         R = p.residual(F_int=F_int, F_ext=F_ext, contact_force=contact_force,
                        out=self._vector("R", lambda: compat.create_vector(p.V)))
         R_free = p.free_residual(R)
-        law, lin, H, geometric = None, None, np.zeros((0, 3)), None
+        law, lin, H, geometric, surface = None, None, np.zeros((0, 3)), None, None
         if p.contact is not None:
             t0 = time.perf_counter()
             law = p.contact.evaluate(p.relative_displacement())
             lin = p.contact.linearise(law)
             H = law.H
             geometric = self._geometric_terms()
+            surface = p.contact.geometry.surface_terms() if self.consistent_surfaces else None
             self._timings.add("contact", t0)
         return _Evaluation(R_free, H, law, p.force_scale(F_int, F_ext, contact_force), vec_norm(R_free),
-                           global_norm(H, p.comm), lin, geometric)
+                           global_norm(H, p.comm), lin, geometric, surface)
 
     def _newton_matrix(self, ev: _Evaluation) -> PETSc.Mat:
         """J as one AIJ matrix (the direct system, and the LM fallback's)."""
@@ -310,15 +330,52 @@ class MonolithicSolver(ReleasesPETSc):
             return self._K
         assert self._mask is not None and ev.law is not None and ev.lin is not None  # all made with contact
         t0 = time.perf_counter()
+        self._follow_geometry()  # a node-to-surface pair may have changed its master facet at this iterate
         if self._matrix is None:
             self._matrix = MonolithicMatrix(p.contact, self._mask)
         B_values = None
         if ev.geometric is not None:  # on every rank, pairs or none: K's assembly in it is collective
             ev.geometric.add_to_tangent(self._K, self._matrix.slave_free(ev.geometric))
             B_values = ev.geometric.rows_values(p.contact.rows)
-        J = self._matrix.assemble(self._K, ev.law.dH_dw, ev.lin.dH_dy, ev.lin.dlam_dy, B_values)
+        K, new_pattern = self._K, False
+        if ev.surface is not None:  # on every rank, pairs or none: the matrices are collective
+            K, B_values, new_pattern = self._with_surface_terms(ev.surface, B_values)
+        J = self._matrix.assemble(K, ev.law.dH_dw, ev.lin.dH_dy, ev.lin.dlam_dy, B_values, new_pattern=new_pattern)
         self._timings.add("block_matrix", t0)
         return J
+
+    def _with_surface_terms(self, terms: list[SurfaceTerms], B_values: np.ndarray | None
+                            ) -> tuple[PETSc.Mat, np.ndarray, bool]:
+        """(K_t − K, B + W, new pattern) with the node-to-surface pairs' geometric blocks.
+
+        K couples the slave node with the master nodes, which K_t's pattern does not hold: K_t − K is
+        its own matrix, made anew when the pairs' columns changed (True: the Newton matrix's
+        pattern changes with it) and refilled otherwise (MUMPS then keeps its analysis).
+        """
+        p = self.problem
+        assert p.contact is not None and self._K is not None and self._matrix is not None
+        values = p.contact.rows.values.copy() if B_values is None else B_values
+        for part in terms:
+            part.add_rows(values, p.contact.rows)
+        matrix = self._matrix
+        G = stiffness_matrix(terms, [matrix.pair_free(t.pairs, t.columns.shape[1]) for t in terms], self._K)
+        columns = np.concatenate([np.zeros(0, dtype=np.int64)] + [t.columns.ravel() for t in terms])
+        same = (self._K_surface is not None and self._surface_columns is not None
+                and np.array_equal(columns, self._surface_columns))
+        same = bool(p.comm.allreduce(same, op=MPI.LAND))
+        if same:
+            assert self._K_surface is not None  # same: made before
+            self._K_surface.zeroEntries()
+            self._K_surface.axpy(1.0, self._K, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)  # type: ignore[arg-type]  # petsc4py's stub types the Structure constants as int
+            self._K_surface.axpy(-1.0, G, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)  # type: ignore[arg-type]  # as above
+        else:
+            if self._K_surface is not None:
+                self._K_surface.destroy()
+            self._K_surface = self._K.copy()
+            self._K_surface.axpy(-1.0, G, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)  # type: ignore[arg-type]  # as above
+            self._surface_columns = columns
+        G.destroy()
+        return self._K_surface, values, not same
 
     def _augmented_system(self, ev: _Evaluation):
         """The augmented Newton system (iterative solver with contact): (MatNest, rhs)."""
@@ -425,7 +482,7 @@ class MonolithicSolver(ReleasesPETSc):
         for obj in (self._matrix, self._augmented):
             if obj is not None:
                 obj.destroy()
-        for petsc_object in (self._K, self._mask):
+        for petsc_object in (self._K, self._K_surface, self._mask):
             if petsc_object is not None:
                 petsc_object.destroy()
 

@@ -92,10 +92,13 @@ class MonolithicOptions:
     lag_preconditioner
         Iterative solver with contact: keep the u block's AMG hierarchy while it works.
     consistent_geometry
-        Current-geometry rigid obstacles: re-evaluate their pairs at every Newton iterate and add
-        the geometric terms (the normal's and the friction frame's rotation) to the Newton matrix
-        (:mod:`~dolfinx_nnqem.contact.geometric_stiffness`); False freezes the geometry within a solve
-        and leaves it to load stepping's repeated solves, as NNEQM1 does (``docs/theory.md``).
+        Current-geometry rigid obstacles and node-to-surface pairs: re-evaluate them at every Newton
+        iterate and add the geometric terms (the normal's and the friction frame's rotation; for
+        node-to-surface also the closest point's motion over the master facet) to the Newton matrix
+        (:mod:`~dolfinx_nnqem.contact.geometric_stiffness`,
+        :mod:`~dolfinx_nnqem.contact.surface_stiffness`; node-to-surface with the direct linear solver);
+        False freezes the geometry within a solve and leaves it to load stepping's repeated solves, as
+        NNEQM1 does (``docs/theory.md``).
     globalisation
         The Newton driver's damping (:class:`~dolfinx_nnqem.numerics.newton.Globalisation`); the LM
         parameter is ν = lm_c · min(ε, 1)^lm_delta · mean diag(JᵀJ), ε the relative residual.

@@ -1,0 +1,175 @@
+"""Node-to-surface pairs linearised consistently in the current geometry (issues 41 and 43).
+
+The block slid 1.6 master facets over another (``cases.large_sliding.sliding_blocks``, 12
+increments, node-to-surface, geometry = "current"): with the monolithic solver the pairs are
+re-evaluated at every Newton iterate and their geometric terms are in J
+(``contact/surface_stiffness.py``), so
+
+* J d equals central differences of (R, H) along a random d at a state off equilibrium mid-slide
+  (every term: the closest points move, pairs sit clamped on facet edges, μ_f = 0.3 slips);
+* Newton converges quadratically in every increment of the slide (ε_{k+1} ≤ 10 ε_k²), and the
+  solve that load stepping makes at the re-evaluated geometry starts converged (the frozen
+  geometry needs four or more solves per increment: its re-evaluations converge linearly);
+* the slid state is the frozen geometry's (both solve the equations in the geometry of their own
+  configuration), in fewer Newton iterations;
+* NNEQM1 keeps the geometry frozen within a solve (its condensation has no room for the terms)
+  and still ends in the same state.
+"""
+
+import numpy as np
+import pytest
+
+from dolfinx_nnqem.cases.large_sliding import PRESSED_AT, slave_force, sliding_blocks
+from dolfinx_nnqem.solvers import MonolithicOptions, SolverOptions, make_solver, solve_load_steps
+
+OPTIONS = SolverOptions(rtol=1e-10, max_iterations=40)
+ROUND_OFF = 1e-12  #: residuals below this (relative to the force scale) are round-off: no rate is read there
+
+
+def _slide(mu_f: float, consistent: bool = True, method: str = "monolithic"):
+    """The block slide; (problem, results, every solve's (load factor, report, pairs that changed their
+    master facet during the solve))."""
+    problem = sliding_blocks(slide=0.4, mu_f=mu_f)
+    reports = []
+    settings = {"monolithic": MonolithicOptions(consistent_geometry=consistent)} if method == "monolithic" else {}
+    with make_solver(method, problem, OPTIONS, **settings) as solver:
+        solve_increment = solver.solve_increment
+
+        def recording(load_factor):
+            pairs = problem.contact.interfaces[0].pairs
+            before = pairs.slave_blocks.copy(), pairs.master_facet.copy()
+            report = solve_increment(load_factor)
+            after = problem.contact.interfaces[0].pairs
+            same = np.array_equal(after.slave_blocks, before[0])
+            changed = int(np.count_nonzero(after.master_facet != before[1])) if same else -1
+            reports.append((load_factor, report, changed))
+            return report
+
+        solver.solve_increment = recording
+        results = solve_load_steps(problem, solver, 12)
+    return problem, results, reports
+
+
+def _residuals(report) -> np.ndarray:
+    """max(|R|/F, |H|/F) of the solve's iterates."""
+    return np.array([max(r.equilibrium, r.contact) for r in report.history])
+
+
+def _last_step(report) -> tuple[float, float] | None:
+    """(ε_k, ε_{k+1}) of the solve's last step that ends above round-off, or None."""
+    eps = _residuals(report)
+    steps = [(eps[k], eps[k + 1]) for k in range(len(eps) - 1) if eps[k + 1] > ROUND_OFF]
+    return steps[-1] if steps else None
+
+
+def _solves_by_increment(reports) -> dict[float, list]:
+    """The solves of every increment of the slide (load factor past the press), in order."""
+    out: dict[float, list] = {}
+    for load_factor, report, _ in reports:
+        if load_factor > PRESSED_AT + 1e-12:
+            out.setdefault(load_factor, []).append(report)
+    return out
+
+
+@pytest.fixture(scope="module")
+def frictional():
+    return {consistent: _slide(0.3, consistent) for consistent in (True, False)}
+
+
+def test_newton_converges_quadratically_on_a_node_to_surface_slide(frictional):
+    """Every increment of the slide: its first solve's last step above round-off ends within
+    10 ε_k² (quadratic), and the solve that follows at the re-evaluated geometry starts converged;
+    in some of them pairs changed their master facet within the solve (B's pattern changed)."""
+    _, _, reports = frictional[True]
+    changed = [c for load_factor, _, c in reports if load_factor > PRESSED_AT + 1e-12]
+    print(f"\n  pairs that changed their master facet within each solve: {changed}")
+    assert sum(c > 0 for c in changed) >= 3
+    print()
+    for load_factor, solves in _solves_by_increment(reports).items():
+        eps = _residuals(solves[0])
+        step = _last_step(solves[0])
+        print(f"  ℓ = {load_factor:.4f}: max(|R|, |H|)/F = {', '.join(f'{e:.1e}' for e in eps)}; last step "
+              f"{'–' if step is None else f'{step[0]:.1e} -> {step[1]:.1e}, ratio {step[1] / step[0]:.1e}'}; "
+              f"iterates per solve {[len(r.history) for r in solves]}")
+        assert step is not None and step[1] <= 10.0 * step[0] ** 2 and step[1] / step[0] < 1e-3
+        # the solution was in its own geometry already: the second solve's start is its only iterate
+        assert [len(r.history) for r in solves[1:]] == [1] and solves[1].history[0].iteration == 0
+
+
+def test_frozen_geometry_needs_repeated_solves(frictional):
+    """The same slide with the geometry frozen within a solve (consistent_geometry=False): each solve
+    is Newton on the frozen equations, and the re-evaluations between them converge linearly (the
+    residual each solve starts with, in the geometry of the last one's solution)."""
+    _, _, reports = frictional[False]
+    print()
+    passes = []
+    for load_factor, solves in _solves_by_increment(reports).items():
+        starts = [_residuals(r)[0] for r in solves[1:]]
+        passes.append(len(solves))
+        print(f"  ℓ = {load_factor:.4f}: {len(solves)} solves, starting at {', '.join(f'{e:.1e}' for e in starts)}")
+    assert min(passes) >= 4
+
+
+def test_consistent_and_frozen_end_in_the_same_state(frictional):
+    consistent, frozen = frictional[True], frictional[False]
+    f_c, f_f = slave_force(consistent[0]), slave_force(frozen[0])
+    n_c, n_f = (sum(r.iterations for r in run[1]) for run in (consistent, frozen))
+    du = np.abs(consistent[0].u.x.array - frozen[0].u.x.array).max() / np.abs(frozen[0].u.x.array).max()
+    print(f"\n  consistent: F = {f_c}, {n_c} Newton iterations; frozen: F = {f_f}, {n_f}; "
+          f"|ΔF|/|F| = {np.linalg.norm(f_c - f_f) / np.linalg.norm(f_f):.1e}, max|Δu|/max|u| = {du:.1e}")
+    assert np.linalg.norm(f_c - f_f) < 1e-7 * np.linalg.norm(f_f) and du < 1e-7
+    assert n_c < 0.5 * n_f
+
+
+def test_newton_matrix_matches_finite_differences_mid_slide():
+    """J d against central differences of (R, H) at a perturbed state mid-slide (μ_f = 0.3)."""
+    problem = sliding_blocks(slide=0.4, mu_f=0.3)
+    with make_solver("monolithic", problem, OPTIONS) as solver:
+        solve_load_steps(problem, solver, 5, final_load_factor=5 / 12)
+        rng = np.random.default_rng(0)
+        n_u = problem.u.x.petsc_vec.getLocalSize()
+        free = np.ones(n_u)
+        free[problem.owned_bc_dofs()] = 0.0
+        problem.u.x.array[:n_u] += 1e-4 * rng.standard_normal(n_u) * free
+        problem.u.x.scatter_forward()
+        J = solver._newton_matrix(solver.evaluate())
+        d = rng.standard_normal(n_u) * free
+        x, y = J.createVecRight(), J.createVecLeft()
+        x.getArray()[:] = 0.0
+        x.getArray()[:n_u] = d
+        J.mult(x, y)
+        Jd = y.getArray().copy()
+        u0 = problem.u.x.array.copy()
+
+        def F(sign: float) -> np.ndarray:
+            problem.u.x.array[:] = u0
+            problem.u.x.array[:n_u] += sign * 1e-7 * d
+            problem.u.x.scatter_forward()
+            ev = solver.evaluate()
+            return np.concatenate([ev.R_free.getArray().copy(), ev.H.ravel()])
+
+        fd = (F(1.0) - F(-1.0)) / 2e-7
+        solver.settings.consistent_geometry = False  # the frozen geometry's J at the same state
+        problem.u.x.array[:] = u0
+        problem.u.x.scatter_forward()
+        solver._newton_matrix(solver.evaluate()).mult(x, y)
+        J_frozen_d = y.getArray().copy()
+    error_u = np.abs(fd[:n_u] - Jd[:n_u]).max() / np.abs(fd[:n_u]).max()
+    error_H = np.abs(fd[n_u:] - Jd[n_u:]).max() / np.abs(fd[n_u:]).max()
+    frozen_u = np.abs(fd[:n_u] - J_frozen_d[:n_u]).max() / np.abs(fd[:n_u]).max()
+    frozen_H = np.abs(fd[n_u:] - J_frozen_d[n_u:]).max() / np.abs(fd[n_u:]).max()
+    print(f"\n  |J d − FD| / |FD|: u rows {error_u:.1e}, pair rows {error_H:.1e}; the frozen geometry's J: "
+          f"{frozen_u:.1e}, {frozen_H:.1e}")
+    assert error_u < 1e-8 and error_H < 1e-5
+    assert frozen_u > 1e-4 and frozen_H > 1e-4  # the residuals differentiated are the current geometry's
+
+
+def test_nneqm1_keeps_the_frozen_geometry_and_the_same_state(frictional):
+    problem, results, _ = _slide(0.3, method="nneqm1")
+    consistent = frictional[True][0]
+    f_n, f_c = slave_force(problem), slave_force(consistent)
+    passes = [r.report.geometry_passes for r in results]
+    print(f"\n  NNEQM1: F = {f_n}, {sum(r.iterations for r in results)} Newton iterations, solves per increment "
+          f"{passes}; monolithic (consistent): F = {f_c}")
+    assert np.linalg.norm(f_n - f_c) < 1e-7 * np.linalg.norm(f_c)
+    assert max(passes) >= 3  # the repeated solves of the frozen geometry
