@@ -6,6 +6,7 @@
     python benchmarks/scaling.py --compare run1.npz run2.npz
     mpiexec -n 2 python benchmarks/scaling.py --levels 17 --linear-solver iterative
     mpiexec -n 2 python benchmarks/scaling.py --levels 17 --linear-solver iterative --increments 2 --final-load-factor 0.5
+    mpiexec -n 2 python benchmarks/scaling.py --levels 8 --linear-solver iterative --forcing quadratic
 
 Two elastoplastic blocks pressed together, then dragged; level k has 4k × 2k × 4k hexahedra
 per block (level 17: 1.0e6 displacement dofs). Per level and linear solver it prints the
@@ -40,6 +41,7 @@ from petsc4py import PETSc
 from dolfinx_nnqem.solvers.monolithic import MonolithicSolver
 from dolfinx_nnqem.cases.pressed_blocks import pressed_blocks_problem
 from dolfinx_nnqem.solvers import MonolithicOptions, SolverOptions
+from dolfinx_nnqem.solvers.options import FORCING_RULES
 from dolfinx_nnqem.io import pair_table
 from dolfinx_nnqem.solvers import solve_load_steps
 
@@ -68,13 +70,13 @@ def one_newton_solve(problem, solver) -> float:
 
 
 def run(level: int, linear_solver: str, increments: int, final_load_factor: float, comm,
-        petsc_options: dict | None = None) -> dict:
+        petsc_options: dict | None = None, monolithic: dict | None = None) -> dict:
     comm.Barrier()
     t0 = time.perf_counter()
     problem = pressed_blocks_problem(level, comm)
     t_setup = time.perf_counter() - t0
     solver = MonolithicSolver(problem, SolverOptions(max_iterations=40, petsc_options=petsc_options or {}),
-                              MonolithicOptions(linear_solver=linear_solver))
+                              MonolithicOptions(linear_solver=linear_solver, **(monolithic or {})))
     comm.Barrier()
     t0, c0 = time.perf_counter(), time.process_time()
     results = solve_load_steps(problem, solver, increments, final_load_factor=final_load_factor)
@@ -91,6 +93,7 @@ def run(level: int, linear_solver: str, increments: int, final_load_factor: floa
     its = max(sum(iterations), 1)
     return {
         "level": level, "ranks": comm.size, "linear_solver": linear_solver, "petsc_options": petsc_options or {},
+        "monolithic": monolithic or {},
         "dofs": dofs,
         "pairs": problem.num_pairs, "iterations": iterations, "krylov": solver.linear_iterations,
         "lm_steps": sum(h.kind == "lm" for r in results for h in r.report.history),
@@ -131,8 +134,11 @@ def main():
     parser.add_argument("--petsc-option", action="append", default=[], metavar="KEY=VALUE",
                         help="a PETSc option of the linear solver, without prefix (repeatable), e.g. "
                              "fieldsplit_u_pc_gamg_threshold=0.02")
+    parser.add_argument("--forcing", choices=FORCING_RULES, help="MonolithicOptions.forcing (default: the package's)")
+    parser.add_argument("--max-forcing", type=float, help="MonolithicOptions.max_forcing (default: the package's)")
     args = parser.parse_args()
     petsc_options = dict(o.split("=", 1) for o in args.petsc_option)
+    monolithic = {k: v for k, v in (("forcing", args.forcing), ("max_forcing", args.max_forcing)) if v is not None}
     if args.compare:
         compare(*args.compare)
         return
@@ -157,7 +163,7 @@ def main():
     last = None
     for level in args.levels:
         for linear_solver in args.linear_solver:
-            r = run(level, linear_solver, args.increments, args.final_load_factor, comm, petsc_options)
+            r = run(level, linear_solver, args.increments, args.final_load_factor, comm, petsc_options, monolithic)
             last = r
             if not rank0:
                 continue

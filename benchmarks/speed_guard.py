@@ -13,7 +13,9 @@ the median of the pairwise ratios is printed with their spread:
   ``--level``), one outer iteration of NNEQM1 and one Newton step of NNEQM2 (level 2), against
   an assembly and MUMPS solve of linear elasticity on a cube of the same kind, with DOLFINx
   alone (no code of the package);
-* counts that do not depend on the machine: Newton and Krylov iterations.
+* in this process: the pressed blocks' whole load path with the iterative solver at level
+  ``--proxy-level`` (the million-dof run's proxy), against the same baseline;
+* counts that do not depend on the machine: Newton and Krylov iterations, AMG set-ups.
 
 Compare its output with the one in ``docs/performance.md`` (the last run of the issue's
 closing note): a ratio that grew by more than its spread is a slowdown. Prints figures;
@@ -143,16 +145,46 @@ def iteration_costs(level: int, runs: int) -> None:
               + (f", Krylov {counts['krylov']}" if counts.get("krylov") else ""), flush=True)
 
 
+def load_path_cost(level: int, runs: int) -> None:
+    """The pressed blocks' whole load path with the iterative solver (the million-dof run's
+    proxy, ``docs/performance.md``), against :func:`baseline_solve`, with its counts."""
+    import dolfinx_nnqem  # noqa: F401
+    from mpi4py import MPI
+
+    from dolfinx_nnqem.cases.pressed_blocks import pressed_blocks_problem
+    from dolfinx_nnqem.solvers import MonolithicOptions, SolverOptions, make_solver, solve_load_steps
+
+    counts: dict = {}
+
+    def one() -> float:
+        problem = pressed_blocks_problem(level, MPI.COMM_WORLD)
+        with make_solver("monolithic", problem, SolverOptions(max_iterations=40),
+                         monolithic=MonolithicOptions(linear_solver="iterative")) as solver:
+            t0 = time.perf_counter()
+            results = solve_load_steps(problem, solver, 6)
+            elapsed = time.perf_counter() - t0
+            counts.update(newton=[r.iterations for r in results], krylov=solver.linear_iterations,
+                          amg=solver.amg_setups)
+        return elapsed
+
+    ratio = _ratios(one, baseline_solve, runs)
+    print(f"monolithic, iterative, whole load path (level {level}) / baseline solve: {ratio}; iterations "
+          f"{counts['newton']}, Krylov {counts['krylov']}, AMG set-ups {counts['amg']}", flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--runs", type=int, default=5, help="pairs of runs per ratio (default 5)")
     parser.add_argument("--level", type=int, default=4, help="pressed-blocks level of the monolithic figure")
     parser.add_argument("--skip-processes", action="store_true", help="only the in-process figures")
+    parser.add_argument("--proxy-level", type=int, default=6,
+                        help="pressed-blocks level of the whole-load-path figure (the million-dof run's proxy)")
     args = parser.parse_args()
     print(f"figure: median of A/B over {args.runs} pairs (min–max)")
     if not args.skip_processes:
         whole_processes(args.runs)
     iteration_costs(args.level, max(1, args.runs // 2))
+    load_path_cost(args.proxy_level, max(1, args.runs // 2))
 
 
 if __name__ == "__main__":

@@ -9,10 +9,12 @@ r"""How the monolithic solver solves its Newton systems: a direct or an iterativ
   near-nullspace) on the u block, the "selfp" Schur complement factorised on the pair block.
   Without contact, CG + GAMG. Two policies make it fast:
 
-  - inexact Newton forcing: each Krylov solve stops at η = min(max(ε², 0.1 rtol/ε), 10⁻²), ε
-    the relative Newton residual (:meth:`IterativeSolver.set_forcing`);
+  - inexact Newton forcing: each Krylov solve stops at a tolerance set from the relative Newton
+    residual ε, by the quadratic rule η = min(max(ε², 0.1 rtol/ε), η_max) or Eisenstat and
+    Walker's η = 0.9 (ε/ε_prev)² (:meth:`IterativeSolver.set_forcing`);
   - a lagged AMG hierarchy: kept over Newton iterations and increments while fewer than 5 % of
-    the pairs change state and lagged solves converge at the rate the last fresh hierarchy had.
+    the pairs change state and lagged solves converge at the rate the last fresh hierarchy had;
+    a solve cut short goes on from its iterate with the rebuilt hierarchy.
 
 ``theory.md`` states both rules with their reasons.
 """
@@ -135,13 +137,21 @@ class IterativeSolver:
         Keep the u block's AMG hierarchy while it works (with contact).
     symmetric
         The tangent is symmetric; False (non-associated flow): GMRES instead of CG without contact.
+    forcing
+        The inexact-Newton rule of the Krylov tolerances: one of :data:`FORCING_RULES`
+        (:meth:`set_forcing`).
+    max_forcing
+        The loosest Krylov tolerance a Newton step gets.
     """
 
     iterative = True
 
     def __init__(self, V, prefix: str, petsc_options: dict | None, rtol: float, num_pairs: int,
-                 lag_preconditioner: bool = True, symmetric: bool = True):
+                 lag_preconditioner: bool = True, symmetric: bool = True, forcing: str = "eisenstat-walker",
+                 max_forcing: float = 1e-2):
         self.V = V
+        self.forcing = forcing
+        self.max_forcing = max_forcing
         self.comm = V.mesh.comm
         self.prefix = prefix
         self.rtol = rtol
@@ -154,6 +164,7 @@ class IterativeSolver:
         self._rtol_floor, _, _, self._max_it = self.ksp.getTolerances()
         self._configured = False
         self._keep: tuple[PETSc.IS | PETSc.NullSpace, ...] = ()  # what PETSc holds by reference only
+        self._residual_work: PETSc.Vec | None = None  # b − J x of a lagged solve cut short
         self._lagging = bool(num_pairs) and lag_preconditioner
         self.refresh_fraction = 0.05
         self._refresh = True
@@ -170,27 +181,57 @@ class IterativeSolver:
         self._last_forcing = None
 
     def set_forcing(self, eps: float, record: bool = True) -> None:
-        """Inexact Newton: Krylov tolerance η = min(max(ε², 0.1·rtol/ε), 1e-2), ε the relative residual.
+        """Inexact Newton: the Krylov tolerance η of the next step, by :attr:`forcing`'s rule.
 
-        η = O(ε) keeps Newton's local order (Dembo–Eisenstat–Steihaug); ε² leaves the step as
-        good as an exact one where the quadratic term dominates, and 0.1·rtol/ε is just the
-        accuracy that lets the step reach the tolerance. Early iterations, far from the
-        solution, are not solved to full accuracy. Never below ``ksp_rtol`` of the options.
-
-        If the last step (``record``-ed, in this increment) cut the residual by no less than its
-        Krylov tolerance allowed (ε ≤ 2 η_prev ε_prev), the problem behaves linearly here (an
-        elastic increment, no pair changing state): η = 0.1·rtol/ε, so that this step finishes
-        the increment instead of taking ε² and one more Newton iteration for the same Krylov work.
+        Both rules share a floor and a finishing step. 0.1·rtol/ε, ε the relative residual, is
+        just the accuracy that lets the step reach the tolerance; η is never below ``ksp_rtol`` of
+        the options. If the last step (``record``-ed, in this increment) cut the residual by no
+        less than its Krylov tolerance allowed (ε ≤ 2 η_prev ε_prev), the problem behaves
+        linearly here (an elastic increment, no pair changing state): η = 0.1·rtol/ε, so that
+        this step finishes the increment instead of one more Newton iteration for the same
+        Krylov work.
         """
-        rtol = self.rtol
-        eta = min(max(eps * eps, 0.1 * rtol / max(eps, 1e-300)), 1e-2)
+        floor = 0.1 * self.rtol / max(eps, 1e-300)
+        if self.forcing == "eisenstat-walker":
+            eta = self._eisenstat_walker(eps, floor)
+        else:
+            eta = self._quadratic(eps, floor)
         if self._last_forcing is not None:
             eps_prev, eta_prev = self._last_forcing
             if eps <= 2.0 * eta_prev * eps_prev:
-                eta = min(eta, 0.1 * rtol / max(eps, 1e-300))
+                eta = min(eta, floor)
         eta = max(eta, self._rtol_floor)
         self._last_forcing = (eps, eta) if record else None
         self.ksp.setTolerances(rtol=eta)
+
+    def _eisenstat_walker(self, eps: float, floor: float) -> float:
+        """η = γ (ε/ε_prev)², γ = 0.9 (Eisenstat–Walker's second choice), between ``floor`` and
+        ``max_forcing``.
+
+        The step is solved only as accurately as the last Newton step's own reduction of the
+        residual suggests the linear model to be: a step that cut the residual by 3 (a semismooth
+        iteration whose active set still moves, a plastic zone that grows) gets the cap, one that
+        cut it by 100 (the quadratic phase) 1e-4. The first step of an increment gets the cap;
+        a step after one whose tolerance was large keeps at least γ η_prev² (their safeguard,
+        when it is above 0.1).
+        """
+        eta = self.max_forcing
+        if self._last_forcing is not None:
+            eps_prev, eta_prev = self._last_forcing
+            eta = 0.9 * (eps / max(eps_prev, 1e-300)) ** 2
+            safeguard = 0.9 * eta_prev ** 2
+            if safeguard > 0.1:
+                eta = max(eta, safeguard)
+        return min(max(eta, floor), self.max_forcing)
+
+    def _quadratic(self, eps: float, floor: float) -> float:
+        """η = min(max(ε², ``floor``), ``max_forcing``), ε the relative residual.
+
+        η = O(ε) keeps Newton's local order (Dembo–Eisenstat–Steihaug); ε² leaves the step as
+        good as an exact one where the quadratic term dominates. Early iterations, far from the
+        solution, are not solved to full accuracy.
+        """
+        return min(max(eps * eps, floor), self.max_forcing)
 
     def _configure(self, J: PETSc.Mat) -> None:
         """Field split (u, z) and the rigid-body near-nullspace for GAMG, once."""
@@ -217,10 +258,13 @@ class IterativeSolver:
         self._configure(J)
         self._krylov_solve(b, x, pair_state)
         if self._lagging and self._lagged_solve_is_poor(b):
-            # the lagged AMG hierarchy no longer fits K + BᵀPB: rebuild it, solve the same system again
+            # the lagged AMG hierarchy no longer fits K + BᵀPB: rebuild it and go on from where the
+            # lagged solve stopped (the tolerance is relative to ‖b‖ whatever the start)
             self._refresh = True
+            start = self._resume_from(J, b, x)
             self._krylov_solve(b, x, pair_state)
-            self._lagged_solve_is_poor(b)  # records the fresh hierarchy's convergence rate
+            self.ksp.setInitialGuessNonzero(False)
+            self._lagged_solve_is_poor(b, start)  # records the fresh hierarchy's convergence rate
         reason = self.ksp.getConvergedReason()
         if reason <= 0 or not np.all(np.isfinite(x.getArray(readonly=True))):  # type: ignore[operator]  # as in DirectSolver.solve
             return f"the linear solve failed (KSP reason {reason})"
@@ -279,11 +323,29 @@ class IterativeSolver:
         self._lag_refreshed = self._refresh
         self._refresh = False
 
-    def _lagged_solve_is_poor(self, b: PETSc.Vec) -> bool:
-        """True if this solve used a lagged hierarchy and did not converge within its budget."""
+    def _resume_from(self, J: PETSc.Mat, b: PETSc.Vec, x: PETSc.Vec) -> float:
+        """Start the next solve from ``x`` (the cut-short lagged solve's iterate) if it is finite and
+        better than zero, else from zero; returns the starting residual norm."""
+        r = self._residual_work = self._residual_work or b.duplicate()
+        norm_b = vec_norm(b)
+        if np.all(np.isfinite(x.getArray(readonly=True))):
+            J.mult(x, r)
+            r.aypx(-1.0, b)  # r = b − J x
+            norm_r = vec_norm(r)
+            if norm_r < norm_b:
+                self.ksp.setInitialGuessNonzero(True)
+                return norm_r
+        x.zeroEntries()
+        return norm_b
+
+    def _lagged_solve_is_poor(self, b: PETSc.Vec, start: float | None = None) -> bool:
+        """True if this solve used a lagged hierarchy and did not converge within its budget.
+
+        After a fresh set-up, records its convergence rate (``start``: the solve's starting residual
+        norm, default ‖b‖)."""
         if self._lag_refreshed:
             its = max(self.ksp.getIterationNumber(), 1)
-            reduction = self.ksp.getResidualNorm() / max(vec_norm(b), 1e-300)
+            reduction = self.ksp.getResidualNorm() / max(vec_norm(b) if start is None else start, 1e-300)
             self._fresh_rate = min(max(reduction ** (1.0 / its), 1e-3), 0.95)
             return False
         return self.ksp.getConvergedReason() <= 0  # type: ignore[operator]  # as in DirectSolver.solve
@@ -296,4 +358,6 @@ class IterativeSolver:
         self.ksp.destroy()
         for obj in self._keep:
             obj.destroy()
+        if self._residual_work is not None:
+            self._residual_work.destroy()
 

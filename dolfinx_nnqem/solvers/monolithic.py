@@ -138,7 +138,8 @@ class MonolithicSolver(ReleasesPETSc):
         p = self.problem
         if self.iterative:
             return IterativeSolver(p.V, self.prefix, self.options.petsc_options, self.options.rtol, p.num_pairs,
-                                   self.settings.lag_preconditioner, p.state.symmetric_tangent)
+                                   self.settings.lag_preconditioner, p.state.symmetric_tangent,
+                                   self.settings.forcing, self.settings.max_forcing)
         return DirectSolver(p.comm, self.prefix, self.options.petsc_options)
 
     def _augmented_system_of_pairs(self) -> AugmentedSystem | None:

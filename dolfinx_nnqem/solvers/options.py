@@ -12,7 +12,11 @@ from dolfinx_nnqem.names import METHODS
 from dolfinx_nnqem.numerics.newton import Globalisation
 from dolfinx_nnqem.numerics.ranges import shown
 
-__all__ = ["FLOW_DIRECTIONS", "METHODS", "STALL_WINDOW", "MonolithicOptions", "NNEQM1Options", "NNEQM2Options", "SolverOptions"]
+__all__ = ["FLOW_DIRECTIONS", "FORCING_RULES", "METHODS", "STALL_WINDOW", "MonolithicOptions", "NNEQM1Options", "NNEQM2Options", "SolverOptions"]
+
+FORCING_RULES = ("eisenstat-walker", "quadratic")
+"""The inexact-Newton rules of the iterative linear solver's Krylov tolerances
+(:class:`MonolithicOptions`, :meth:`~dolfinx_nnqem.solvers.linear_solver.IterativeSolver.set_forcing`)."""
 
 FLOW_DIRECTIONS = ("return-map", "frozen")
 """NNEQM2's two variants (:class:`NNEQM2Options`)."""
@@ -91,6 +95,13 @@ class MonolithicOptions:
         preconditioner, not the Newton step.
     lag_preconditioner
         Iterative solver with contact: keep the u block's AMG hierarchy while it works.
+    forcing
+        Iterative solver: how loosely each Newton step's Krylov solve may stop (inexact Newton),
+        one of :data:`FORCING_RULES`. "quadratic": η = min(max(ε², 0.1 rtol/ε), ``max_forcing``),
+        ε the relative residual; "eisenstat-walker" (default): η = 0.9 (ε/ε_prev)², from the last
+        step's own reduction of the residual, at most ``max_forcing`` (``docs/theory.md``).
+    max_forcing
+        Iterative solver: the loosest Krylov tolerance of a Newton step, in (0, 0.9].
     consistent_geometry
         Current-geometry rigid obstacles and node-to-surface pairs: re-evaluate them at every Newton
         iterate and add the geometric terms (the normal's and the friction frame's rotation; for
@@ -109,6 +120,8 @@ class MonolithicOptions:
     extrapolate: bool = True
     augmentation: float = 1.0
     lag_preconditioner: bool = True
+    forcing: str = "eisenstat-walker"
+    max_forcing: float = 1e-2
     consistent_geometry: bool = True
     globalisation: Globalisation = field(default_factory=lambda: Globalisation(
         min_step=1.0 / 64, watchdog=6, watchdog_progress=0.5, watchdog_restarts=2,
@@ -119,6 +132,9 @@ class MonolithicOptions:
             raise ValueError(f"MonolithicOptions: linear_solver = {self.linear_solver!r}; expected 'direct', "
                              "'iterative' or 'auto'")
         _check_integer("MonolithicOptions", "auto_iterative_dofs", self.auto_iterative_dofs, 0)
+        if self.forcing not in FORCING_RULES:
+            raise ValueError(f"MonolithicOptions: forcing = {self.forcing!r}; expected one of {list(FORCING_RULES)}")
+        _check_real("MonolithicOptions", "max_forcing", self.max_forcing, 0.0, 0.9)
         if isinstance(self.augmentation, bool) or not isinstance(self.augmentation, numbers.Real) \
                 or not (math.isfinite(float(self.augmentation)) and self.augmentation > 0):
             raise ValueError(f"MonolithicSolver: augmentation = {self.augmentation!r}; expected a finite value > 0 "

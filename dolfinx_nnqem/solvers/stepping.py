@@ -143,6 +143,7 @@ def solve_load_steps(
             continue
         result = _commit(problem, solver, report, values, target, index=index0 + len(results) + 1,
                          cutbacks=schedule.cutbacks, verdict=verdict, t0=t0, callbacks=callbacks)
+        values = None  # committed: not held through the next increment's solve (σ and Δε_p at every point)
         results.append(result)
         ell = target
         schedule.accepted(report.iterations)
@@ -494,4 +495,5 @@ def solve_load_path(problem: SolvableProblem, solver: Solver, load_factors: Sequ
             _fail(problem, solver, report, target, increment=len(results) + 1, cutbacks=0, callbacks=callbacks)
         results.append(_commit(problem, solver, report, values, target, index=len(results) + 1, cutbacks=0,
                                verdict=verdict, t0=t0, callbacks=callbacks))
+        values = None  # as in solve_load_steps
     return results
