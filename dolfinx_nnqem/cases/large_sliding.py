@@ -149,9 +149,11 @@ IRONING_PRESSED_AT = 0.2
 
 
 def ironing(nx: int = 16, *, law: str = "alart-curnier", mu_f: float = 0.1, depth: float = 0.005,
-            geometry: str | None = "current", comm: MPI.Comm = MPI.COMM_WORLD) -> ContactProblem:
+            geometry: str | None = "current", kinematics: str = "small",
+            comm: MPI.Comm = MPI.COMM_WORLD) -> ContactProblem:
     """A cylinder pressed into an elastoplastic strip and dragged along it (module docstring);
-    ``geometry=None``: the contact's default geometry."""
+    ``geometry=None``: the contact's default geometry; ``kinematics="finite"``: the strip at finite
+    strain (a deep ironing, ``demos/deep_ironing.py``)."""
     mesh, ct, ft = build_block_stack(comm, 2.0, 0.25, [0.5], [(nx, max(nx // 4, 1), 2)])
     path = PiecewiseLinearPath([[0.0, 0.0, 0.0, 0.0], [IRONING_PRESSED_AT, 0.0, -depth, 0.0], [1.0, 1.0, -depth, 0.0]])
     radius = 0.5
@@ -160,7 +162,8 @@ def ironing(nx: int = 16, *, law: str = "alart-curnier", mu_f: float = 0.1, dept
     contact = Contact(punch, T.top(1), mu_f=mu_f, law=law)
     if geometry is not None:
         contact = replace(contact, geometry=geometry)
-    return ContactProblem(mesh, ct, ft, materials=IRONING_MATERIAL, dirichlet=dirichlet, contact=contact)
+    return ContactProblem(mesh, ct, ft, materials=IRONING_MATERIAL, dirichlet=dirichlet, contact=contact,
+                          kinematics=kinematics)
 
 
 def obstacle_force(problem: ContactProblem) -> np.ndarray:

@@ -9,6 +9,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
+
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "scripts"))
 import demos_to_docs  # noqa: E402
@@ -83,3 +85,28 @@ def test_two_beams_concrete_demo_runs(tmp_path):
     first = re.search(r"\| first increment with a plastic point \| (\d+) \| (\d+) \|", tables)
     assert 0 < int(plastic.group(2)) < int(plastic.group(1)) and int(first.group(2)) > int(first.group(1))
     assert (tmp_path / "load_deflection.png").is_file() and (tmp_path / "plastic_zone.png").is_file()
+
+
+def test_deep_ironing_demo_runs(tmp_path):
+    """The finite-strain tutorial: the small-strain run is refused by max_strain, the deep ironing
+    converges at finite strain with every state's figures in range (J > 0, the law in the logarithmic
+    space, the shape ratio, p far past the small-strain range), the shallow answers of the two
+    kinematics agree to the order of the strains, and the three pictures are drawn."""
+    env = {k: v for k, v in os.environ.items() if k != "DOLFINX_NNQEM_PICTURES"}
+    env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
+    run = subprocess.run([sys.executable, str(ROOT / "demos" / "deep_ironing.py"), "--out", str(tmp_path)],
+                         capture_output=True, text=True, env=env, timeout=900, cwd=tmp_path)
+    print("\n" + run.stdout + run.stderr[-2000:])
+    assert run.returncode == 0
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert "exceeds max_strain = 0.1" in summary["small_strain_refusal"]
+    deep = summary["deep_finite"]
+    assert len(deep["load_factor"]) == 40 and abs(deep["load_factor"][-1] - 1.0) < 1e-12
+    assert min(deep["min_J"]) > 0.5 and min(deep["min_shape_ratio"]) > 0.5
+    assert max(deep["law_violation"]) < 1e-8 and max(deep["equilibrium"]) < 1e-8
+    assert deep["max_p"][-1] > 0.3  # far past the small-strain range
+    small, finite = (np.array([summary[k]["F_x"], summary[k]["F_y"]]) for k in ("shallow_small", "shallow_finite"))
+    difference = np.abs(finite - small).max() / np.abs(small[1]).max()
+    assert 1e-4 < difference < 0.05  # of the order of the strains (a few percent): close, not equal
+    for name in ("forces.png", "plastic_strain.png", "cauchy_stress.png"):
+        assert (tmp_path / name).is_file()
