@@ -317,12 +317,24 @@ def _beyond_small_strain(strain: float, rotation: float, options: CheckOptions) 
     """Why the largest strain or rotation is outside the small-strain setting (empty if it is not)."""
     reasons = []
     if options.max_strain is not None and not strain <= options.max_strain:
-        reasons.append(f"largest strain {strain:.3g} exceeds max_strain = {options.max_strain:g}: far outside "
-                       "the small-strain setting (plastic collapse or friction exceeded?)")
+        reasons.append(f"largest strain {_beyond(strain, options.max_strain)} exceeds max_strain = "
+                       f"{options.max_strain:g}: far outside the small-strain setting (plastic collapse or "
+                       "friction exceeded? a large deformation: kinematics = 'finite')")
     if options.max_rotation is not None and not rotation <= options.max_rotation:
-        reasons.append(f"largest rotation {rotation:.3g} rad exceeds max_rotation = {options.max_rotation:g}: "
-                       "far outside the small-rotation setting (a mechanism or collapse?)")
+        reasons.append(f"largest rotation {_beyond(rotation, options.max_rotation)} rad exceeds max_rotation = "
+                       f"{options.max_rotation:g}: far outside the small-rotation setting (a mechanism or collapse? "
+                       "a large rotation: kinematics = 'finite')")
     return reasons
+
+
+def _beyond(value: float, limit: float) -> str:
+    """``value`` to three significant digits, or to as many as it takes to read larger than ``limit``
+    (0.1002 against 0.1 is not printed "0.1")."""
+    for digits in range(3, 10):
+        text = f"{value:.{digits}g}"
+        if float(text) > limit:
+            return text
+    return repr(value)
 
 
 def _law(problem, forms: _Forms, values: GaussPointValues, reasons: list[str]) -> tuple[ConstitutiveCheck, float]:

@@ -11,7 +11,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from dolfinx_nnqem.solvers.checks import CheckOptions, check_state
+from dolfinx_nnqem.solvers.checks import CheckOptions, _beyond_small_strain, check_state
 from dolfinx_nnqem.solvers import ConvergenceError, SolveReport
 from dolfinx_nnqem.material import VonMises
 from dolfinx_nnqem.io import ResultsWriter
@@ -166,12 +166,20 @@ def test_large_strain_is_refused_and_can_be_relaxed():
     with pytest.raises(ConvergenceError) as error:
         solve_load_steps(problem, make_solver("monolithic", problem), 1, max_cutbacks=0)
     print(f"\n  {str(error.value).splitlines()[0]}")
-    assert "max_strain" in str(error.value)
+    assert "max_strain" in str(error.value) and "kinematics = 'finite'" in str(error.value)
     problem.restore()
     results = solve_load_steps(problem, make_solver("monolithic", problem), 1, max_cutbacks=0,
                                check=CheckOptions(max_strain=None, max_rotation=None))
     print(f"  relaxed: strain {results[0].check.max_strain:.3f} accepted")
     assert results[0].check.max_strain > 0.4
+
+
+def test_a_strain_just_above_the_limit_reads_above_it():
+    """0.1002 against max_strain = 0.1 is printed with the digits that show it is above (not "0.1 exceeds 0.1")."""
+    reasons = _beyond_small_strain(0.1002, 0.0, CheckOptions(max_strain=0.1))
+    rotations = _beyond_small_strain(0.0, 0.20004, CheckOptions(max_rotation=0.2))
+    assert reasons[0].startswith("largest strain 0.1002 exceeds max_strain = 0.1:"), reasons
+    assert rotations[0].startswith("largest rotation 0.20004 rad exceeds max_rotation = 0.2:"), rotations
 
 
 def test_plastic_collapse_ends_in_a_clear_report():
