@@ -64,6 +64,8 @@ SUPPORTED_POINTWISE = (VonMisesAtPoints, IsotropicAtPoints, KinematicAtPoints, D
 deviators and 3κ on the volume, and internal variables the route knows how to carry ("p"; the
 back-stresses of :class:`~dolfinx_nnqem.material.kinematic.KinematicAtPoints`)."""
 _DIRECTIONS = np.eye(9).reshape(9, 3, 3)
+_COORDINATE_BASIS = np.ascontiguousarray(symmetric_coordinates(_DIRECTIONS).T)
+"""B (6, 9): the coordinates of a tensor T (9 components, row-major) are B T (:func:`symmetric_coordinates`)."""
 
 
 @dataclass(frozen=True)
@@ -139,7 +141,21 @@ def _rotated(r: np.ndarray, T: np.ndarray) -> np.ndarray:
 
 
 def _tangent(F: np.ndarray, trial: _Trial, ret: LogarithmicReturn, tau: np.ndarray) -> np.ndarray:
-    """∂P_ij/∂F_kl (n, 3, 3, 3, 3) along the nine directions e_k⊗e_l (the module docstring)."""
+    """∂P_ij/∂F_kl (n, 3, 3, 3, 3) along the nine directions e_k⊗e_l (the module docstring), by the
+    compiled loop over the points of :mod:`.kernels`."""
+    from dolfinx_nnqem.material.finite_strain.kernels import hencky_tangent  # (imports numba: here, when needed)
+
+    F_inv = np.linalg.inv(F)
+    out = np.empty((F.shape[0], 3, 3, 3, 3))
+    hencky_tangent(trial.F_n_inv, trial.f @ trial.b_n, trial.lam, trial.Q, trial.r, trial.u, trial.eps_bar, ret.D,
+                   _COORDINATE_BASIS, symmetric_tensors(ret.tau), F_inv, tau @ np.swapaxes(F_inv, 1, 2), out)
+    return out
+
+
+def tangent_by_arrays(F: np.ndarray, trial: _Trial, ret: LogarithmicReturn, tau: np.ndarray) -> np.ndarray:
+    """∂P_ij/∂F_kl (n, 3, 3, 3, 3) as :func:`_tangent`, written on numpy arrays of the nine directions
+    (n, 9, 3, 3) (the module docstring's formulas as they read): the reference the compiled
+    kernel is tested against."""
     n = F.shape[0]
     dF = np.broadcast_to(_DIRECTIONS, (n, 9, 3, 3))
     df = dF @ trial.F_n_inv[:, None]
