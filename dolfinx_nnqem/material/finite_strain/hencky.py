@@ -24,8 +24,11 @@ configuration to the next: here they turn with the rotation r of the polar decom
 f = r u of the increment's deformation (α_n → r α_n rᵀ, a Green–Naghdi-type rule). This is a
 model choice of its own (``formulation.md`` §1c: "for kinematic hardening it is a model of its
 own"); it is objective, and exact for loading without rotation (the uniaxial closed forms).
-The return map runs in the increment's rotated frame, ε̄ = rᵀ ε^tr r with the stored α_n; for an
-isotropic law that frame changes nothing.
+The return map runs in the increment's rotated frame, ε̄ = rᵀ ε^tr r with the stored α_n. For an
+isotropic law that frame changes nothing: its return map τ̂ is an isotropic function,
+τ̂(rᵀ ε r) = rᵀ τ̂(ε) r, so r τ̂(ε̄) rᵀ = τ̂(ε^tr) exactly; the route takes r = I there (no polar
+decomposition) and the back-stress laws alone (:class:`~dolfinx_nnqem.material.kinematic.KinematicAtPoints`)
+run in the rotated frame.
 
 **Consistent tangent.** Along a direction δF, with δf = δF F_n⁻¹,
 δb = δf b_e,n fᵀ + f b_e,n δfᵀ, δε^tr = ½ d ln(b_e^tr)[δb] (:func:`.spectral.log_derivative`,
@@ -35,7 +38,10 @@ exact as eigenvalues coincide), Ω = rᵀδr (:func:`.spectral.rotation_derivati
     δP = δτ F⁻ᵀ − τ F⁻ᵀ δFᵀ F⁻ᵀ,
 
 with D = C (I − ∂Δε_p/∂ε) the small-strain algorithmic tangent in the logarithmic space. The
-nine directions δF = e_k ⊗ e_l give ∂P/∂F (n, 3, 3, 3, 3).
+nine directions δF = e_k ⊗ e_l give ∂P/∂F (n, 3, 3, 3, 3). With r = I (an isotropic law) the
+terms in Ω cancel: differentiating τ̂(e^{−tΩ} ε e^{tΩ}) = e^{−tΩ} τ̂(ε) e^{tΩ} at t = 0 gives
+D : (ε̄ Ω − Ω ε̄) = τ̄ Ω − Ω τ̄, and δτ = D : δε^tr (the compiled tangent, :mod:`.kernels`, leaves
+them out there; :func:`tangent_by_arrays` keeps them, and the tests compare the two).
 """
 
 from __future__ import annotations
@@ -116,13 +122,15 @@ class _Trial:
     f: np.ndarray  #: F F_n⁻¹
     lam: np.ndarray  #: eigenvalues of b_e^tr (n, 3)
     Q: np.ndarray  #: its eigenvectors (columns)
-    r: np.ndarray  #: polar rotation of f
-    u: np.ndarray  #: its stretch
+    r: np.ndarray  #: polar rotation of f (I where not ``rotating``)
+    u: np.ndarray  #: its stretch (I where not ``rotating``)
     eps_bar: np.ndarray  #: rᵀ ε^tr r
+    rotating: bool  #: the return map runs in the rotated frame (back-stresses); else r = I
 
 
-def _trial(F: np.ndarray, state: FiniteStrainState) -> _Trial:
-    """b_e^tr = f b_e,n fᵀ, its eigen-decomposition and ε̄ = rᵀ (½ ln b_e^tr) r."""
+def _trial(F: np.ndarray, state: FiniteStrainState, rotating: bool = True) -> _Trial:
+    """b_e^tr = f b_e,n fᵀ, its eigen-decomposition and ε̄ = rᵀ (½ ln b_e^tr) r; r = I unless
+    ``rotating`` (an isotropic law: the module docstring)."""
     F_n_inv = np.linalg.inv(state.F)
     f = F @ F_n_inv
     b_tr = f @ state.b_e @ np.swapaxes(f, 1, 2)
@@ -130,14 +138,23 @@ def _trial(F: np.ndarray, state: FiniteStrainState) -> _Trial:
     if np.any(lam <= 0.0):
         raise ValueError(f"the elastic trial b_e has an eigenvalue <= 0 at {np.count_nonzero((lam <= 0).any(1))} "
                          "Gauss point(s): the state's b_e is not positive definite")
-    r, u = polar_decomposition(f)
     eps_tr = tensor_function(Q, 0.5 * np.log(lam))
-    return _Trial(F_n_inv, state.b_e, f, lam, Q, r, u, np.swapaxes(r, 1, 2) @ eps_tr @ r)
+    if not rotating:
+        eye = np.broadcast_to(np.eye(3), F.shape).copy()
+        return _Trial(F_n_inv, state.b_e, f, lam, Q, eye, eye, eps_tr, False)
+    r, u = polar_decomposition(f)
+    return _Trial(F_n_inv, state.b_e, f, lam, Q, r, u, np.swapaxes(r, 1, 2) @ eps_tr @ r, True)
 
 
 def _rotated(r: np.ndarray, T: np.ndarray) -> np.ndarray:
     """r T rᵀ for (n, 3, 3) arrays."""
     return r @ T @ np.swapaxes(r, 1, 2)
+
+
+def _spatial(trial: _Trial, coordinates: np.ndarray) -> np.ndarray:
+    """The spatial tensor r T̄ rᵀ (n, 3, 3) of a tensor T̄ of the rotated frame given by its coordinates
+    (n, 6) (T̄ itself where r = I)."""
+    return _rotated(trial.r, symmetric_tensors(coordinates)) if trial.rotating else symmetric_tensors(coordinates)
 
 
 def _tangent(F: np.ndarray, trial: _Trial, ret: LogarithmicReturn, tau: np.ndarray) -> np.ndarray:
@@ -148,7 +165,7 @@ def _tangent(F: np.ndarray, trial: _Trial, ret: LogarithmicReturn, tau: np.ndarr
     F_inv = np.linalg.inv(F)
     out = np.empty((F.shape[0], 3, 3, 3, 3))
     hencky_tangent(trial.F_n_inv, trial.f @ trial.b_n, trial.lam, trial.Q, trial.r, trial.u, trial.eps_bar, ret.D,
-                   _COORDINATE_BASIS, symmetric_tensors(ret.tau), F_inv, tau @ np.swapaxes(F_inv, 1, 2), out)
+                   _COORDINATE_BASIS, symmetric_tensors(ret.tau), F_inv, tau @ np.swapaxes(F_inv, 1, 2), trial.rotating, out)
     return out
 
 
@@ -228,11 +245,10 @@ class HenckyAtPoints:
         """The return map at the deformation gradients ``F`` (n, 3, 3) from the converged ``state``
         (the module docstring), with the consistent tangent ∂P/∂F if ``tangent``."""
         F, J = checked_deformation_gradients(F, self.size)
-        trial = _trial(F, state)
+        trial = _trial(F, state, rotating=bool(self.back_stress_names))
         internal = {name: np.asarray(v) for name, v in state.internal.items()}
         ret = logarithmic_return(self.pointwise, trial.eps_bar, internal)
-        tau = _rotated(trial.r, symmetric_tensors(ret.tau))
-        eps_e = _rotated(trial.r, symmetric_tensors(ret.eps_e))
+        tau, eps_e = _spatial(trial, ret.tau), _spatial(trial, ret.eps_e)
         lam_e, Q_e = eigen(eps_e)
         new_internal = {**internal, "p": internal["p"] + ret.dp,
                         **self._updated_back_stresses(internal, ret, trial.r)}

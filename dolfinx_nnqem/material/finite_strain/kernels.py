@@ -17,7 +17,8 @@ The mathematics is :mod:`.hencky`'s (its module docstring, "Consistent tangent")
 
 D is given on the nine components of a tensor (row-major), D₉ = Bᵀ D B with B the coordinates'
 basis (:func:`~dolfinx_nnqem.material.kinematics.symmetric_coordinates`): D₉ : δε̄ is the δτ̄ of
-the coordinates, δε̄'s symmetric part taken by B as there. The arrays stay per point (3 × 3 and
+the coordinates, δε̄'s symmetric part taken by B as there. Where r = I (an isotropic law,
+:mod:`.hencky`) Ω and the products with r are left out. The arrays stay per point (3 × 3 and
 9 × 9): no (n, 9, 3, 3) temporaries. The same operations as the numpy form up to their order:
 the results agree to rounding (``tests/unit/test_finite_strain_material.py`` checks both).
 
@@ -146,27 +147,34 @@ def _stress_rate(D, B, deps_bar, Y):  # pragma: no cover  (compiled)
 
 
 @numba.njit(cache=True)
-def _direction(k, ll, g, point, work, D, B, out):  # pragma: no cover  (compiled)
+def _direction(k, ll, g, point, work, D, B, rotating, out):  # pragma: no cover  (compiled)
     """∂P/∂F_kl at point g into out[g, :, :, k, ll] (the module docstring's steps); ``point`` holds
-    the point's 3 × 3 arrays (:func:`hencky_tangent`), ``work`` 3 × 3 work arrays."""
+    the point's 3 × 3 arrays (:func:`hencky_tangent`), ``work`` 3 × 3 work arrays; Ω = 0 unless
+    ``rotating`` (r = I: the terms in Ω cancel, :mod:`.hencky`)."""
     Fn_inv, h, Q, L, R_Q, M_inv, r, eps_bar, tau_bar, F_inv, P = (point[0], point[1], point[2], point[3], point[4],
                                                                   point[5], point[6], point[7], point[8], point[9],
                                                                   point[10])
     S, Omega, C, Y, dtau = work[0], work[1], work[2], work[3], work[4]
     _rotated_log_derivative(k, h[ll], Q, L, R_Q, work[5], work[6], S)
-    _spin(k, ll, r, Fn_inv, M_inv, Omega)
+    if rotating:
+        _spin(k, ll, r, Fn_inv, M_inv, Omega)
+    else:
+        Omega[:] = 0.0
     _commutator(Omega, eps_bar, C)
     for i in range(3):
         for j in range(3):
             S[i, j] -= C[i, j]  # δε̄ = rᵀ δε^tr r − (Ω ε̄ − ε̄ Ω)
     _commutator(Omega, tau_bar, Y)
     _stress_rate(D, B, S, Y)
-    for i in range(3):
-        for p in range(3):
-            C[i, p] = r[i, 0] * Y[0, p] + r[i, 1] * Y[1, p] + r[i, 2] * Y[2, p]
-    for i in range(3):
-        for j in range(3):
-            dtau[i, j] = C[i, 0] * r[j, 0] + C[i, 1] * r[j, 1] + C[i, 2] * r[j, 2]
+    if rotating:  # δτ = r Y rᵀ
+        for i in range(3):
+            for p in range(3):
+                C[i, p] = r[i, 0] * Y[0, p] + r[i, 1] * Y[1, p] + r[i, 2] * Y[2, p]
+        for i in range(3):
+            for j in range(3):
+                dtau[i, j] = C[i, 0] * r[j, 0] + C[i, 1] * r[j, 1] + C[i, 2] * r[j, 2]
+    else:
+        dtau[:, :] = Y
     for i in range(3):
         for j in range(3):
             s = dtau[i, 0] * F_inv[j, 0] + dtau[i, 1] * F_inv[j, 1] + dtau[i, 2] * F_inv[j, 2]
@@ -176,10 +184,12 @@ def _direction(k, ll, g, point, work, D, B, out):  # pragma: no cover  (compiled
 @numba.njit(cache=True)
 def hencky_tangent(Fn_inv: np.ndarray, left: np.ndarray, lam: np.ndarray, Q: np.ndarray, r: np.ndarray,
                    u: np.ndarray, eps_bar: np.ndarray, D: np.ndarray, B: np.ndarray, tau_bar: np.ndarray,
-                   F_inv: np.ndarray, P: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover  (compiled)
+                   F_inv: np.ndarray, P: np.ndarray, rotating: bool, out: np.ndarray
+                   ) -> None:  # pragma: no cover  (compiled)
     """∂P_ij/∂F_kl (n, 3, 3, 3, 3) into ``out`` from the trial state's F_n⁻¹, f b_e,n, λ, Q, r, u and
     ε̄, the algorithmic tangent D (n, 6, 6) in the coordinates of the basis B (6, 9), τ̄, F⁻¹ and
-    P = τ F⁻ᵀ (the module docstring)."""
+    P = τ F⁻ᵀ (the module docstring); the terms in Ω left out unless ``rotating`` (r = I, an isotropic
+    law: :mod:`.hencky`)."""
     point, work = np.empty((11, 3, 3)), np.empty((7, 3, 3))
     for g in range(Fn_inv.shape[0]):
         _log_divided_differences(lam[g], point[3])
@@ -188,4 +198,4 @@ def hencky_tangent(Fn_inv: np.ndarray, left: np.ndarray, lam: np.ndarray, Q: np.
             point[m] = a[g]
         for k in range(3):
             for ll in range(3):
-                _direction(k, ll, g, point, work, D[g], B, out)
+                _direction(k, ll, g, point, work, D[g], B, rotating, out)
