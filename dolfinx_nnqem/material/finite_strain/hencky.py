@@ -157,20 +157,19 @@ def _spatial(trial: _Trial, coordinates: np.ndarray) -> np.ndarray:
     return _rotated(trial.r, symmetric_tensors(coordinates)) if trial.rotating else symmetric_tensors(coordinates)
 
 
-def _tangent(F: np.ndarray, trial: _Trial, ret: LogarithmicReturn, tau: np.ndarray) -> np.ndarray:
+def _tangent(trial: _Trial, ret: LogarithmicReturn, F_inv: np.ndarray, P: np.ndarray) -> np.ndarray:
     """∂P_ij/∂F_kl (n, 3, 3, 3, 3) along the nine directions e_k⊗e_l (the module docstring), by the
-    compiled loop over the points of :mod:`.kernels`."""
+    compiled loop over the points of :mod:`.kernels`, given F⁻¹ and P = τ F⁻ᵀ."""
     from dolfinx_nnqem.material.finite_strain.kernels import hencky_tangent  # (imports numba: here, when needed)
 
-    F_inv = np.linalg.inv(F)
-    out = np.empty((F.shape[0], 3, 3, 3, 3))
+    out = np.empty((F_inv.shape[0], 3, 3, 3, 3))
     hencky_tangent(trial.F_n_inv, trial.f @ trial.b_n, trial.lam, trial.Q, trial.r, trial.u, trial.eps_bar, ret.D,
-                   _COORDINATE_BASIS, symmetric_tensors(ret.tau), F_inv, tau @ np.swapaxes(F_inv, 1, 2), trial.rotating, out)
+                   _COORDINATE_BASIS, symmetric_tensors(ret.tau), F_inv, P, trial.rotating, out)
     return out
 
 
 def tangent_by_arrays(F: np.ndarray, trial: _Trial, ret: LogarithmicReturn, tau: np.ndarray) -> np.ndarray:
-    """∂P_ij/∂F_kl (n, 3, 3, 3, 3) as :func:`_tangent`, written on numpy arrays of the nine directions
+    """∂P_ij/∂F_kl (n, 3, 3, 3, 3) as :func:`_tangent` (with r of ``trial``), written on numpy arrays of the nine directions
     (n, 9, 3, 3) (the module docstring's formulas as they read): the reference the compiled
     kernel is tested against."""
     n = F.shape[0]
@@ -253,7 +252,8 @@ class HenckyAtPoints:
         new_internal = {**internal, "p": internal["p"] + ret.dp,
                         **self._updated_back_stresses(internal, ret, trial.r)}
         new_state = FiniteStrainState(F.copy(), tensor_function(Q_e, np.exp(2.0 * lam_e)), new_internal)
-        P = tau @ np.swapaxes(np.linalg.inv(F), 1, 2)
+        F_inv = np.linalg.inv(F)
+        P = tau @ np.swapaxes(F_inv, 1, 2)
         return FiniteStrainResponse(P=P, tau=tau, sigma=tau / J[:, None, None], dp=ret.dp, state=new_state,
-                                    tangent=_tangent(F, trial, ret, tau) if tangent else None)
+                                    tangent=_tangent(trial, ret, F_inv, P) if tangent else None)
 
