@@ -3,8 +3,9 @@
 numpy arrays of the nine directions (``hencky.tangent_by_arrays``): equal to rounding at many
 points at once (plastic, elastic, back-stresses, the cone and its apex, equal eigenvalues,
 rotations): the update's tangent (the compiled one) against the reference. For an isotropic law
-the update leaves out the increment's rotated frame (r = I, the terms in Ω of the tangent): its
-τ and its tangent against the rotated frame's, to rounding.
+the update leaves out the increment's rotated frame (r = I, the terms in Ω of the tangent) and
+takes ε_e's eigenvectors from ε^tr (coaxial): its τ, b_e and tangent against the rotated frame's
+with b_e = exp(2 ε_e) decomposed on its own, to rounding.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import pytest
 from dolfinx_nnqem.material import BackStress, DruckerPrager, Elastic, VoceHardening, VonMises
 from dolfinx_nnqem.material.finite_strain import HenckyAtPoints, finite_strain_material
 from dolfinx_nnqem.material.finite_strain.hencky import _rotated, _trial, logarithmic_return, tangent_by_arrays
+from dolfinx_nnqem.material.finite_strain.spectral import eigen, tensor_function
 from dolfinx_nnqem.material.kinematics import symmetric_tensors
 
 E, NU, SY = 200e9, 0.3, 250e6
@@ -57,6 +59,9 @@ def test_compiled_tangent_equals_the_array_form(name: str) -> None:
     ret = logarithmic_return(material.pointwise, trial.eps_bar, {k: np.asarray(v) for k, v in state.internal.items()})
     tau = _rotated(trial.r, symmetric_tensors(ret.tau))
     assert np.abs(out.tau - tau).max() <= 1e-12 * np.abs(tau).max()
+    lam_e, Q_e = eigen(_rotated(trial.r, symmetric_tensors(ret.eps_e)))  # b_e = exp(2 ε_e) by a decomposition of its own
+    b_e = tensor_function(Q_e, np.exp(2.0 * lam_e))
+    assert np.abs(out.state.b_e - b_e).max() <= 1e-12 * np.abs(b_e).max()
     reference = tangent_by_arrays(F, trial, ret, tau)
     scale = np.abs(reference).reshape(-1, 81).max(axis=1)
     error = np.abs(out.tangent - reference).reshape(-1, 81).max(axis=1) / scale

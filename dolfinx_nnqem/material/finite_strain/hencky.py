@@ -13,7 +13,8 @@ From the deformation gradient F = F_{n+1}:
    strain ε^tr: its trial stress C : ε^tr is the σ_n + C : Δε of the small-strain code with
    ε_e,n in the place of ε_n − ε_p,n. It gives Δε_p, Δp and ∂Δε_p/∂ε; ε_e = ε^tr − Δε_p and the
    Kirchhoff stress τ = C : ε_e (Hencky's hyperelastic law in the logarithmic space);
-3. b_e = exp(2 ε_e): the exponential map of the plastic flow, which keeps det b_e = det b_e^tr
+3. b_e = exp(2 ε_e): the exponential map of the plastic flow (for an isotropic law ε_e is coaxial
+   with ε^tr and takes its eigenvectors), which keeps det b_e = det b_e^tr
    exp(−2 tr Δε_p) (plastic incompressibility exactly, for a deviatoric flow);
 4. P = τ F⁻ᵀ, σ = τ / J.
 
@@ -190,6 +191,15 @@ def tangent_by_arrays(F: np.ndarray, trial: _Trial, ret: LogarithmicReturn, tau:
     return dP.reshape(n, 3, 3, 3, 3).transpose(0, 3, 4, 1, 2)
 
 
+def _elastic_eigen(trial: _Trial, eps_e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(λ, Q) of the elastic logarithmic strain ε_e (n, 3, 3), for b_e = exp(2 ε_e). Where r = I (an
+    isotropic law) ε_e is an isotropic function of ε^tr, hence coaxial with it: its eigenvalues are
+    q_aᵀ ε_e q_a in the trial's eigenvectors Q (no second decomposition); else numpy's."""
+    if trial.rotating:
+        return eigen(eps_e)
+    return np.sum(trial.Q * (eps_e @ trial.Q), axis=1), trial.Q
+
+
 class HenckyAtPoints:
     """A small-strain material at n Gauss points, at finite strain by the logarithmic strain and the
     exponential map (the module docstring): a :class:`~.interface.FiniteStrainMaterial`.
@@ -248,7 +258,7 @@ class HenckyAtPoints:
         internal = {name: np.asarray(v) for name, v in state.internal.items()}
         ret = logarithmic_return(self.pointwise, trial.eps_bar, internal)
         tau, eps_e = _spatial(trial, ret.tau), _spatial(trial, ret.eps_e)
-        lam_e, Q_e = eigen(eps_e)
+        lam_e, Q_e = _elastic_eigen(trial, eps_e)
         new_internal = {**internal, "p": internal["p"] + ret.dp,
                         **self._updated_back_stresses(internal, ret, trial.r)}
         new_state = FiniteStrainState(F.copy(), tensor_function(Q_e, np.exp(2.0 * lam_e)), new_internal)
