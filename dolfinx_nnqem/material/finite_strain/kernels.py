@@ -15,12 +15,12 @@ The mathematics is :mod:`.hencky`'s (its module docstring, "Consistent tangent")
 * δε̄ = rᵀ δε^tr r − Ω ε̄ + ε̄ Ω, δτ̄ = D : δε̄, δτ = r (Ω τ̄ − τ̄ Ω + δτ̄) rᵀ,
   δP = δτ F⁻ᵀ − τ F⁻ᵀ δFᵀ F⁻ᵀ = δτ F⁻ᵀ − P e_l ⊗ F⁻¹ e_k.
 
-D is given on the nine components of a tensor (row-major), D₉ = Bᵀ D B with B the coordinates'
-basis (:func:`~dolfinx_nnqem.material.kinematics.symmetric_coordinates`): D₉ : δε̄ is the δτ̄ of
-the coordinates, δε̄'s symmetric part taken by B as there. Where r = I (an isotropic law,
-:mod:`.hencky`) Ω and the products with r are left out. The arrays stay per point (3 × 3 and
-9 × 9): no (n, 9, 3, 3) temporaries. The same operations as the numpy form up to their order:
-the results agree to rounding (``tests/unit/test_finite_strain_material.py`` checks both).
+D is given in the coordinates of the basis B (6, 9) of
+:func:`~dolfinx_nnqem.material.kinematics.symmetric_coordinates`: δτ̄ = Bᵀ (D (B δε̄)), δε̄'s
+symmetric part taken by B as there. Where r = I (an isotropic law, :mod:`.hencky`) Ω and the
+products with r are left out. The arrays stay per point (3 × 3, and work arrays allocated once):
+no (n, 9, 3, 3) temporaries. The same operations as the numpy form up to their order: the results
+agree to rounding (``tests/unit/test_finite_strain_kernels.py`` compares the two).
 
 This module imports numba: :mod:`.hencky` imports it where a tangent is first asked for (numba's
 import is kept out of a run that does not need it, ``cli.py``).
@@ -66,9 +66,9 @@ def _inverse(M, out):  # pragma: no cover  (compiled)
 
 
 @numba.njit(cache=True)
-def _point_setup(Fn_inv, left, Q, r, u, h, R_Q, M_inv):  # pragma: no cover  (compiled)
+def _point_setup(Fn_inv, left, Q, r, u, h, R_Q, M, M_inv):  # pragma: no cover  (compiled)
     """A point's direction-independent arrays: h (row l: (f b_e,n) F_n⁻ᵀ e_l), rᵀQ and
-    (tr u I − u)⁻¹."""
+    M⁻¹ = (tr u I − u)⁻¹ (M: a work array)."""
     for ll in range(3):
         for j in range(3):
             s = 0.0
@@ -81,7 +81,6 @@ def _point_setup(Fn_inv, left, Q, r, u, h, R_Q, M_inv):  # pragma: no cover  (co
             for m in range(3):
                 s += r[m, i] * Q[m, j]
             R_Q[i, j] = s
-    M = np.empty((3, 3))
     tr = u[0, 0] + u[1, 1] + u[2, 2]
     for i in range(3):
         for j in range(3):
@@ -134,22 +133,26 @@ def _commutator(Omega, T, out):  # pragma: no cover  (compiled)
 
 
 @numba.njit(cache=True)
-def _stress_rate(D, B, deps_bar, Y):  # pragma: no cover  (compiled)
-    """Y += δτ̄ = D : δε̄ in the coordinates: Bᵀ (D (B δε̄)) (δε̄ (3, 3), B the basis (6, 9))."""
-    c = np.zeros(6)
+def _stress_rate(D, B, deps_bar, c, Y):  # pragma: no cover  (compiled)
+    """Y += δτ̄ = D : δε̄ in the coordinates: Bᵀ (D (B δε̄)) (δε̄ (3, 3), B the basis (6, 3, 3), c a
+    work vector (6))."""
     for a in range(6):
-        for j in range(9):
-            c[a] += B[a, j] * deps_bar[j // 3, j % 3]
+        s = 0.0
+        for i in range(3):
+            for j in range(3):
+                s += B[a, i, j] * deps_bar[i, j]
+        c[a] = s
     for a in range(6):
         d = D[a, 0] * c[0] + D[a, 1] * c[1] + D[a, 2] * c[2] + D[a, 3] * c[3] + D[a, 4] * c[4] + D[a, 5] * c[5]
-        for j in range(9):
-            Y[j // 3, j % 3] += B[a, j] * d
+        for i in range(3):
+            for j in range(3):
+                Y[i, j] += B[a, i, j] * d
 
 
 @numba.njit(cache=True)
-def _direction(k, ll, g, point, work, D, B, rotating, out):  # pragma: no cover  (compiled)
+def _direction(k, ll, g, point, work, c, D, B, rotating, out):  # pragma: no cover  (compiled)
     """∂P/∂F_kl at point g into out[g, :, :, k, ll] (the module docstring's steps); ``point`` holds
-    the point's 3 × 3 arrays (:func:`hencky_tangent`), ``work`` 3 × 3 work arrays; Ω = 0 unless
+    the point's 3 × 3 arrays (:func:`hencky_tangent`), ``work`` and ``c`` work arrays; Ω = 0 unless
     ``rotating`` (r = I: the terms in Ω cancel, :mod:`.hencky`)."""
     Fn_inv, h, Q, L, R_Q, M_inv, r, eps_bar, tau_bar, F_inv, P = (point[0], point[1], point[2], point[3], point[4],
                                                                   point[5], point[6], point[7], point[8], point[9],
@@ -165,7 +168,7 @@ def _direction(k, ll, g, point, work, D, B, rotating, out):  # pragma: no cover 
         for j in range(3):
             S[i, j] -= C[i, j]  # δε̄ = rᵀ δε^tr r − (Ω ε̄ − ε̄ Ω)
     _commutator(Omega, tau_bar, Y)
-    _stress_rate(D, B, S, Y)
+    _stress_rate(D, B, S, c, Y)
     if rotating:  # δτ = r Y rᵀ
         for i in range(3):
             for p in range(3):
@@ -190,12 +193,13 @@ def hencky_tangent(Fn_inv: np.ndarray, left: np.ndarray, lam: np.ndarray, Q: np.
     ε̄, the algorithmic tangent D (n, 6, 6) in the coordinates of the basis B (6, 9), τ̄, F⁻¹ and
     P = τ F⁻ᵀ (the module docstring); the terms in Ω left out unless ``rotating`` (r = I, an isotropic
     law: :mod:`.hencky`)."""
-    point, work = np.empty((11, 3, 3)), np.empty((7, 3, 3))
+    point, work, c = np.empty((11, 3, 3)), np.empty((8, 3, 3)), np.empty(6)
+    B3 = B.reshape(6, 3, 3)
     for g in range(Fn_inv.shape[0]):
         _log_divided_differences(lam[g], point[3])
-        _point_setup(Fn_inv[g], left[g], Q[g], r[g], u[g], point[1], point[4], point[5])
+        _point_setup(Fn_inv[g], left[g], Q[g], r[g], u[g], point[1], point[4], work[7], point[5])
         for m, a in ((0, Fn_inv), (2, Q), (6, r), (7, eps_bar), (8, tau_bar), (9, F_inv), (10, P)):
             point[m] = a[g]
         for k in range(3):
             for ll in range(3):
-                _direction(k, ll, g, point, work, D[g], B, rotating, out)
+                _direction(k, ll, g, point, work, c, D[g], B3, rotating, out)
