@@ -19,7 +19,7 @@ SPLIT_MODULES = ("numerics/newton.py", "io/run_pictures.py", "problem/meshing.py
                  *(f"cases/geometries/{name}.py" for name in ("two_beams", "stacked_blocks", "block_stack",
                                                               "thick_cylinder", "graded_blocks", "sphere_on_block")),
                  *(f"material/finite_strain/{name}.py" for name in ("__init__", "hencky", "interface", "neo_hooke",
-                                                                    "spectral", "gauss_state")),
+                                                                    "spectral", "gauss_state", "kernels")),
                  *(f"problem/{name}.py" for name in ("contact_problem", "assembly", "interfaces", "loads", "predictor",
                                                      "supports", "parameter_study")),
                  "contact/laws.py", "contact/model.py", "contact/constrained_directions.py", "material/state.py",

@@ -13,7 +13,8 @@ From the deformation gradient F = F_{n+1}:
    strain ε^tr: its trial stress C : ε^tr is the σ_n + C : Δε of the small-strain code with
    ε_e,n in the place of ε_n − ε_p,n. It gives Δε_p, Δp and ∂Δε_p/∂ε; ε_e = ε^tr − Δε_p and the
    Kirchhoff stress τ = C : ε_e (Hencky's hyperelastic law in the logarithmic space);
-3. b_e = exp(2 ε_e): the exponential map of the plastic flow, which keeps det b_e = det b_e^tr
+3. b_e = exp(2 ε_e): the exponential map of the plastic flow (for an isotropic law ε_e is coaxial
+   with ε^tr and takes its eigenvectors), which keeps det b_e = det b_e^tr
    exp(−2 tr Δε_p) (plastic incompressibility exactly, for a deviatoric flow);
 4. P = τ F⁻ᵀ, σ = τ / J.
 
@@ -24,8 +25,11 @@ configuration to the next: here they turn with the rotation r of the polar decom
 f = r u of the increment's deformation (α_n → r α_n rᵀ, a Green–Naghdi-type rule). This is a
 model choice of its own (``formulation.md`` §1c: "for kinematic hardening it is a model of its
 own"); it is objective, and exact for loading without rotation (the uniaxial closed forms).
-The return map runs in the increment's rotated frame, ε̄ = rᵀ ε^tr r with the stored α_n; for an
-isotropic law that frame changes nothing.
+The return map runs in the increment's rotated frame, ε̄ = rᵀ ε^tr r with the stored α_n. For an
+isotropic law that frame changes nothing: its return map τ̂ is an isotropic function,
+τ̂(rᵀ ε r) = rᵀ τ̂(ε) r, so r τ̂(ε̄) rᵀ = τ̂(ε^tr) exactly; the route takes r = I there (no polar
+decomposition) and the back-stress laws alone (:class:`~dolfinx_nnqem.material.kinematic.KinematicAtPoints`)
+run in the rotated frame.
 
 **Consistent tangent.** Along a direction δF, with δf = δF F_n⁻¹,
 δb = δf b_e,n fᵀ + f b_e,n δfᵀ, δε^tr = ½ d ln(b_e^tr)[δb] (:func:`.spectral.log_derivative`,
@@ -35,7 +39,10 @@ exact as eigenvalues coincide), Ω = rᵀδr (:func:`.spectral.rotation_derivati
     δP = δτ F⁻ᵀ − τ F⁻ᵀ δFᵀ F⁻ᵀ,
 
 with D = C (I − ∂Δε_p/∂ε) the small-strain algorithmic tangent in the logarithmic space. The
-nine directions δF = e_k ⊗ e_l give ∂P/∂F (n, 3, 3, 3, 3).
+nine directions δF = e_k ⊗ e_l give ∂P/∂F (n, 3, 3, 3, 3). With r = I (an isotropic law) the
+terms in Ω cancel: differentiating τ̂(e^{−tΩ} ε e^{tΩ}) = e^{−tΩ} τ̂(ε) e^{tΩ} at t = 0 gives
+D : (ε̄ Ω − Ω ε̄) = τ̄ Ω − Ω τ̄, and δτ = D : δε^tr (the compiled tangent, :mod:`.kernels`, leaves
+them out there; :func:`tangent_by_arrays` keeps them, and the tests compare the two).
 """
 
 from __future__ import annotations
@@ -64,6 +71,8 @@ SUPPORTED_POINTWISE = (VonMisesAtPoints, IsotropicAtPoints, KinematicAtPoints, D
 deviators and 3κ on the volume, and internal variables the route knows how to carry ("p"; the
 back-stresses of :class:`~dolfinx_nnqem.material.kinematic.KinematicAtPoints`)."""
 _DIRECTIONS = np.eye(9).reshape(9, 3, 3)
+_COORDINATE_BASIS = np.ascontiguousarray(symmetric_coordinates(_DIRECTIONS).T)
+"""B (6, 9): the coordinates of a tensor T (9 components, row-major) are B T (:func:`symmetric_coordinates`)."""
 
 
 @dataclass(frozen=True)
@@ -114,13 +123,15 @@ class _Trial:
     f: np.ndarray  #: F F_n⁻¹
     lam: np.ndarray  #: eigenvalues of b_e^tr (n, 3)
     Q: np.ndarray  #: its eigenvectors (columns)
-    r: np.ndarray  #: polar rotation of f
-    u: np.ndarray  #: its stretch
+    r: np.ndarray  #: polar rotation of f (I where not ``rotating``)
+    u: np.ndarray  #: its stretch (I where not ``rotating``)
     eps_bar: np.ndarray  #: rᵀ ε^tr r
+    rotating: bool  #: the return map runs in the rotated frame (back-stresses); else r = I
 
 
-def _trial(F: np.ndarray, state: FiniteStrainState) -> _Trial:
-    """b_e^tr = f b_e,n fᵀ, its eigen-decomposition and ε̄ = rᵀ (½ ln b_e^tr) r."""
+def _trial(F: np.ndarray, state: FiniteStrainState, rotating: bool = True) -> _Trial:
+    """b_e^tr = f b_e,n fᵀ, its eigen-decomposition and ε̄ = rᵀ (½ ln b_e^tr) r; r = I unless
+    ``rotating`` (an isotropic law: the module docstring)."""
     F_n_inv = np.linalg.inv(state.F)
     f = F @ F_n_inv
     b_tr = f @ state.b_e @ np.swapaxes(f, 1, 2)
@@ -128,9 +139,12 @@ def _trial(F: np.ndarray, state: FiniteStrainState) -> _Trial:
     if np.any(lam <= 0.0):
         raise ValueError(f"the elastic trial b_e has an eigenvalue <= 0 at {np.count_nonzero((lam <= 0).any(1))} "
                          "Gauss point(s): the state's b_e is not positive definite")
-    r, u = polar_decomposition(f)
     eps_tr = tensor_function(Q, 0.5 * np.log(lam))
-    return _Trial(F_n_inv, state.b_e, f, lam, Q, r, u, np.swapaxes(r, 1, 2) @ eps_tr @ r)
+    if not rotating:
+        eye = np.broadcast_to(np.eye(3), F.shape).copy()
+        return _Trial(F_n_inv, state.b_e, f, lam, Q, eye, eye, eps_tr, False)
+    r, u = polar_decomposition(f)
+    return _Trial(F_n_inv, state.b_e, f, lam, Q, r, u, np.swapaxes(r, 1, 2) @ eps_tr @ r, True)
 
 
 def _rotated(r: np.ndarray, T: np.ndarray) -> np.ndarray:
@@ -138,8 +152,27 @@ def _rotated(r: np.ndarray, T: np.ndarray) -> np.ndarray:
     return r @ T @ np.swapaxes(r, 1, 2)
 
 
-def _tangent(F: np.ndarray, trial: _Trial, ret: LogarithmicReturn, tau: np.ndarray) -> np.ndarray:
-    """∂P_ij/∂F_kl (n, 3, 3, 3, 3) along the nine directions e_k⊗e_l (the module docstring)."""
+def _spatial(trial: _Trial, coordinates: np.ndarray) -> np.ndarray:
+    """The spatial tensor r T̄ rᵀ (n, 3, 3) of a tensor T̄ of the rotated frame given by its coordinates
+    (n, 6) (T̄ itself where r = I)."""
+    return _rotated(trial.r, symmetric_tensors(coordinates)) if trial.rotating else symmetric_tensors(coordinates)
+
+
+def _tangent(trial: _Trial, ret: LogarithmicReturn, F_inv: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """∂P_ij/∂F_kl (n, 3, 3, 3, 3) along the nine directions e_k⊗e_l (the module docstring), by the
+    compiled loop over the points of :mod:`.kernels`, given F⁻¹ and P = τ F⁻ᵀ."""
+    from dolfinx_nnqem.material.finite_strain.kernels import hencky_tangent  # (imports numba: here, when needed)
+
+    out = np.empty((F_inv.shape[0], 3, 3, 3, 3))
+    hencky_tangent(trial.F_n_inv, trial.f @ trial.b_n, trial.lam, trial.Q, trial.r, trial.u, trial.eps_bar, ret.D,
+                   _COORDINATE_BASIS, symmetric_tensors(ret.tau), F_inv, P, trial.rotating, out)
+    return out
+
+
+def tangent_by_arrays(F: np.ndarray, trial: _Trial, ret: LogarithmicReturn, tau: np.ndarray) -> np.ndarray:
+    """∂P_ij/∂F_kl (n, 3, 3, 3, 3) as :func:`_tangent` (with r of ``trial``), written on numpy arrays of the nine directions
+    (n, 9, 3, 3) (the module docstring's formulas as they read): the reference the compiled
+    kernel is tested against."""
     n = F.shape[0]
     dF = np.broadcast_to(_DIRECTIONS, (n, 9, 3, 3))
     df = dF @ trial.F_n_inv[:, None]
@@ -156,6 +189,15 @@ def _tangent(F: np.ndarray, trial: _Trial, ret: LogarithmicReturn, tau: np.ndarr
     F_inv_T = np.swapaxes(np.linalg.inv(F), 1, 2)[:, None]
     dP = dtau @ F_inv_T - tau[:, None] @ F_inv_T @ np.swapaxes(dF, -1, -2) @ F_inv_T
     return dP.reshape(n, 3, 3, 3, 3).transpose(0, 3, 4, 1, 2)
+
+
+def _elastic_eigen(trial: _Trial, eps_e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(λ, Q) of the elastic logarithmic strain ε_e (n, 3, 3), for b_e = exp(2 ε_e). Where r = I (an
+    isotropic law) ε_e is an isotropic function of ε^tr, hence coaxial with it: its eigenvalues are
+    q_aᵀ ε_e q_a in the trial's eigenvectors Q (no second decomposition); else numpy's."""
+    if trial.rotating:
+        return eigen(eps_e)
+    return np.sum(trial.Q * (eps_e @ trial.Q), axis=1), trial.Q
 
 
 class HenckyAtPoints:
@@ -212,16 +254,16 @@ class HenckyAtPoints:
         """The return map at the deformation gradients ``F`` (n, 3, 3) from the converged ``state``
         (the module docstring), with the consistent tangent ∂P/∂F if ``tangent``."""
         F, J = checked_deformation_gradients(F, self.size)
-        trial = _trial(F, state)
+        trial = _trial(F, state, rotating=bool(self.back_stress_names))
         internal = {name: np.asarray(v) for name, v in state.internal.items()}
         ret = logarithmic_return(self.pointwise, trial.eps_bar, internal)
-        tau = _rotated(trial.r, symmetric_tensors(ret.tau))
-        eps_e = _rotated(trial.r, symmetric_tensors(ret.eps_e))
-        lam_e, Q_e = eigen(eps_e)
+        tau, eps_e = _spatial(trial, ret.tau), _spatial(trial, ret.eps_e)
+        lam_e, Q_e = _elastic_eigen(trial, eps_e)
         new_internal = {**internal, "p": internal["p"] + ret.dp,
                         **self._updated_back_stresses(internal, ret, trial.r)}
         new_state = FiniteStrainState(F.copy(), tensor_function(Q_e, np.exp(2.0 * lam_e)), new_internal)
-        P = tau @ np.swapaxes(np.linalg.inv(F), 1, 2)
+        F_inv = np.linalg.inv(F)
+        P = tau @ np.swapaxes(F_inv, 1, 2)
         return FiniteStrainResponse(P=P, tau=tau, sigma=tau / J[:, None, None], dp=ret.dp, state=new_state,
-                                    tangent=_tangent(F, trial, ret, tau) if tangent else None)
+                                    tangent=_tangent(trial, ret, F_inv, P) if tangent else None)
 
