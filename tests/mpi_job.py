@@ -200,7 +200,9 @@ def _report(done: subprocess.CompletedProcess, watch: _Watch, oom_before: dict, 
     if pid is not None or number is not None:
         who = f"rank {pids[pid]} (pid {pid})" if pid in pids else f"pid {pid} (its rank not seen)"
         how = f"by signal {number} ({signal.Signals(number).name})" if number is not None else "abnormally"
-        lines.append(f"the launcher says: {who} ended {how}")
+        lines.append(f"the launcher says: {who} ended {how}"
+                     + (" (MPICH names one rank; once a rank has died it ends the others with SIGKILL, so the "
+                        "rank that died first may be another)" if number == signal.SIGKILL and mpich[0] else ""))
     if number == signal.SIGKILL:
         lines.append("SIGKILL cannot be caught: it came from the kernel (its out-of-memory killer, see the counts "
                      "below; a hard CPU-time limit) or from another process (kill -9, pkill, killall); the "

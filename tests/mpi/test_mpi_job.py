@@ -28,7 +28,10 @@ def test_a_rank_killed_by_sigkill_is_named_with_the_memory_of_the_machine():
     out-of-memory kills, and the output of every rank, tagged."""
     done, report = run_mpi_job([sys.executable, "-c", KILLED_RANK_1], ranks=3, timeout=120)
     print(f"\n{report}")
-    assert done.returncode != 0 and "rank 1 (pid " in report and "ended by signal 9 (SIGKILL)" in report
+    # which rank MPICH names is its choice: under load it names a rank it killed itself after rank 1 died
+    # (seen: "rank 0 (pid ...) ended by signal 9"), so the report says so instead of the test asking for rank 1
+    assert done.returncode != 0 and "ended by signal 9 (SIGKILL)" in report
+    assert "(pid " in report and ("rank 1 (pid " in report or "the rank that died first may be another" in report)
     assert "SIGKILL cannot be caught" in report and "out-of-memory kills before the job {" in report
     assert all(f"rank {rank}: pid " in report and "peak memory" in report for rank in range(3))
     assert "lowest during the job" in report and "rank 2 started" in report.replace("[2] ", "")
