@@ -32,7 +32,7 @@ from petsc4py import PETSc
 from dolfinx_nnqem import compat
 from dolfinx_nnqem.contact.geometric_stiffness import GeometricTerms
 from dolfinx_nnqem.contact.laws import LawEvaluation, Linearisation
-from dolfinx_nnqem.contact.surface_stiffness import SurfaceTerms, stiffness_matrix
+from dolfinx_nnqem.contact.surface_stiffness import SurfaceTerms
 from dolfinx_nnqem.solvers.block_system import AugmentedSystem, MonolithicMatrix, free_mask
 from dolfinx_nnqem.solvers.contract import ReleasesPETSc
 from dolfinx_nnqem.solvers.convergence import IterationRecord, SolveReport, count_states, iteration_log_on, logger
@@ -44,6 +44,7 @@ from dolfinx_nnqem.numerics.roundoff import floor_note, residual_floor
 from dolfinx_nnqem.problem.contact_problem import ContactProblem
 from dolfinx_nnqem.solvers.options import MonolithicOptions, SolverOptions
 from dolfinx_nnqem.solvers.prediction import lifted_residual, predict_increment
+from dolfinx_nnqem.solvers.surface_tangent import SurfaceTangent
 from dolfinx_nnqem.solvers.timings import Timings
 
 __all__ = ["MonolithicSolver"]
@@ -90,8 +91,7 @@ class MonolithicSolver(ReleasesPETSc):
         self.iterative = self._use_iterative()
         self.linear: IterativeSolver | DirectSolver = self._linear_solver()
         self._K: PETSc.Mat | None = None
-        self._K_surface: PETSc.Mat | None = None  # K_t − K of the node-to-surface pairs (its own pattern)
-        self._surface_columns: np.ndarray | None = None  # the pairs' columns that made its pattern
+        self._surface_tangent = SurfaceTangent()  # K_t − K of the node-to-surface pairs (consistent geometry)
         self._mask = free_mask(problem) if problem.has_contact else None
         self._matrix: MonolithicMatrix | None = None  # the direct Newton matrix (also the LM fallback's)
         self._augmented: AugmentedSystem | None = self._augmented_system_of_pairs()
@@ -340,43 +340,11 @@ class MonolithicSolver(ReleasesPETSc):
             B_values = ev.geometric.rows_values(p.contact.rows)
         K, new_pattern = self._K, False
         if ev.surface is not None:  # on every rank, pairs or none: the matrices are collective
-            K, B_values, new_pattern = self._with_surface_terms(ev.surface, B_values)
+            K, B_values, new_pattern = self._surface_tangent.with_terms(self._K, ev.surface, self._matrix, p.contact.rows,
+                                                                        B_values, p.comm)
         J = self._matrix.assemble(K, ev.law.dH_dw, ev.lin.dH_dy, ev.lin.dlam_dy, B_values, new_pattern=new_pattern)
         self._timings.add("block_matrix", t0)
         return J
-
-    def _with_surface_terms(self, terms: list[SurfaceTerms], B_values: np.ndarray | None
-                            ) -> tuple[PETSc.Mat, np.ndarray, bool]:
-        """(K_t − K, B + W, new pattern) with the node-to-surface pairs' geometric blocks.
-
-        K couples the slave node with the master nodes, which K_t's pattern does not hold: K_t − K is
-        its own matrix, made anew when the pairs' columns changed (True: the Newton matrix's
-        pattern changes with it) and refilled otherwise (MUMPS then keeps its analysis).
-        """
-        p = self.problem
-        assert p.contact is not None and self._K is not None and self._matrix is not None
-        values = p.contact.rows.values.copy() if B_values is None else B_values
-        for part in terms:
-            part.add_rows(values, p.contact.rows)
-        matrix = self._matrix
-        G = stiffness_matrix(terms, [matrix.pair_free(t.pairs, t.columns.shape[1]) for t in terms], self._K)
-        columns = np.concatenate([np.zeros(0, dtype=np.int64)] + [t.columns.ravel() for t in terms])
-        same = (self._K_surface is not None and self._surface_columns is not None
-                and np.array_equal(columns, self._surface_columns))
-        same = bool(p.comm.allreduce(same, op=MPI.LAND))
-        if same:
-            assert self._K_surface is not None  # same: made before
-            self._K_surface.zeroEntries()
-            self._K_surface.axpy(1.0, self._K, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)  # type: ignore[arg-type]  # petsc4py's stub types the Structure constants as int
-            self._K_surface.axpy(-1.0, G, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)  # type: ignore[arg-type]  # as above
-        else:
-            if self._K_surface is not None:
-                self._K_surface.destroy()
-            self._K_surface = self._K.copy()
-            self._K_surface.axpy(-1.0, G, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)  # type: ignore[arg-type]  # as above
-            self._surface_columns = columns
-        G.destroy()
-        return self._K_surface, values, not same
 
     def _augmented_system(self, ev: _Evaluation):
         """The augmented Newton system (iterative solver with contact): (MatNest, rhs)."""
@@ -483,7 +451,8 @@ class MonolithicSolver(ReleasesPETSc):
         for obj in (self._matrix, self._augmented):
             if obj is not None:
                 obj.destroy()
-        for petsc_object in (self._K, self._K_surface, self._mask):
+        self._surface_tangent.destroy()
+        for petsc_object in (self._K, self._mask):
             if petsc_object is not None:
                 petsc_object.destroy()
 
