@@ -56,7 +56,7 @@ from dolfinx_nnqem.material.elastic import ElasticAtPoints
 from dolfinx_nnqem.material.finite_strain.interface import (FiniteStrainResponse, FiniteStrainState,
                                                             checked_deformation_gradients)
 from dolfinx_nnqem.material.finite_strain.spectral import (eigen, log_derivative, polar_decomposition,
-                                                           rotation_derivative, tensor_function)
+                                                           rotation_derivative)
 from dolfinx_nnqem.material.interface import PointwiseMaterial
 from dolfinx_nnqem.material.isotropic import IsotropicAtPoints
 from dolfinx_nnqem.material.kinematic import KinematicAtPoints, back_stresses
@@ -121,6 +121,7 @@ class _Trial:
     F_n_inv: np.ndarray  #: F_n⁻¹
     b_n: np.ndarray  #: b_e,n
     f: np.ndarray  #: F F_n⁻¹
+    left: np.ndarray  #: f b_e,n
     lam: np.ndarray  #: eigenvalues of b_e^tr (n, 3)
     Q: np.ndarray  #: its eigenvectors (columns)
     r: np.ndarray  #: polar rotation of f (I where not ``rotating``)
@@ -131,20 +132,23 @@ class _Trial:
 
 def _trial(F: np.ndarray, state: FiniteStrainState, rotating: bool = True) -> _Trial:
     """b_e^tr = f b_e,n fᵀ, its eigen-decomposition and ε̄ = rᵀ (½ ln b_e^tr) r; r = I unless
-    ``rotating`` (an isotropic law: the module docstring)."""
-    F_n_inv = np.linalg.inv(state.F)
-    f = F @ F_n_inv
-    b_tr = f @ state.b_e @ np.swapaxes(f, 1, 2)
-    lam, Q = eigen(b_tr)
-    if np.any(lam <= 0.0):
-        raise ValueError(f"the elastic trial b_e has an eigenvalue <= 0 at {np.count_nonzero((lam <= 0).any(1))} "
+    ``rotating`` (an isotropic law: the module docstring). The per-point algebra is compiled
+    (:func:`.point_kernels.elastic_trial`)."""
+    from dolfinx_nnqem.material.finite_strain.point_kernels import elastic_trial  # (imports numba: when needed)
+
+    n = F.shape[0]
+    F_n_inv, f, left, Q, eps_tr = (np.empty((n, 3, 3)) for _ in range(5))
+    lam = np.empty((n, 3))
+    elastic_trial(np.ascontiguousarray(F), np.ascontiguousarray(state.F), np.ascontiguousarray(state.b_e),
+                  F_n_inv, f, left, lam, Q, eps_tr)
+    if np.any(~(lam > 0.0)):
+        raise ValueError(f"the elastic trial b_e has an eigenvalue <= 0 at {np.count_nonzero(~(lam > 0).all(1))} "
                          "Gauss point(s): the state's b_e is not positive definite")
-    eps_tr = tensor_function(Q, 0.5 * np.log(lam))
     if not rotating:
         eye = np.broadcast_to(np.eye(3), F.shape).copy()
-        return _Trial(F_n_inv, state.b_e, f, lam, Q, eye, eye, eps_tr, False)
+        return _Trial(F_n_inv, state.b_e, f, left, lam, Q, eye, eye, eps_tr, False)
     r, u = polar_decomposition(f)
-    return _Trial(F_n_inv, state.b_e, f, lam, Q, r, u, np.swapaxes(r, 1, 2) @ eps_tr @ r, True)
+    return _Trial(F_n_inv, state.b_e, f, left, lam, Q, r, u, np.swapaxes(r, 1, 2) @ eps_tr @ r, True)
 
 
 def _rotated(r: np.ndarray, T: np.ndarray) -> np.ndarray:
@@ -164,7 +168,7 @@ def _tangent(trial: _Trial, ret: LogarithmicReturn, F_inv: np.ndarray, P: np.nda
     from dolfinx_nnqem.material.finite_strain.kernels import hencky_tangent  # (imports numba: here, when needed)
 
     out = np.empty((F_inv.shape[0], 3, 3, 3, 3))
-    hencky_tangent(trial.F_n_inv, trial.f @ trial.b_n, trial.lam, trial.Q, trial.r, trial.u, trial.eps_bar, ret.D,
+    hencky_tangent(trial.F_n_inv, trial.left, trial.lam, trial.Q, trial.r, trial.u, trial.eps_bar, ret.D,
                    _COORDINATE_BASIS, symmetric_tensors(ret.tau), F_inv, P, trial.rotating, out)
     return out
 
@@ -176,7 +180,7 @@ def tangent_by_arrays(F: np.ndarray, trial: _Trial, ret: LogarithmicReturn, tau:
     n = F.shape[0]
     dF = np.broadcast_to(_DIRECTIONS, (n, 9, 3, 3))
     df = dF @ trial.F_n_inv[:, None]
-    left = (trial.f @ trial.b_n)[:, None]
+    left = trial.left[:, None]
     db = df @ np.swapaxes(left, -1, -2) + left @ np.swapaxes(df, -1, -2)
     deps = 0.5 * log_derivative(trial.lam, trial.Q, db)
     r, rT = trial.r[:, None], np.swapaxes(trial.r, 1, 2)[:, None]
@@ -189,6 +193,16 @@ def tangent_by_arrays(F: np.ndarray, trial: _Trial, ret: LogarithmicReturn, tau:
     F_inv_T = np.swapaxes(np.linalg.inv(F), 1, 2)[:, None]
     dP = dtau @ F_inv_T - tau[:, None] @ F_inv_T @ np.swapaxes(dF, -1, -2) @ F_inv_T
     return dP.reshape(n, 3, 3, 3, 3).transpose(0, 3, 4, 1, 2)
+
+
+def _exponential_map(F: np.ndarray, J: np.ndarray, tau: np.ndarray, Q_e: np.ndarray, lam_e: np.ndarray,
+                     b_e: np.ndarray, F_inv: np.ndarray, P: np.ndarray, sigma: np.ndarray) -> None:
+    """b_e = exp(2 ε_e) from its eigen-pairs, F⁻¹, P = τ F⁻ᵀ and σ = τ / J into the last four arrays
+    (compiled: :func:`.point_kernels.exponential_map`)."""
+    from dolfinx_nnqem.material.finite_strain.point_kernels import exponential_map  # (imports numba: when needed)
+
+    exponential_map(F, J, np.ascontiguousarray(tau), np.ascontiguousarray(Q_e), np.ascontiguousarray(lam_e),
+                    b_e, F_inv, P, sigma)
 
 
 def _elastic_eigen(trial: _Trial, eps_e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -254,6 +268,7 @@ class HenckyAtPoints:
         """The return map at the deformation gradients ``F`` (n, 3, 3) from the converged ``state``
         (the module docstring), with the consistent tangent ∂P/∂F if ``tangent``."""
         F, J = checked_deformation_gradients(F, self.size)
+        F = np.ascontiguousarray(F)  # (the compiled steps take C-ordered arrays)
         trial = _trial(F, state, rotating=bool(self.back_stress_names))
         internal = {name: np.asarray(v) for name, v in state.internal.items()}
         ret = logarithmic_return(self.pointwise, trial.eps_bar, internal)
@@ -261,9 +276,9 @@ class HenckyAtPoints:
         lam_e, Q_e = _elastic_eigen(trial, eps_e)
         new_internal = {**internal, "p": internal["p"] + ret.dp,
                         **self._updated_back_stresses(internal, ret, trial.r)}
-        new_state = FiniteStrainState(F.copy(), tensor_function(Q_e, np.exp(2.0 * lam_e)), new_internal)
-        F_inv = np.linalg.inv(F)
-        P = tau @ np.swapaxes(F_inv, 1, 2)
-        return FiniteStrainResponse(P=P, tau=tau, sigma=tau / J[:, None, None], dp=ret.dp, state=new_state,
+        b_e, F_inv, P, sigma = (np.empty_like(F) for _ in range(4))
+        _exponential_map(F, J, tau, Q_e, lam_e, b_e, F_inv, P, sigma)
+        new_state = FiniteStrainState(F.copy(), b_e, new_internal)
+        return FiniteStrainResponse(P=P, tau=tau, sigma=sigma, dp=ret.dp, state=new_state,
                                     tangent=_tangent(trial, ret, F_inv, P) if tangent else None)
 

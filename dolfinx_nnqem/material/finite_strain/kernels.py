@@ -34,13 +34,14 @@ import numba
 import numpy as np
 
 from dolfinx_nnqem.chatter import apply_numba_options
+from dolfinx_nnqem.material.finite_strain.point_kernels import inverse_3x3
 
 __all__ = ["hencky_tangent"]
 
 apply_numba_options()
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _log_divided_differences(lam, L):  # pragma: no cover  (compiled)
     """L_ab = log1p(d)/(λ_b d), d = (λ_a − λ_b)/λ_b; L_ab = 1/λ_b where d = 0 (:mod:`.spectral`)."""
     for a in range(3):
@@ -49,23 +50,7 @@ def _log_divided_differences(lam, L):  # pragma: no cover  (compiled)
             L[a, b] = 1.0 / lam[b] if d == 0.0 else math.log1p(d) / (lam[b] * d)
 
 
-@numba.njit(cache=True)
-def _inverse(M, out):  # pragma: no cover  (compiled)
-    """M⁻¹ of a 3 × 3 matrix by its cofactors."""
-    c00 = M[1, 1] * M[2, 2] - M[1, 2] * M[2, 1]
-    c01 = M[1, 2] * M[2, 0] - M[1, 0] * M[2, 2]
-    c02 = M[1, 0] * M[2, 1] - M[1, 1] * M[2, 0]
-    det = M[0, 0] * c00 + M[0, 1] * c01 + M[0, 2] * c02
-    out[0, 0], out[1, 0], out[2, 0] = c00 / det, c01 / det, c02 / det
-    out[0, 1] = (M[0, 2] * M[2, 1] - M[0, 1] * M[2, 2]) / det
-    out[1, 1] = (M[0, 0] * M[2, 2] - M[0, 2] * M[2, 0]) / det
-    out[2, 1] = (M[0, 1] * M[2, 0] - M[0, 0] * M[2, 1]) / det
-    out[0, 2] = (M[0, 1] * M[1, 2] - M[0, 2] * M[1, 1]) / det
-    out[1, 2] = (M[0, 2] * M[1, 0] - M[0, 0] * M[1, 2]) / det
-    out[2, 2] = (M[0, 0] * M[1, 1] - M[0, 1] * M[1, 0]) / det
-
-
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _point_setup(Fn_inv, left, Q, r, u, h, R_Q, M, M_inv):  # pragma: no cover  (compiled)
     """A point's direction-independent arrays: h (row l: (f b_e,n) F_n⁻ᵀ e_l), rᵀQ and
     M⁻¹ = (tr u I − u)⁻¹ (M: a work array)."""
@@ -85,10 +70,10 @@ def _point_setup(Fn_inv, left, Q, r, u, h, R_Q, M, M_inv):  # pragma: no cover  
     for i in range(3):
         for j in range(3):
             M[i, j] = (tr if i == j else 0.0) - u[i, j]
-    _inverse(M, M_inv)
+    inverse_3x3(M, M_inv)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _rotated_log_derivative(k, h, Q, L, R_Q, X, Y, S):  # pragma: no cover  (compiled)
     """S = rᵀ δε^tr r = ½ (rᵀQ)(L ∘ Ĥ)(rᵀQ)ᵀ, Ĥ = q_k ⊗ ĥ + ĥ ⊗ q_k, ĥ = Qᵀ h (X, Y: work arrays)."""
     h0 = Q[0, 0] * h[0] + Q[1, 0] * h[1] + Q[2, 0] * h[2]
@@ -107,7 +92,7 @@ def _rotated_log_derivative(k, h, Q, L, R_Q, X, Y, S):  # pragma: no cover  (com
             S[i, j] = 0.5 * (Y[i, 0] * R_Q[j, 0] + Y[i, 1] * R_Q[j, 1] + Y[i, 2] * R_Q[j, 2])
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _spin(k, ll, r, Fn_inv, M_inv, Omega):  # pragma: no cover  (compiled)
     """Ω = W(ω), ω = (tr u I − u)⁻¹ axial(A − Aᵀ), A_ij = (rᵀδf)_ij = r_ki (F_n⁻¹)_lj."""
     a0 = r[k, 2] * Fn_inv[ll, 1] - r[k, 1] * Fn_inv[ll, 2]  # axial(A − Aᵀ) = (A_21 − A_12, ...)
@@ -121,7 +106,7 @@ def _spin(k, ll, r, Fn_inv, M_inv, Omega):  # pragma: no cover  (compiled)
     Omega[2, 0], Omega[2, 1], Omega[2, 2] = -w1, w0, 0.0
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _commutator(Omega, T, out):  # pragma: no cover  (compiled)
     """out = Ω T − T Ω."""
     for i in range(3):
@@ -132,7 +117,7 @@ def _commutator(Omega, T, out):  # pragma: no cover  (compiled)
             out[i, j] = s
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _stress_rate(D, B, deps_bar, c, Y):  # pragma: no cover  (compiled)
     """Y += δτ̄ = D : δε̄ in the coordinates: Bᵀ (D (B δε̄)) (δε̄ (3, 3), B the basis (6, 3, 3), c a
     work vector (6))."""
@@ -149,7 +134,7 @@ def _stress_rate(D, B, deps_bar, c, Y):  # pragma: no cover  (compiled)
                 Y[i, j] += B[a, i, j] * d
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _direction(k, ll, g, point, work, c, D, B, rotating, out):  # pragma: no cover  (compiled)
     """∂P/∂F_kl at point g into out[g, :, :, k, ll] (the module docstring's steps); ``point`` holds
     the point's 3 × 3 arrays (:func:`hencky_tangent`), ``work`` and ``c`` work arrays; Ω = 0 unless
