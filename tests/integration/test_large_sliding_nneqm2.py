@@ -13,7 +13,9 @@ whose own geometry it was solved in (``solvers/nneqm2/current_geometry.py``). On
 * a cylinder dragged over an elastoplastic strip (plasticity, friction, a path-dependent state):
   NNEQM1's state on the same load path;
 * the block slid 1.6 master facets over another (node-to-surface: pairs change their master facet
-  and a third of them go), both laws: NNEQM1's force; and the same run from a problem file.
+  and a third of them go), both laws, and with friction on dual mortar pairs: NNEQM1's force.
+The problem-file run, the default geometry's switch and 2 ranks: tests/integration/test_large_sliding.py
+and tests/mpi/test_large_sliding_mpi.py.
 """
 
 import numpy as np
@@ -124,4 +126,19 @@ def test_block_slid_over_several_facets_equals_nneqm1(law):
     error = abs(f[1] - f_n[1]) / abs(f_n[1])
     print(f"\n  {law}: NNEQM2 F = {f}, NNEQM1 F = {f_n}: {error:.1e}; iterations {[r.iterations for r in results]}")
     assert problem.num_pairs == nested.num_pairs == 28
+    assert error < 1e-8 and all(r.check.ok for r in results)
+
+
+def test_mortar_frictional_slide_equals_nneqm1():
+    """The frictional block slide (μ_f = 0.3) with dual mortar pairs, integrated afresh on the moved facets
+    at every evaluation: NNEQM1's force on the slave body to 1e-8."""
+    problem = sliding_blocks(slide=0.4, mu_f=0.3, discretisation="mortar")
+    results = _run(problem, "nneqm2", 12)
+    nested = sliding_blocks(slide=0.4, mu_f=0.3, discretisation="mortar")
+    _run(nested, "nneqm1", 12)
+    f, f_n = slave_force(problem), slave_force(nested)
+    error = np.linalg.norm(f - f_n) / np.linalg.norm(f_n)
+    print(f"\n  mortar: NNEQM2 F = {f}, NNEQM1 F = {f_n}: {error:.1e}; iterations {[r.iterations for r in results]}, "
+          f"solves {[r.report.geometry_passes for r in results]}")
+    assert problem.num_pairs == nested.num_pairs and problem.contact.interfaces[0].pairs.kind == "mortar"
     assert error < 1e-8 and all(r.check.ok for r in results)

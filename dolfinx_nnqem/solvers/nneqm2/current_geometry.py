@@ -74,9 +74,10 @@ class GeometryFollower:
 
     @property
     def follows(self) -> bool:
-        """True if some interface's pairs may change during the run (current geometry, or "auto")."""
+        """True if some interface is in the current geometry now (from the start, or moved there by
+        ``geometry = "auto"``): only then does load stepping repeat a solve in a re-evaluated geometry."""
         model = self.problem.contact
-        return model is not None and model.geometry.pairs_may_change
+        return model is not None and model.geometry.follows_bodies
 
     def follow(self) -> None:
         """Forget what was built on B if the geometry changed since the last call (collective: the
