@@ -27,7 +27,9 @@ that very u (:func:`settled`):
 * the Gauss points' rows do not depend on the geometry (u and Δε_p are unchanged): they hold as
   the last solve left them.
 
-If so, the increment ends there with no iteration (and load stepping stops repeating it): the
+If so, the increment ends there with no iteration (and load stepping stops repeating it; a
+repeated solve that did not settle but moved u reports at least one iteration, so that the
+geometry is evaluated again: :meth:`GeometryFollower.moved`): the
 committed state meets equilibrium, the material law at every Gauss point and the contact law at
 every pair in the geometry at its own displacement, to the solver's tolerance — the fixed point's
 tolerance is the solver's (tol = rtol + atol / F). Else the solve starts from that state: its
@@ -91,6 +93,16 @@ class GeometryFollower:
     def remember(self, load_factor: float, values: GaussPointValues) -> None:
         """The converged solve's load factor and Gauss-point values (their u is the solution)."""
         self._last = (float(load_factor), values)
+
+    def moved(self, iterations: int, last: GaussPointValues) -> int:
+        """The iterations to report for a repeated solve that did not settle: at least one where its
+        u differs from ``last.u``, where the geometry was evaluated (collective). Its Newton driver
+        can stop at its start with no iteration (the frozen variant's dense solves started
+        converged, say) although its displacement, G (b + Bᵀλ + q) + N α with the new B, is not the
+        last one; load stepping repeats a solve until one takes no iteration, and must evaluate the
+        geometry again at this u."""
+        same = bool(np.array_equal(last.u, self.problem.u.x.array))
+        return iterations if iterations or self.problem.comm.allreduce(same, op=MPI.LAND) else 1
 
     def repeated(self, load_factor: float) -> GaussPointValues | None:
         """The last solve's values if this solve repeats it in a re-evaluated geometry: the problem

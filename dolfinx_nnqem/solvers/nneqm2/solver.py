@@ -186,6 +186,8 @@ class NNEQM2Solver(ReleasesPETSc):
             start.destroy()
         if values is None:
             return report
+        if repeats is not None and values is not repeats:
+            report.iterations = self.geometry.moved(report.iterations, repeats)
         self.geometry.remember(load_factor, values)
         report.gauss_point_values = values
         info = self._checks(values, load_factor, report.iterations)
