@@ -11,8 +11,9 @@
 * a cylinder slid like the sphere; a plane pressed and slid with friction gives the reference
   geometry's results (its geometry is exact in both);
 * μ_f = 0.3: the slid block's pairs on the Coulomb cone; the same run from a problem file;
-* what is refused, before solving, with the reason: NNEQM2 and node-to-node with
-  ``geometry = "current"`` (mortar: tests/integration/test_large_sliding_mortar.py).
+* what is refused, before solving, with the reason: node-to-node with ``geometry = "current"``
+  (mortar: tests/integration/test_large_sliding_mortar.py; NNEQM2, which follows the geometry since
+  issue 41: tests/integration/test_large_sliding_nneqm2.py).
 """
 
 import logging
@@ -114,10 +115,11 @@ def test_issue_sliding_sphere_reference_geometry_stops_before_a_stale_state():
 
 @pytest.mark.parametrize("method, law, nx, increments, switch", [("monolithic", "alart-curnier", 32, 40, 0.225),
                                                               ("monolithic", "polar", 32, 40, 0.225),
-                                                              ("nneqm1", "alart-curnier", 16, 20, 0.25)])
+                                                              ("nneqm1", "alart-curnier", 16, 20, 0.25),
+                                                              ("nneqm2", "alart-curnier", 16, 20, 0.25)])
 def test_default_geometry_follows_a_dragged_punch(method, law, nx, increments, switch):
     """Issue 39, item 1: a cylinder pressed into a plastic strip and dragged 16 facets along it (8 for
-    NNEQM1: time), with the default geometry. The press leaves the surfaces where they were; the
+    NNEQM1 and NNEQM2: time), with the default geometry. The press leaves the surfaces where they were; the
     drag slides them past 0.25 facet sizes at ℓ = 0.225 (0.25 with 8 facets), and from that increment on the pairs are
     re-evaluated where the bodies are: every committed force is the current geometry's, to round-off.
     (The reference geometry, the default before, committed forces 1.8 to 2.4 times too large
@@ -140,20 +142,6 @@ def test_default_geometry_follows_a_dragged_punch(method, law, nx, increments, s
     assert len(a) == len(b) == increments and following == [True]
     assert len(switches) == 1 and f"at load factor {switch:g}:" in switches[0] and "geometry = 'auto'" in switches[0]
     assert error < 1e-8
-
-
-def test_nneqm2_stops_where_the_default_geometry_goes_stale():
-    """NNEQM2 condenses contact in the reference geometry only: the dragged punch's first state past the
-    slip limit is not committed, the run stops there and says why."""
-    problem = ironing(16, geometry=None)
-    committed = []
-    with make_solver("nneqm2", problem, OPTIONS) as solver:
-        with pytest.raises(ConvergenceError) as error:
-            solve_load_steps(problem, solver, 20, callbacks=[lambda r: committed.append(r.load_factor)])
-    print(f"\n  committed {committed}; {error.value}")
-    assert committed[-1] == pytest.approx(0.2) and error.value.failure["load_factor"] == pytest.approx(0.25)
-    assert "nneqm2 solves contact in the reference geometry only (use the monolithic solver or NNEQM1 for large " \
-           "sliding)" in str(error.value)
 
 
 def test_issue_sliding_sphere_current_geometry():
@@ -191,12 +179,6 @@ def test_block_slid_over_several_facets(method, law):
     assert moved > 10
     assert error < 1e-6
     assert error_total < 1e-3  # the lateral part: which facet a node on a shared edge keeps (theory.md)
-
-
-def test_nneqm2_refuses_current_geometry():
-    problem = sliding_sphere(3)
-    with pytest.raises(ValueError, match="nneqm2: contact sphere-201 has geometry = 'current'"):
-        make_solver("nneqm2", problem, OPTIONS)
 
 
 @pytest.mark.parametrize("discretisation, why", [("node-to-node", "does not apply to node-to-node")])
@@ -271,7 +253,7 @@ increments = {increments}
 BLOCKS_FILE = _blocks_file(E1=1.0e3, press=-0.01, pressed_at=0.25, slide=0.4, z_tags=[202], increments=12)
 
 
-@pytest.mark.parametrize("method, law", [("monolithic", "alart-curnier"), ("nneqm1", "polar")])
+@pytest.mark.parametrize("method, law", [("monolithic", "alart-curnier"), ("nneqm1", "polar"), ("nneqm2", "alart-curnier")])
 def test_problem_file_block_slid_in_current_geometry(tmp_path, method, law):
     """The frictional block slide from a problem file (``geometry = "current"``), through the CLI and its
     writers, while a third of the pairs go: the Python run's force."""

@@ -4,7 +4,8 @@ The cases of tests/mpi_scripts/large_sliding.py (a sphere slid over a block; a f
 1.6 master facets over another, node-to-surface and dual mortar; a cylinder ironing an elastoplastic strip). Every rank evaluates the node-to-surface pairs
 from the gathered surfaces, with the displacements of their nodes summed over the ranks, so a
 slave node finds its master facet on whichever rank holds it. Pairs are owned by the rank of their
-slave node, so they are compared after sorting by the slave node's position.
+slave node, so they are compared after sorting by the slave node's position. NNEQM2 (current
+geometry since issue 41) on the sphere and the block slide, on 2 ranks.
 """
 
 import subprocess
@@ -59,3 +60,33 @@ def test_large_sliding_on_several_ranks_matches_serial(ranks, cases, serial, tmp
             assert p["following"].all() and s["following"].all()  # "auto" moved the ironing to the current geometry
             if case == "blocks":
                 assert p["foreign_masters"] > 0  # the gathered surfaces found facets of the other rank
+
+
+@pytest.mark.mpi
+def test_nneqm2_large_sliding_on_two_ranks_matches_serial(tmp_path):
+    """NNEQM2 in the current geometry (issue 41) on 2 ranks: the sphere slid over the block and the frictional
+    block slid 1.6 master facets (node-to-surface, pairs on both ranks, master facets on the other rank):
+    the serial pair forces and resultant to 1e-8."""
+    out = tmp_path / "out.npz"
+    runs = ("sphere", "blocks")
+    cmd = [*compat.mpiexec(), "-n", "2", sys.executable, str(SCRIPTS / "large_sliding.py"), str(out),
+           *(f"{case}/nneqm2" for case in runs)]
+    run = subprocess.run(cmd, capture_output=True, text=True, timeout=900, env=compat.mpi_environment())
+    assert run.returncode == 0, f"{' '.join(cmd)} failed:\n{run.stdout[-3000:]}\n{run.stderr[-3000:]}"
+    parallel = dict(np.load(out))
+    for case in runs:
+        s = solve(case, "nneqm2", MPI.COMM_SELF)
+        p = {key.rsplit("/", 1)[1]: value for key, value in parallel.items() if key.startswith(f"{case}/nneqm2/")}
+        i, j = _order(p["position"]), _order(s["position"])
+        df = np.abs(p["force"][i] - s["force"][j]).max() / np.abs(s["force"]).max()
+        dF = np.linalg.norm(p["total"] - s["total"]) / np.linalg.norm(s["total"])
+        print(f"\n  {case}/nneqm2, 2 ranks vs serial: {len(i)} pairs (per rank {p['pairs_per_rank'].tolist()}); "
+              f"{int(p['foreign_masters'])} with a master node on another rank; pair forces {df:.1e}, resultant "
+              f"{dF:.1e} (tolerance 1e-8); iterations serial {s['iterations'].tolist()}, 2 ranks "
+              f"{p['iterations'].tolist()}")
+        assert len(i) == len(j) and np.abs(p["position"][i] - s["position"][j]).max() < 1e-9
+        assert np.count_nonzero(p["pairs_per_rank"]) == 2  # the pairs are split
+        assert df < 1e-8 and dF < 1e-8
+        assert p["following"].all() and s["following"].all()
+        if case == "blocks":
+            assert p["foreign_masters"] > 0

@@ -1,11 +1,12 @@
 """MPI helper of tests/mpi/test_large_sliding_mpi.py: large-sliding cases on any number of ranks.
 
     mpiexec -n N python large_sliding.py OUT.npz [CASE ...]
+    mpiexec -n N python large_sliding.py OUT.npz CASE/METHOD ...   (one method, any of ALL_METHODS)
 
 The frictionless sphere slid over the block (6³, rigid obstacle), the frictional block slid 1.6
 master facets over another (node-to-surface, μ_f = 0.3; the same with dual mortar) and the ironing of an elastoplastic strip
 by a cylinder dragged 8 facets (μ_f = 0.1; the default geometry = "auto", which moves it to the current
-geometry once the punch slides), current geometry, monolithic and NNEQM1
+geometry once the punch slides), current geometry, monolithic and NNEQM1 (NNEQM2 when named)
 (:mod:`dolfinx_nnqem.cases.large_sliding`). Rank 0 writes, per ``CASE/METHOD/``, the pair table's
 slave positions and forces on the master side in global pair order, the resultant force, the
 Newton iterations per increment, the pairs each rank owns and how many pairs have a master node
@@ -26,7 +27,8 @@ from dolfinx_nnqem.cases.large_sliding import (ironing, obstacle_force, slave_fo
 from dolfinx_nnqem.io.results import pair_table  # noqa: E402
 from dolfinx_nnqem.solvers import SolverOptions, make_solver, solve_load_steps  # noqa: E402
 
-METHODS = ("monolithic", "nneqm1")
+METHODS = ("monolithic", "nneqm1")  #: what a bare CASE runs
+ALL_METHODS = (*METHODS, "nneqm2")
 CASES = {
     "sphere": (lambda comm: sliding_sphere(6, comm=comm), obstacle_force, 16),
     "blocks": (lambda comm: sliding_blocks(slide=0.4, mu_f=0.3, comm=comm), slave_force, 12),
@@ -61,9 +63,21 @@ def foreign_masters(problem) -> int:
     return int(np.count_nonzero(np.bincount(pair, other, minlength=pairs.num_local)))
 
 
+def runs(names: list[str]) -> list[tuple[str, str]]:
+    """(case, method) of every name: CASE (every method of METHODS) or CASE/METHOD."""
+    out = []
+    for name in names:
+        case, _, method = name.partition("/")
+        if case not in CASES or (method and method not in ALL_METHODS):
+            raise SystemExit(f"large_sliding.py: {name!r}: expected CASE or CASE/METHOD with CASE in {list(CASES)} "
+                             f"and METHOD in {list(ALL_METHODS)}")
+        out += [(case, method)] if method else [(case, m) for m in METHODS]
+    return out
+
+
 if __name__ == "__main__":
-    out, cases = sys.argv[1], sys.argv[2:] or list(CASES)
-    data = {f"{case}/{method}/{key}": value for case in cases for method in METHODS
+    out, names = sys.argv[1], sys.argv[2:] or list(CASES)
+    data = {f"{case}/{method}/{key}": value for case, method in runs(names)
             for key, value in solve(case, method).items()}
     if MPI.COMM_WORLD.rank == 0:
         np.savez(out, **data)

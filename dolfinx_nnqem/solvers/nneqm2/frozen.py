@@ -85,7 +85,12 @@ class FrozenDirections:
         self.timings = Timings()
         slope = self.material.hardening({"p": problem.state.p_n.x.array[:gp.n_gp]})
         self.gscale = gp.gather_yielding(gp.stress_unit / (3.0 * gp.mu + slope))  # Δγ = Δγ̃ · gscale
-        self._pairs = None  # G Bᵀ (owned rows), its strains (NG, 5, 3NC) and B G Bᵀ: built once
+        self._pairs = None  # G Bᵀ (owned rows), its strains (NG, 5, 3NC) and B G Bᵀ: built once per geometry
+
+    def pairs_changed(self) -> None:
+        """Forget G Bᵀ, its strains and B G Bᵀ (the contact geometry changed): made again from the same
+        factorisation of K_e at the next increment."""
+        self._pairs = None
 
     # -- influence of loads -----------------------------------------------------------------------------
     def _influence(self, loads: PETSc.Mat):

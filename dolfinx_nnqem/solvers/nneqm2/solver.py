@@ -46,6 +46,7 @@ from dolfinx_nnqem.problem.kinematics_choice import kinematics_of
 from dolfinx_nnqem.solvers.condensation import Condensation, check_dense_memory
 from dolfinx_nnqem.solvers.contract import ReleasesPETSc
 from dolfinx_nnqem.solvers.convergence import IterationRecord, SolveReport, logger
+from dolfinx_nnqem.solvers.nneqm2.current_geometry import GeometryFollower, settled
 from dolfinx_nnqem.solvers.nneqm2.gauss_points import GaussPointOperators
 from dolfinx_nnqem.solvers.nneqm2.increment_start import IncrementStart, start_increment
 from dolfinx_nnqem.solvers.nneqm2.frozen import FrozenDirections
@@ -56,19 +57,6 @@ from dolfinx_nnqem.solvers.timings import Timings, summed
 __all__ = ["NNEQM2Solver"]
 
 _SQRT23 = math.sqrt(2.0 / 3.0)
-
-
-def refuse_current_geometry(problem: ContactProblem) -> None:
-    """NNEQM2 takes contact geometry computed once (``geometry = "reference"``); raise otherwise."""
-    model = problem.contact
-    if model is None or not model.geometry.follows_bodies:
-        return
-    labels = [i.contact.label for i, following in zip(model.interfaces, model.geometry.following) if following]
-    raise ValueError(
-        f"nneqm2: contact {', '.join(labels)} has geometry = 'current', which NNEQM2 does not take yet: it condenses "
-        "every increment through the elastic stiffness factorised once per run and its pair flexibility, and "
-        "rebuilding them in a geometry that moves within the increment is not implemented; use "
-        "the monolithic solver or NNEQM1 for large sliding, or geometry = 'reference'")
 
 
 def refuse_finite_strain(problem: ContactProblem) -> None:
@@ -124,12 +112,11 @@ class NNEQM2Solver(ReleasesPETSc):
     """
 
     name = "nneqm2"
-    follows_contact_geometry = False  # its condensation is built once per run on B (refuse_current_geometry)
+    follows_contact_geometry = True  # K_e once per run; what is built on B follows the pairs (.current_geometry)
 
     def __init__(self, problem: ContactProblem, options: SolverOptions | None = None,
                  nneqm2: NNEQM2Options | None = None):
         refuse_finite_strain(problem)
-        refuse_current_geometry(problem)
         self.problem = problem
         self.options = options or SolverOptions()
         self.settings = nneqm2 or NNEQM2Options()
@@ -156,6 +143,7 @@ class NNEQM2Solver(ReleasesPETSc):
         self._frozen = (FrozenDirections(problem, self.gp, self.elastic, self.settings.inner_globalisations,
                                          self.settings.inner_max_iterations) if self.frozen else None)
         self._factorised = False
+        self.geometry = GeometryFollower(problem, self._pairs_changed)
         self._timings = Timings(setup=time.perf_counter() - t0)
         self._phases: list[dict[str, float]] = []
 
@@ -182,19 +170,35 @@ class NNEQM2Solver(ReleasesPETSc):
             self.elastic.factorise(p.assemble_elastic_stiffness, "the elastic stiffness K_e")
             self._factorised = True
         t_start = time.perf_counter()
+        self.geometry.follow()  # current geometry: B changed since the last solve
+        repeats = self.geometry.repeated(load_factor)  # the last solve's values, if this one repeats it
         start = start_increment(p, self.gp, self.elastic, load_factor, self.settings.extrapolate)
+        self.system_order = (3 * p.num_pairs + (1 if self.frozen else 5) * self.gp.num_yield_points
+                             + p.rigid_modes.count)  # pairs come and go in the current geometry
         report = SolveReport(converged=False, iterations=0, system_order=self.system_order)
         tol = self.options.rtol + self.options.atol / start.force_scale
         try:
-            values = self._frozen_increment(start, tol, report) if self.frozen else \
-                self._return_map_increment(start, tol, report)
+            values = self._settled(repeats, start, tol, report) if repeats is not None else None
+            if values is None:
+                values = self._frozen_increment(start, tol, report) if self.frozen else \
+                    self._return_map_increment(start, tol, report, repeated=repeats is not None)
         finally:
             start.destroy()
         if values is None:
             return report
+        if repeats is not None and values is not repeats:
+            report.iterations = self.geometry.moved(report.iterations, repeats)
+        self.geometry.remember(load_factor, values)
         report.gauss_point_values = values
         info = self._checks(values, load_factor, report.iterations)
         info["wall_time_s"] = time.perf_counter() - t_start
+        info["solves"] = 1
+        if repeats is not None and self.increment_info and self.increment_info[-1]["load_factor"] == info["load_factor"]:
+            # one entry per increment: the last solve's checks, in the geometry it ended in
+            previous = self.increment_info.pop()
+            info["solves"] += previous["solves"]
+            info["iterations"] += previous["iterations"]
+            info["wall_time_s"] += previous["wall_time_s"]
         self.increment_info.append(info)
         last = report.history[-1]
         report.history[-1] = IterationRecord(last.iteration, info["equilibrium_residual"], last.contact,
@@ -207,15 +211,29 @@ class NNEQM2Solver(ReleasesPETSc):
         report.converged, report.message = True, "converged"
         return report
 
-    def _return_map_increment(self, start: IncrementStart, tol: float, report: SolveReport
+    def _settled(self, last: GaussPointValues, start: IncrementStart, tol: float, report: SolveReport
+                 ) -> GaussPointValues | None:
+        """``last`` if the last solve's state satisfies the equations in the geometry re-evaluated at it
+        (:func:`~dolfinx_nnqem.solvers.nneqm2.current_geometry.settled`): the increment then takes no
+        iteration. Else None (and the solve starts there)."""
+        ok, record = settled(self.problem, self.gp, last, start, tol)
+        report.history.append(record)
+        logger.info(record.line(self.name) + ("  (the last solve, in the geometry re-evaluated at it)"))
+        if not ok:
+            report.history.clear()
+            return None
+        return last
+
+    def _return_map_increment(self, start: IncrementStart, tol: float, report: SolveReport, repeated: bool = False
                               ) -> GaussPointValues | None:
         """The default variant's Newton iteration; its Gauss-point values, or None.
 
         With the polar law, an increment that fails is tried once more with the angle of sliding
-        pairs on their slip after every step, as in the monolithic solver.
+        pairs on their slip after every step, as in the monolithic solver. ``repeated``: the solve
+        repeats the last one in a re-evaluated contact geometry, from its solution (no lift).
         """
         p = self.problem
-        backend, outcome = self._newton(start, tol, report, align_sliding=False)
+        backend, outcome = self._newton(start, tol, report, align_sliding=False, repeated=repeated)
         report.iterations = outcome.iterations
         if outcome.converged:
             return self._own_values(start, backend.x)
@@ -226,7 +244,7 @@ class NNEQM2Solver(ReleasesPETSc):
             p.restore()
             again = start_increment(p, self.gp, self.elastic, start.load_factor, self.settings.extrapolate)
             try:
-                backend, outcome = self._newton(again, tol, report, align_sliding=True)
+                backend, outcome = self._newton(again, tol, report, align_sliding=True, repeated=False)
                 outcome.iterations += tried
                 report.iterations = outcome.iterations
                 if outcome.converged:
@@ -236,15 +254,17 @@ class NNEQM2Solver(ReleasesPETSc):
         report.message = outcome.message
         return None
 
-    def _newton(self, start: IncrementStart, tol: float, report: SolveReport, align_sliding: bool):
+    def _newton(self, start: IncrementStart, tol: float, report: SolveReport, align_sliding: bool,
+                repeated: bool):
         """One attempt: the predictor step, then the Newton driver. (backend, outcome)."""
         p = self.problem
         assert self.tangent is not None  # the return-map variant factorises K_t
         backend = ReturnMapIncrement(p, self.gp, self.elastic, self.tangent, start, tol, report, align_sliding)
         # the first step linearises where the increment starts, as the other solvers' first
         # iteration does; where prescribed values jump and nothing is extrapolated, at u_n with
-        # the jump lifted (a boundary layer moved alone would yield spuriously)
-        jump = start.extrapolation is None and p.comm.allreduce(
+        # the jump lifted (a boundary layer moved alone would yield spuriously); a repeated solve
+        # (current geometry) at the last solution, which holds the prescribed values already
+        jump = not repeated and start.extrapolation is None and p.comm.allreduce(
             bool(np.any(p.u.x.array[p.bc_dofs] != p.state.u_n.x.array[p.bc_dofs])), op=MPI.LOR)
         why_not = backend.predictor_step(lift=jump)
         first = (0, "", math.nan) if why_not else (1, "predictor", 1.0)
@@ -317,6 +337,13 @@ class NNEQM2Solver(ReleasesPETSc):
             "max_yield_violation": comm.allreduce(float(np.max(f, initial=-np.inf)), op=MPI.MAX),
             "plastic_points": comm.allreduce(int(np.count_nonzero(values.dp > 0.0)), op=MPI.SUM),
         }
+
+    def _pairs_changed(self) -> None:
+        """The contact geometry changed: forget what was built on B (the factorisations of K_e and
+        K_t stay: at small strain they do not depend on the pairs)."""
+        for part in (self.elastic, self.tangent, self._frozen):
+            if part is not None:
+                part.pairs_changed()
 
     def destroy(self) -> None:
         """Free the condensations' and the Gauss-point operators' PETSc objects (collective)."""
