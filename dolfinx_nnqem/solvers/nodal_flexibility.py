@@ -202,13 +202,20 @@ class NodalFlexibility:
         x_D = self.values_at(x_r, positions)
         if update is not None:
             a = update.solve(x_D[update.A])
-            x += self.Y[:, positions[update.A]] @ a
+            x += self.Y @ self._on_columns(positions[update.A], a)
             x_D += self.S[np.ix_(positions, positions[update.A])] @ a
         return x, x_D
 
     def response(self, v: np.ndarray, positions: np.ndarray, update: GeometricUpdate | None) -> np.ndarray:
         """(K − E_A K_g E_Aᵀ)⁻¹ E_D ``v`` (owned rows), ``v`` (|D|,) loads on the pairs' dofs."""
-        du = self.Y[:, positions] @ v
+        loads = self._on_columns(positions, v)
         if update is not None:
-            du += self.Y[:, positions[update.A]] @ update.solve(self.S[np.ix_(positions[update.A], positions)] @ v)
-        return du
+            A = positions[update.A]
+            loads += self._on_columns(A, update.solve(self.S[np.ix_(A, positions)] @ v))
+        return self.Y @ loads  # one product with Y as it is: selecting its columns would copy it
+
+    def _on_columns(self, columns: np.ndarray, values: np.ndarray) -> np.ndarray:
+        """A vector over Y's columns with ``values`` added at ``columns``, zero elsewhere."""
+        out = np.zeros(self.Y.shape[1])
+        np.add.at(out, columns, values)
+        return out
