@@ -15,13 +15,16 @@ the median of the pairwise ratios is printed with their spread:
   alone (no code of the package);
 * in this process: the pressed blocks' whole load path with the iterative solver at level
   ``--proxy-level`` (the million-dof run's proxy), against the same baseline;
+* in this process: NNEQM1 against the monolithic solver (direct) on the sphere slid over a block
+  in the current geometry (``--slide-n``³ hexahedra, 10 increments; issue 43, "Speed, second round"),
+  with both methods' outer/Newton iterations, solves per increment and NNEQM1's factorisations;
 * counts that do not depend on the machine: Newton and Krylov iterations, AMG set-ups.
 
 Compare its output with the one in ``docs/performance.md`` (the last run of the issue's
 closing note): a ratio that grew by more than its spread is a slowdown. Prints figures;
 asserts nothing::
 
-    python benchmarks/speed_guard.py [--runs 5] [--level 4]
+    python benchmarks/speed_guard.py [--runs 5] [--level 4] [--slide-n 8]
 """
 
 from __future__ import annotations
@@ -172,6 +175,35 @@ def load_path_cost(level: int, runs: int) -> None:
           f"{counts['newton']}, Krylov {counts['krylov']}, AMG set-ups {counts['amg']}", flush=True)
 
 
+def sliding_ratio(n: int, runs: int) -> None:
+    """NNEQM1 / monolithic on the sphere slid over an n³ block in the current geometry (the case ``slide``
+    of ``benchmarks/large_sliding.py``, 10 increments), the two interleaved, with their counts."""
+    import dolfinx_nnqem  # noqa: F401
+
+    from dolfinx_nnqem.cases.large_sliding import sliding_sphere
+    from dolfinx_nnqem.solvers import SolverOptions, make_solver, solve_load_steps
+
+    counts: dict = {}
+
+    def one(method: str) -> float:
+        problem = sliding_sphere(n, start=0.3, end=0.7, geometry="current")
+        with make_solver(method, problem, SolverOptions(rtol=1e-10, max_iterations=40)) as solver:
+            t0 = time.perf_counter()
+            results = solve_load_steps(problem, solver, 10)
+            elapsed = time.perf_counter() - t0
+            condensation = getattr(solver, "condensation", None)
+            counts[method] = (sum(r.iterations for r in results), sum(r.report.geometry_passes for r in results),
+                              None if condensation is None else condensation.factorisations)
+        return elapsed
+
+    one("nneqm1")  # JIT and caches
+    ratio = _ratios(lambda: one("nneqm1"), lambda: one("monolithic"), runs)
+    (it_1, passes_1, factorisations), (it_m, passes_m, _) = counts["nneqm1"], counts["monolithic"]
+    print(f"sphere slide (n = {n}, 10 increments), NNEQM1 / monolithic: {ratio}; NNEQM1 {it_1} outer iterations "
+          f"in {passes_1} solves, {factorisations} factorisation(s); monolithic {it_m} iterations in {passes_m} solves",
+          flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--runs", type=int, default=5, help="pairs of runs per ratio (default 5)")
@@ -179,12 +211,14 @@ def main() -> None:
     parser.add_argument("--skip-processes", action="store_true", help="only the in-process figures")
     parser.add_argument("--proxy-level", type=int, default=6,
                         help="pressed-blocks level of the whole-load-path figure (the million-dof run's proxy)")
+    parser.add_argument("--slide-n", type=int, default=8, help="block divisions of the sliding-sphere figure")
     args = parser.parse_args()
     print(f"figure: median of A/B over {args.runs} pairs (min–max)")
     if not args.skip_processes:
         whole_processes(args.runs)
     iteration_costs(args.level, max(1, args.runs // 2))
     load_path_cost(args.proxy_level, max(1, args.runs // 2))
+    sliding_ratio(args.slide_n, max(1, args.runs // 2))
 
 
 if __name__ == "__main__":

@@ -135,6 +135,8 @@ class Condensation:
         self.ksp = create_ksp(problem.comm, self.prefix, self._options)
         self._options_cleared = False
         self._K: PETSc.Mat | None = None  # K̃, assembled by factorise into the same matrix every time
+        self._K_trial: PETSc.Mat | None = None  # refactorise's assembly, compared with K̃ before K̃ changes
+        self.factorisations = 0  #: numeric factorisations made (what depends on them is made again)
         # made at the first pair_flexibility (mode_coupling), refilled (kept) afterwards
         self._Bt_dense: PETSc.Mat | None = None
         self._X: PETSc.Mat | None = None
@@ -214,7 +216,33 @@ class Condensation:
             if not self._options_cleared:
                 clear_options(self.prefix, self._options)
                 self._options_cleared = True
+        self.factorisations += 1
         self.timings.add("factorisation", t0)
+
+    def refactorise(self, assemble: Callable[[PETSc.Mat | None, Any], PETSc.Mat], what: str) -> bool:
+        """:meth:`factorise`, unless the stiffness ``assemble`` gives is bitwise the one factorised
+        last (an elastic body's tangent in small strain): then the factors are kept. Returns True if
+        it factorised.
+
+        The stiffness is assembled into a second matrix and compared with K̃; only a changed one is
+        copied into K̃ and factorised, so that the factors are those :meth:`factorise` makes.
+        """
+        if self._K is None:
+            self.factorise(assemble, what)
+            return True
+        t0 = time.perf_counter()
+        self._K_trial = assemble(self._K_trial, self.fixing_bcs)
+        changed = not np.array_equal(self._K_trial.getValuesCSR()[2], self._K.getValuesCSR()[2])
+        changed = bool(self.problem.comm.allreduce(changed, op=MPI.LOR))
+        if changed:
+            self._K_trial.copy(self._K, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)  # type: ignore[arg-type]  # petsc4py's stub types the Structure constants as int
+        self.timings.add("assembly", t0)
+        if changed:
+            t0 = time.perf_counter()
+            factorise(self.ksp, self._K, self.solver.upper(), what)
+            self.factorisations += 1
+            self.timings.add("factorisation", t0)
+        return changed
 
     def solve(self, rhs: PETSc.Vec) -> PETSc.Vec:
         """K̃⁻¹ (rhs with the fixing rows zeroed); constrained rows of ``rhs`` are kept (lifting)."""
@@ -308,6 +336,6 @@ class Condensation:
 
     def destroy(self) -> None:
         """Free the factorisation, K̃ and the dense flexibility's PETSc objects (collective)."""
-        for obj in (self.ksp, self._K, self._Bt_dense, self._X, self._C_rows):
+        for obj in (self.ksp, self._K, self._K_trial, self._Bt_dense, self._X, self._C_rows):
             if obj is not None:
                 obj.destroy()

@@ -44,6 +44,7 @@ from petsc4py import PETSc
 
 from dolfinx_nnqem.solvers.condensation import Condensation, check_dense_memory
 from dolfinx_nnqem.solvers.condensed import CondensedProblem, CondensedSystem, newton_step, rigid_start
+from dolfinx_nnqem.solvers.nodal_flexibility import NodalFlexibility, rows_on_dofs
 from dolfinx_nnqem.contact.laws import LawEvaluation
 from dolfinx_nnqem.contact.pair_laws import PairLaws
 from dolfinx_nnqem.solvers.contract import ReleasesPETSc, contact_model
@@ -91,6 +92,26 @@ class NNEQM1Solver(ReleasesPETSc):
         self._timings = Timings()
         self.last_condensed: CondensedProblem | None = None  #: the latest outer iteration's dense problem
         self._geometry_version = contact_model(problem).geometry.version
+        self._nodal: NodalFlexibility | None = None  # made at the first increment that follows the geometry
+
+    @property
+    def nodal(self) -> NodalFlexibility | None:
+        """The flexibility from the unit loads of the pairs' dofs, where it is used: current-geometry
+        contact, ``consistent_geometry``, not ``modified``, no free rigid mode (asked anew at every
+        use: ``geometry = "auto"`` moves an interface to the current geometry during a run)."""
+        settings = self.settings
+        if (not settings.consistent_geometry or settings.modified or self.condensation.num_modes
+                or not contact_model(self.problem).geometry.follows_bodies):
+            return None
+        if self._nodal is None:
+            self._nodal = NodalFlexibility(self.condensation)
+        return self._nodal
+
+    @property
+    def consistent_geometry(self) -> bool:
+        """True if current-geometry obstacles are re-evaluated at every outer iterate, their geometric
+        terms in the outer linearisation (:class:`~dolfinx_nnqem.solvers.nodal_flexibility.NodalFlexibility`)."""
+        return self.nodal is not None and contact_model(self.problem).geometry.obstacles_follow
 
     @property
     def timings(self) -> dict[str, float]:
@@ -125,6 +146,8 @@ class NNEQM1Solver(ReleasesPETSc):
         outcome = solve(system, FULL_STEPS, self.options.max_iterations, first_iteration=1 if lifted else 0,
                         first_kind="lifted" if lifted else "", first_step_length=1.0 if lifted else math.nan)
         report.iterations, report.converged = outcome.iterations, outcome.converged
+        # every iterate was evaluated in its own geometry, and no pair can have changed: no second solve
+        report.geometry_consistent = self.consistent_geometry and not model.geometry.surfaces_follow
         final = report.final
         if outcome.converged:
             report.message = "converged"
@@ -197,6 +220,7 @@ class _OuterSystem:
         self.problem = solver.problem
         self.contact = contact_model(self.problem)  # the problem's, which NNEQM1Solver asks for
         self.report = report
+        self.consistent = solver.consistent_geometry  # fixed for the solve
         self.laws = self.contact.gathered_laws()
         self.w_prev = self.contact.gather(self.contact.w_n)
         self.steps = 0
@@ -208,6 +232,10 @@ class _OuterSystem:
 
     def evaluate(self) -> Merit:
         p, s = self.problem, self.solver
+        if self.consistent:  # the obstacles' pairs at this iterate: their frames, gaps, w_n and laws
+            self.contact.geometry.refresh_obstacles(p.u, p.load_factor, p.state.u_n, p.load_factor_n)
+            self.laws = self.contact.gathered_laws()
+            self.w_prev = self.contact.gather(self.contact.w_n)
         t0 = time.perf_counter()
         F_int = p.assemble_internal_force()
         s._timings.add("assembly", t0)
@@ -271,15 +299,26 @@ class _OuterSystem:
         model = self.contact
         assert self.current is not None  # evaluate() ran at this iterate
         R_free, w, _, scale, _, _ = self.current
-        if not (s.settings.modified and self.steps > 0):
-            cond_solver.factorise(p.assemble_tangent, "the tangent stiffness K_t")
-            self._X, self._C = cond_solver.pair_flexibility()
         r = newton_right_hand_side(p, R_free, lift)
-        x_r = cond_solver.solve(r)
+        nodal = s.nodal
+        if nodal is not None:
+            C, w_free, du_free, response = self._nodal_condensation(nodal, r)
+        else:
+            if not (s.settings.modified and self.steps > 0):
+                cond_solver.factorise(p.assemble_tangent, "the tangent stiffness K_t")
+                self._X, self._C = cond_solver.pair_flexibility()
+            x_r = cond_solver.solve(r)
+            C, w_free = self._C, model.gather(model.B_times(x_r)).reshape(-1)
+            du_free = x_r.getArray(readonly=True).copy()
+            x_r.destroy()
+            X = self._X
+
+            def response(dlam: np.ndarray) -> np.ndarray:
+                return X @ dlam
         z_m = model.gather(model.z)
         lam_m, _ = self.laws.force(z_m)
         cond = CondensedProblem(
-            C=self._C, w_free=model.gather(model.B_times(x_r)).reshape(-1), w_m=model.gather(w).reshape(-1),
+            C=C, w_free=w_free, w_m=model.gather(w).reshape(-1),
             lam_m=lam_m.reshape(-1), mu_f=self.laws.mu_f, g0=self.laws.g0, w_prev=self.w_prev,
             r=self.laws.r_max, BN=cond_solver.mode_coupling(),
             e=cond_solver.mode_loads(r))
@@ -298,12 +337,38 @@ class _OuterSystem:
             return self.inner_failure
         z_new = system.pair_unknowns(result.x)
         lam_new, _ = self.laws.force(z_new)
-        du = x_r.getArray(readonly=True) + self._X @ (lam_new.reshape(-1) - cond.lam_m)
+        du = du_free + response(lam_new.reshape(-1) - cond.lam_m)
         if cond_solver.num_modes:
             du += cond_solver.mode_array() @ system.modes(result.x)
         self._step = (du, model.local_rows(z_new).copy())
-        x_r.destroy()
         return None
+
+    def _nodal_condensation(self, nodal: NodalFlexibility, r: PETSc.Vec):
+        """(C, w_free, du_free, response) of the Newton right-hand side ``r`` from the unit loads of the
+        pairs' dofs (:mod:`~dolfinx_nnqem.solvers.nodal_flexibility`): the flexibility, the free
+        response's w and du, and the map of a pair force change Δλ (3NC,) to its du. With
+        :attr:`consistent`, of the outer linearisation with the obstacles' geometric terms."""
+        p, model, condensation = self.problem, self.contact, self.solver.condensation
+        condensation.refactorise(p.assemble_tangent, "the tangent stiffness K_t")
+        positions = nodal.update()
+        t0 = time.perf_counter()
+        D = nodal.dofs[positions]
+        B_D = rows_on_dofs(model, model.rows.values, D)
+        Bc_D, update = B_D, None
+        if self.consistent:
+            terms = model.geometry.geometric_terms(p.u, p.load_factor, p.state.u_n, p.load_factor_n)
+            Bc_D = rows_on_dofs(model, terms.rows_values(model.rows), D)
+            update = nodal.geometric_update(terms, positions)
+        C = nodal.flexibility(positions, B_D, Bc_D, update)
+        condensation.timings.add("flexibility", t0)
+        x_r = condensation.solve(r)
+        du_free, x_D = nodal.free_response(x_r, positions, update)
+        x_r.destroy()
+
+        def response(dlam: np.ndarray) -> np.ndarray:
+            return nodal.response(B_D.T @ dlam, positions, update)
+
+        return C, Bc_D @ x_D, du_free, response
 
     def lm_direction(self, merit: Merit, globalisation: Globalisation) -> str | None:
         return "NNEQM1's outer iteration has no Levenberg–Marquardt step"

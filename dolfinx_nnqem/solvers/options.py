@@ -183,6 +183,16 @@ class NNEQM1Options:
         (:func:`~dolfinx_nnqem.solvers.condensation.dense_memory`). A problem that needs more is
         refused before anything is assembled, with the sizes. None (default): the memory the
         machine has available when the solver is made.
+    consistent_geometry
+        Current-geometry contact (no free rigid modes, not ``modified``): the contact flexibility
+        from the unit loads of the dofs the pairs touch, computed once per factorisation and
+        reused while the pairs' frames move, and the factorisation kept while the tangent does not
+        change (:mod:`~dolfinx_nnqem.solvers.nodal_flexibility`); current-geometry rigid obstacles
+        re-evaluated at every outer iterate, their geometric terms (the normal's and the friction
+        frame's rotation) in the outer linearisation, as the monolithic solver's: a solve ends in
+        its own geometry. False: the flexibility C = B G Bᵀ made anew at every outer iteration and
+        the geometry frozen within a solve, left to load stepping's repeated solves (the earlier
+        behaviour, ``docs/theory.md``).
     """
 
     modified: bool = False
@@ -193,6 +203,7 @@ class NNEQM1Options:
     inner_retry: Globalisation | None = field(default_factory=lambda: Globalisation(min_step=1e-10, watchdog=0,
                                                                                     stall_window=STALL_WINDOW))
     max_memory_gb: float | None = None
+    consistent_geometry: bool = True
 
     def __post_init__(self):
         _check_integer("NNEQM1Options", "inner_max_iterations", self.inner_max_iterations, 1)

@@ -26,7 +26,8 @@ SPLIT_MODULES = ("numerics/newton.py", "io/run_pictures.py", "problem/meshing.py
                  "material/gauss_fields.py", "problem/kinematics_choice.py", "problem/deformed_mesh.py",
                  "solvers/finite_strain_check.py",
                  "material/state_report.py", "solvers/prediction.py", "solvers/monolithic.py",
-                 "solvers/surface_tangent.py", "contact/surface_stiffness.py")
+                 "solvers/surface_tangent.py", "contact/surface_stiffness.py", "solvers/nodal_flexibility.py",
+                 "solvers/nneqm1.py")
 MAX_FUNCTION_LINES = 80
 MAX_CLASS_LINES = 400
 
