@@ -71,16 +71,18 @@ STEP = 1e-6
 facet size (their truncation error ~ STEP², their round-off ~ 1e-16 / STEP, relative)."""
 
 
-def couple_derivatives(xs: np.ndarray, xm: np.ndarray, step: float,
+def couple_derivatives(xs: np.ndarray, xm: np.ndarray, ci: np.ndarray, cj: np.ndarray, step: float,
                        relative_tolerance: float = RELATIVE_TOLERANCE,
                        min_facing_cosine: float = MIN_FACING_COSINE) -> tuple[np.ndarray, np.ndarray]:
-    """Central differences of the integrals of couples (slave facet, master facet).
+    """Central differences of the integrals of couples (slave facet ``ci``, master facet ``cj``).
 
     Parameters
     ----------
     xs, xm
-        (c, ks, 3) and (c, km, 3): each couple's slave and master facet vertices, cyclic
+        (ms, ks, 3) and (mm, km, 3): the slave and master facets' vertices, cyclic
         (:func:`~dolfinx_nnqem.contact.mortar_geometry.couple_integrals`).
+    ci, cj
+        (c,) the couples.
     step
         The length a coordinate is moved by, each way.
 
@@ -88,15 +90,21 @@ def couple_derivatives(xs: np.ndarray, xm: np.ndarray, step: float,
     -------
     (dM (c, ks, km, P), dg (c, ks, P)): ∂M_c and ∂g̃_c with respect to the P = 3 (ks + km) vertex
     coordinates (the slave facet's vertices, then the master's, each x, y, z); the dual coefficients
-    of the moved slave facet are computed again.
+    of a moved slave facet are computed again (once per slave facet and coordinate).
     """
-    c, ks, km = xs.shape[0], xs.shape[1], xm.shape[1]
-    P = 3 * (ks + km)
-    x = np.concatenate([xs, xm], axis=1).reshape(c, 1, P)
+    c, ks, km = len(ci), xs.shape[1], xm.shape[1]
+    P, S = 3 * (ks + km), 3 * ks
     e = step * np.eye(P)[None]
+    x = np.concatenate([xs[ci], xm[cj]], axis=1).reshape(c, 1, P)
     moved = np.concatenate([x + e, x - e], axis=1).reshape(-1, ks + km, 3)  # (c·2P): +h each, then −h each
     xs_p, xm_p = np.ascontiguousarray(moved[:, :ks]), np.ascontiguousarray(moved[:, ks:])
-    A, _ = dual_coefficients(xs_p)
+    A0 = dual_coefficients(xs)[0]  # (ms, ks, ks); moved slave facets: (ms, 2, S, ks, ks)
+    facets = xs.reshape(-1, 1, S)
+    A_moved = dual_coefficients(np.concatenate([facets + e[:, :S, :S], facets - e[:, :S, :S]], axis=1)
+                                .reshape(-1, ks, 3))[0].reshape(len(xs), 2, S, ks, ks)
+    A = np.broadcast_to(A0[ci][:, None, None], (c, 2, P, ks, ks)).copy()
+    A[:, :, :S] = A_moved[ci]
+    A = np.ascontiguousarray(A.reshape(-1, ks, ks))
     qb, qw = triangle_rule()
     every = np.arange(len(moved), dtype=np.int64)
     M, g, _, _, _ = _integrate_couples(every, every, xs_p, A, xm_p, qb, qw, relative_tolerance, min_facing_cosine)
@@ -156,7 +164,7 @@ def interface_derivatives(moved: GatheredSurfaces, search_distance: float | None
     xs, perm_s = _cyclic(slave.x, slave.area)
     xm, perm_m = _cyclic(master.x, master.area)
     ci, cj = candidate_couples(xs, xm, float(search_distance))
-    dM, dg = couple_derivatives(xs[ci], xm[cj], STEP * facet_size(slave))
+    dM, dg = couple_derivatives(xs, xm, ci, cj, STEP * facet_size(slave))
     return CoupleDerivatives(mi, np.take_along_axis(slave.nodes, perm_s, axis=1),
                              np.take_along_axis(master.nodes, perm_m, axis=1), xs, np.column_stack([ci, cj]), dM, dg)
 
@@ -185,6 +193,9 @@ class _Incidence:
         self._entry_nodes = at[self._entry_order]
         self._ks = ks
         facets = cd.slave_nodes.ravel()
+        d = cd.slave_x - cd.slave_x[:, :1]
+        self.area = 0.5 * np.cross(d, np.roll(d, -1, axis=1)).sum(axis=1)  #: (ms, 3) the slave facets' Newell vectors
+        self.d_area = newell_derivative(cd.slave_x)  #: (ms, 3, 3 ks) their derivatives
         self._facet_order = np.argsort(facets, kind="stable")
         self._facet_nodes = facets[self._facet_order]
 
@@ -200,22 +211,15 @@ class _Incidence:
         return self._facet_order[lo:hi] // self._ks
 
 
-def _scatter_columns(cols: np.ndarray, nodes: np.ndarray) -> np.ndarray:
-    """The columns 3 pos(node) + (x, y, z) of ``nodes`` among the pair's ``cols`` (flattened)."""
-    return (3 * np.searchsorted(cols, nodes)[:, None] + np.arange(3)).ravel()
-
-
-def _normal_derivative(cd: CoupleDerivatives, facets: np.ndarray, cols: np.ndarray, normal: np.ndarray,
-                       given: np.ndarray) -> np.ndarray:
+def _normal_derivative(cd: CoupleDerivatives, incidence: _Incidence, facets: np.ndarray, cols: np.ndarray,
+                       normal: np.ndarray, given: np.ndarray) -> np.ndarray:
     """∂n/∂x (3, 3c) over ``cols`` of the pair normal ``normal``: n_f = −ν/|ν| (``given``) of the Newell
     vectors ν of the slave facets ``facets`` (module docstring), or ``given`` turned into symmetry planes
     (:func:`~dolfinx_nnqem.contact.surfaces.symmetry_normals` removed its components along them)."""
-    x = cd.slave_x[facets]
     dnu = np.zeros((3, 3 * len(cols)))
-    for e, d_area in zip(facets, newell_derivative(x)):
-        dnu[:, _scatter_columns(cols, cd.slave_nodes[e])] += d_area
-    d = x - x[:, :1]
-    length = np.linalg.norm(0.5 * np.cross(d, np.roll(d, -1, axis=1)).sum(axis=(0, 1)))
+    at = (3 * np.searchsorted(cols, cd.slave_nodes[facets])[:, :, None] + np.arange(3)).reshape(len(facets), -1)
+    np.add.at(dnu, (np.arange(3)[None, :, None], at[:, None, :]), incidence.d_area[facets])
+    length = np.linalg.norm(incidence.area[facets].sum(axis=0))
     dn = -(np.eye(3) - np.outer(given, given)) @ dnu / length
     if np.array_equal(normal, given):
         return dn
@@ -243,11 +247,10 @@ def pair_geometry(cd: CoupleDerivatives, incidence: _Incidence, s: int, normal: 
     M[np.searchsorted(cols, masters)] = mi.M.data[row]
     dM = np.zeros((c, 3 * c))
     dgt = np.zeros(3 * c)
-    for couple, vertex, nodes in zip(couples[active], vertices[active], couple_nodes[active]):
-        at = _scatter_columns(cols, nodes)
-        master_rows = np.searchsorted(cols, cd.master_nodes[cd.couples[couple, 1]])
-        dM[master_rows[:, None], at[None, :]] += cd.dM[couple, vertex]
-        dgt[at] += cd.dg[couple, vertex]
+    at = (3 * np.searchsorted(cols, couple_nodes[active])[:, :, None] + np.arange(3)).reshape(int(active.sum()), 3 * couple_nodes.shape[1])
+    master_rows = np.searchsorted(cols, cd.master_nodes[cd.couples[couples[active], 1]])  # (entries, km)
+    np.add.at(dM, (master_rows[:, :, None], at[:, None, :]), cd.dM[couples[active], vertices[active]])
+    np.add.at(dgt, at, cd.dg[couples[active], vertices[active]])
     m = M.sum()
     if m > 0.0:
         dm = dM.sum(axis=0)
@@ -259,7 +262,7 @@ def pair_geometry(cd: CoupleDerivatives, incidence: _Incidence, s: int, normal: 
     slave = np.searchsorted(cols, block)
     a, da = -coefficient, -dc
     a[slave], da[slave] = 1.0, 0.0
-    return PairGeometry(cols, a, da, dg, _normal_derivative(cd, facets, cols, normal, -mi.normal[s])), gap
+    return PairGeometry(cols, a, da, dg, _normal_derivative(cd, incidence, facets, cols, normal, -mi.normal[s])), gap
 
 
 @dataclass(frozen=True)
