@@ -376,13 +376,14 @@ class ContactGeometry:
         return [isinstance(t, (SurfaceTracker, MortarTracker)) for t in self._trackers]
 
     def refresh_surfaces(self, u: dolfinx.fem.Function, u_n: dolfinx.fem.Function, load_factor_n: float) -> None:
-        """Re-evaluate the node-to-surface interfaces of :attr:`reprojecting` at u, keeping their pairs
-        (collective): every slave node is projected again onto the moved master (onto another facet
-        if it slid there), its frame, weights and gap follow; w_n is measured again. Where B's pattern
-        stays the model is refilled in place, else its pairs are replaced (the same pairs, in the same
-        order: z stays) and :attr:`version` moves on. This is what the monolithic solver calls at every
-        Newton iterate (:mod:`~dolfinx_nnqem.contact.surface_stiffness`); nothing is done when u and
-        u_n are where the last refresh had them."""
+        """Re-evaluate the node-to-surface and mortar interfaces of :attr:`reprojecting` at u, keeping their
+        pairs (collective): every slave node is projected again onto the moved master (onto another
+        facet if it slid there), or the mortar integrals are computed again on the moved surfaces; the
+        frames, weights and gaps follow; w_n is measured again. Where B's pattern stays the model is
+        refilled in place, else its pairs are replaced (the same pairs, in the same order: z stays) and
+        :attr:`version` moves on. This is what the monolithic solver calls at every Newton iterate
+        (:mod:`~dolfinx_nnqem.contact.surface_stiffness`, :mod:`~dolfinx_nnqem.contact.mortar_linearisation`);
+        nothing is done when u and u_n are where the last refresh had them."""
         key = np.concatenate([u.x.array, u_n.x.array])
         same = (self._surfaces_at is not None and len(key) == len(self._surfaces_at)
                 and bool(np.array_equal(key, self._surfaces_at)))

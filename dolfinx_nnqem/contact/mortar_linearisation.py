@@ -382,9 +382,10 @@ def remortared_pairs(pairs: SurfacePairs, reference: GatheredSurfaces, moved: Ga
     """
     cd = interface_derivatives(moved, search_distance)
     mi = cd.integrals
-    every = np.searchsorted(mi.slave_index, np.concatenate(pairs.comm.allgather(pairs.slave_blocks)))
+    gathered = pairs.comm.allgather(pairs.slave_blocks)  # every pair of the interface, in the global order
+    every = np.searchsorted(mi.slave_index, np.concatenate(gathered))
     normals, pinned = _all_normals(mi, every, moved, V, supported)
-    start = pairs.comm.exscan(pairs.num_local) or 0
+    start = sum(len(blocks) for blocks in gathered[:pairs.comm.rank])
     local = every[start:start + pairs.num_local]
     normal = normals[start:start + pairs.num_local]
     m = np.asarray(mi.M[local].sum(axis=1)).ravel()
