@@ -141,3 +141,27 @@ def test_rows_and_forces_match_global_differences(triangles):
     error_K = np.abs(terms.K[0] - fd[3:]).max() / np.abs(fd[3:]).max()
     print(f"\n  |B + W − FD|/|FD| = {error_W:.1e}, |K − FD|/|FD| = {error_K:.1e}")
     assert error_W < 1e-6 and error_K < 1e-6
+
+
+def test_normal_turned_into_a_symmetry_plane_matches_global_differences():
+    """A slave node on a symmetry plane x = const: its normal with the x component removed
+    (:func:`~dolfinx_nnqem.contact.surfaces.symmetry_normals`) turns by (I − n nᵀ) P δn_f / |P n_f|."""
+    from dolfinx_nnqem.contact.mortar_linearisation import _normal_derivative
+    from dolfinx_nnqem.contact.surfaces import symmetry_normals
+
+    block = 3  # on the patch's edge x ≈ 0
+    ids, x, slave, master = _setup(False)
+    axes = np.array([[True, False, False]])
+    cd = interface_derivatives(_surfaces(ids, x, slave, master), 1.0)
+    s = int(np.searchsorted(cd.integrals.slave_index, block))
+    given = -cd.integrals.normal[s]
+    turned = symmetry_normals(given[None], axes)[0]
+    incidence = _Incidence(cd)
+    pg, _ = pair_geometry(cd, incidence, s, turned, held_open=False)
+    dn = _normal_derivative(cd, incidence, incidence.facets(block), pg.blocks, turned, given)
+    fd = _central(lambda y: symmetry_normals(_exact(ids, y, slave, master, block, pg.blocks)[2][None], axes)[0],
+                  ids, x, pg.blocks)
+    error = np.abs(dn - fd).max() / np.abs(fd).max()
+    print(f"\n  turned normal: |dn − FD|/|FD| = {error:.1e} (turned by {np.degrees(np.arccos(given @ turned)):.2f}°)")
+    assert turned[0] == 0.0 and given[0] != 0.0 and np.abs(pg.dn - dn).max() == 0.0
+    assert error < 1e-6
