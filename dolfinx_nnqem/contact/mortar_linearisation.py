@@ -50,6 +50,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -62,6 +63,9 @@ from dolfinx_nnqem.contact.projection import _cyclic
 from dolfinx_nnqem.contact.surface_pairs import SurfacePairs, facet_size
 from dolfinx_nnqem.contact.surface_stiffness import SurfaceTerms
 from dolfinx_nnqem.contact.surfaces import GatheredSurfaces, local_frames, local_frames_derivative
+
+if TYPE_CHECKING:
+    import dolfinx
 
 __all__ = ["STEP", "CoupleDerivatives", "MortarPoints", "couple_derivatives", "interface_derivatives",
            "mortar_terms", "newell_derivative", "remortared_pairs"]
@@ -247,7 +251,8 @@ def pair_geometry(cd: CoupleDerivatives, incidence: _Incidence, s: int, normal: 
     M[np.searchsorted(cols, masters)] = mi.M.data[row]
     dM = np.zeros((c, 3 * c))
     dgt = np.zeros(3 * c)
-    at = (3 * np.searchsorted(cols, couple_nodes[active])[:, :, None] + np.arange(3)).reshape(int(active.sum()), 3 * couple_nodes.shape[1])
+    at = (3 * np.searchsorted(cols, couple_nodes[active])[:, :, None] + np.arange(3)).reshape(
+        int(active.sum()), 3 * couple_nodes.shape[1])  # (entries, P): each couple coordinate's column
     master_rows = np.searchsorted(cols, cd.master_nodes[cd.couples[couples[active], 1]])  # (entries, km)
     np.add.at(dM, (master_rows[:, :, None], at[:, None, :]), cd.dM[couples[active], vertices[active]])
     np.add.at(dgt, at, cd.dg[couples[active], vertices[active]])
@@ -320,7 +325,7 @@ def mortar_terms(points: MortarPoints, lam: np.ndarray, pairs: np.ndarray) -> li
 
 
 def _all_normals(mi: MortarIntegrals, every: np.ndarray, moved: GatheredSurfaces,
-                 V, supported: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
+                 V: dolfinx.fem.FunctionSpace | None, supported: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
     """(the unit normals of every pair of the interface (rows ``every`` of ``mi``), their pinned
     directions or None): the averaged normals, turned into the interface's symmetry planes as
     :func:`~dolfinx_nnqem.contact.surface_pairs.surface_pairs` does (collective)."""
@@ -328,7 +333,7 @@ def _all_normals(mi: MortarIntegrals, every: np.ndarray, moved: GatheredSurfaces
     from dolfinx_nnqem.contact.symmetry_planes import IN_PLANE, support_rules
 
     given = -mi.normal[every]
-    if supported is None:
+    if supported is None or V is None:
         return given, None
     M = mi.M[every]
     m = np.asarray(M.sum(axis=1)).ravel()
@@ -354,7 +359,7 @@ def _nodal(reference: GatheredSurfaces, moved: GatheredSurfaces, u_n: tuple[np.n
 
 def remortared_pairs(pairs: SurfacePairs, reference: GatheredSurfaces, moved: GatheredSurfaces,
                      u_n: tuple[np.ndarray, np.ndarray], gap_rounding: float, search_distance: float | None,
-                     V=None, supported: np.ndarray | None = None) -> tuple[SurfacePairs, MortarPoints]:
+                     V: dolfinx.fem.FunctionSpace | None = None, supported: np.ndarray | None = None) -> tuple[SurfacePairs, MortarPoints]:
     """The mortar ``pairs`` (the same slave nodes, in the same order) integrated again on the moved
     surfaces, and their :class:`MortarPoints` (collective).
 
@@ -417,5 +422,6 @@ def remortared_pairs(pairs: SurfacePairs, reference: GatheredSurfaces, moved: Ga
     np.add.at(X_master, np.repeat(np.arange(len(local)), np.diff(indptr)),
               c[:, None] * x[np.searchsorted(blocks, master_blocks)])
     new = replace(pairs, master_indptr=indptr, master_blocks=master_blocks, weights=c, X_master=X_master, R=R,
-                  g0=g0, rows=rows, support_pinned=pairs.support_pinned if pinned is None else pinned[start:start + pairs.num_local])
+                  g0=g0, rows=rows,
+                  support_pinned=pairs.support_pinned if pinned is None else pinned[start:start + pairs.num_local])
     return new, MortarPoints(geometry, normal, du_pairs)
