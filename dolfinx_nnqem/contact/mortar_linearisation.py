@@ -157,9 +157,12 @@ class CoupleDerivatives:
     dg: np.ndarray
 
 
-def interface_derivatives(moved: GatheredSurfaces, search_distance: float | None) -> CoupleDerivatives:
+def interface_derivatives(moved: GatheredSurfaces, search_distance: float | None,
+                          slave_blocks: np.ndarray | None = None) -> CoupleDerivatives:
     """The mortar integrals of the moved surfaces (master, slave) and their couples' derivatives (the
-    same candidate couples and search distance as :func:`~dolfinx_nnqem.contact.mortar.mortar_pairs`)."""
+    same candidate couples and search distance as :func:`~dolfinx_nnqem.contact.mortar.mortar_pairs`);
+    only the couples whose slave facet holds one of the nodes ``slave_blocks`` (a rank's pairs) are
+    differenced and kept (None: every couple)."""
     master, slave = moved.facets_of(0), moved.facets_of(1)
     if search_distance is None:
         search_distance = 2.0 * max(facet_size(master), facet_size(slave))
@@ -168,9 +171,13 @@ def interface_derivatives(moved: GatheredSurfaces, search_distance: float | None
     xs, perm_s = _cyclic(slave.x, slave.area)
     xm, perm_m = _cyclic(master.x, master.area)
     ci, cj = candidate_couples(xs, xm, float(search_distance))
+    nodes_s = np.take_along_axis(slave.nodes, perm_s, axis=1)
+    if slave_blocks is not None:
+        wanted = np.isin(nodes_s[ci], slave_blocks).any(axis=1)
+        ci, cj = ci[wanted], cj[wanted]
     dM, dg = couple_derivatives(xs, xm, ci, cj, STEP * facet_size(slave))
-    return CoupleDerivatives(mi, np.take_along_axis(slave.nodes, perm_s, axis=1),
-                             np.take_along_axis(master.nodes, perm_m, axis=1), xs, np.column_stack([ci, cj]), dM, dg)
+    return CoupleDerivatives(mi, nodes_s, np.take_along_axis(master.nodes, perm_m, axis=1), xs,
+                             np.column_stack([ci, cj]), dM, dg)
 
 
 @dataclass(frozen=True)
@@ -385,7 +392,7 @@ def remortared_pairs(pairs: SurfacePairs, reference: GatheredSurfaces, moved: Ga
     the slave node or in M's row), and their :class:`MortarPoints`. A pair whose node is covered
     less than :data:`~dolfinx_nnqem.contact.mortar.MIN_COVERED` is held open (module docstring).
     """
-    cd = interface_derivatives(moved, search_distance)
+    cd = interface_derivatives(moved, search_distance, pairs.slave_blocks)
     mi = cd.integrals
     gathered = pairs.comm.allgather(pairs.slave_blocks)  # every pair of the interface, in the global order
     every = np.searchsorted(mi.slave_index, np.concatenate(gathered))
