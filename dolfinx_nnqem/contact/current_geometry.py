@@ -19,10 +19,10 @@ N_k(ξ*) of the evaluation point u*, and the gap is its first-order expansion ab
 so that the model's g = g0 + (B u + m)_n equals the current distance at u = u*. For a rigid
 obstacle n* is the exact derivative of the signed distance, so re-evaluating at the converged u
 and solving again is a Newton iteration on the geometry (:func:`dolfinx_nnqem.solvers.stepping`
-repeats the increment until a solve starts converged). The monolithic solver evaluates obstacles
-and node-to-surface pairs at every Newton iterate instead, with the derivatives of the geometry in
-its Newton matrix (:mod:`~dolfinx_nnqem.contact.geometric_stiffness`,
-:mod:`~dolfinx_nnqem.contact.surface_stiffness`).
+repeats the increment until a solve starts converged). The monolithic solver evaluates obstacles,
+node-to-surface and mortar pairs at every Newton iterate instead, with the derivatives of the
+geometry in its Newton matrix (:mod:`~dolfinx_nnqem.contact.geometric_stiffness`,
+:mod:`~dolfinx_nnqem.contact.surface_stiffness`, :mod:`~dolfinx_nnqem.contact.mortar_linearisation`).
 
 Pairs are known by their slave node (per interface): the pair unknowns z (in the pair's local
 frame) and the states follow the slave node from one evaluation to the next; a new pair starts

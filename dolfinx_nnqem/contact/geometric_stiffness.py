@@ -24,8 +24,8 @@ normal row. ∂r_i/∂x = ∂r_i/∂n · ∂n/∂x with ∂n/∂x the obstacle's
 p_n ∂n/∂x remains; the frame's rotation enters with friction (q ≠ 0, and the slip a ≠ 0).
 
 Node-to-surface pairs have theirs in :mod:`~dolfinx_nnqem.contact.surface_stiffness` (their closest
-point moves too, and the force acts on the master nodes); mortar pairs stay frozen within a solve
-(``docs/theory.md``, "Large sliding").
+point moves too, and the force acts on the master nodes), dual mortar pairs in
+:mod:`~dolfinx_nnqem.contact.mortar_linearisation` (``docs/theory.md``, "Large sliding").
 """
 
 from __future__ import annotations

@@ -24,8 +24,10 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from dolfinx_nnqem.contact.current_geometry import (EDGE_ALLOWANCE, MortarTracker, ObstacleTracker, SurfaceTracker,
-                                                     displacement_at, moved_surfaces, surface_tracker)
+                                                     displacement_at, moved_surfaces, surface_tracker,
+                                                     with_moved_normals)
 from dolfinx_nnqem.contact.discretisation import discretise
+from dolfinx_nnqem.contact.mortar_linearisation import MortarPoints, mortar_terms, remortared_pairs
 from dolfinx_nnqem.contact.geometric_stiffness import GeometricTerms, no_terms, obstacle_terms
 from dolfinx_nnqem.contact.obstacles import ObstaclePairs, RigidObstacle, obstacle_pairs
 from dolfinx_nnqem.contact.pairset import PairSet
@@ -204,7 +206,7 @@ class ContactGeometry:
         self._facet_sizes: list[float] | None = None  # of the interfaces' slave surfaces, at the first slip check
         self._supports: dict[int, tuple[np.ndarray, np.ndarray] | None] = {}  # per interface: its nodes' supports
         self._surfaces_at: np.ndarray | None = None  # where refresh_surfaces last evaluated
-        self._closest_points: dict[int, ClosestPoints] = {}  # of the interfaces refresh_surfaces evaluated
+        self._closest_points: dict[int, ClosestPoints | MortarPoints] = {}  # of the interfaces refresh_surfaces evaluated
 
     # -- which interfaces follow the bodies ---------------------------------------------------------
     @property
@@ -369,18 +371,19 @@ class ContactGeometry:
 
     @property
     def reprojecting(self) -> list[bool]:
-        """Per interface: True if :meth:`refresh_surfaces` re-evaluates it (node-to-surface in the
-        current geometry)."""
-        return [isinstance(t, SurfaceTracker) for t in self._trackers]
+        """Per interface: True if :meth:`refresh_surfaces` re-evaluates it (node-to-surface and mortar in
+        the current geometry)."""
+        return [isinstance(t, (SurfaceTracker, MortarTracker)) for t in self._trackers]
 
     def refresh_surfaces(self, u: dolfinx.fem.Function, u_n: dolfinx.fem.Function, load_factor_n: float) -> None:
-        """Re-evaluate the node-to-surface interfaces of :attr:`reprojecting` at u, keeping their pairs
-        (collective): every slave node is projected again onto the moved master (onto another facet
-        if it slid there), its frame, weights and gap follow; w_n is measured again. Where B's pattern
-        stays the model is refilled in place, else its pairs are replaced (the same pairs, in the same
-        order: z stays) and :attr:`version` moves on. This is what the monolithic solver calls at every
-        Newton iterate (:mod:`~dolfinx_nnqem.contact.surface_stiffness`); nothing is done when u and
-        u_n are where the last refresh had them."""
+        """Re-evaluate the node-to-surface and mortar interfaces of :attr:`reprojecting` at u, keeping their
+        pairs (collective): every slave node is projected again onto the moved master (onto another
+        facet if it slid there), or the mortar integrals are computed again on the moved surfaces; the
+        frames, weights and gaps follow; w_n is measured again. Where B's pattern stays the model is
+        refilled in place, else its pairs are replaced (the same pairs, in the same order: z stays) and
+        :attr:`version` moves on. This is what the monolithic solver calls at every Newton iterate
+        (:mod:`~dolfinx_nnqem.contact.surface_stiffness`, :mod:`~dolfinx_nnqem.contact.mortar_linearisation`);
+        nothing is done when u and u_n are where the last refresh had them."""
         key = np.concatenate([u.x.array, u_n.x.array])
         same = (self._surfaces_at is not None and len(key) == len(self._surfaces_at)
                 and bool(np.array_equal(key, self._surfaces_at)))
@@ -388,10 +391,11 @@ class ContactGeometry:
             return
         interfaces, new = self._model.interfaces, {}
         for k, tracker in enumerate(self._trackers):
-            if self.reprojecting[k]:
-                assert isinstance(tracker, SurfaceTracker)  # reprojecting: a node-to-surface tracker
+            if isinstance(tracker, SurfaceTracker):
                 new[k], self._closest_points[k] = _reprojected(interfaces[k].pairs, tracker, u, u_n,
                                                                self._supports_of(k, tracker))
+            elif isinstance(tracker, MortarTracker):
+                new[k], self._closest_points[k] = _remortared(interfaces[k].pairs, tracker, u, u_n)
         kept = all(np.array_equal(p.rows.indptr, interfaces[k].pairs.rows.indptr)
                    and np.array_equal(p.rows.columns, interfaces[k].pairs.rows.columns) for k, p in new.items())
         if self._comm.allreduce(kept, op=MPI.LAND):
@@ -401,8 +405,8 @@ class ContactGeometry:
             self.version += 1
         for k, pairs in new.items():
             tracker = self._trackers[k]
-            assert isinstance(tracker, SurfaceTracker)
-            tracker.facets = tracker.gathered_facets(pairs)
+            if isinstance(tracker, SurfaceTracker):
+                tracker.facets = tracker.gathered_facets(pairs)
         self._surfaces_at = key
 
     def _supports_of(self, k: int, tracker: SurfaceTracker) -> tuple[np.ndarray, np.ndarray] | None:
@@ -422,7 +426,10 @@ class ContactGeometry:
         out = []
         for k, points in sorted(self._closest_points.items()):
             local = self._model.interfaces[k].local
-            out.append(surface_terms(points, lam[local], np.arange(local.start, local.stop)))
+            if isinstance(points, MortarPoints):
+                out += mortar_terms(points, lam[local], np.arange(local.start, local.stop))
+            else:
+                out.append(surface_terms(points, lam[local], np.arange(local.start, local.stop)))
         return out
 
     # -- checkpoints --------------------------------------------------------------------------------
@@ -454,6 +461,16 @@ def _reprojected(pairs: PairSet, tracker: SurfaceTracker, u, u_n, supports: tupl
         known = Supports(slave, supports[1], IN_PLANE * size)
     return reprojected_pairs(pairs, tracker.surfaces, moved_surfaces(tracker.surfaces, u), u_n_slave, u_n_master,
                              tracker.gap_rounding, EDGE_ALLOWANCE * size, size, known)
+
+
+def _remortared(pairs: PairSet, tracker: MortarTracker, u, u_n) -> tuple[SurfacePairs, MortarPoints]:
+    """The interface's mortar pairs integrated again at u, and their derivatives (collective;
+    :mod:`~dolfinx_nnqem.contact.mortar_linearisation`)."""
+    assert isinstance(pairs, SurfacePairs)  # a mortar tracker's pairs
+    surfaces = tracker.surfaces
+    u_n_nodes = (displacement_at(u_n, surfaces.nodes[0].index), displacement_at(u_n, surfaces.nodes[1].index))
+    return remortared_pairs(pairs, surfaces, with_moved_normals(moved_surfaces(surfaces, u)), u_n_nodes,
+                            tracker.gap_rounding, tracker.search_distance, tracker.V, tracker.supported)
 
 
 def _pairs_or_lost(interface: TrackedInterface, tracker: GeometryTracker, u, load_factor: float) -> PairSet:

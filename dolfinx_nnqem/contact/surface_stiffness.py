@@ -324,7 +324,12 @@ def stiffness_matrix(terms: Sequence[SurfaceTerms], free: Sequence[np.ndarray], 
 
 def surface_terms(points: ClosestPoints, lam: np.ndarray, pairs: np.ndarray) -> SurfaceTerms:
     """The :class:`SurfaceTerms` of the local pairs ``pairs`` at ``points`` with forces ``lam``, their
-    columns put in B's (ascending) order."""
+    columns put in B's (ascending) order. A rank without pairs (on 3 ranks, the slave surface may lie on
+    two of them) gets empty terms with the pair's c = 3 (1 + m) columns."""
+    if len(points.blocks) == 0:
+        c = 3 * points.blocks.shape[1]
+        return SurfaceTerms(np.zeros(0, dtype=np.int64), np.zeros((0, c), dtype=np.int64), np.zeros((0, c, c)),
+                            np.zeros((0, 3, c)))
     K, W = pair_terms(points, lam)
     order = np.argsort(points.blocks, axis=1, kind="stable")
     take = (3 * order[:, :, None] + np.arange(3)).reshape(len(order), -1)

@@ -111,8 +111,9 @@ class MonolithicSolver(ReleasesPETSc):
 
     @property
     def consistent_surfaces(self) -> bool:
-        """True if current-geometry node-to-surface pairs are re-evaluated at every iterate, their geometric
-        terms in J (:mod:`~dolfinx_nnqem.contact.surface_stiffness`; the direct solver: the iterative one's
+        """True if current-geometry node-to-surface and mortar pairs are re-evaluated at every iterate, their
+        geometric terms in J (:mod:`~dolfinx_nnqem.contact.surface_stiffness`,
+        :mod:`~dolfinx_nnqem.contact.mortar_linearisation`; the direct solver: the iterative one's
         augmented system has no room for blocks that couple the two bodies, so it keeps their geometry
         frozen within a solve)."""
         model = self.problem.contact
@@ -167,7 +168,7 @@ class MonolithicSolver(ReleasesPETSc):
         self._augmented = self._augmented_system_of_pairs()
 
     def _refresh_geometry(self) -> None:
-        """The current-geometry obstacles' and node-to-surface pairs re-evaluated at the iterate (u, ℓ)
+        """The current-geometry obstacles', node-to-surface and mortar pairs re-evaluated at the iterate (u, ℓ)
         (collective; nothing to do unless :attr:`consistent_geometry` or :attr:`consistent_surfaces`,
         or if the iterate has not moved)."""
         p = self.problem

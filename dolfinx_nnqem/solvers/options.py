@@ -103,11 +103,13 @@ class MonolithicOptions:
     max_forcing
         Iterative solver: the loosest Krylov tolerance of a Newton step, in (0, 0.9].
     consistent_geometry
-        Current-geometry rigid obstacles and node-to-surface pairs: re-evaluate them at every Newton
-        iterate and add the geometric terms (the normal's and the friction frame's rotation; for
-        node-to-surface also the closest point's motion over the master facet) to the Newton matrix
-        (:mod:`~dolfinx_nnqem.contact.geometric_stiffness`,
-        :mod:`~dolfinx_nnqem.contact.surface_stiffness`; node-to-surface with the direct linear solver);
+        Current-geometry rigid obstacles, node-to-surface and dual mortar pairs: re-evaluate them at every
+        Newton iterate and add the geometric terms (the normal's and the friction frame's rotation; for
+        node-to-surface also the closest point's motion over the master facet, for mortar the motion of
+        the weights M_jk / m_j and of the weighted gap) to the Newton matrix
+        (:mod:`~dolfinx_nnqem.contact.geometric_stiffness`, :mod:`~dolfinx_nnqem.contact.surface_stiffness`,
+        :mod:`~dolfinx_nnqem.contact.mortar_linearisation`; node-to-surface and mortar with the direct
+        linear solver);
         False freezes the geometry within a solve and leaves it to load stepping's repeated solves, as
         NNEQM1 does (``docs/theory.md``).
     globalisation

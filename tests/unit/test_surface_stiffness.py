@@ -164,3 +164,17 @@ def test_projection_onto_given_facets_is_the_single_facet_projection(facet):
         for name in ("xi", "N", "point", "normal", "g0", "distance", "tangential_offset"):
             assert np.array_equal(getattr(q, name)[i], getattr(one, name)[0]), name
     assert np.array_equal(q.facet, which)
+
+
+def test_a_rank_without_pairs_gets_empty_terms():
+    """On 3 ranks a rank may own no slave node of the interface: its terms are empty (the matrices they
+    go into are assembled collectively, so it must still take part), not a failed reshape."""
+    from dolfinx_nnqem.contact.surface_stiffness import surface_terms
+
+    x, x_n, _ = _state(QUADRILATERAL)
+    one = _points(x, x_n)
+    none = ClosestPoints(*(getattr(one, f)[:0] for f in ("x_s", "x_m", "xi", "interior", "normal", "du_s", "du_m",
+                                                         "blocks")))
+    terms = surface_terms(none, np.zeros((0, 3)), np.zeros(0, dtype=np.int64))
+    assert len(terms) == 0 and terms.columns.shape == (0, 15) and terms.K.shape == (0, 15, 15)
+    assert terms.W.shape == (0, 3, 15)
