@@ -44,6 +44,7 @@ from dolfinx_nnqem.contact.laws import STATE_NAMES
 from dolfinx_nnqem.io.deformed_fields import writes_deformed_mesh
 from dolfinx_nnqem.io.field_series import CellField, FieldSeriesWriter
 from dolfinx_nnqem.io.locking import OutputLock, clear_outputs, previous_outputs
+from dolfinx_nnqem.io.obstacle_shapes import obstacle_records
 from dolfinx_nnqem.io.quadratic_fields import QuadraticFieldWriter, writes_quadratic_fields
 from dolfinx_nnqem.io.run_pictures import (ALL_PICTURES, PictureDrawer, draw_live_pictures, missing_pictures,
                                           pictures_enabled)
@@ -198,6 +199,7 @@ class SummaryWriter:
             "load_factors": [], "iterations": [], "residual_histories": [], "checks": [],
             "plastic_gauss_points": [], "num_gauss_points": problem.state.num_gauss_points(),
             "num_pairs": problem.num_pairs, "wall_time_s": 0.0, "mpi_ranks": problem.comm.size,
+            "kinematics": getattr(problem, "kinematics", "small"),
         }
         if extra:
             self.data.update(extra)
@@ -243,6 +245,7 @@ class SummaryWriter:
         if eq["obstacle_forces"]:
             d["obstacle_forces"] = {k: v.tolist() for k, v in eq["obstacle_forces"].items()}
             d.setdefault("obstacle_force_history", []).append(d["obstacle_forces"])
+            d["obstacles"] = obstacle_records(p, result.load_factor)  # where the pictures draw them
         d["reaction_sum"] = eq["reaction_sum"].tolist()
         d["equilibrium_residual"] = eq["global_imbalance"]
         d["free_dof_residual"] = eq["residual_norm"]

@@ -157,7 +157,7 @@ def test_a_degree_2_run_draws_its_quadratic_displacement(tmp_path, monkeypatch):
     vertex values of fields.xdmf."""
     import pyvista
 
-    from dolfinx_nnqem.io import run_pictures
+    from dolfinx_nnqem.io import deformed_picture, run_pictures
     from dolfinx_nnqem.io.reader import read_fields
 
     monkeypatch.delenv(ENV_SWITCH, raising=False)
@@ -175,7 +175,7 @@ def test_a_degree_2_run_draws_its_quadratic_displacement(tmp_path, monkeypatch):
     vertices = read_fields(out, last_only=True)[-1]["geometry"]
     expected = _nodes_and_displacements(quadratic.points, quadratic.point_data["u"])
     for where, step in zip(("end of the run", "plot"), drawn):
-        grid, _ = run_pictures._field_grid(step, 1.0)
+        grid, _ = deformed_picture._field_grid(step, 1.0)
         print(f"\n  {where}: {grid.n_points} nodes, {grid.n_cells} cells of VTK type {grid.celltypes[0]} drawn "
               f"(fields_p2.pvd: {quadratic.n_points} nodes; fields.xdmf: {len(vertices)} vertices)", end="")
         assert grid.n_points == quadratic.n_points > len(vertices)

@@ -24,12 +24,14 @@ INCREMENTS = 2
 
 
 def write_run(folder: str | Path, kinematics: str = "finite", deformed_mesh: bool | None = None,
-              depth: float = 0.05) -> None:
-    """Solve the sphere pressed ``depth`` into the block and write its outputs into ``folder`` (collective)."""
+              depth: float = 0.05):
+    """Solve the sphere pressed ``depth`` into the block and write its outputs into ``folder``
+    (collective); returns the problem, solved."""
     problem = sphere_into_block(kinematics=kinematics, depth=depth)
     with ResultsWriter(problem, "monolithic", folder, INCREMENTS, pictures=False, deformed_mesh=deformed_mesh) as writer:
         with make_solver("monolithic", problem, SolverOptions(rtol=1e-10)) as solver:
             solve_load_steps(problem, solver, INCREMENTS, callbacks=[writer])
+    return problem
 
 
 if __name__ == "__main__":
