@@ -22,7 +22,7 @@ from dolfinx_nnqem.io.live_fields import LINEAR_VTK_CELLS
 from dolfinx_nnqem.io.obstacle_shapes import add_obstacles, view_box
 from dolfinx_nnqem.io.offscreen import offscreen_plotter
 
-__all__ = ["STATE_COLOURS", "VTK_CELLS", "deformed_plotter", "draw_deformed"]
+__all__ = ["LABELS", "STATE_COLOURS", "VTK_CELLS", "DeformedScene", "deformed_plotter", "draw_deformed"]
 
 STATE_COLOURS = {"open": "white", "stick": "royalblue", "slip": "crimson"}
 _log = logging.getLogger("dolfinx_nnqem")
@@ -136,9 +136,7 @@ def deformed_plotter(step: dict, rows: list[dict], *, title: str = "", scale: fl
     if field not in grid.cell_data:
         raise ValueError(f"field {field!r}: the results hold {sorted(grid.cell_data)}")
     plotter = offscreen_plotter((1200, 800))
-    label = {"von_mises": "von Mises stress (Pa)", "p": "equivalent plastic strain p",
-             "error_indicator": "error indicator eta_K (sqrt J)"}.get(field, field)
-    plotter.add_mesh(grid, scalars=field, show_edges=True, cmap="viridis", scalar_bar_args={"title": label})
+    _add_bodies(plotter, grid, field)
     plastic_zone = "p" in grid.cell_data and np.any(grid.cell_data["p"] > 0)
     if plastic_zone:
         plastic = grid.extract_cells(np.flatnonzero(grid.cell_data["p"] > 0))
@@ -163,12 +161,60 @@ def deformed_plotter(step: dict, rows: list[dict], *, title: str = "", scale: fl
     return plotter
 
 
+LABELS = {"von_mises": "von Mises stress (Pa)", "p": "equivalent plastic strain p",
+          "error_indicator": "error indicator eta_K (sqrt J)"}
+"""The colour bar's title of each cell field (any other: its name)."""
+
+
+def _add_bodies(plotter, grid, field: str) -> None:
+    """The deformed bodies coloured by the cell field ``field`` (actor ``bodies``), its colour bar."""
+    plotter.add_mesh(grid, scalars=field, show_edges=True, cmap="viridis", name="bodies",
+                     scalar_bar_args={"title": LABELS.get(field, field)})
+
+
+class DeformedScene:
+    """The scene of :func:`deformed_plotter`, made once and saved coloured by one cell field after
+    another (``deformed.png``, then ``error_indicator.png``): only the bodies' colours and the
+    colour bar change between them, not the mesh, the plastic zone, the pairs or the obstacles.
+
+    Parameters are those of :func:`deformed_plotter` but ``field``, given to :meth:`draw`.
+    """
+
+    def __init__(self, step: dict, rows: list[dict], *, title: str = "", scale: float | None = None,
+                 camera: str = "iso", obstacles: Mapping[str, Mapping[str, Any]] | None = None):
+        self.step, self.rows = step, rows
+        self.options: dict[str, Any] = {"title": title, "scale": scale, "camera": camera, "obstacles": obstacles}
+        self.plotter: Any = None  #: the pyvista plotter, made at the first :meth:`draw`
+        self.field: str | None = None  #: the field the bodies are coloured by
+
+    def draw(self, field: str, path: Path) -> Path:
+        """The scene coloured by ``field`` into the PNG file ``path``."""
+        if self.plotter is None:
+            self.plotter = deformed_plotter(self.step, self.rows, field=field, **self.options)
+        elif field != self.field:
+            grid = self.plotter.actors["bodies"].mapper.dataset
+            if field not in grid.cell_data:
+                raise ValueError(f"field {field!r}: the results hold {sorted(grid.cell_data)}")
+            self.plotter.remove_scalar_bar(LABELS.get(self.field or "", self.field))
+            _add_bodies(self.plotter, grid, field)  # (replaces the actor of that name)
+        self.field = field
+        self.plotter.screenshot(str(path))
+        return path
+
+    def close(self) -> None:
+        """Free the plotter (its render window)."""
+        if self.plotter is not None:
+            self.plotter.close()
+            self.plotter = None
+
+
 def draw_deformed(step: dict, rows: list[dict], path: Path, *, title: str = "", scale: float | None = None,
                   field: str = "von_mises", camera: str = "iso",
                   obstacles: Mapping[str, Mapping[str, Any]] | None = None) -> Path:
     """The deformed shape coloured by ``field``, the plastic zone outlined, pairs by state, the
     rigid obstacles where they stand (:func:`deformed_plotter`), into the PNG file ``path``."""
-    plotter = deformed_plotter(step, rows, title=title, scale=scale, field=field, camera=camera, obstacles=obstacles)
-    plotter.screenshot(str(path))
-    plotter.close()
-    return path
+    scene = DeformedScene(step, rows, title=title, scale=scale, camera=camera, obstacles=obstacles)
+    try:
+        return scene.draw(field, path)
+    finally:
+        scene.close()

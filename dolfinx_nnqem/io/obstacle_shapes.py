@@ -86,9 +86,13 @@ def _surface(record: Mapping[str, Any], shift: np.ndarray, box: tuple[float, ...
     if kind == "cylinder":
         axis = _unit(record["axis"])
         point = np.asarray(record["point"], float) + shift
-        middle = point + ((centre - point) @ axis) * axis  # the axis point nearest the box's centre
-        return pyvista.Cylinder(center=middle, direction=axis, radius=float(record["radius"]), height=reach,
-                                resolution=RESOLUTION, capping=False)
+        # along its axis the cylinder spans the box (a hair less: its capped ends stay inside the
+        # clip), so that a view along the axis shows its end face, not the inside of a tube
+        corners = np.array(np.meshgrid(box[0:2], box[2:4], box[4:6])).reshape(3, -1).T
+        along = (corners - point) @ axis
+        middle = point + 0.5 * (along.min() + along.max()) * axis
+        return pyvista.Cylinder(center=middle, direction=axis, radius=float(record["radius"]),
+                                height=0.999 * float(np.ptp(along)), resolution=RESOLUTION, capping=True)
     if kind == "plane":
         normal = _unit(record["normal"])
         point = np.asarray(record["point"], float) + shift

@@ -47,7 +47,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 
 import dolfinx_nnqem.io.plots as plots
-from dolfinx_nnqem.io.deformed_picture import _with_quadratic_displacement, draw_deformed
+from dolfinx_nnqem.io.deformed_picture import DeformedScene, _with_quadratic_displacement, draw_deformed  # noqa: F401
 from dolfinx_nnqem.io.estimate_pictures import ESTIMATE_PICTURE, draw_error_estimates
 from dolfinx_nnqem.io.offscreen import PictureUnavailable
 from dolfinx_nnqem.io.reader import read_pairs, read_summary, start_reading_fields
@@ -371,13 +371,16 @@ def _draw_curves(out: Path, names: Collection[str], summary: dict, rows: list[di
 def _draw_fields(out: Path, names: Collection[str], last: dict, rows: list[dict], done: dict[str, Path | str], *,
                  title: str, scale: float | None, field: str, camera: str, obstacles: dict | None) -> None:
     """The pictures of ``names`` drawn on the deformed mesh of the ``last`` field step, with the
-    rigid ``obstacles`` of ``summary.json``: ``deformed.png`` and ``error_indicator.png``."""
-    if "deformed.png" in names:
-        _attempt(done, out, "deformed.png", draw_deformed, last, rows, title=title, scale=scale, field=field,
-                 camera=camera, obstacles=obstacles)
-    if "error_indicator.png" in names and "error_indicator" in last:  # (written by the command line)
-        _attempt(done, out, "error_indicator.png", draw_deformed, last, rows, title=title, scale=scale,
-                 field="error_indicator", camera=camera, obstacles=obstacles)
+    rigid ``obstacles`` of ``summary.json``: ``deformed.png`` and ``error_indicator.png``, one
+    scene coloured in turn by ``field`` and by the error indicator (:class:`DeformedScene`)."""
+    scene = DeformedScene(last, rows, title=title, scale=scale, camera=camera, obstacles=obstacles)
+    try:
+        if "deformed.png" in names:
+            _attempt(done, out, "deformed.png", scene.draw, field)
+        if "error_indicator.png" in names and "error_indicator" in last:  # (written by the command line)
+            _attempt(done, out, "error_indicator.png", scene.draw, "error_indicator")
+    finally:
+        scene.close()
 
 
 CONTACT_PICTURE = "contact_pressure.png"

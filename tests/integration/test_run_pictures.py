@@ -162,10 +162,13 @@ def test_a_degree_2_run_draws_its_quadratic_displacement(tmp_path, monkeypatch):
 
     monkeypatch.delenv(ENV_SWITCH, raising=False)
     drawn: list[dict] = []
-    draw = run_pictures.draw_deformed
-    monkeypatch.setattr(run_pictures, "draw_deformed",  # (deformed.png's calls: error_indicator.png draws too)
-                        lambda step, *a, **k: (k.get("field") == "error_indicator" or drawn.append(step),
-                                               draw(step, *a, **k))[1])
+
+    class Recorded(deformed_picture.DeformedScene):  # one scene for deformed.png and error_indicator.png
+        def __init__(self, step, *args, **kwargs):
+            drawn.append(step)
+            super().__init__(step, *args, **kwargs)
+
+    monkeypatch.setattr(run_pictures, "DeformedScene", Recorded)
     out = tmp_path / "out"
     assert main(["-q", "run", str(_degree_2_problem(tmp_path)), "--increments", "1", "--out", str(out)]) == EXIT_OK
     assert main(["-q", "plot", str(out), "--out", str(tmp_path / "redrawn")]) == EXIT_OK
