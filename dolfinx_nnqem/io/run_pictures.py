@@ -107,6 +107,18 @@ def _matplotlib():
     return plt
 
 
+def _curve_margins(fig) -> None:
+    """Fixed margins (inches) for a row of curve panels whose y tick labels have a bounded width:
+    the load factor (0 to 1) and the relative residuals of a log axis ("1e−16"). ``tight_layout``
+    found about the same margins, but it costs a second pass over the ticks and texts, a third of
+    these figures' drawing time."""
+    width, height = fig.get_size_inches()
+    panels = len(fig.axes)
+    left, right, gap, bottom, top = 0.85, 0.3, 0.85, 0.6, 0.55
+    fig.subplots_adjust(left=left / width, right=1 - right / width, bottom=bottom / height, top=1 - top / height,
+                        wspace=gap / ((width - left - right - gap * (panels - 1)) / panels))
+
+
 def _title(summary: dict) -> str:
     """What the run is and how far it got (a failed run says where it stopped)."""
     factors = summary.get("load_factors", [])
@@ -201,7 +213,7 @@ def draw_load_curve(summary: dict, path: Path, *, title: str = "") -> Path:
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=7, loc="best")
     fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
+    _curve_margins(fig)  # (not tight_layout: a second layout pass)
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return path
@@ -231,7 +243,7 @@ def draw_convergence(summary: dict, path: Path, *, title: str = "") -> Path:
         if len(histories) <= 12:
             ax.legend(fontsize=7)
     fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
+    _curve_margins(fig)  # (not tight_layout: a second layout pass)
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return path
