@@ -109,10 +109,27 @@ def obstacle_surfaces(records: Mapping[str, Mapping[str, Any]], box: tuple[float
     surfaces = {}
     for name, record in records.items():
         shift = scale * np.asarray(record.get("displacement", (0.0, 0.0, 0.0)), dtype=float)
-        clipped = _surface(record, shift, box).clip_box(list(box), invert=False)
+        clipped = _clipped(_surface(record, shift, box), box)
         if clipped.n_cells:
             surfaces[name] = clipped
     return surfaces
+
+
+def _clipped(surface: pyvista.PolyData, box: tuple[float, ...]) -> pyvista.PolyData:
+    """The part of ``surface`` inside ``box``, cut exactly along its faces: VTK's vtkClipPolyData
+    with the box's implicit function (``clip_box``'s vtkBoxClipDataSet left a plane's triangles
+    whole, outside the box, with Debian's VTK 9.3)."""
+    from vtkmodules.vtkCommonDataModel import vtkBox
+    from vtkmodules.vtkFiltersCore import vtkClipPolyData
+
+    inside = vtkBox()
+    inside.SetBounds(*box)
+    clip = vtkClipPolyData()
+    clip.SetInputData(surface)
+    clip.SetClipFunction(inside)
+    clip.InsideOutOn()  # keep where the box's function is negative: inside it
+    clip.Update()
+    return pyvista_compat.import_pyvista().wrap(clip.GetOutput())
 
 
 def add_obstacles(plotter: pyvista.Plotter, records: Mapping[str, Mapping[str, Any]], box: tuple[float, ...],

@@ -31,7 +31,8 @@ CHORD = 1 - np.cos(np.pi / 64)  # how far a facet of the drawn sphere or cylinde
 @pytest.mark.parametrize("scale", [1.0, 20.0])
 def test_each_obstacle_is_drawn_where_it_stands(scale):
     d = np.array([0.0, -0.01, 0.0])
-    records = {"ball": {"type": "sphere", "centre": [0.0, 0.5, 0.0], "radius": 0.3, "displacement": d.tolist()},
+    # the ball sticks out of the view's top (y = 1) when scale = 1: it is cut there
+    records = {"ball": {"type": "sphere", "centre": [0.0, 0.9, 0.0], "radius": 0.3, "displacement": d.tolist()},
                "roller": {"type": "cylinder", "point": [0.0, 0.5, 0.0], "axis": [0.0, 0.0, 2.0], "radius": 0.3,
                           "displacement": d.tolist()},
                "floor": {"type": "plane", "point": [0.0, -0.5, 0.0], "normal": [0.0, 1.0, 0.0],
@@ -43,7 +44,9 @@ def test_each_obstacle_is_drawn_where_it_stands(scale):
     for name, surface in surfaces.items():
         x = np.asarray(surface.points)
         assert np.all(x >= np.array(BOX[::2]) - 1e-9) and np.all(x <= np.array(BOX[1::2]) + 1e-9), name
-    ball = np.linalg.norm(np.asarray(surfaces["ball"].points) - (np.array([0.0, 0.5, 0.0]) + shift), axis=1)
+    ball_points = np.asarray(surfaces["ball"].points)
+    ball = np.linalg.norm(ball_points - (np.array([0.0, 0.9, 0.0]) + shift), axis=1)[ball_points[:, 1] < 1.0 - 1e-6]
+    assert ball_points[:, 1].max() == pytest.approx(min(1.0, 1.2 + shift[1]), abs=CHORD * 0.3 + 1e-6)
     roller = np.linalg.norm((np.asarray(surfaces["roller"].points) - (np.array([0.0, 0.5, 0.0]) + shift))[:, :2], axis=1)
     side = np.abs(np.abs(np.asarray(surfaces["roller"].points)[:, 2]) - 0.999) > 1e-6  # not on an end face
     floor = np.asarray(surfaces["floor"].points)[:, 1] - (-0.5 + shift[1])
