@@ -92,7 +92,7 @@ def _surface(record: Mapping[str, Any], shift: np.ndarray, box: tuple[float, ...
         along = (corners - point) @ axis
         middle = point + 0.5 * (along.min() + along.max()) * axis
         return pyvista.Cylinder(center=middle, direction=axis, radius=float(record["radius"]),
-                                height=0.999 * float(np.ptp(along)), resolution=RESOLUTION, capping=True)
+                                height=0.999 * float(np.ptp(along)), resolution=RESOLUTION, capping=True).triangulate()
     if kind == "plane":
         normal = _unit(record["normal"])
         point = np.asarray(record["point"], float) + shift
@@ -116,20 +116,27 @@ def obstacle_surfaces(records: Mapping[str, Mapping[str, Any]], box: tuple[float
 
 
 def _clipped(surface: pyvista.PolyData, box: tuple[float, ...]) -> pyvista.PolyData:
-    """The part of ``surface`` inside ``box``, cut exactly along its faces: VTK's vtkClipPolyData
-    with the box's implicit function (``clip_box``'s vtkBoxClipDataSet left a plane's triangles
-    whole, outside the box, with Debian's VTK 9.3)."""
-    from vtkmodules.vtkCommonDataModel import vtkBox
+    """The part of ``surface`` inside ``box``, cut exactly along its six faces: one
+    vtkClipPolyData per face, each with the face's plane (a linear function: a cut along a
+    triangle's edge is exact, where one cut by the box's function, piecewise linear, lost most of
+    a cylinder's end face; and ``clip_box``'s vtkBoxClipDataSet left a plane's triangles whole,
+    outside the box, with Debian's VTK 9.3)."""
+    from vtkmodules.vtkCommonDataModel import vtkPlane
     from vtkmodules.vtkFiltersCore import vtkClipPolyData
 
-    inside = vtkBox()
-    inside.SetBounds(*box)
-    clip = vtkClipPolyData()
-    clip.SetInputData(surface)
-    clip.SetClipFunction(inside)
-    clip.InsideOutOn()  # keep where the box's function is negative: inside it
-    clip.Update()
-    return pyvista_compat.import_pyvista().wrap(clip.GetOutput())
+    data = surface
+    for axis in range(3):
+        for side, bound in ((-1.0, box[2 * axis]), (1.0, box[2 * axis + 1])):
+            face = vtkPlane()
+            face.SetOrigin(*[bound if k == axis else 0.0 for k in range(3)])
+            face.SetNormal(*[side if k == axis else 0.0 for k in range(3)])  # outward
+            clip = vtkClipPolyData()
+            clip.SetInputData(data)
+            clip.SetClipFunction(face)
+            clip.InsideOutOn()  # keep the side the normal points away from: inside the box
+            clip.Update()
+            data = clip.GetOutput()
+    return pyvista_compat.import_pyvista().wrap(data)
 
 
 def add_obstacles(plotter: pyvista.Plotter, records: Mapping[str, Mapping[str, Any]], box: tuple[float, ...],
