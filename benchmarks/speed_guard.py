@@ -18,7 +18,11 @@ the median of the pairwise ratios is printed with their spread:
 * in this process: NNEQM1 against the monolithic solver (direct) on the sphere slid over a block
   in the current geometry (``--slide-n``³ hexahedra, 10 increments; issue 43, "Speed, second round"),
   with both methods' outer/Newton iterations, solves per increment and NNEQM1's factorisations;
-* counts that do not depend on the machine: Newton and Krylov iterations, AMG set-ups.
+* counts that do not depend on the machine: Newton and Krylov iterations, AMG set-ups;
+* what the end-of-run pictures add (issue 43): ``dolfinx-nnqem run demos/two_beams.toml`` with its
+  pictures against ``--no-pictures``, in turn: the median of the pairwise differences of CPU
+  seconds (the process and the children it waited for: the picture worker too) and of wall
+  seconds; absolute seconds, so compare them only at a like load (``docs/performance.md``).
 
 Compare its output with the one in ``docs/performance.md`` (the last run of the issue's
 closing note): a ratio that grew by more than its spread is a slowdown. Prints figures;
@@ -31,6 +35,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import resource
 import shutil
 import statistics
 import subprocess
@@ -80,6 +85,34 @@ def whole_processes(runs: int) -> None:
                        stdout=subprocess.DEVNULL)
         print(f"two beams, whole process / CalculiX 2.20:   "
               f"{_ratios(lambda: _time(run, env=env), lambda: _time([ccx, '-i', 'two_beams'], cwd=tmp), runs)}")
+
+
+def _wall_and_cpu(cmd: list[str], env: dict) -> tuple[float, float]:
+    """(wall s, CPU s) of ``cmd``: user + system of the process and of the children it waited for."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    subprocess.run(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, check=True)
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+
+
+def picture_cost(runs: int) -> None:
+    """What the five pictures add to the seed run: with − without, CPU and wall seconds."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""),
+           "OPENBLAS_NUM_THREADS": "1"}
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
+    env.pop("DOLFINX_NNQEM_PICTURES", None)  # (a test environment turns them off)
+    with tempfile.TemporaryDirectory() as tmp:
+        run = [sys.executable, "-m", "dolfinx_nnqem", "-q", "run", str(ROOT / "demos" / "two_beams.toml"), "--out",
+               f"{tmp}/out", "--overwrite"]
+        _wall_and_cpu(run, env)  # warm caches (FFCx, bytecode, fonts, shaders)
+        pairs = [(_wall_and_cpu(run, env), _wall_and_cpu([*run, "--no-pictures"], env)) for _ in range(runs)]
+    for k, what in ((1, "CPU"), (0, "wall")):
+        added = sorted(a[k] - b[k] for a, b in pairs)
+        print(f"two beams, pictures added ({what}): {statistics.median(added):.2f} s ({added[0]:.2f}–{added[-1]:.2f}); "
+              f"with {statistics.median(a[k] for a, _ in pairs):.2f} s, without "
+              f"{statistics.median(b[k] for _, b in pairs):.2f} s (medians)")
 
 
 def baseline_solve(n: int = 12) -> float:
@@ -216,6 +249,7 @@ def main() -> None:
     print(f"figure: median of A/B over {args.runs} pairs (min–max)")
     if not args.skip_processes:
         whole_processes(args.runs)
+        picture_cost(args.runs)
     iteration_costs(args.level, max(1, args.runs // 2))
     load_path_cost(args.proxy_level, max(1, args.runs // 2))
     sliding_ratio(args.slide_n, max(1, args.runs // 2))

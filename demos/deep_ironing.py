@@ -190,7 +190,8 @@ if rank0:
 # ## The ironed strip
 # The equivalent plastic strain p and the von Mises stress of the Cauchy stress (`sigma_n` holds
 # the Cauchy stress at finite strain; cell means) on the deformed strip, the displacements drawn at
-# their true size (the view looks along z): the track the punch ironed from x = 0.5, its last
+# their true size (the view looks along z), with the punch drawn translucent where it stands at the
+# end (`plot_deformed` draws every rigid obstacle): the track the punch ironed from x = 0.5, its last
 # position at x = 1.5 (the hollow in the surface, under the largest stress), and the end of the
 # strip ahead of it pushed forward over its clamped bottom. The plastic strain grows along the
 # track, as the force does, to its largest cell mean, 0.36, under the punch's last position.

@@ -33,6 +33,7 @@ from dolfinx.io import XDMFFile
 
 from dolfinx_nnqem import compat
 from dolfinx_nnqem.collective import on_rank0
+from dolfinx_nnqem.io.deformed_fields import DEFORMED_INDEX, deformed_geometry, write_deformed_geometry
 from dolfinx_nnqem.io.safe_io import OutputError, StagedFiles, atomic_write_text
 from dolfinx_nnqem.io.xdmf_steps import child, data_path, read_field_index
 from dolfinx_nnqem.material.kinematics import von_mises_stress
@@ -55,8 +56,8 @@ class CellMeans:
     −1 where the material cannot yield); with a material that has back-stresses, also the
     equivalent back-stress ``back_stress`` (q(α) = √(3/2)|α|, α = Σ_k α_k). At finite strain
     (``kinematics = "finite"``) the stresses are Cauchy's, and the cell mean of the Cauchy stress tensor
-    ``cauchy_stress`` is written too (:attr:`tensors`; a field of the reference mesh, like u: the
-    deformed mesh is x = X + u, ParaView's "Warp By Vector" on u)."""
+    ``cauchy_stress`` is written too (:attr:`tensors`; a field of the reference mesh, like u;
+    ``fields_deformed.xdmf`` shows it on the deformed mesh x = X + u, :mod:`dolfinx_nnqem.io.deformed_fields`)."""
 
     def __init__(self, problem):
         self.problem = problem
@@ -133,11 +134,15 @@ class FieldSeriesWriter:
         Further per-cell fields written with the cell means (:class:`CellField`: e.g. the error
         indicator of :mod:`dolfinx_nnqem.estimates.indicators`), updated before each increment is
         written.
+    deformed_mesh
+        Also write each step's mesh moved by u and the index ``fields_deformed.xdmf`` of the
+        steps on it (:mod:`dolfinx_nnqem.io.deformed_fields`).
     """
 
     def __init__(self, problem, folder: str | os.PathLike, staged: StagedFiles | None = None, *,
-                 keep_last: bool = False, cell_fields: Sequence[CellField] = ()):
+                 keep_last: bool = False, cell_fields: Sequence[CellField] = (), deformed_mesh: bool = False):
         self.problem = problem
+        self.deformed_mesh = deformed_mesh
         self.cell_fields = list(cell_fields)
         self.keep_last = keep_last
         self.last_written: tuple[float, fem.FunctionSpace, np.ndarray] | None = None
@@ -145,6 +150,7 @@ class FieldSeriesWriter:
         self.folder = Path(folder)
         self.staged = staged
         self._grids: dict[tuple[int, float], str] = {}  # a step's grid as index text, read once from its file
+        self._deformed_grids: dict[tuple[int, float], str] = {}  # the same on the deformed mesh
         self.comm = problem.mesh.comm
         self.steps: list[tuple[int, float]] = []  # (increment, load factor) in the index
         self._means = CellMeans(problem)
@@ -174,11 +180,12 @@ class FieldSeriesWriter:
         # for the step file is refused here, with the figures
         on_rank0(self.comm, check_free_space, path.with_suffix(".h5"), self._bytes_needed())
         self._write_step(path, [u, *self._means.fields, *self._means.tensors, *(f.function for f in self.cell_fields)],
-                         t)
+                         t, moved_by=u if self.deformed_mesh else None)
         if self.keep_last:  # a copy: problem.u moves on in the next increment
             self.last_written = (t, u.function_space, u.x.array.copy())
         self.steps = [s for s in self.steps if s[0] < result.index] + [(result.index, t)]
         self._grids.pop((result.index, t), None)  # a step file written again (after a restart)
+        self._deformed_grids.pop((result.index, t), None)
         on_rank0(self.comm, self._write_index)
 
     def cell_means(self) -> dict[str, fem.Function]:
@@ -196,12 +203,14 @@ class FieldSeriesWriter:
             mesh = self.problem.mesh
             nodes = mesh.geometry.index_map().size_global
             cells = mesh.topology.index_map(mesh.topology.dim).size_global
-            # geometry and u (nodes × 3 doubles), topology (int64 per cell node), three cell fields
-            size = 8 * (6 * nodes + cells * (compat.geometry_dofmap(mesh).shape[1] + 3))
+            # geometry and u (nodes × 3 doubles, and the deformed geometry), topology (int64 per
+            # cell node), three cell fields
+            size = 8 * ((9 if self.deformed_mesh else 6) * nodes + cells * (compat.geometry_dofmap(mesh).shape[1] + 3))
         return int(1.25 * size) + 65536
 
-    def _write_step(self, path: Path, functions: list, t: float) -> None:
+    def _write_step(self, path: Path, functions: list, t: float, moved_by: fem.Function | None = None) -> None:
         """One closed XDMF/HDF5 step file; a failed write raises OutputError naming the .h5.
+        With ``moved_by``, the mesh's geometry moved by it too (the grid ``deformed``).
 
         DOLFINx leaves the dataset of a failed write open, so on MPI the file can no longer be
         closed (H5Fclose fails; the next attempt, in XDMFFile's destructor, throws from a C++
@@ -214,6 +223,8 @@ class FieldSeriesWriter:
             xdmf.write_mesh(self.problem.mesh)
             for f in functions:
                 xdmf.write_function(f, t)
+            if moved_by is not None:
+                write_deformed_geometry(xdmf, moved_by)
             xdmf.close()
         except RuntimeError as error:  # HDF5 reports a full disk as a RuntimeError
             _abandon(xdmf, self.comm)
@@ -224,17 +235,23 @@ class FieldSeriesWriter:
 
         Each step's grid is parsed from its step file and serialised once (:func:`_grid_text`);
         the index is their concatenation (re-serialising every grid at every increment made the
-        index cost grow with the number of increments)."""
-        grids = []
-        for index, t in self.steps:
-            if (index, t) not in self._grids:
-                self._grids[(index, t)] = _grid_text(_step_grid(self.folder / FOLDER / f"{_step_name(index)}.xdmf", t))
-            grids.append(self._grids[(index, t)])
-        text = _INDEX_HEAD + "".join(grids) + _INDEX_TAIL
-        if self.staged is None or at_once:
-            atomic_write_text(self.folder / INDEX, text)
-        else:
-            self.staged.stage(self.folder / INDEX, text)
+        index cost grow with the number of increments). With ``deformed_mesh``, the index of the
+        steps on the deformed mesh (``fields_deformed.xdmf``) likewise."""
+        indices = [(INDEX, self._grids, False)]
+        if self.deformed_mesh:
+            indices.append((DEFORMED_INDEX, self._deformed_grids, True))
+        for name, cache, deformed in indices:
+            grids = []
+            for index, t in self.steps:
+                if (index, t) not in cache:
+                    step_file = self.folder / FOLDER / f"{_step_name(index)}.xdmf"
+                    cache[(index, t)] = _grid_text(_step_grid(step_file, t, deformed))
+                grids.append(cache[(index, t)])
+            text = _INDEX_HEAD + "".join(grids) + _INDEX_TAIL
+            if self.staged is None or at_once:
+                atomic_write_text(self.folder / name, text)
+            else:
+                self.staged.stage(self.folder / name, text)
 
     # -- restart -------------------------------------------------------------------------------------
     def state(self) -> dict:
@@ -311,15 +328,16 @@ def _grid_text(grid: ET.Element) -> str:
     return "      " + ET.tostring(grid, encoding="unicode") + "\n"
 
 
-def _step_grid(step_file: Path, t: float) -> ET.Element:
+def _step_grid(step_file: Path, t: float, deformed: bool = False) -> ET.Element:
     """One Uniform grid at time ``t``: the mesh and every function of ``step_file``, with data
-    paths made relative to the index's folder."""
+    paths made relative to the index's folder; with ``deformed``, the mesh's geometry is the
+    deformed one of the step file (:mod:`dolfinx_nnqem.io.deformed_fields`)."""
     tree = ET.parse(step_file)
     prefix = f"{FOLDER}/"
     grid = ET.Element("Grid", {"Name": step_file.stem, "GridType": "Uniform"})
     mesh_grid = next(g for g in tree.iter("Grid") if g.find("Topology") is not None and g.find("Geometry") is not None)
     for tag in ("Topology", "Geometry"):
-        element = child(mesh_grid, tag)
+        element = deformed_geometry(step_file) if deformed and tag == "Geometry" else child(mesh_grid, tag)
         for item in element.iter("DataItem"):
             item.text = prefix + data_path(item)
         grid.append(element)

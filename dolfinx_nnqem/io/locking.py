@@ -23,8 +23,8 @@ from pathlib import Path
 __all__ = ["LOCK_NAME", "OUTPUT_NAMES", "FolderInUse", "OutputLock", "clear_outputs", "previous_outputs"]
 
 LOCK_NAME = ".nnqem.lock"
-OUTPUT_NAMES = ("summary.json", "fields.xdmf", "fields.h5", "fields", "fields_p2.pvd", "pairs.pvd", "pairs", "checkpoints",
-                "pictures")
+OUTPUT_NAMES = ("summary.json", "fields.xdmf", "fields.h5", "fields", "fields_p2.pvd", "fields_deformed.xdmf",
+                "pairs.pvd", "pairs", "checkpoints", "pictures")
 """What a run writes into its folder (files and folders); cleared by ``--overwrite``."""
 
 

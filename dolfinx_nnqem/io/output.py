@@ -41,8 +41,10 @@ import dolfinx_nnqem.io.results as res
 from dolfinx_nnqem import interrupts
 from dolfinx_nnqem.collective import on_rank0
 from dolfinx_nnqem.contact.laws import STATE_NAMES
+from dolfinx_nnqem.io.deformed_fields import writes_deformed_mesh
 from dolfinx_nnqem.io.field_series import CellField, FieldSeriesWriter
 from dolfinx_nnqem.io.locking import OutputLock, clear_outputs, previous_outputs
+from dolfinx_nnqem.io.obstacle_shapes import obstacle_records
 from dolfinx_nnqem.io.quadratic_fields import QuadraticFieldWriter, writes_quadratic_fields
 from dolfinx_nnqem.io.run_pictures import (ALL_PICTURES, PictureDrawer, draw_live_pictures, missing_pictures,
                                           pictures_enabled)
@@ -197,6 +199,7 @@ class SummaryWriter:
             "load_factors": [], "iterations": [], "residual_histories": [], "checks": [],
             "plastic_gauss_points": [], "num_gauss_points": problem.state.num_gauss_points(),
             "num_pairs": problem.num_pairs, "wall_time_s": 0.0, "mpi_ranks": problem.comm.size,
+            "kinematics": getattr(problem, "kinematics", "small"),
         }
         if extra:
             self.data.update(extra)
@@ -242,6 +245,7 @@ class SummaryWriter:
         if eq["obstacle_forces"]:
             d["obstacle_forces"] = {k: v.tolist() for k, v in eq["obstacle_forces"].items()}
             d.setdefault("obstacle_force_history", []).append(d["obstacle_forces"])
+            d["obstacles"] = obstacle_records(p, result.load_factor)  # where the pictures draw them
         d["reaction_sum"] = eq["reaction_sum"].tolist()
         d["equilibrium_residual"] = eq["global_imbalance"]
         d["free_dof_residual"] = eq["residual_norm"]
@@ -399,13 +403,16 @@ class ResultsWriter:
         Further per-cell fields for ``fields.xdmf`` and the pictures
         (:class:`~dolfinx_nnqem.io.field_series.CellField`, e.g.
         :class:`dolfinx_nnqem.estimates.RecoveryIndicator`).
+    deformed_mesh
+        Also write ``fields_deformed.xdmf``, the same steps on the mesh moved by u
+        (:mod:`dolfinx_nnqem.io.deformed_fields`). None (default): at finite strain only.
     """
 
     def __init__(self, problem, method: str, folder: str | os.PathLike, increments: int,
                  probes: Mapping[str, Probe] | None = None, extra: dict | None = None,
                  fields: bool = True, *, overwrite: bool = True, resume: bool = False, lock: bool = True,
                  pictures: bool | None = None, picture_worker: PictureDrawer | None = None,
-                 cell_fields: Sequence[CellField] = ()):
+                 cell_fields: Sequence[CellField] = (), deformed_mesh: bool | None = None):
 
         check_output_folder(folder)
         self.folder = Path(folder)
@@ -440,7 +447,8 @@ class ResultsWriter:
         self.checkpoint_every = 0  #: set by a Checkpointer of this writer: it commits those increments
         self.writers: list[FieldSeriesWriter | QuadraticFieldWriter | PairWriter | SummaryWriter] = []
         keep = pictures_enabled(pictures)  # the pictures are drawn from the last fields written, in memory
-        self.fields = (FieldSeriesWriter(problem, self.folder, self.staged, keep_last=keep, cell_fields=cell_fields)
+        self.fields = (FieldSeriesWriter(problem, self.folder, self.staged, keep_last=keep, cell_fields=cell_fields,
+                                         deformed_mesh=writes_deformed_mesh(problem, deformed_mesh))
                        if fields else None)
         if self.fields is not None:
             self.writers.append(self.fields)

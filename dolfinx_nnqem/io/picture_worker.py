@@ -3,10 +3,11 @@
 The pictures of a run (:mod:`dolfinx_nnqem.io.run_pictures`) need matplotlib, pyvista and VTK,
 whose imports take longer than the drawing itself. A run uses one core; a worker started with
 the run imports them on another core while the run solves, then draws what the run sends it at
-its end. Two workers split the drawing: ``curves`` (the matplotlib figures) and ``fields`` (the
-VTK pictures, ``deformed.png`` and ``contact_pressure.png``), so that the two parts are drawn at
-the same time. This costs CPU (each worker imports NumPy and its libraries again) and saves wall
-clock time only where a core is idle.
+its end. One worker, ``pictures``, draws them all (:data:`ROLES`): two workers (the matplotlib
+figures and the VTK pictures drawn at the same time) saved 0.1–0.2 s of wall clock but cost
+0.2–0.3 s more CPU, each importing NumPy and matplotlib again (``pyvista.plotting`` imports
+matplotlib too; ``docs/performance.md``). A worker costs CPU (it imports NumPy again) and
+saves wall clock time only where a core is idle.
 
 A worker is a fresh Python process (``subprocess``, never a fork of the run: MPI and PETSc are
 initialised there) that imports neither DOLFINx nor PETSc nor MPI: an MPI initialisation in a
@@ -37,8 +38,8 @@ from typing import IO, Any
 __all__ = ["ROLES", "PictureWorkers", "launcher_rank", "launcher_size", "serve", "worth_starting"]
 
 ROLES: dict[str, tuple[tuple[str, ...], bool]] = {
-    "curves": (("pair_pressure.png", "load_curve.png", "convergence.png", "error_estimates.png"), False),
-    "fields": (("deformed.png", "error_indicator.png"), True),
+    "pictures": (("deformed.png", "pair_pressure.png", "load_curve.png", "convergence.png", "error_indicator.png",
+                  "error_estimates.png"), True),
 }
 """Worker role → (the pictures of :data:`~dolfinx_nnqem.io.run_pictures.PICTURES` it draws,
 whether it draws ``contact_pressure.png``)."""
@@ -308,18 +309,21 @@ def _die_with(parent: int) -> None:
 
 
 def _warm_up(role: str) -> None:
-    """Import what the role's pictures need (raises where an import fails)."""
+    """Import what the role's pictures need (raises where an import fails): matplotlib for
+    ``curves``, and for any other role pyvista and VTK as well."""
     from dolfinx_nnqem.io.run_pictures import _matplotlib
 
-    if role == "curves":
-        _matplotlib()
-    else:
+    _matplotlib()  # Agg chosen before pyvista.plotting imports pyplot
+    if role != "curves":
         from dolfinx_nnqem import pyvista_compat
         from dolfinx_nnqem.chatter import apply_vtk_options
 
         pyvista_compat.import_pyvista()
         apply_vtk_options()
-        pyvista_compat.vtk_render_problem()
+        if pyvista_compat.vtk_render_problem() is None:
+            # VTK renders here: pyvista need not make a render window of its own to ask again
+            # (its Plotter does, once per process, unless ALLOW_PLOTTING says so); this process is ours
+            os.environ["ALLOW_PLOTTING"] = "true"
         import pyvista.plotting  # noqa: F401  (the plotter's module: VTK's rendering, matplotlib)
 
 

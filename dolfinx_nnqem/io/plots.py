@@ -113,15 +113,19 @@ def _gather_grid(problem, field: str):
 def plot_deformed(problem: ContactProblem, path: str | os.PathLike, *, field: str = "von_mises",
                   scale: float | None = None, show_pairs: bool = True, title: str = "",
                   camera: str | Sequence[float] | None = "iso",
-                  focus: Sequence[float] | None = None, zoom: float = 1.0) -> None:
+                  focus: Sequence[float] | None = None, zoom: float = 1.0, show_obstacles: bool = True) -> None:
     """Deformed shape (displacements × ``scale``) coloured by a Gauss-point field (cell means).
 
     ``field``: ``"von_mises"`` (Pa) or ``"p"`` (equivalent plastic strain). Contact pairs are
     drawn at their slave nodes as spheres coloured by state (white open, blue stick, red slip).
+    With ``show_obstacles``, each rigid obstacle is drawn translucent at its position at the last
+    converged increment, moved by ``scale`` × its displacement like the bodies, and clipped to a
+    box around them (:mod:`dolfinx_nnqem.io.obstacle_shapes`).
     ``camera``: "iso", "xy", "xz", "yz", "front", a direction (x, y, z) from the focus to the
     camera, or None (VTK's default); ``focus``: the point looked at (default the mesh centre);
     ``zoom``: > 1 magnifies. Collective.
     """
+    from dolfinx_nnqem.io.obstacle_shapes import add_obstacles, obstacle_records, view_box
     from dolfinx_nnqem.io.results import pair_table
 
     grid_data = _gather_grid(problem, field)
@@ -148,6 +152,8 @@ def plot_deformed(problem: ContactProblem, path: str | os.PathLike, *, field: st
             if np.any(sel):
                 plotter.add_points(centres[sel], color=colour, point_size=14,
                                    render_points_as_spheres=True)
+    if show_obstacles:
+        add_obstacles(plotter, obstacle_records(problem, problem.load_factor_n), view_box(x + scale * u), scale)
     plotter.add_text(f"{title}  (displacements x {scale:.3g})", font_size=10)
     views = {"iso": plotter.view_isometric, "xy": plotter.view_xy, "xz": plotter.view_xz,
              "yz": plotter.view_yz, "front": lambda: plotter.view_vector((0.4, 0.5, 1.0), viewup=(0, 1, 0))}

@@ -56,13 +56,14 @@ def _h5py_usable_here() -> bool:
     return compat.H5PY_BEFORE_DOLFINX
 
 
-def read_fields(folder: str | os.PathLike, last_only: bool = False) -> list[dict]:
+def read_fields(folder: str | os.PathLike, last_only: bool = False, index: str = "fields.xdmf") -> list[dict]:
     """The increments ``fields.xdmf`` lists (see :func:`dolfinx_nnqem.io.xdmf_steps.read_field_index`);
-    with ``last_only`` the last one only."""
-    return start_reading_fields(folder, last_only)()
+    with ``last_only`` the last one only; ``index="fields_deformed.xdmf"``: on the deformed mesh."""
+    return start_reading_fields(folder, last_only, index)()
 
 
-def start_reading_fields(folder: str | os.PathLike, last_only: bool = False) -> Callable[[], list[dict]]:
+def start_reading_fields(folder: str | os.PathLike, last_only: bool = False,
+                         index: str = "fields.xdmf") -> Callable[[], list[dict]]:
     """Start reading the fields; returns the function that waits for them (:func:`read_fields`).
 
     Where h5py cannot be used in this process, a child process reads them, and this process
@@ -72,7 +73,7 @@ def start_reading_fields(folder: str | os.PathLike, last_only: bool = False) -> 
     if _h5py_usable_here():
         from dolfinx_nnqem.io.xdmf_steps import read_field_index
 
-        steps = read_field_index(folder, last_only)
+        steps = read_field_index(folder, last_only, index)
         return lambda: steps
     tmp = tempfile.TemporaryDirectory()
     out = Path(tmp.name) / "fields.npz"
@@ -80,14 +81,15 @@ def start_reading_fields(folder: str | os.PathLike, last_only: bool = False) -> 
             "spec = importlib.util.spec_from_file_location('_nnqem_xdmf_steps', sys.argv[1])\n"
             "module = importlib.util.module_from_spec(spec)\n"
             "spec.loader.exec_module(module)\n"
-            "steps = module.read_field_index(sys.argv[2], sys.argv[4] == '1')\n"
+            "steps = module.read_field_index(sys.argv[2], sys.argv[4] == '1', sys.argv[5])\n"
             "arrays = {f'{i}/{k}': np.asarray(v) for i, s in enumerate(steps) for k, v in s.items()}\n"
             "np.savez(sys.argv[3], **arrays)\n")
     # a child of an MPI rank (mpirun) must not take the launcher's variables: it would try to
     # join the parallel job (MPICH: "PMI_Init returned -1") and fail to start
     env = {k: v for k, v in os.environ.items() if not k.startswith(MPI_LAUNCHER_PREFIXES)}
     module = Path(__file__).resolve().with_name("xdmf_steps.py")
-    child = subprocess.Popen([sys.executable, "-c", code, str(module), str(folder), str(out), "1" if last_only else "0"],
+    child = subprocess.Popen([sys.executable, "-c", code, str(module), str(folder), str(out), "1" if last_only else "0",
+                              index],
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
 
     def wait() -> list[dict]:

@@ -39,7 +39,6 @@ from __future__ import annotations
 import logging
 import math
 import os
-import xml.etree.ElementTree as ET
 from pathlib import Path
 
 from collections.abc import Callable, Collection, Mapping
@@ -48,10 +47,9 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 
 import dolfinx_nnqem.io.plots as plots
-from dolfinx_nnqem import pyvista_compat
+from dolfinx_nnqem.io.deformed_picture import DeformedScene, _with_quadratic_displacement, draw_deformed  # noqa: F401
 from dolfinx_nnqem.io.estimate_pictures import ESTIMATE_PICTURE, draw_error_estimates
-from dolfinx_nnqem.io.live_fields import LINEAR_VTK_CELLS
-from dolfinx_nnqem.io.offscreen import PictureUnavailable, offscreen_plotter
+from dolfinx_nnqem.io.offscreen import PictureUnavailable
 from dolfinx_nnqem.io.reader import read_pairs, read_summary, start_reading_fields
 
 if TYPE_CHECKING:
@@ -68,7 +66,6 @@ INDICATOR_FIELD = "error_indicator"
 ENV_SWITCH = "DOLFINX_NNQEM_PICTURES"
 """Environment variable: ``0`` turns the end-of-run pictures off where no flag decides."""
 
-STATE_COLOURS = {"open": "white", "stick": "royalblue", "slip": "crimson"}
 _log = logging.getLogger("dolfinx_nnqem")
 
 
@@ -110,6 +107,18 @@ def _matplotlib():
     return plt
 
 
+def _curve_margins(fig) -> None:
+    """Fixed margins (inches) for a row of curve panels whose y tick labels have a bounded width:
+    the load factor (0 to 1) and the relative residuals of a log axis ("1e−16"). ``tight_layout``
+    found about the same margins, but it costs a second pass over the ticks and texts, a third of
+    these figures' drawing time."""
+    width, height = fig.get_size_inches()
+    panels = len(fig.axes)
+    left, right, gap, bottom, top = 0.85, 0.3, 0.85, 0.6, 0.55
+    fig.subplots_adjust(left=left / width, right=1 - right / width, bottom=bottom / height, top=1 - top / height,
+                        wspace=gap / ((width - left - right - gap * (panels - 1)) / panels))
+
+
 def _title(summary: dict) -> str:
     """What the run is and how far it got (a failed run says where it stopped)."""
     factors = summary.get("load_factors", [])
@@ -122,138 +131,6 @@ def _title(summary: dict) -> str:
     elif status not in ("completed", ""):
         text += f"; {status}"
     return text
-
-
-# -- deformed shape ------------------------------------------------------------------------------
-VTK_CELLS = {4: ("tetra", 4), 10: ("tetra", 4), 8: ("hexahedron", 8), 20: ("hexahedron", 8),
-             27: ("hexahedron", 8)}
-"""Nodes per cell in the XDMF topology → (pyvista cell type, corner nodes): a quadratic cell
-is drawn by its corners (XDMF lists them first)."""
-
-
-def _field_grid(step: dict, scale: float | None):
-    """The pyvista grid of one field step, moved by ``scale`` × u; returns (grid, scale).
-
-    A step with ``cell_type`` (from memory, :mod:`dolfinx_nnqem.io.live_fields`, or from
-    ``fields_p2.pvd``) is drawn on those VTK cells whole, a quadratic one with its edge nodes;
-    a step read from ``fields.xdmf`` by the corners of its cells (:data:`VTK_CELLS`).
-    """
-    pyvista = pyvista_compat.import_pyvista()
-
-    topology = np.asarray(step["topology"], dtype=np.int64)
-    if "cell_type" in step:
-        cell_type, cells = int(step["cell_type"]), topology
-    elif topology.shape[1] in VTK_CELLS:
-        name, corners = VTK_CELLS[topology.shape[1]]
-        cell_type = {"tetra": pyvista.CellType.TETRA, "hexahedron": pyvista.CellType.HEXAHEDRON}[name]
-        cells = topology[:, :corners]
-    else:
-        raise ValueError(f"cells with {topology.shape[1]} nodes: expected one of {sorted(VTK_CELLS)}")
-    x = np.asarray(step["geometry"], dtype=float).reshape(-1, 3)
-    u = np.asarray(step.get("u", np.zeros_like(x)), dtype=float).reshape(len(x), -1)[:, :3]
-    # the flat [n, i0, ..., i(n-1)] layout takes every VTK cell type (Lagrange cells too)
-    flat = np.hstack([np.full((len(cells), 1), cells.shape[1]), cells]).reshape(-1)
-    grid = pyvista.UnstructuredGrid(flat, np.full(len(cells), cell_type, dtype=np.uint8), x.copy())
-    if scale is None:
-        umax = np.abs(u).max()
-        scale = 0.1 * np.ptp(x, axis=0).max() / umax if umax > 0 else 1.0
-    grid.points = x + scale * u
-    for key in ("von_mises", "p", "plastic", "error_indicator"):
-        if key in step:
-            grid.cell_data[key] = np.asarray(step[key], dtype=float).reshape(len(topology), -1)[:, 0]
-    return grid, scale
-
-
-def _with_quadratic_displacement(folder: Path, step: dict) -> dict:
-    """A step of ``fields.xdmf`` with the degree-2 displacement of ``fields_p2.pvd`` where the
-    folder has it for the same increment: the grid of its Lagrange cells, u at every P2 node,
-    and the cell fields of ``step`` carried over to those cells (matched by their centres).
-    Otherwise (degree 1, an older folder, cells that do not match) ``step`` itself."""
-    index = folder / "fields_p2.pvd"
-    if not index.exists():
-        return step
-    try:
-        datasets = list(ET.parse(index).iter("DataSet"))
-        if not datasets or float(datasets[-1].attrib["timestep"]) != float(step["time"]):
-            raise ValueError("its last increment is not the last of fields.xdmf")
-        grid = pyvista_compat.import_pyvista().read(str(folder / datasets[-1].attrib["file"]))
-        cell_type = int(grid.celltypes[0])
-        if cell_type not in LINEAR_VTK_CELLS or np.any(grid.celltypes != cell_type):
-            raise ValueError(f"cells of VTK types {sorted(set(grid.celltypes.tolist()))}")
-        cells = np.asarray(grid.cells).reshape(grid.n_cells, -1)[:, 1:]
-        order = _matching_cells(step, np.asarray(grid.points), cells, LINEAR_VTK_CELLS[cell_type][1])
-    except (OSError, ValueError, KeyError, IndexError, ET.ParseError) as error:
-        _log.warning(f"picture deformed.png: drawn from fields.xdmf, not {index.name} ({error})")
-        return step
-    quadratic = {"time": step["time"], "geometry": np.asarray(grid.points), "topology": cells,
-                 "cell_type": cell_type, "u": np.asarray(grid.point_data["u"])}
-    ncells = len(np.asarray(step["topology"]))
-    for key, values in step.items():
-        values = np.asarray(values)
-        if key not in quadratic and values.ndim and len(values) == ncells:  # a cell field
-            quadratic[key] = values.reshape(ncells, -1)[order]
-    return quadratic
-
-
-def _matching_cells(step: dict, points: np.ndarray, cells: np.ndarray, corners: int) -> np.ndarray:
-    """For each of ``cells`` (rows of ``points``), the row of the same cell in ``step``'s topology,
-    found by the centre of its corners (a ValueError where a cell has no match)."""
-    from scipy.spatial import cKDTree
-
-    x = np.asarray(step["geometry"], dtype=float).reshape(-1, 3)
-    topology = np.asarray(step["topology"], dtype=np.int64)
-    if len(topology) != len(cells):
-        raise ValueError(f"{len(cells)} cells against {len(topology)} in fields.xdmf")
-    # the corner nodes are the first ones in both files' orderings (XDMF's and VTK's Lagrange cells)
-    centres = x[topology[:, :corners]].mean(axis=1)
-    distance, order = cKDTree(centres).query(points[cells[:, :corners]].mean(axis=1))
-    size = max(float(np.ptp(x, axis=0).max()), 1e-300)
-    if np.any(distance > 1e-9 * size) or len(np.unique(order)) != len(order):
-        raise ValueError("its cells are not those of fields.xdmf")
-    return order
-
-
-def _pair_points(rows: list[dict], scale: float) -> tuple[np.ndarray, np.ndarray]:
-    """Slave points of the pairs on the drawn (scaled) deformed mesh, and their states."""
-    if not rows:
-        return np.zeros((0, 3)), np.array([], dtype=str)
-    slave = np.array([[float(r["slave_x"]), float(r["slave_y"]), float(r["slave_z"])] for r in rows])
-    u2 = np.array([[float(r["u2x"]), float(r["u2y"]), float(r["u2z"])] for r in rows])
-    return slave + scale * u2, np.array([r["state"] for r in rows])
-
-
-def draw_deformed(step: dict, rows: list[dict], path: Path, *, title: str = "", scale: float | None = None,
-                  field: str = "von_mises", camera: str = "iso") -> Path:
-    """The deformed shape coloured by ``field``, the plastic zone outlined, pairs by state."""
-    grid, scale = _field_grid(step, scale)
-    if field not in grid.cell_data:
-        raise ValueError(f"field {field!r}: the results hold {sorted(grid.cell_data)}")
-    plotter = offscreen_plotter((1200, 800))
-    label = {"von_mises": "von Mises stress (Pa)", "p": "equivalent plastic strain p",
-             "error_indicator": "error indicator eta_K (sqrt J)"}.get(field, field)
-    plotter.add_mesh(grid, scalars=field, show_edges=True, cmap="viridis", scalar_bar_args={"title": label})
-    if "p" in grid.cell_data and np.any(grid.cell_data["p"] > 0):
-        plastic = grid.extract_cells(np.flatnonzero(grid.cell_data["p"] > 0))
-        # the outline of the plastic zone (not its inner cell faces), drawn over the colours
-        edges = pyvista_compat.extract_outer_surface(plastic).extract_feature_edges(
-            boundary_edges=True, feature_edges=True, manifold_edges=False, non_manifold_edges=False)
-        plotter.add_mesh(edges, color="darkorange", line_width=4, label="plastic zone (p > 0)")
-    points, states = _pair_points(rows, scale)
-    for state, colour in STATE_COLOURS.items():
-        selected = states == state
-        if np.any(selected):
-            plotter.add_points(points[selected], color=colour, point_size=14, render_points_as_spheres=True,
-                               label=f"{state} ({int(selected.sum())})")
-    if plotter.legend is None and (len(points) or ("p" in grid.cell_data and np.any(grid.cell_data["p"] > 0))):
-        plotter.add_legend(bcolor="lightgrey", face="circle", size=(0.2, 0.15), loc="lower left")
-    plotter.add_text(f"{title}\ndisplacements x {scale:.3g}", font_size=10)
-    # y up, as the problem files of this package have it (gravity along -y, stacks along y)
-    views = {"iso": lambda: plotter.view_vector((1.0, 0.8, 1.4), viewup=(0, 1, 0)), "xy": plotter.view_xy,
-             "xz": plotter.view_xz, "yz": plotter.view_yz}
-    views[camera]()
-    plotter.screenshot(str(path))
-    plotter.close()
-    return path
 
 
 # -- curves --------------------------------------------------------------------------------------
@@ -336,7 +213,7 @@ def draw_load_curve(summary: dict, path: Path, *, title: str = "") -> Path:
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=7, loc="best")
     fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
+    _curve_margins(fig)  # (not tight_layout: a second layout pass)
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return path
@@ -366,7 +243,7 @@ def draw_convergence(summary: dict, path: Path, *, title: str = "") -> Path:
         if len(histories) <= 12:
             ax.legend(fontsize=7)
     fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
+    _curve_margins(fig)  # (not tight_layout: a second layout pass)
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return path
@@ -386,8 +263,9 @@ def draw_run_pictures(folder: str | os.PathLike, *, out: str | os.PathLike | Non
     out
         Where the PNG files go (default ``folder/pictures``).
     scale
-        Displacement magnification of ``deformed.png`` (default: the largest displacement
-        drawn as 10 % of the model's size).
+        Displacement magnification of ``deformed.png`` (default: 1 for a finite-strain run, else
+        the largest displacement drawn as 10 % of the model's size); the rigid obstacles are
+        moved by the same scale × their displacement.
     field
         Cell field of ``deformed.png``: ``"von_mises"`` or ``"p"``.
     camera
@@ -425,7 +303,10 @@ def draw_run_pictures(folder: str | os.PathLike, *, out: str | os.PathLike | Non
         steps = _wait_for_fields(fields, done)
     if steps:
         last = steps[-1] if step is not None else _with_quadratic_displacement(folder, steps[-1])
-        _draw_fields(out, names, last, rows, done, title=title, scale=scale, field=field, camera=camera)
+        if scale is None and summary.get("kinematics") == "finite":
+            scale = 1.0  # large displacements: their true size
+        _draw_fields(out, names, last, rows, done, title=title, scale=scale, field=field, camera=camera,
+                     obstacles=summary.get("obstacles"))
     else:
         for name in ("deformed.png", "error_indicator.png"):
             done.setdefault(name, "not drawn: no fields (the run was made with fields = false)")
@@ -500,15 +381,18 @@ def _draw_curves(out: Path, names: Collection[str], summary: dict, rows: list[di
 
 
 def _draw_fields(out: Path, names: Collection[str], last: dict, rows: list[dict], done: dict[str, Path | str], *,
-                 title: str, scale: float | None, field: str, camera: str) -> None:
-    """The pictures of ``names`` drawn on the deformed mesh of the ``last`` field step:
-    ``deformed.png`` and ``error_indicator.png``."""
-    if "deformed.png" in names:
-        _attempt(done, out, "deformed.png", draw_deformed, last, rows, title=title, scale=scale, field=field,
-                 camera=camera)
-    if "error_indicator.png" in names and "error_indicator" in last:  # (written by the command line)
-        _attempt(done, out, "error_indicator.png", draw_deformed, last, rows, title=title, scale=scale,
-                 field="error_indicator", camera=camera)
+                 title: str, scale: float | None, field: str, camera: str, obstacles: dict | None) -> None:
+    """The pictures of ``names`` drawn on the deformed mesh of the ``last`` field step, with the
+    rigid ``obstacles`` of ``summary.json``: ``deformed.png`` and ``error_indicator.png``, one
+    scene coloured in turn by ``field`` and by the error indicator (:class:`DeformedScene`)."""
+    scene = DeformedScene(last, rows, title=title, scale=scale, camera=camera, obstacles=obstacles)
+    try:
+        if "deformed.png" in names:
+            _attempt(done, out, "deformed.png", scene.draw, field)
+        if "error_indicator.png" in names and "error_indicator" in last:  # (written by the command line)
+            _attempt(done, out, "error_indicator.png", scene.draw, "error_indicator")
+    finally:
+        scene.close()
 
 
 CONTACT_PICTURE = "contact_pressure.png"

@@ -18,19 +18,19 @@ import numpy as np
 __all__ = ["child", "data_path", "read_field_index"]
 
 
-def read_field_index(folder: str | os.PathLike, last_only: bool = False) -> list[dict]:
+def read_field_index(folder: str | os.PathLike, last_only: bool = False, index: str = "fields.xdmf") -> list[dict]:
     """The increments ``fields.xdmf`` lists, read with h5py (no DOLFINx, any number of ranks).
 
     Returns one dict per increment: ``time`` (the load factor), ``geometry`` (nodes, 3),
     ``topology`` (cells, nodes per cell) and every field by name (nodal or cell values); with
-    ``last_only``, the last increment only. Raises :class:`OSError` naming the file that cannot
-    be read.
+    ``last_only``, the last increment only. ``index``: another index of the folder of the same
+    form (``fields_deformed.xdmf``: the geometry is the deformed mesh's). Raises
+    :class:`OSError` naming the file that cannot be read.
     """
     import h5py
 
     folder = Path(folder)
-    index = folder / "fields.xdmf"
-    tree = ET.parse(index)
+    tree = ET.parse(folder / index)
     grids = [grid for grid in tree.iter("Grid") if grid.get("GridType") == "Uniform"]
     steps = []
     for grid in grids[-1:] if last_only else grids:

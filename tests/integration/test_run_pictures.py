@@ -157,15 +157,18 @@ def test_a_degree_2_run_draws_its_quadratic_displacement(tmp_path, monkeypatch):
     vertex values of fields.xdmf."""
     import pyvista
 
-    from dolfinx_nnqem.io import run_pictures
+    from dolfinx_nnqem.io import deformed_picture, run_pictures
     from dolfinx_nnqem.io.reader import read_fields
 
     monkeypatch.delenv(ENV_SWITCH, raising=False)
     drawn: list[dict] = []
-    draw = run_pictures.draw_deformed
-    monkeypatch.setattr(run_pictures, "draw_deformed",  # (deformed.png's calls: error_indicator.png draws too)
-                        lambda step, *a, **k: (k.get("field") == "error_indicator" or drawn.append(step),
-                                               draw(step, *a, **k))[1])
+
+    class Recorded(deformed_picture.DeformedScene):  # one scene for deformed.png and error_indicator.png
+        def __init__(self, step, *args, **kwargs):
+            drawn.append(step)
+            super().__init__(step, *args, **kwargs)
+
+    monkeypatch.setattr(run_pictures, "DeformedScene", Recorded)
     out = tmp_path / "out"
     assert main(["-q", "run", str(_degree_2_problem(tmp_path)), "--increments", "1", "--out", str(out)]) == EXIT_OK
     assert main(["-q", "plot", str(out), "--out", str(tmp_path / "redrawn")]) == EXIT_OK
@@ -175,7 +178,7 @@ def test_a_degree_2_run_draws_its_quadratic_displacement(tmp_path, monkeypatch):
     vertices = read_fields(out, last_only=True)[-1]["geometry"]
     expected = _nodes_and_displacements(quadratic.points, quadratic.point_data["u"])
     for where, step in zip(("end of the run", "plot"), drawn):
-        grid, _ = run_pictures._field_grid(step, 1.0)
+        grid, _ = deformed_picture._field_grid(step, 1.0)
         print(f"\n  {where}: {grid.n_points} nodes, {grid.n_cells} cells of VTK type {grid.celltypes[0]} drawn "
               f"(fields_p2.pvd: {quadratic.n_points} nodes; fields.xdmf: {len(vertices)} vertices)", end="")
         assert grid.n_points == quadratic.n_points > len(vertices)
