@@ -119,8 +119,13 @@ def cap_elements(radius: float, facet: float) -> tuple[np.ndarray, np.ndarray]:
     return coords, outward(coords, np.array(cells))
 
 
-def model_text(problem, increments: int, *, h: float, penalty_factor: float, facet: float, mu_f: float) -> str:
-    """The whole ``.inp`` text of ``deep_press_problem(h, mu_f)`` pressed in ``increments`` increments."""
+def model_text(problem, increments: int, *, h: float, penalty_factor: float, facet: float, mu_f: float,
+               substeps: int = 1) -> str:
+    """The whole ``.inp`` text of ``deep_press_problem(h, mu_f)`` pressed in ``increments`` increments.
+
+    CalculiX's increments are at most 1/``substeps`` of those (its plasticity's error depends on the
+    increment: ``docs/verification-materials.md``); its output is at their ends.
+    """
     coords, cells = strip_elements(problem)
     lo, hi = coords.min(axis=0), coords.max(axis=0)
     c_coords, c_cells = cap_elements(R_SPHERE, facet)
@@ -162,8 +167,9 @@ def model_text(problem, increments: int, *, h: float, penalty_factor: float, fac
     lines += ["*BOUNDARY", "BOTTOM, 1, 3", "XSYM, 1, 1", "ZSYM, 3, 3", "ROT, 1, 3", f"{ref}, 1, 1", f"{ref}, 3, 3"]
     ends = [f"{k / increments:.12g}" for k in range(1, increments + 1)]
     lines += ["*TIME POINTS, NAME=INCREMENTS"] + [", ".join(ends[k:k + 8]) for k in range(0, len(ends), 8)]
-    dt = 1.0 / increments
-    lines += [f"*STEP, INC={1000 * increments}, NLGEOM", "*STATIC", f"{dt:.12g}, 1.0, {1e-6 * dt:.6g}, {dt:.12g}",
+    dt = 1.0 / (increments * substeps)
+    lines += [f"*STEP, INC={1000 * increments * substeps}, NLGEOM", "*STATIC",
+              f"{dt:.12g}, 1.0, {1e-6 * dt:.6g}, {dt:.12g}",
               "*BOUNDARY", f"{ref}, 2, 2, {-DEPTH:.12e}",
               "*NODE PRINT, NSET=REF, TIME POINTS=INCREMENTS", "RF",
               "*EL PRINT, ELSET=FINE, TIME POINTS=INCREMENTS", "PEEQ",
@@ -322,6 +328,96 @@ def print_measures(m: dict, depths: np.ndarray) -> None:
         print(f"  {x:8.4f} {po:10.2f} {ptrue:10.2f}   {xt:8.4f} {pt:10.2f}")
 
 
+# -- one material point ----------------------------------------------------------------------
+def material_point_text(stretch: float, confined: bool, increments: int, substeps: int = 1) -> str:
+    """One C3D8 cube [0, 1]³ on rollers at x, y, z = 0, its face y = 1 moved to y = ``stretch``; with
+    ``confined`` the faces x = 1 and z = 1 held too (uniaxial strain), else free (uniaxial stress).
+    Output at ``increments`` equal steps, each done in ``substeps`` fixed increments."""
+    corners = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)]
+    held = {1: [1, 4, 5, 8], 2: [1, 2, 5, 6], 3: [1, 2, 3, 4]}  # nodes on x = 0, y = 0, z = 0
+    lines = ["*HEADING", "one material point", "*NODE"] + [f"{i + 1}, {x}, {y}, {z}" for i, (x, y, z) in enumerate(corners)]
+    lines += ["*ELEMENT, TYPE=C3D8, ELSET=EALL", "1, 1, 2, 3, 4, 5, 6, 7, 8",
+              "*MATERIAL, NAME=BLOCK", "*ELASTIC", f"{E:.12e}, {NU}", "*PLASTIC",
+              f"{SIGMA_Y0:.12e}, 0.0", f"{SIGMA_Y0 + H_LIN * P_MAX:.12e}, {P_MAX:.12e}",
+              "*SOLID SECTION, ELSET=EALL, MATERIAL=BLOCK", "*BOUNDARY"]
+    lines += [f"{n}, {d}, {d}" for d, nodes in held.items() for n in nodes]
+    if confined:
+        lines += [f"{n}, 1, 1" for n in (2, 3, 6, 7)] + [f"{n}, 3, 3" for n in (5, 6, 7, 8)]
+    ends = [f"{k / increments:.12g}" for k in range(1, increments + 1)]
+    lines += ["*TIME POINTS, NAME=INCREMENTS"] + [", ".join(ends[k:k + 8]) for k in range(0, len(ends), 8)]
+    dt = 1.0 / (increments * substeps)
+    lines += ["*STEP, NLGEOM, INC=100000", "*STATIC", f"{dt:.12g}, 1.0, {dt:.12g}, {dt:.12g}", "*BOUNDARY"]
+    lines += [f"{n}, 2, 2, {stretch - 1.0:.12e}" for n in (3, 4, 7, 8)]
+    lines += ["*EL PRINT, ELSET=EALL, TIME POINTS=INCREMENTS", "S, PEEQ", "*END STEP"]
+    return "\n".join(lines) + "\n"
+
+
+def material_point_ccx(dat: Path) -> np.ndarray:
+    """(σ_xx, σ_yy, p) of CalculiX's one element at each output, averaged over its 8 points."""
+    out: dict[str, list[float]] = {"stresses": [], "equivalent plastic strain": []}
+    kind, rows = None, []
+    for line in dat.read_text().splitlines() + [" end"]:
+        if re.match(r"^\s*[a-z]", line):
+            if kind is not None:
+                a = np.array(rows)
+                out[kind].append(a[:, 2:4].mean(axis=0) if kind == "stresses" else a[:, 2].mean())
+            kind = next((k for k in out if line.strip().startswith(k)), None)
+            rows = []
+        elif kind is not None and line.split():
+            rows.append([float(w) for w in line.split()])
+    return np.column_stack([np.array(out["stresses"]), out["equivalent plastic strain"]])
+
+
+def material_point_ours(stretch: float, confined: bool, increments: int) -> np.ndarray:
+    """(σ_xx, σ_yy, p) of the package's one hexahedron (finite strain) at each increment, as CalculiX's."""
+    from dolfinx_nnqem.cases.geometries import BlockStackTags as T
+    from dolfinx_nnqem.cases.geometries import build_block_stack
+    from dolfinx_nnqem.material import VonMises
+    from dolfinx_nnqem.problem import ContactProblem, Dirichlet
+    from dolfinx_nnqem.solvers import CheckOptions, SolverOptions, make_solver, solve_load_steps
+
+    mesh, ct, ft = build_block_stack(MPI.COMM_SELF, 1.0, 1.0, [1.0], [(1, 1, 1)])
+    dirichlet = [Dirichlet(T.xmin(1), 0.0, [0]), Dirichlet(T.bottom(1), 0.0, [1]), Dirichlet(T.zmin(1), 0.0, [2]),
+                 Dirichlet(T.top(1), stretch - 1.0, [1])]
+    if confined:
+        dirichlet += [Dirichlet(T.xmax(1), 0.0, [0]), Dirichlet(T.zmax(1), 0.0, [2])]
+    problem = ContactProblem(mesh, ct, ft, materials=VonMises(E=E, nu=NU, sigma_y0=SIGMA_Y0, H=H_LIN),
+                             dirichlet=dirichlet, kinematics="finite")
+    rows = []
+
+    def record(_):
+        sigma = problem.state.sigma_n.x.array.reshape(-1, 3, 3)
+        rows.append([sigma[:, 0, 0].mean(), sigma[:, 1, 1].mean(), problem.state.p_n.x.array.mean()])
+
+    solve_load_steps(problem, make_solver("monolithic", problem, SolverOptions(rtol=1e-10)), increments,
+                     check=CheckOptions(max_strain=None, max_rotation=None), callbacks=[record])
+    return np.array(rows)
+
+
+def material_points(out: Path, increments: int = 10, substeps: tuple[int, ...] = (1, 4, 16)) -> dict:
+    """The two programs' laws at one material point: uniaxial stress to λ = 0.7 (large plastic strain,
+    J ≈ 1) and uniaxial strain to λ = 0.985 (J = 0.985, a pressure of a few σ_y: as under the sphere).
+    The package in ``increments`` increments (its update is exact on these proportional paths),
+    CalculiX in ``increments`` × each of ``substeps``."""
+    results = {}
+    for name, stretch, confined in (("uniaxial stress, λ = 0.7", 0.7, False), ("uniaxial strain, λ = 0.985", 0.985, True)):
+        ours = material_point_ours(stretch, confined, increments)
+        results[name] = {"ours": ours.tolist()}
+        for k in substeps:
+            job = ("point_confined" if confined else "point_free") + f"_s{k}"
+            (out / f"{job}.inp").write_text(material_point_text(stretch, confined, increments, k))
+            run_ccx(out, job)
+            theirs = material_point_ccx(out / f"{job}.dat")
+            results[name][f"ccx, {k} substeps"] = theirs.tolist()
+            print(f"== {name}, CalculiX in {increments * k} increments: λ, σ_yy ours, CalculiX (MPa), difference; "
+                  "p ours, CalculiX, difference")
+            for i in range(increments):
+                print(f"  {1 + (stretch - 1) * (i + 1) / increments:.4f} {ours[i, 1]:11.4f} {theirs[i, 1]:11.4f} "
+                      f"{(theirs[i, 1] - ours[i, 1]) / abs(ours[i, 1]):+8.3%}   {ours[i, 2]:.6f} {theirs[i, 2]:.6f} "
+                      f"{(theirs[i, 2] - ours[i, 2]) / max(ours[i, 2], 1e-300):+8.3%}")
+    return results
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("outdir", help="where the .inp files, CalculiX's outputs and the json go")
@@ -332,18 +428,23 @@ def main(argv=None) -> int:
     parser.add_argument("--mu-f", type=float, default=0.0, help="Coulomb friction coefficient")
     parser.add_argument("--ours", action="store_true", help="solve the case with the package as well")
     parser.add_argument("--tag", default="", help="added to the json's name")
+    parser.add_argument("--ccx-substeps", type=int, default=1, help="CalculiX's increments at most 1/this of ours")
+    parser.add_argument("--material-point", action="store_true", help="only compare the two laws at one point")
     args = parser.parse_args(argv)
     out = Path(args.outdir)
     out.mkdir(parents=True, exist_ok=True)
+    if args.material_point:
+        (out / "material_points.json").write_text(json.dumps(material_points(out), indent=1))
+        return 0
     h = 1.0 / args.h
     problem = deep_press_problem(h, args.mu_f)
     stem = f"deep_h{args.h}_n{args.increments}_mu{args.mu_f:g}"
     theirs, seconds = {}, {}
     for factor in args.penalty:
         for facet in args.facet:
-            job = f"{stem}_k{factor:g}_f{facet:g}"
+            job = f"{stem}_k{factor:g}_f{facet:g}" + (f"_s{args.ccx_substeps}" if args.ccx_substeps > 1 else "")
             (out / f"{job}.inp").write_text(model_text(problem, args.increments, h=h, penalty_factor=factor,
-                                                       facet=facet, mu_f=args.mu_f))
+                                                       facet=facet, mu_f=args.mu_f, substeps=args.ccx_substeps))
             seconds[job] = run_ccx(out, job)
             theirs[job] = ccx_results(out / f"{job}.dat", problem)
             print(f"CalculiX {job}: {len(theirs[job]['force'])} increments in {seconds[job]:.1f} s", flush=True)
