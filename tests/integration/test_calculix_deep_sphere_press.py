@@ -17,7 +17,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 import calculix_deep_sphere_press as deep  # noqa: E402
 
-H, INCREMENTS = 0.25, 10  # the small version: h = 1/4 mm (900 hexahedra), 0.02 R per increment
+H, INCREMENTS = 0.25, 20  # the small version: h = 1/4 mm (900 hexahedra), 0.01 R per increment
 
 
 def test_calculix_cap_lies_on_the_sphere():
@@ -61,18 +61,19 @@ def test_calculix_model_is_the_finite_strain_case():
 @pytest.mark.slow
 @pytest.mark.skipif(shutil.which("ccx") is None, reason="CalculiX (ccx) is not on PATH")
 def test_deep_sphere_press_agrees_with_calculix_nlgeom(tmp_path):
-    """h = 1/4 mm, 10 increments, frictionless, CalculiX's sphere of 2° facets and penalty 100 E/h:
-    the force at the full depth within 1 %, at every increment within 2.5 % (a ring of nodes entering
-    contact moves the force by 10-30 % in one increment: where it enters differs by the penalty and the
-    facets), the largest p within 2 % at every increment, p point by point within 3 % of its largest
-    value, the contact radius within 0.5 % and the pressure at the nodes on z = 0 within 5 % of the
-    largest (CalculiX's penalty pressure against the package's normal force over the node's deformed
-    tributary area, a quarter of each deformed face: the two programs' nodal areas differ, measured
-    1.3-3.6 % apart on this mesh)."""
+    """h = 1/4 mm, 20 increments (CalculiX's at most a quarter of them: its return map's error grows
+    with the increment), frictionless, CalculiX's sphere of 2° facets and penalty 100 E/h. Measured:
+    the force within 0.6 % at 18 of the 20 increments and 1.9 % at the other two (a ring of nodes
+    entering contact moves the force by 10-30 % in one increment, and where it enters differs with the
+    penalty and the facets), 0.07 % at the full depth; the largest p within 0.65 %; p point by point
+    within 0.87 % of its largest value; the contact radius within 0.05 %; the pressure at the nodes on
+    z = 0 within 2.1 % of the largest (CalculiX's penalty pressure against the package's normal force
+    over the node's deformed tributary area, a quarter of each deformed face: the two programs' nodal
+    areas are not the same)."""
     problem = deep.deep_press_problem(H)
     job = "deep"
     (tmp_path / f"{job}.inp").write_text(deep.model_text(problem, INCREMENTS, h=H, penalty_factor=100.0, facet=2.0,
-                                                         mu_f=0.0))
+                                                         mu_f=0.0, substeps=4))
     deep.run_ccx(tmp_path, job)
     theirs = deep.ccx_results(tmp_path / f"{job}.dat", problem)
     ours = deep.run_ours(problem, INCREMENTS)
@@ -81,8 +82,9 @@ def test_deep_sphere_press_agrees_with_calculix_nlgeom(tmp_path):
     deep.print_measures(m, deep.DEPTH / deep.R_SPHERE * ours["load_factor"])
     force, max_p = np.abs(m["force"]["difference"]), np.abs(m["max p"]["difference"])
     assert force[-1] < 1e-2 and force.max() < 2.5e-2
-    assert max_p.max() < 2e-2
-    assert m["p at the points"]["largest |difference| / max p"] < 3e-2
+    assert np.median(force) < 5e-3 and np.count_nonzero(force < 1e-2) >= 0.8 * INCREMENTS
+    assert max_p.max() < 1e-2
+    assert m["p at the points"]["largest |difference| / max p"] < 1.5e-2
     assert m["p at the points"]["match distance / point spacing"] < 1e-3
     radius = m["contact radius"]
     assert radius["ccx"] == pytest.approx(radius["ours"], rel=5e-3)
