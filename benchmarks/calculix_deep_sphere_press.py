@@ -21,9 +21,11 @@ CalculiX's model, on the same mesh:
   "Incremental (visco)plasticity: multiplicative decomposition") is Simo's (1988) model: F = F_e F_p,
   the Kirchhoff stress τ = K (J² − 1)/2 I + μ dev b̄_e (b̄_e = J^(−2/3) b_e, a Neo-Hookean-type
   stored energy), von Mises on τ with the table's (Cauchy) stress multiplied by J, isochoric flow.
-  The package's is Hencky's τ = K ln J I + 2μ dev ε_e (ε_e = ½ ln b_e) and σ_y on τ: the two elastic
-  laws differ at second order in the elastic strain (here below 4 · 10⁻³), the yield conditions by
-  the factor J = det F_e (1 − J of order 10⁻³);
+  The package's is Hencky's τ = K ln J I + 2μ dev ε_e (ε_e = ½ ln b_e) and σ_y on τ, by the
+  exponential map. They differ by the volumetric law (CalculiX's pressure is J times the package's
+  at the same J), by the factor J on the yield stress, and by CalculiX's return map, whose error
+  depends on the increment (``--material-point`` measures each; ``--ccx-substeps`` refines
+  CalculiX's increments);
 * the sphere: a cap of C3D8 elements whose outer nodes lie on the sphere, on a grid of equal angles
   ``--facet`` (degrees) in the planes x = 0 and z = 0 up to ``CAP_ANGLE`` from the pole (a
   gnomonic grid: direction (tan φ_x, −1, tan φ_z)), tied by ``*RIGID BODY`` to a reference node at
@@ -43,7 +45,9 @@ the package's normal force / tributary area).
 Usage::
 
     python benchmarks/calculix_deep_sphere_press.py OUTDIR [--h 8] [--increments 20] [--penalty 100 ...]
-        [--facet 1.5 ...] [--mu-f 0.0] [--ours] [--tag T]
+        [--facet 1.5 ...] [--mu-f 0.0] [--ccx-substeps 1] [--ours] [--tag T]
+    python benchmarks/calculix_deep_sphere_press.py OUTDIR --material-point   # one point, both laws
+    python benchmarks/calculix_deep_sphere_press.py OUTDIR --plot STEM   # force and p from STEM.json
 
 Each CalculiX run writes ``OUTDIR/deep_h{1/h}_n{increments}_mu{mu_f}_k{factor}_f{facet}.inp`` (and its
 outputs next to it); ``OUTDIR/deep_h{1/h}_n{increments}_mu{mu_f}{tag}.json`` holds every history and measure.
@@ -418,6 +422,31 @@ def material_points(out: Path, increments: int = 10, substeps: tuple[int, ...] =
     return results
 
 
+def plot(outdir: Path, stem: str) -> None:
+    """``deep_sphere_press.png``: the force and the largest p against the depth, the package's (lines)
+    and each CalculiX run's (circles) of ``outdir/stem.json``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    data = json.loads((outdir / f"{stem}.json").read_text())
+    fig, axes = plt.subplots(1, 2, figsize=(8.4, 3.6))
+    for job, m in data["measures"].items():
+        depth = DEPTH / R_SPHERE * np.arange(1, len(m["force"]["ours"]) + 1) / len(m["force"]["ours"])
+        for ax, key in zip(axes, ("force", "max p")):
+            ax.plot(np.concatenate([[0.0], depth]), np.concatenate([[0.0], m[key]["ours"]]), "-", label="dolfinx_nnqem")
+            ax.plot(depth, m[key]["ccx"], "o", ms=4, mfc="none", label=f"CalculiX 2.20 NLGEOM ({job})")
+    for ax, label in zip(axes, ("force (N)", "largest equivalent plastic strain")):
+        ax.set_xlabel("depth / R")
+        ax.set_ylabel(label)
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(outdir / "deep_sphere_press.png", dpi=120)
+    plt.close(fig)
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("outdir", help="where the .inp files, CalculiX's outputs and the json go")
@@ -430,9 +459,13 @@ def main(argv=None) -> int:
     parser.add_argument("--tag", default="", help="added to the json's name")
     parser.add_argument("--ccx-substeps", type=int, default=1, help="CalculiX's increments at most 1/this of ours")
     parser.add_argument("--material-point", action="store_true", help="only compare the two laws at one point")
+    parser.add_argument("--plot", metavar="STEM", help="only draw the force and p of OUTDIR/STEM.json")
     args = parser.parse_args(argv)
     out = Path(args.outdir)
     out.mkdir(parents=True, exist_ok=True)
+    if args.plot:
+        plot(out, args.plot)
+        return 0
     if args.material_point:
         (out / "material_points.json").write_text(json.dumps(material_points(out), indent=1))
         return 0
