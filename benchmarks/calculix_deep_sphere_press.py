@@ -37,10 +37,11 @@ CalculiX's model, on the same mesh:
 
 The measures at every increment: the whole sphere's force (4 × the quarter model's), the largest
 equivalent plastic strain p of the fine zone's Gauss points; at the end: p point by point (the
-package's Gauss points matched to CalculiX's by their deformed positions), the contact radius
-(the largest distance from the axis, in the deformed configuration, of a top node in contact) and
-the contact pressure at the top's nodes on the plane z = 0 (CalculiX's penalty pressure ``CSTR``,
-the package's normal force / tributary area).
+package's Gauss points matched to CalculiX's by their reference positions: CalculiX 2.20 prints
+``COORD`` undeformed with ``NLGEOM`` too), the contact radius (the largest distance from the axis,
+in the deformed configuration, of a top node in contact) and the contact pressure at the top's
+nodes on the plane z = 0 (CalculiX's penalty pressure ``CSTR``; the package's normal force over
+the node's reference tributary area and over its deformed one).
 
 Usage::
 
@@ -198,8 +199,8 @@ def read_contact_stress(dat: Path) -> np.ndarray:
 
 
 def ccx_results(dat: Path, problem) -> dict:
-    """CalculiX's histories (force, largest p per increment) and its final state (p at the points,
-    their deformed positions, the top's deformed positions and contact pressures)."""
+    """CalculiX's histories (force, largest p per increment) and its final state (p at the points and
+    their reference positions, the top's deformed positions and contact pressures)."""
     blocks = read_dat(dat)
     force = np.array([[t, -SYMMETRY * r[0, 2]] for t, r in blocks["forces"]])
     peeq = [r for _, r in blocks["peeq"]]
