@@ -18,7 +18,10 @@ the median of the pairwise ratios is printed with their spread:
 * in this process: NNEQM1 against the monolithic solver (direct) on the sphere slid over a block
   in the current geometry (``--slide-n``³ hexahedra, 10 increments; issue 43, "Speed, second round"),
   with both methods' outer/Newton iterations, solves per increment and NNEQM1's factorisations;
-* counts that do not depend on the machine: Newton and Krylov iterations, AMG set-ups;
+* counts that do not depend on the machine: Newton and Krylov iterations, AMG set-ups, and the
+  Newton iterations per increment of the node-to-surface and mortar block slides (12 increments,
+  μ_f = 0 and 0.3) against the rigid sphere's slide (``--slide-n``³, 10 increments) with the
+  monolithic solver (issue 43: at most 1.5 times; ``benchmarks/large_sliding.py``'s cases);
 * what the end-of-run pictures add (issue 43): ``dolfinx-nnqem run demos/two_beams.toml`` with its
   pictures against ``--no-pictures``, in turn: the median of the pairwise differences of CPU
   seconds (the process and the children it waited for: the picture worker too) and of wall
@@ -237,6 +240,21 @@ def sliding_ratio(n: int, runs: int) -> None:
           flush=True)
 
 
+def sliding_iterations(n: int) -> None:
+    """Newton iterations per increment of the block slides (node-to-surface and mortar, μ_f = 0 and
+    0.3) against the rigid sphere's slide, monolithic solver, current geometry (counts: no ratio
+    of times; the cases of ``benchmarks/large_sliding.py``)."""
+    from large_sliding import run
+
+    per_increment = {}
+    for case in ("slide", "blocks", "blocks-friction", "mortar", "mortar-friction"):
+        _, iterations = run(case, n, 2, "current", "monolithic", None, None)
+        per_increment[case] = sum(iterations) / len(iterations) if iterations else float("nan")
+    base = per_increment.pop("slide")
+    print(f"Newton iterations per increment against the sphere slide (n = {n}, {base:.2f} per increment): "
+          + ", ".join(f"{case} {value / base:.2f}" for case, value in per_increment.items()), flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--runs", type=int, default=5, help="pairs of runs per ratio (default 5)")
@@ -253,6 +271,7 @@ def main() -> None:
     iteration_costs(args.level, max(1, args.runs // 2))
     load_path_cost(args.proxy_level, max(1, args.runs // 2))
     sliding_ratio(args.slide_n, max(1, args.runs // 2))
+    sliding_iterations(args.slide_n)
 
 
 if __name__ == "__main__":
