@@ -17,6 +17,7 @@ input index, cell tag and undeformed centre.
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 
 import dolfinx.fem as fem
@@ -47,12 +48,28 @@ class DeformedCells:
                 f"s: the deformed cell's, ρ: the ratio): {'; '.join(self.named)}{more}")
 
 
+#: The coordinate element's vector space for each displacement function seen (made once: a new
+#: function space costs more than the check it serves, which runs at every converged increment).
+#: Keyed by the function (a function space is not hashable), kept while it lives.
+_COORDINATE_SPACES: weakref.WeakKeyDictionary[fem.Function, fem.FunctionSpace] = weakref.WeakKeyDictionary()
+
+
+def coordinate_space(u: fem.Function) -> fem.FunctionSpace:
+    """The vector Lagrange space of the coordinate element's degree on the mesh of ``u``, whose cell
+    dofs are the geometry nodes' (made once per function)."""
+    V_x = _COORDINATE_SPACES.get(u)
+    if V_x is None:
+        mesh = u.function_space.mesh
+        V_x = fem.functionspace(mesh, ("Lagrange", compat.coordinate_element(mesh).degree, (3,)))
+        _COORDINATE_SPACES[u] = V_x
+    return V_x
+
+
 def node_displacements(u: fem.Function) -> np.ndarray:
     """u at every geometry node of its mesh, laid out like ``mesh.geometry.x`` (n_nodes, 3): u
     interpolated into the coordinate element's space, whose cell dofs are the geometry nodes'."""
     mesh = u.function_space.mesh
-    degree = compat.coordinate_element(mesh).degree
-    V_x = fem.functionspace(mesh, ("Lagrange", degree, (3,)))
+    V_x = coordinate_space(u)
     u_x = fem.Function(V_x)
     u_x.interpolate(u)
     out = np.zeros_like(mesh.geometry.x)
