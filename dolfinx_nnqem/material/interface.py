@@ -197,9 +197,11 @@ class MaterialState(Protocol):
         """Every part's consistent tangent is symmetric."""
         ...
 
-    def evaluate(self, u: fem.Function) -> None:
+    def evaluate(self, u: fem.Function, tangent: bool = True) -> None:
         """Bring the quadrature data the forms read to ``u``: call before assembling the internal
-        force or the tangent at a new iterate (:class:`~dolfinx_nnqem.problem.ContactProblem` does)."""
+        force or the tangent at a new iterate (:class:`~dolfinx_nnqem.problem.ContactProblem` does).
+        ``tangent`` False: the internal force's data alone are needed (a state may then leave the
+        tangent's out until it is asked for at the same ``u``)."""
         ...
 
     def elastic_stress(self, eps: ufl.core.expr.Expr) -> ufl.core.expr.Expr:

@@ -131,8 +131,9 @@ class GaussPointState(GaussPointFields):
         """K_t(u)[du, v] = ∫ (C_alg : ε(du)) : ε(v) dx."""
         return self._integral(lambda part: ufl.inner(part.tangent(u, strain(du)), strain(v)))
 
-    def evaluate(self, u: fem.Function) -> None:
-        """Bring the quadrature data of the forms to ``u`` (the parts' return maps evaluated on arrays)."""
+    def evaluate(self, u: fem.Function, tangent: bool = True) -> None:
+        """Bring the quadrature data of the forms to ``u`` (the parts' return maps evaluated on arrays;
+        their tangents with them, whatever ``tangent`` says: one evaluation gives both)."""
         for part in self.parts:
             part.evaluate(u)
 

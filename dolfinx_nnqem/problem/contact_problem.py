@@ -262,7 +262,7 @@ class ContactProblem:
 
     def assemble_internal_force(self, F: PETSc.Vec | None = None) -> PETSc.Vec:
         """F_int(u) = ∫ σ(u) : ε(v) dx with the return map from the converged state."""
-        self.state.evaluate(self.u)
+        self.state.evaluate(self.u, tangent=False)
         return assemble_vector(self.F_int_form, self.V, F)
 
     def assemble_tangent(self, A: PETSc.Mat | None = None, extra_bcs: Sequence = ()) -> PETSc.Mat:

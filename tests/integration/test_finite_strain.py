@@ -387,6 +387,32 @@ def test_the_shape_ratio_is_relative_to_the_undeformed_cell():
     assert not strict.ok and "below min_shape_ratio = 0.4" in strict.reason and "input cell" in strict.reason
 
 
+@pytest.mark.parametrize("material", [VonMises(E=E, nu=NU, hardening=VOCE), NeoHooke(E=E, nu=NU)],
+                         ids=["hencky-voce", "neo-hooke"])
+def test_a_tangent_left_out_by_the_internal_force_is_the_one_computed_with_it(material):
+    """The internal force evaluates the state without the tangent (a Newton iteration's last residual
+    needs none); the tangent asked for afterwards at the same u is computed from that update's arrays
+    and equals, bit for bit, the one of an update that computed both at once; at a new u the tangent is
+    not the old one's."""
+    problem = uniaxial_problem(material, 0.3)
+    solve_load_steps(problem, make_solver("monolithic", problem), 2, final_load_factor=0.5)
+    st = problem.state
+    problem.u.x.array[:] *= 1.01  # a new iterate, plastic for von Mises
+    problem.assemble_internal_force()
+    K_later = problem.assemble_tangent().copy()
+    A_later = st.A_q.x.array.copy()
+    st._evaluated = None  # (the same u evaluated afresh, tangent and stresses at once)
+    st.evaluate(problem.u)
+    K_now = problem.assemble_tangent()
+    assert np.array_equal(A_later, st.A_q.x.array) and np.abs(A_later).max() > 0.0
+    K_later.axpy(-1.0, K_now)
+    assert K_later.norm() == 0.0
+    problem.u.x.array[:] *= 1.01
+    problem.assemble_internal_force()
+    problem.assemble_tangent()
+    assert not np.array_equal(A_later, st.A_q.x.array)
+
+
 # -- refusals --------------------------------------------------------------------------------------------
 def test_a_kinematics_that_does_not_exist_is_refused_by_name():
     with pytest.raises(ValueError, match=r"kinematics = 'large': expected 'small' .* or 'finite'"):

@@ -26,7 +26,7 @@ stresses, a commit of a solver's own values) has no meaning here and raises
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 import basix.ufl
@@ -140,6 +140,9 @@ class FiniteStrainGaussState(GaussPointFields):
         self._inverted = np.zeros(n_local, dtype=bool)  # det F ≤ 0 (or F not finite) at the last u evaluated
         self._gradient: tuple[fem.Function, fem.Expression, fem.Function] | None = None
         self._evaluated: tuple[fem.Function, np.ndarray, int] | None = None
+        #: per body, what computes the tangent the last update left out (empty: A_q is at that update)
+        self._tangent_later: list[tuple[FiniteStrainBody, Callable[[], np.ndarray] | None, np.ndarray,
+                                        FiniteStrainState]] = []
         self.reset()
 
     def _body(self, tag: int | None, material) -> FiniteStrainBody:
@@ -195,27 +198,45 @@ class FiniteStrainGaussState(GaussPointFields):
         compat.interpolate_expression(values, expression)
         return values.x.array.reshape(-1, 3, 3).copy()
 
-    def evaluate(self, u: fem.Function) -> None:
-        """P_q, A_q, σ_q, τ_q, Δp_q and the trial state at ``u`` from the converged state (nothing if
-        they are at this u and converged state already); P_q is NaN where det F ≤ 0."""
-        if self._evaluated is not None:
-            u_then, array, version = self._evaluated
-            if u_then is u and version == self.version and np.array_equal(array, u.x.array):
-                return
+    def evaluate(self, u: fem.Function, tangent: bool = True) -> None:
+        """P_q, σ_q, τ_q, Δp_q and the trial state at ``u`` from the converged state, and A_q unless
+        ``tangent`` is False (the internal force alone: a Newton iteration's last residual needs no
+        tangent). Nothing is done twice: at the same u and converged state only a tangent left out
+        is computed, from the update's own arrays. P_q is NaN where det F ≤ 0."""
+        if not self._evaluated_at(u):
+            self._update(u, tangent)
+        if tangent and self._tangent_later:
+            self._complete_tangent()
+
+    def _evaluated_at(self, u: fem.Function) -> bool:
+        """The quadrature data are at ``u`` (the same function, values and converged state)."""
+        if self._evaluated is None:
+            return False
+        u_then, array, version = self._evaluated
+        return u_then is u and version == self.version and np.array_equal(array, u.x.array)
+
+    def _update(self, u: fem.Function, tangent: bool) -> None:
+        """Every body's update at ``u`` into the quadrature data (A_q if ``tangent``, else the means to
+        compute it later, :meth:`_complete_tangent`)."""
         F = self.deformation_gradients(u)
         F_n = self.F_n.x.array.reshape(-1, 3, 3)
         self._inverted = ~(np.isfinite(F).all(axis=(1, 2)) & (np.linalg.det(np.where(np.isfinite(F), F, 1.0)) > 0.0))
+        self._tangent_later = []
         for body in self.bodies:
             pts = body.points
             bad = self._inverted[pts]
             # an inverted point has no stress: the update runs at the converged F there, and P is NaN
             F_body = np.where(bad[:, None, None], F_n[pts], F[pts])
-            response = body.material.update(F_body, self._converged(pts), tangent=True)
-            P, A = response.P.copy(), response.tangent
-            assert A is not None  # (asked for)
+            converged = self._converged(pts)
+            response = body.material.update(F_body, converged, tangent=tangent)
+            if tangent:
+                assert response.tangent is not None  # (asked for)
+                self.A_q.x.array.reshape(-1, 81)[pts] = response.tangent.reshape(-1, 81)
+            else:
+                self._tangent_later.append((body, response.tangent_later, F_body, converged))
+            P = response.P.copy()
             P[bad] = np.nan
             self.P_q.x.array.reshape(-1, 9)[pts] = P.reshape(-1, 9)
-            self.A_q.x.array.reshape(-1, 81)[pts] = A.reshape(-1, 81)
             self.sigma_q.x.array.reshape(-1, 9)[pts] = response.sigma.reshape(-1, 9)
             self.tau_q.x.array.reshape(-1, 9)[pts] = response.tau.reshape(-1, 9)
             self.dp_q.x.array[pts] = response.dp
@@ -225,6 +246,15 @@ class FiniteStrainGaussState(GaussPointFields):
                 self._trial[name][pts] = value
         self._evaluated = (u, u.x.array.copy(), self.version)
 
+    def _complete_tangent(self) -> None:
+        """A_q of the last update, which left it out: each body's tangent from its update's arrays, or
+        by the update again where its material keeps none."""
+        for body, later, F_body, converged in self._tangent_later:
+            A = later() if later is not None else body.material.update(F_body, converged, tangent=True).tangent
+            assert A is not None
+            self.A_q.x.array.reshape(-1, 81)[body.points] = A.reshape(-1, 81)
+        self._tangent_later = []
+
     def _converged(self, points: np.ndarray) -> FiniteStrainState:
         """The converged state (F_n, b_e,n, internal variables) at the local Gauss points ``points``."""
         return FiniteStrainState(self.F_n.x.array.reshape(-1, 3, 3)[points].copy(),
@@ -233,14 +263,14 @@ class FiniteStrainGaussState(GaussPointFields):
     # -- the return map's values ----------------------------------------------------------------------------
     def num_inverted_points(self, u: fem.Function) -> int:
         """Number of Gauss points (over all ranks) where det F(u) ≤ 0 (collective)."""
-        self.evaluate(u)
+        self.evaluate(u, tangent=False)
         n = self.num_owned_points()
         return self.mesh.comm.allreduce(int(np.count_nonzero(self._inverted[:n])), op=MPI.SUM)
 
     def trial_values(self, u: fem.Function) -> dict[str, np.ndarray]:
         """The update's values at ``u`` at the owned Gauss points (copies): "F", "b_e", "tau",
         "sigma", "dp" and the internal variables after the increment ("p", back-stresses)."""
-        self.evaluate(u)
+        self.evaluate(u, tangent=False)
         n = self.num_owned_points()
         out = {name: value[:n].copy() for name, value in self._trial.items()}
         out.update(tau=self.tau_q.x.array[:9 * n].reshape(n, 3, 3).copy(),
@@ -256,7 +286,7 @@ class FiniteStrainGaussState(GaussPointFields):
 
     def count_trial_plastic_points(self, u: fem.Function) -> int:
         """Number of Gauss points (over all ranks) where the update at ``u`` is plastic."""
-        self.evaluate(u)
+        self.evaluate(u, tangent=False)
         n = self.num_owned_points()
         return self.mesh.comm.allreduce(int(np.count_nonzero(self.dp_q.x.array[:n] > 0.0)), op=MPI.SUM)
 
@@ -322,7 +352,7 @@ class FiniteStrainGaussState(GaussPointFields):
             Other values: a solver's own Gauss-point values are small-strain stresses and plastic
             strains (NNEQM2), which have no meaning here.
         """
-        self.evaluate(u)
+        self.evaluate(u, tangent=False)
         n = self.num_owned_points()
         own = (np.array_equal(values.u, u.x.array)
                and np.array_equal(np.asarray(values.sigma).reshape(-1), self.sigma_q.x.array[:9 * n])

@@ -279,6 +279,9 @@ class HenckyAtPoints:
         b_e, F_inv, P, sigma = (np.empty_like(F) for _ in range(4))
         _exponential_map(F, J, tau, Q_e, lam_e, b_e, F_inv, P, sigma)
         new_state = FiniteStrainState(F.copy(), b_e, new_internal)
+        if tangent:
+            return FiniteStrainResponse(P=P, tau=tau, sigma=sigma, dp=ret.dp, state=new_state,
+                                        tangent=_tangent(trial, ret, F_inv, P))
         return FiniteStrainResponse(P=P, tau=tau, sigma=sigma, dp=ret.dp, state=new_state,
-                                    tangent=_tangent(trial, ret, F_inv, P) if tangent else None)
+                                    tangent_later=lambda: _tangent(trial, ret, F_inv, P))
 

@@ -13,7 +13,7 @@ Tangent layout: ``tangent[g, i, j, k, l]`` = ∂P_ij/∂F_kl at point g ((n, 9, 
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
@@ -60,6 +60,11 @@ class FiniteStrainResponse:
         The state at the end of the increment (:class:`FiniteStrainState`).
     tangent
         (n, 3, 3, 3, 3) consistent tangent ∂P_ij/∂F_kl; None when not asked for.
+    tangent_later
+        Where the tangent was not asked for: a function that computes it from this update's own
+        arrays (the same values as ``tangent``, without the update again), or None where the
+        material gives none (the caller updates again with ``tangent=True``). A Newton iteration
+        needs the tangent at every iterate but the last, whose residual alone it evaluates.
     """
 
     P: np.ndarray
@@ -68,6 +73,7 @@ class FiniteStrainResponse:
     dp: np.ndarray
     state: FiniteStrainState
     tangent: np.ndarray | None = None
+    tangent_later: Callable[[], np.ndarray] | None = None
 
 
 @runtime_checkable

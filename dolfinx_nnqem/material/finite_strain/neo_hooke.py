@@ -119,6 +119,9 @@ class NeoHookeAtPoints:
         b = F @ np.swapaxes(F, 1, 2)
         tau = mu * (b - np.eye(3)) + lmbda * log_J[:, None, None] * np.eye(3)
         new_state = FiniteStrainState(F.copy(), b, {"p": np.asarray(state.internal["p"]).copy()})
+        def later() -> np.ndarray:
+            return neo_hooke_tangent(F_inv, log_J, self.mu, self.lmbda)
+
         return FiniteStrainResponse(P=P, tau=tau, sigma=tau / J[:, None, None], dp=np.zeros(self.size),
-                                    state=new_state,
-                                    tangent=neo_hooke_tangent(F_inv, log_J, self.mu, self.lmbda) if tangent else None)
+                                    state=new_state, tangent=later() if tangent else None,
+                                    tangent_later=None if tangent else later)
