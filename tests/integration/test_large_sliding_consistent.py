@@ -18,12 +18,12 @@ re-evaluated at every Newton iterate and their geometric terms are in J
 
 import numpy as np
 import pytest
+from newton_checks import last_step, newton_matrix_against_differences, residuals, solves_by_increment
 
 from dolfinx_nnqem.cases.large_sliding import PRESSED_AT, slave_force, sliding_blocks
 from dolfinx_nnqem.solvers import MonolithicOptions, SolverOptions, make_solver, solve_load_steps
 
 OPTIONS = SolverOptions(rtol=1e-10, max_iterations=40)
-ROUND_OFF = 1e-12  #: residuals below this (relative to the force scale) are round-off: no rate is read there
 
 
 def _slide(mu_f: float, consistent: bool = True, method: str = "monolithic"):
@@ -50,27 +50,6 @@ def _slide(mu_f: float, consistent: bool = True, method: str = "monolithic"):
     return problem, results, reports
 
 
-def _residuals(report) -> np.ndarray:
-    """max(|R|/F, |H|/F) of the solve's iterates."""
-    return np.array([max(r.equilibrium, r.contact) for r in report.history])
-
-
-def _last_step(report) -> tuple[float, float] | None:
-    """(ε_k, ε_{k+1}) of the solve's last step that ends above round-off, or None."""
-    eps = _residuals(report)
-    steps = [(eps[k], eps[k + 1]) for k in range(len(eps) - 1) if eps[k + 1] > ROUND_OFF]
-    return steps[-1] if steps else None
-
-
-def _solves_by_increment(reports) -> dict[float, list]:
-    """The solves of every increment of the slide (load factor past the press), in order."""
-    out: dict[float, list] = {}
-    for load_factor, report, _ in reports:
-        if load_factor > PRESSED_AT + 1e-12:
-            out.setdefault(load_factor, []).append(report)
-    return out
-
-
 @pytest.fixture(scope="module")
 def frictional():
     return {consistent: _slide(0.3, consistent) for consistent in (True, False)}
@@ -85,9 +64,9 @@ def test_newton_converges_quadratically_on_a_node_to_surface_slide(frictional):
     print(f"\n  pairs that changed their master facet within each solve: {changed}")
     assert sum(c > 0 for c in changed) >= 3
     print()
-    for load_factor, solves in _solves_by_increment(reports).items():
-        eps = _residuals(solves[0])
-        step = _last_step(solves[0])
+    for load_factor, solves in solves_by_increment(reports, PRESSED_AT).items():
+        eps = residuals(solves[0])
+        step = last_step(solves[0])
         print(f"  ℓ = {load_factor:.4f}: max(|R|, |H|)/F = {', '.join(f'{e:.1e}' for e in eps)}; last step "
               f"{'–' if step is None else f'{step[0]:.1e} -> {step[1]:.1e}, ratio {step[1] / step[0]:.1e}'}; "
               f"iterates per solve {[len(r.history) for r in solves]}")
@@ -103,8 +82,8 @@ def test_frozen_geometry_needs_repeated_solves(frictional):
     _, _, reports = frictional[False]
     print()
     passes = []
-    for load_factor, solves in _solves_by_increment(reports).items():
-        starts = [_residuals(r)[0] for r in solves[1:]]
+    for load_factor, solves in solves_by_increment(reports, PRESSED_AT).items():
+        starts = [residuals(r)[0] for r in solves[1:]]
         passes.append(len(solves))
         print(f"  ℓ = {load_factor:.4f}: {len(solves)} solves, starting at {', '.join(f'{e:.1e}' for e in starts)}")
     assert min(passes) >= 4
@@ -126,38 +105,7 @@ def test_newton_matrix_matches_finite_differences_mid_slide():
     problem = sliding_blocks(slide=0.4, mu_f=0.3)
     with make_solver("monolithic", problem, OPTIONS) as solver:
         solve_load_steps(problem, solver, 5, final_load_factor=5 / 12)
-        rng = np.random.default_rng(0)
-        n_u = problem.u.x.petsc_vec.getLocalSize()
-        free = np.ones(n_u)
-        free[problem.owned_bc_dofs()] = 0.0
-        problem.u.x.array[:n_u] += 1e-4 * rng.standard_normal(n_u) * free
-        problem.u.x.scatter_forward()
-        J = solver._newton_matrix(solver.evaluate())
-        d = rng.standard_normal(n_u) * free
-        x, y = J.createVecRight(), J.createVecLeft()
-        x.getArray()[:] = 0.0
-        x.getArray()[:n_u] = d
-        J.mult(x, y)
-        Jd = y.getArray().copy()
-        u0 = problem.u.x.array.copy()
-
-        def F(sign: float) -> np.ndarray:
-            problem.u.x.array[:] = u0
-            problem.u.x.array[:n_u] += sign * 1e-7 * d
-            problem.u.x.scatter_forward()
-            ev = solver.evaluate()
-            return np.concatenate([ev.R_free.getArray().copy(), ev.H.ravel()])
-
-        fd = (F(1.0) - F(-1.0)) / 2e-7
-        solver.settings.consistent_geometry = False  # the frozen geometry's J at the same state
-        problem.u.x.array[:] = u0
-        problem.u.x.scatter_forward()
-        solver._newton_matrix(solver.evaluate()).mult(x, y)
-        J_frozen_d = y.getArray().copy()
-    error_u = np.abs(fd[:n_u] - Jd[:n_u]).max() / np.abs(fd[:n_u]).max()
-    error_H = np.abs(fd[n_u:] - Jd[n_u:]).max() / np.abs(fd[n_u:]).max()
-    frozen_u = np.abs(fd[:n_u] - J_frozen_d[:n_u]).max() / np.abs(fd[:n_u]).max()
-    frozen_H = np.abs(fd[n_u:] - J_frozen_d[n_u:]).max() / np.abs(fd[n_u:]).max()
+        error_u, error_H, frozen_u, frozen_H = newton_matrix_against_differences(problem, solver)
     print(f"\n  |J d − FD| / |FD|: u rows {error_u:.1e}, pair rows {error_H:.1e}; the frozen geometry's J: "
           f"{frozen_u:.1e}, {frozen_H:.1e}")
     assert error_u < 1e-8 and error_H < 1e-5
