@@ -62,7 +62,7 @@ class CellMeans:
 
     def __init__(self, problem):
         self.problem = problem
-        self.Q0 = fem.functionspace(problem.mesh, ("DG", 0))
+        self.Q0 = problem.state.Q0  # the state's DG 0 space of the mesh (one per problem, not per writer)
         self.q = fem.Function(self.Q0, name="von_mises")
         self.p = fem.Function(self.Q0, name="p")
         self.plastic = fem.Function(self.Q0, name="plastic")
