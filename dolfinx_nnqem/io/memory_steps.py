@@ -13,12 +13,14 @@ increment's commit point (:func:`dolfinx_nnqem.io.safe_io.commit`) makes it dura
 Only in serial (an HDF5 file written by several ranks must be on a file system that every rank
 sees), for step files up to :data:`LARGEST_STEP_BYTES` (a large step file would take its size in
 memory; its rewrites of the small XML file are then a small part of its cost), and when the
-tmpfs has room for twice the step.
+tmpfs has room for twice the step. A process killed while it wrote a step leaves its memory folder
+(``/dev/shm/dolfinx-nnqem-step-PID-*``); the next process that writes a step removes it.
 """
 
 from __future__ import annotations
 
 import errno as _errno
+import functools
 import os
 import shutil
 import tempfile
@@ -30,6 +32,9 @@ __all__ = ["LARGEST_STEP_BYTES", "MEMORY_FOLDER", "copy_step_files", "memory_fol
 
 MEMORY_FOLDER = Path("/dev/shm")
 """The tmpfs the step files are written in (Linux's shared-memory file system)."""
+
+PREFIX = "dolfinx-nnqem-step-"
+"""The memory folders' names: the prefix, the writing process's id, a random part."""
 
 LARGEST_STEP_BYTES = 64 * 1024 * 1024
 """The largest step file (its estimated size) written in memory first."""
@@ -45,9 +50,31 @@ def memory_folder(ranks: int, needed: int) -> Path | None:
         st = os.statvfs(MEMORY_FOLDER)
         if st.f_bavail * st.f_frsize < 2 * needed:
             return None
-        return Path(tempfile.mkdtemp(prefix="dolfinx-nnqem-step-", dir=MEMORY_FOLDER))
+        _remove_stale_memory_folders()
+        return Path(tempfile.mkdtemp(prefix=f"{PREFIX}{os.getpid()}-", dir=MEMORY_FOLDER))
     except OSError:
         return None
+
+
+@functools.cache
+def _remove_stale_memory_folders() -> None:
+    """Remove, once per process, the memory folders that killed processes left (a SIGKILL while a
+    step was written): the name holds the writing process's id."""
+    for folder in MEMORY_FOLDER.glob(f"{PREFIX}*-*"):
+        pid = folder.name[len(PREFIX):].split("-")[0]
+        if pid.isdigit() and not _alive(int(pid)):
+            remove_memory_folder(folder)
+
+
+def _alive(pid: int) -> bool:
+    """True if process ``pid`` exists (or is another user's: its folder is not ours to remove)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
 
 
 def copy_step_files(source: Path, target: Path) -> None:

@@ -11,6 +11,7 @@ no room in the tmpfs.
 from __future__ import annotations
 
 import errno
+import os
 from pathlib import Path
 
 import numpy as np
@@ -97,3 +98,22 @@ def test_where_a_step_is_written_in_place(monkeypatch):
     assert memory_steps.memory_folder(1, memory_steps.LARGEST_STEP_BYTES + 1) is None
     monkeypatch.setattr(memory_steps, "MEMORY_FOLDER", Path("/nonexistent-tmpfs"))
     assert memory_steps.memory_folder(1, 1000) is None
+
+
+def test_the_memory_folder_a_killed_process_left_is_removed(tmp_path, monkeypatch):
+    """A SIGKILL while a step is written leaves its memory folder; the next process's first step removes
+    it, and not the folder of a process that lives."""
+    import subprocess
+    import sys
+
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    monkeypatch.setattr(memory_steps, "MEMORY_FOLDER", tmp_path)
+    left = tmp_path / f"{memory_steps.PREFIX}{int(dead.stdout)}-abc"
+    living = tmp_path / f"{memory_steps.PREFIX}{os.getppid()}-abc"
+    for folder in (left, living):
+        folder.mkdir()
+        (folder / "fields_0001.h5").write_bytes(b"h5")
+    memory_steps._remove_stale_memory_folders.cache_clear()
+    made = memory_steps.memory_folder(1, 1000)
+    assert made is not None and made.parent == tmp_path and made.name.startswith(f"{memory_steps.PREFIX}{os.getpid()}-")
+    assert not left.exists() and living.exists()
