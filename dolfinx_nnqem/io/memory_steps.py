@@ -14,7 +14,8 @@ Only in serial (an HDF5 file written by several ranks must be on a file system t
 sees), for step files up to :data:`LARGEST_STEP_BYTES` (a large step file would take its size in
 memory; its rewrites of the small XML file are then a small part of its cost), and when the
 tmpfs has room for twice the step. A process killed while it wrote a step leaves its memory folder
-(``/dev/shm/dolfinx-nnqem-step-PID-*``); the next process that writes a step removes it.
+(``/dev/shm/dolfinx-nnqem-step-PID-*``); the next process that writes a step ten minutes or more
+later removes it.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ import functools
 import os
 import shutil
 import tempfile
+import time
 from pathlib import Path
 
 from dolfinx_nnqem.io.safe_io import OutputError
@@ -35,6 +37,9 @@ MEMORY_FOLDER = Path("/dev/shm")
 
 PREFIX = "dolfinx-nnqem-step-"
 """The memory folders' names: the prefix, the writing process's id, a random part."""
+
+STALE_AFTER_S = 600.0
+"""How long a memory folder of a process that is not seen alive stays before it is removed."""
 
 LARGEST_STEP_BYTES = 64 * 1024 * 1024
 """The largest step file (its estimated size) written in memory first."""
@@ -59,10 +64,17 @@ def memory_folder(ranks: int, needed: int) -> Path | None:
 @functools.cache
 def _remove_stale_memory_folders() -> None:
     """Remove, once per process, the memory folders that killed processes left (a SIGKILL while a
-    step was written): the name holds the writing process's id."""
+    step was written): the name holds the writing process's id. Only folders untouched for
+    :data:`STALE_AFTER_S` as well: a process of another PID namespace that shares the tmpfs (a
+    container with the host's IPC) is not seen alive from here, and its step takes seconds."""
+    now = time.time()
     for folder in MEMORY_FOLDER.glob(f"{PREFIX}*-*"):
         pid = folder.name[len(PREFIX):].split("-")[0]
-        if pid.isdigit() and not _alive(int(pid)):
+        try:
+            stale = now - folder.stat().st_mtime > STALE_AFTER_S
+        except OSError:  # removed meanwhile
+            continue
+        if stale and pid.isdigit() and not _alive(int(pid)):
             remove_memory_folder(folder)
 
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import errno
 import os
+import time
 from pathlib import Path
 
 import numpy as np
@@ -102,7 +103,7 @@ def test_where_a_step_is_written_in_place(monkeypatch):
 
 def test_the_memory_folder_a_killed_process_left_is_removed(tmp_path, monkeypatch):
     """A SIGKILL while a step is written leaves its memory folder; the next process's first step removes
-    it, and not the folder of a process that lives."""
+    it when it is ten minutes old, and not the folder of a process that lives, nor a recent one."""
     import subprocess
     import sys
 
@@ -110,10 +111,14 @@ def test_the_memory_folder_a_killed_process_left_is_removed(tmp_path, monkeypatc
     monkeypatch.setattr(memory_steps, "MEMORY_FOLDER", tmp_path)
     left = tmp_path / f"{memory_steps.PREFIX}{int(dead.stdout)}-abc"
     living = tmp_path / f"{memory_steps.PREFIX}{os.getppid()}-abc"
-    for folder in (left, living):
+    recent = tmp_path / f"{memory_steps.PREFIX}{int(dead.stdout)}-def"  # maybe of a process this one cannot see
+    for folder in (left, living, recent):
         folder.mkdir()
         (folder / "fields_0001.h5").write_bytes(b"h5")
+    old = time.time() - memory_steps.STALE_AFTER_S - 60
+    for folder in (left, living):
+        os.utime(folder, (old, old))
     memory_steps._remove_stale_memory_folders.cache_clear()
     made = memory_steps.memory_folder(1, 1000)
     assert made is not None and made.parent == tmp_path and made.name.startswith(f"{memory_steps.PREFIX}{os.getpid()}-")
-    assert not left.exists() and living.exists()
+    assert not left.exists() and living.exists() and recent.exists()
