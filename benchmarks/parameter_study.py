@@ -8,8 +8,10 @@ recovery indicator, pair tables; no pictures) into a folder of its own. CalculiX
 ``ccx`` process per variant, with its default outputs (.frd, .dat, .sta).
 
 The two alternate, variant by variant, so that both see the same load of the machine. Prints the
-time per variant of both, the ratio, our set-up (import and build, once per study) and the
-compiles of the variants after the first (counted in ``dolfinx_nnqem.jit``). The issue's
+wall time per variant of both, the ratio, their CPU time per variant (ours: the process's;
+CalculiX's: the child's user and system time; on a shared machine the fairer comparison), our
+set-up (import and build, once per study) and the compiles of the variants after the first
+(counted in ``dolfinx_nnqem.jit``). The issue's
 target: at most 0.3 × CalculiX per variant. Figures: ``docs/performance.md``.
 
 Usage::
