@@ -8,8 +8,10 @@ recovery indicator, pair tables; no pictures) into a folder of its own. CalculiX
 ``ccx`` process per variant, with its default outputs (.frd, .dat, .sta).
 
 The two alternate, variant by variant, so that both see the same load of the machine. Prints the
-time per variant of both, the ratio, our set-up (import and build, once per study) and the
-compiles of the variants after the first (counted in ``dolfinx_nnqem.jit``). The issue's
+wall time per variant of both, the ratio, their CPU time per variant (ours: the process's;
+CalculiX's: the child's user and system time; on a shared machine the fairer comparison), our
+set-up (import and build, once per study) and the compiles of the variants after the first
+(counted in ``dolfinx_nnqem.jit``). The issue's
 target: at most 0.3 × CalculiX per variant. Figures: ``docs/performance.md``.
 
 Usage::
@@ -24,6 +26,7 @@ import time
 T_START = time.perf_counter()
 
 import argparse  # noqa: E402
+import resource  # noqa: E402
 import shutil  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
@@ -49,17 +52,23 @@ def calculix_text(mu_f: float) -> str:
     return "\n".join(lines) + "\n"
 
 
-def run_calculix_variant(folder: Path, k: int, mu_f: float) -> float:
-    """Wall time of one ``ccx`` process on variant ``k`` (the whole process, its outputs written)."""
+def children_cpu() -> float:
+    """CPU seconds (user and system) of the finished child processes so far."""
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
+def run_calculix_variant(folder: Path, k: int, mu_f: float) -> tuple[float, float]:
+    """Wall and CPU time of one ``ccx`` process on variant ``k`` (the whole process, its outputs written)."""
     ccx = shutil.which("ccx")
     if ccx is None:
         raise SystemExit("no ccx on PATH (Debian: apt-get install calculix-ccx)")
     work = folder / f"ccx_{k:02d}"
     work.mkdir(parents=True, exist_ok=True)
     (work / "two_beams.inp").write_text(calculix_text(mu_f))
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), children_cpu()
     subprocess.run([ccx, "-i", "two_beams"], cwd=work, check=True, stdout=subprocess.DEVNULL)
-    return time.perf_counter() - t0
+    return time.perf_counter() - t0, children_cpu() - c0
 
 
 class Study:
@@ -82,8 +91,8 @@ class Study:
         self.indicator = RecoveryIndicator(self.problem)
         self.setup = time.perf_counter() - T_START
 
-    def variant(self, k: int, mu_f: float) -> tuple[float, int, float]:
-        """Wall time, compiles and total normal contact force of variant ``k`` (μ_f = ``mu_f``)."""
+    def variant(self, k: int, mu_f: float) -> tuple[float, float, int, float]:
+        """Wall and CPU time, compiles and total normal contact force of variant ``k`` (μ_f = ``mu_f``)."""
         from dolfinx_nnqem.cases.two_beams import FREE_END_CORNERS
         from dolfinx_nnqem.io.output import ResultsWriter
         from dolfinx_nnqem.solvers.registry import make_solver
@@ -91,17 +100,17 @@ class Study:
 
         problem = self.problem
         self.count[0] = 0
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         problem.update(mu_f=mu_f)
         writer = ResultsWriter(problem, self.method, self.folder / f"ours_{k:02d}", 15, probes=FREE_END_CORNERS,
                                extra={"mu_f": mu_f}, pictures=False, cell_fields=[self.indicator])
         with make_solver(self.method, problem) as solver:
             solve_load_steps(problem, solver, 15, callbacks=[writer])
         writer.close()
-        elapsed = time.perf_counter() - t0
+        elapsed, cpu = time.perf_counter() - t0, time.process_time() - c0
         assert problem.contact is not None
         normal = float(problem.comm.allreduce(np.sum(problem.contact.force()[:, 0])))
-        return elapsed, self.count[0], normal
+        return elapsed, cpu, self.count[0], normal
 
 
 def main(argv=None) -> int:
@@ -113,13 +122,16 @@ def main(argv=None) -> int:
     folder = Path(args.outdir)
     mu_values = np.linspace(0.0, 0.5, args.variants)
     study = Study(folder, args.method)
-    ours, theirs, compiles, normal = [], [], [], []
+    ours, theirs, ours_cpu, theirs_cpu, compiles, normal = [], [], [], [], [], []
     for k, mu in enumerate(mu_values):  # alternated, so that both see the same load of the machine
-        elapsed, count, force = study.variant(k, float(mu))
+        elapsed, cpu, count, force = study.variant(k, float(mu))
         ours.append(elapsed)
+        ours_cpu.append(cpu)
         compiles.append(count)
         normal.append(force)
-        theirs.append(run_calculix_variant(folder, k, float(mu)))
+        wall, cpu = run_calculix_variant(folder, k, float(mu))
+        theirs.append(wall)
+        theirs_cpu.append(cpu)
     setup = study.setup
     n = args.variants
     print(f"{n} variants of the two beams, mu_f = {mu_values[0]:g} ... {mu_values[-1]:g}, method {args.method}")
@@ -128,6 +140,8 @@ def main(argv=None) -> int:
     print(f"CalculiX: per variant median {np.median(theirs):.3f} s (min {min(theirs):.3f}, max {max(theirs):.3f})")
     print(f"ratio per variant (medians): {np.median(ours) / np.median(theirs):.3f}; with our set-up shared by the "
           f"{n} variants: {(setup + sum(ours)) / sum(theirs):.3f}")
+    print(f"CPU per variant (medians): ours {np.median(ours_cpu):.3f} s, CalculiX {np.median(theirs_cpu):.3f} s, "
+          f"ratio {np.median(ours_cpu) / np.median(theirs_cpu):.3f}")
     print(f"compiles per variant after the first: {compiles[1:]}")
     print("total normal contact force (N) per mu_f: "
           + ", ".join(f"{mu:.3f}: {f:.1f}" for mu, f in zip(mu_values, normal)))

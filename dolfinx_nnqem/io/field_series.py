@@ -34,6 +34,7 @@ from dolfinx.io import XDMFFile
 from dolfinx_nnqem import compat
 from dolfinx_nnqem.collective import on_rank0
 from dolfinx_nnqem.io.deformed_fields import DEFORMED_INDEX, deformed_geometry, write_deformed_geometry
+from dolfinx_nnqem.io.memory_steps import copy_step_files, memory_folder, remove_memory_folder
 from dolfinx_nnqem.io.safe_io import OutputError, StagedFiles, atomic_write_text
 from dolfinx_nnqem.io.xdmf_steps import child, data_path, read_field_index
 from dolfinx_nnqem.material.kinematics import von_mises_stress
@@ -61,7 +62,7 @@ class CellMeans:
 
     def __init__(self, problem):
         self.problem = problem
-        self.Q0 = fem.functionspace(problem.mesh, ("DG", 0))
+        self.Q0 = problem.state.Q0  # the state's DG 0 space of the mesh (one per problem, not per writer)
         self.q = fem.Function(self.Q0, name="von_mises")
         self.p = fem.Function(self.Q0, name="p")
         self.plastic = fem.Function(self.Q0, name="plastic")
@@ -178,9 +179,19 @@ class FieldSeriesWriter:
         # HDF5 must not meet a full disk: after a failed collective write it can neither close
         # the file nor be left to close it at exit (see _write_step), so a disk without room
         # for the step file is refused here, with the figures
-        on_rank0(self.comm, check_free_space, path.with_suffix(".h5"), self._bytes_needed())
-        self._write_step(path, [u, *self._means.fields, *self._means.tensors, *(f.function for f in self.cell_fields)],
-                         t, moved_by=u if self.deformed_mesh else None)
+        needed = self._bytes_needed()
+        on_rank0(self.comm, check_free_space, path.with_suffix(".h5"), needed)
+        functions = [u, *self._means.fields, *self._means.tensors, *(f.function for f in self.cell_fields)]
+        moved_by = u if self.deformed_mesh else None
+        memory = memory_folder(self.comm.size, needed)
+        if memory is None:
+            self._write_step(path, functions, t, moved_by)
+        else:  # written in memory, then copied whole (io/memory_steps.py: the XML's rewrites)
+            try:
+                self._write_step(memory / path.name, functions, t, moved_by, named=path)
+                copy_step_files(memory / path.name, path)
+            finally:
+                remove_memory_folder(memory)
         if self.keep_last:  # a copy: problem.u moves on in the next increment
             self.last_written = (t, u.function_space, u.x.array.copy())
         self.steps = [s for s in self.steps if s[0] < result.index] + [(result.index, t)]
@@ -208,8 +219,10 @@ class FieldSeriesWriter:
             size = 8 * ((9 if self.deformed_mesh else 6) * nodes + cells * (compat.geometry_dofmap(mesh).shape[1] + 3))
         return int(1.25 * size) + 65536
 
-    def _write_step(self, path: Path, functions: list, t: float, moved_by: fem.Function | None = None) -> None:
-        """One closed XDMF/HDF5 step file; a failed write raises OutputError naming the .h5.
+    def _write_step(self, path: Path, functions: list, t: float, moved_by: fem.Function | None = None,
+                    named: Path | None = None) -> None:
+        """One closed XDMF/HDF5 step file; a failed write raises OutputError naming the .h5 (of
+        ``named``, the step file's place in the output folder, if ``path`` is a copy's source).
         With ``moved_by``, the mesh's geometry moved by it too (the grid ``deformed``).
 
         DOLFINx leaves the dataset of a failed write open, so on MPI the file can no longer be
@@ -228,7 +241,8 @@ class FieldSeriesWriter:
             xdmf.close()
         except RuntimeError as error:  # HDF5 reports a full disk as a RuntimeError
             _abandon(xdmf, self.comm)
-            raise OutputError(28, f"cannot write {path.with_suffix('.h5')}: {error}", str(path)) from error
+            named = path if named is None else named
+            raise OutputError(28, f"cannot write {named.with_suffix('.h5')}: {error}", str(named)) from error
 
     def _write_index(self, at_once: bool = False) -> None:
         """The index of the steps (rank 0): staged, or with ``at_once`` (or no staging) replaced now.
