@@ -47,12 +47,13 @@ MATERIAL = VonMises(E=1.0e3, nu=0.3)
 
 def sliding_sphere(n: int, *, start: float = 0.3, end: float = 0.7, geometry: str = "current",
                    law: str = "alart-curnier", mu_f: float = 0.0, comm: MPI.Comm = MPI.COMM_WORLD,
-                   shape: str = "sphere", degree: int = 1, ny: int | None = None) -> ContactProblem:
+                   shape: str = "sphere", degree: int = 1, ny: int | None = None,
+                   cell_type: str = "hexahedron") -> ContactProblem:
     """The issue's sliding sphere on an n³ unit cube (module docstring); ``shape="cylinder"``: a
     cylinder of the same radius with its axis along z instead; ``degree``: of the displacements
-    (2: Q2 hexahedra, every node of the top face a slave node); ``ny``: the layers of cells along y
-    (default n)."""
-    mesh, ct, ft = build_block_stack(comm, 1.0, 1.0, [1.0], [(n, n if ny is None else ny, n)])
+    (2: Q2 hexahedra or P2 tetrahedra, every node of the top face a slave node); ``ny``: the layers of
+    cells along y (default n); ``cell_type``: "hexahedron" or "tetrahedron" (``build_block_stack``)."""
+    mesh, ct, ft = build_block_stack(comm, 1.0, 1.0, [1.0], [(n, n if ny is None else ny, n)], cell_type=cell_type)
     path = PiecewiseLinearPath([[0.0, 0.0, 0.0, 0.0], [PRESSED_AT, 0.0, -DEPTH, 0.0], [1.0, end - start, -DEPTH, 0.0]])
     centre = (start, 1.0 + RADIUS, 0.5)
     obstacle: RigidObstacle

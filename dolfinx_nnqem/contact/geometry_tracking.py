@@ -23,7 +23,8 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from dolfinx_nnqem.contact.current_geometry import (EDGE_ALLOWANCE, MortarTracker, ObstacleTracker, SurfaceTracker,
+from dolfinx_nnqem.contact.current_geometry import (EDGE_ALLOWANCE, CombinedObstacleTracker, MortarTracker,
+                                                     ObstacleTracker, SurfaceTracker,
                                                      displacement_at, moved_surfaces, surface_tracker,
                                                      with_moved_normals)
 from dolfinx_nnqem.contact.discretisation import discretise
@@ -45,7 +46,7 @@ if TYPE_CHECKING:
 __all__ = ["ContactGeometry", "GeometryTracker", "LostContactError", "Remap", "TrackedInterface", "TrackedModel",
            "current_geometry_refusal", "reference_pairs", "starting_pairs", "tracker_of", "zero_displacement"]
 
-GeometryTracker = ObstacleTracker | SurfaceTracker | MortarTracker
+GeometryTracker = ObstacleTracker | CombinedObstacleTracker | SurfaceTracker | MortarTracker
 
 Remap = Callable[[np.ndarray, np.ndarray], np.ndarray]
 """``remap(old, fill)``: per-pair rows laid out like the pairs before a re-evaluation, in the new
@@ -96,27 +97,19 @@ def current_geometry_refusal(kind: str, V: dolfinx.fem.FunctionSpace) -> tuple[s
     cannot be evaluated in the current configuration with the displacement space V, and what to use
     instead; None if they can.
 
-    Degree 1 takes every kind. Degree 2 takes rigid obstacles on hexahedra: a 9-node quadrilateral
+    Degree 1 takes every kind. Degree 2 takes rigid obstacles: on hexahedra a 9-node quadrilateral
     facet gives every node a pair of its own (the node alone, as at degree 1), which the tracker
-    re-evaluates where that node is. On tetrahedra a 6-node triangle's pairs act on combinations
-    of its nodes (the transformed basis, :mod:`~dolfinx_nnqem.contact.quadratic_facets`), and
-    node-to-surface and mortar pairs are projected onto linear facets in the current configuration.
+    re-evaluates where that node is; on tetrahedra a 6-node triangle's pairs act on combinations of
+    its nodes (the transformed basis, :mod:`~dolfinx_nnqem.contact.quadratic_facets`), re-evaluated
+    between solves (:class:`~dolfinx_nnqem.contact.current_geometry.CombinedObstacleTracker`).
+    Node-to-surface and mortar pairs are projected onto linear facets in the current configuration.
     """
-    import dolfinx
-
     degree = space_degree(V)
-    if degree == 1:
+    if degree == 1 or kind == "rigid obstacle":
         return None
-    if kind == "rigid obstacle":
-        if V.mesh.topology.cell_type == dolfinx.mesh.CellType.hexahedron:
-            return None
-        return ("the current geometry takes a rigid obstacle with degree-2 displacements on hexahedra only in this "
-                "version (9-node quadrilateral facets: one pair per node); on tetrahedra the pairs of the 6-node "
-                "triangle facets act on combinations of their nodes (the transformed basis), which it does not "
-                "re-evaluate", "hexahedra, or degree 1")
     what = ("segments, dual basis and weighted gaps" if kind == "mortar" else "closest points and pair rows")
     return (f"the current geometry takes {kind} pairs with degree-1 displacements only in this version (its {what} "
-            f"are those of linear facets; of degree 2 it takes rigid obstacles on hexahedra); the displacements "
+            f"are those of linear facets; of degree 2 it takes rigid obstacles only); the displacements "
             f"here have degree {degree}", "degree 1")
 
 
@@ -142,8 +135,9 @@ def tracker_of(contact: Contact, V: dolfinx.fem.FunctionSpace, facet_tags: dolfi
     """
     if isinstance(contact.surface1, RigidObstacle):
         tolerance = mesh_tolerance(V.mesh) if contact.tolerance is None else float(contact.tolerance)
-        return ObstacleTracker(obstacle_pairs(V, facet_tags, int(contact.surface2), contact.surface1,
-                                              tolerance=tolerance))
+        pairs = obstacle_pairs(V, facet_tags, int(contact.surface2), contact.surface1, tolerance=tolerance)
+        # the same kind on every rank: whether pairs combine nodes is a property of the gathered surface
+        return ObstacleTracker(pairs) if pairs.combination is None else CombinedObstacleTracker(pairs)
     slave = contact.slave
     if reference is not None:
         discretisation = "mortar" if reference.kind == "mortar" else "node-to-surface"
@@ -251,8 +245,9 @@ class ContactGeometry:
 
     @property
     def obstacles_follow(self) -> bool:
-        """True if some interface is a rigid obstacle in the current geometry (whose pairs
-        :meth:`refresh_obstacles` re-evaluates in place)."""
+        """True if some interface is a rigid obstacle in the current geometry whose pairs
+        :meth:`refresh_obstacles` re-evaluates in place (one node per pair: degree 1, Q2 hexahedra; on
+        P2 tetrahedra they are re-evaluated between solves, by :meth:`update`)."""
         return any(isinstance(t, ObstacleTracker) for t in self._trackers)
 
     @property

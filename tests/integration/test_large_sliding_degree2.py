@@ -56,6 +56,26 @@ def test_q2_sphere_slid_equals_press_in_place(method, law):
     assert error < 1e-8 and f_place[1] < 0
 
 
+@pytest.mark.parametrize("method, law", [("monolithic", "alart-curnier"), ("monolithic", "polar"),
+                                         ("nneqm1", "alart-curnier"), ("nneqm1", "polar"),
+                                         ("nneqm2", "alart-curnier")])
+def test_p2_tetrahedra_sphere_slid_equals_press_in_place(method, law):
+    """The sphere slid 0.3 -> 0.7 over a block of 3³ × 6 P2 tetrahedra: its 65 pairs combine the nodes of their
+    6-node triangles (CombinedObstacleTracker), frozen within a solve and evaluated again between solves;
+    the force of a press made in place at 0.7, 1e-8."""
+    slid = sliding_sphere(3, degree=2, law=law, cell_type="tetrahedron")
+    results = _run(slid, method, 16)
+    in_place = sliding_sphere(3, start=0.7, end=0.7, degree=2, law=law, cell_type="tetrahedron")
+    _run(in_place, method, 4)
+    f_slid, f_place = obstacle_force(slid), obstacle_force(in_place)
+    error = np.linalg.norm(f_slid - f_place) / np.linalg.norm(f_place)
+    print(f"\n  {method}/{law}, P2 tetrahedra: slid F = {f_slid}, in place F = {f_place}; |ΔF|/|F| = {error:.1e}; "
+          f"Newton iterations per increment {[r.iterations for r in results]}, solves "
+          f"{[r.report.geometry_passes for r in results]}")
+    assert slid.num_pairs == 65 and slid.contact.geometry.following == [True]
+    assert error < 1e-8 and f_place[1] < 0
+
+
 def test_q2_cylinder_slid_equals_press_in_place():
     slid = sliding_sphere(3, degree=2, shape="cylinder")
     _run(slid, "monolithic", 16)
@@ -84,24 +104,26 @@ def test_q2_sphere_slide_converges_quadratically():
             assert steps[-1][1] <= 10.0 * steps[-1][0] ** 2
 
 
-def _block(n: int, obstacle, geometry: str, mu_f: float) -> ContactProblem:
-    mesh, ct, ft = build_block_stack(MPI.COMM_WORLD, 1.0, 1.0, [1.0], [(n, n, n)])
+def _block(n: int, obstacle, geometry: str, mu_f: float, cell_type: str = "hexahedron") -> ContactProblem:
+    mesh, ct, ft = build_block_stack(MPI.COMM_WORLD, 1.0, 1.0, [1.0], [(n, n, n)], cell_type=cell_type)
     return ContactProblem(mesh, ct, ft, materials=MATERIAL, dirichlet=[Dirichlet(T.bottom(1))], degree=2,
                           contact=Contact(obstacle, T.top(1), mu_f=mu_f, geometry=geometry))
 
 
-@pytest.mark.parametrize("method", ["monolithic", "nneqm1"])
-def test_q2_current_geometry_equals_reference_for_a_plane(method):
-    """A plane pressed 10⁻³ and slid 5·10⁻³ with friction: exact in either geometry, so the same forces."""
+@pytest.mark.parametrize("method, cell_type", [("monolithic", "hexahedron"), ("nneqm1", "hexahedron"),
+                                               ("monolithic", "tetrahedron"), ("nneqm1", "tetrahedron")])
+def test_q2_current_geometry_equals_reference_for_a_plane(method, cell_type):
+    """A plane pressed 10⁻³ and slid 5·10⁻³ with friction: exact in either geometry, so the same forces (on
+    P2 tetrahedra too: the plane's distance of X̂ + d̂ is the combination Σ_k a_ik of the nodes' distances)."""
     path = PiecewiseLinearPath([[0.0, 0.0, 0.0, 0.0], [0.5, 0.0, -1e-3, 0.0], [1.0, 5e-3, -1e-3, 0.0]])
     forces = {}
     for geometry in ("reference", "current"):
         plane = Plane(point=(0.0, 1.0, 0.0), normal=(0.0, -1.0, 0.0), motion=path)
-        problem = _block(2, plane, geometry, 0.3)
+        problem = _block(2 if cell_type == "hexahedron" else 3, plane, geometry, 0.3, cell_type)
         _run(problem, method, 8)
         forces[geometry] = obstacle_force(problem)
     error = np.linalg.norm(forces["current"] - forces["reference"]) / np.linalg.norm(forces["reference"])
-    print(f"\n  {method}, Q2 plane: reference F = {forces['reference']}, current F = {forces['current']}; "
+    print(f"\n  {method}, {cell_type}, degree 2 plane: reference F = {forces['reference']}, current F = {forces['current']}; "
           f"|ΔF|/|F| = {error:.1e}")
     assert error < 1e-8 and abs(forces["reference"][0]) > 0.1 * abs(forces["reference"][1])
 
