@@ -2,21 +2,25 @@
 
 Q2 hexahedra: a 9-node quadrilateral facet gives every node of the contact surface (vertices,
 edge and centre nodes) a pair of its own, the node alone, which the current geometry re-evaluates
-where the node is, as at degree 1 (``contact/geometry_tracking.py``, ``current_geometry_refusal``).
+where the node is, as at degree 1, with its geometric terms in the Newton matrices. P2
+tetrahedra: a 6-node triangle's pair acts on a combination of its nodes (the transformed basis);
+the current geometry re-evaluates the combined point between solves, frozen within one
+(``CombinedObstacleTracker``).
 
-* the issue's sphere slid 0.3 -> 0.7 over a 3³ Q2 block ends with the force of a press made in
-  place there, with every solver (monolithic, NNEQM1, NNEQM2) and both laws; a cylinder too;
-* the monolithic solver converges quadratically in every increment of the slide (the obstacle's
+* the issue's sphere slid 0.3 -> 0.7 over a 3³ Q2 block, and over 3³ × 6 P2 tetrahedra, ends with
+  the force of a press made in place there, with every solver (monolithic, NNEQM1, NNEQM2) and
+  both laws; a cylinder too (Q2);
+* the monolithic solver converges quadratically in every increment of the Q2 slide (the obstacle's
   geometric terms, per node, in its Newton matrix) and takes one solve per increment;
-* a plane pressed and slid with friction gives the reference geometry's results (its geometry is
-  exact in both); a cylinder pressed and slid by d tends to them linearly in d (9e-9 at d = 10⁻⁵,
-  1e-9 at 10⁻⁶ with R = 0.6);
+* a plane pressed and slid with friction gives the reference geometry's results on Q2 and P2 (its
+  geometry is exact in both); a cylinder pressed and slid by d tends to them linearly in d on Q2
+  (9e-9 at d = 10⁻⁵, 1e-9 at 10⁻⁶ with R = 0.6);
 * the force converges with the mesh (a wider sphere, whose contact patch spans several facets):
   Q2 on 2³, 3³, 6³ against Q1 on 12³ (slow tier);
 * ``geometry = "auto"`` moves the Q2 interface to the current geometry once it slides (it stopped
-  the run before);
-* what stays refused, with the reason: a rigid obstacle on P2 tetrahedra (6-node triangle
-  facets), node-to-surface and mortar pairs of degree 2.
+  the run before); the problem file takes ``degree = 2`` with ``geometry = "current"``;
+* what stays refused, with the reason (tests/integration/test_large_sliding.py): node-to-surface and
+  mortar pairs of degree 2.
 """
 
 import numpy as np
@@ -112,7 +116,7 @@ def _block(n: int, obstacle, geometry: str, mu_f: float, cell_type: str = "hexah
 
 @pytest.mark.parametrize("method, cell_type", [("monolithic", "hexahedron"), ("nneqm1", "hexahedron"),
                                                ("monolithic", "tetrahedron"), ("nneqm1", "tetrahedron")])
-def test_q2_current_geometry_equals_reference_for_a_plane(method, cell_type):
+def test_degree_2_current_geometry_equals_reference_for_a_plane(method, cell_type):
     """A plane pressed 10⁻³ and slid 5·10⁻³ with friction: exact in either geometry, so the same forces (on
     P2 tetrahedra too: the plane's distance of X̂ + d̂ is the combination Σ_k a_ik of the nodes' distances)."""
     path = PiecewiseLinearPath([[0.0, 0.0, 0.0, 0.0], [0.5, 0.0, -1e-3, 0.0], [1.0, 5e-3, -1e-3, 0.0]])

@@ -94,27 +94,29 @@ def test_nneqm2_large_sliding_on_two_ranks_matches_serial(tmp_path):
 
 
 @pytest.mark.mpi
-def test_degree_2_obstacle_on_two_ranks_matches_serial(tmp_path):
-    """The frictional sphere (μ_f = 0.3) slid over 4 × 1 × 4 Q2 hexahedra in the current geometry (issue 41:
-    every node of the top face, vertices, edge and centre nodes, a pair) on 2 ranks, monolithic, NNEQM1
-    and NNEQM2: the serial pair forces and resultant to 1e-8."""
+@pytest.mark.parametrize("case, num_pairs", [("sphere-q2", 81), ("sphere-p2", 65)])
+def test_degree_2_obstacle_on_two_ranks_matches_serial(tmp_path, case, num_pairs):
+    """The frictional sphere (μ_f = 0.3) slid in the current geometry (issue 41: every node of the top face a
+    pair) over 4 × 1 × 4 Q2 hexahedra and over 3 × 2 × 3 × 6 P2 tetrahedra (pairs that combine the nodes of
+    a 6-node triangle, some of them on the other rank), on 2 ranks, monolithic, NNEQM1 and NNEQM2: the
+    serial pair forces and resultant to 1e-8."""
     out = tmp_path / "out.npz"
     methods = ("monolithic", "nneqm1", "nneqm2")
     cmd = [*compat.mpiexec(), "-n", "2", sys.executable, str(SCRIPTS / "large_sliding.py"), str(out),
-           *(f"sphere-q2/{method}" for method in methods)]
+           *(f"{case}/{method}" for method in methods)]
     run = subprocess.run(cmd, capture_output=True, text=True, timeout=900, env=compat.mpi_environment())
     assert run.returncode == 0, f"{' '.join(cmd)} failed:\n{run.stdout[-3000:]}\n{run.stderr[-3000:]}"
     parallel = dict(np.load(out))
     for method in methods:
-        s = solve("sphere-q2", method, MPI.COMM_SELF)
-        p = {key.rsplit("/", 1)[1]: value for key, value in parallel.items() if key.startswith(f"sphere-q2/{method}/")}
+        s = solve(case, method, MPI.COMM_SELF)
+        p = {key.rsplit("/", 1)[1]: value for key, value in parallel.items() if key.startswith(f"{case}/{method}/")}
         i, j = _order(p["position"]), _order(s["position"])
         df = np.abs(p["force"][i] - s["force"][j]).max() / np.abs(s["force"]).max()
         dF = np.linalg.norm(p["total"] - s["total"]) / np.linalg.norm(s["total"])
-        print(f"\n  sphere-q2/{method}, 2 ranks vs serial: {len(i)} pairs (per rank {p['pairs_per_rank'].tolist()}); "
+        print(f"\n  {case}/{method}, 2 ranks vs serial: {len(i)} pairs (per rank {p['pairs_per_rank'].tolist()}); "
               f"pair forces {df:.1e}, resultant {dF:.1e} (tolerance 1e-8); iterations serial "
               f"{s['iterations'].tolist()}, 2 ranks {p['iterations'].tolist()}")
-        assert len(i) == len(j) == 81 and np.abs(p["position"][i] - s["position"][j]).max() < 1e-9
+        assert len(i) == len(j) == num_pairs and np.abs(p["position"][i] - s["position"][j]).max() < 1e-9
         assert np.count_nonzero(p["pairs_per_rank"]) == 2  # the pairs are split
         assert df < 1e-8 and dF < 1e-8
         assert p["following"].all() and s["following"].all()
