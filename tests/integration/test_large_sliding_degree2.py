@@ -158,16 +158,18 @@ def test_q2_current_geometry_tends_to_reference_at_a_tiny_slip():
     assert errors[0] < 1e-8 and errors[1] < 2e-9 and 0.05 < errors[1] / errors[0] < 0.2
 
 
-def test_q2_auto_geometry_follows_the_sphere():
-    """geometry = "auto": the Q2 interface starts in the reference geometry and moves to the current one
-    once the sphere slides (before, degree 2 stopped the run there); the force of the press in place."""
-    slid = sliding_sphere(3, degree=2, geometry="auto")
-    _run(slid, "monolithic", 16)
-    in_place = sliding_sphere(3, start=0.7, end=0.7, degree=2)
+@pytest.mark.parametrize("cell_type", ["hexahedron", "tetrahedron"])
+def test_degree_2_auto_geometry_follows_the_sphere(cell_type):
+    """geometry = "auto": the degree-2 interface starts in the reference geometry and moves to the current
+    one once the sphere slides (before, degree 2 stopped the run there); the force of the press in place."""
+    slid = sliding_sphere(3, degree=2, geometry="auto", cell_type=cell_type)
+    results = _run(slid, "monolithic", 16)
+    in_place = sliding_sphere(3, start=0.7, end=0.7, degree=2, cell_type=cell_type)
     _run(in_place, "monolithic", 4)
     f_slid, f_place = obstacle_force(slid), obstacle_force(in_place)
     error = np.linalg.norm(f_slid - f_place) / np.linalg.norm(f_place)
-    print(f"\n  auto, Q2 3³: slid F = {f_slid}, in place F = {f_place}; |ΔF|/|F| = {error:.1e}")
+    print(f"\n  auto, {cell_type}, degree 2: slid F = {f_slid}, in place F = {f_place}; |ΔF|/|F| = {error:.1e}; solves "
+          f"per increment {[r.report.geometry_passes for r in results]}")
     assert slid.contact.geometry.following == [True] and error < 1e-8
 
 
