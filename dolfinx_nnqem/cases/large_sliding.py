@@ -47,10 +47,13 @@ MATERIAL = VonMises(E=1.0e3, nu=0.3)
 
 def sliding_sphere(n: int, *, start: float = 0.3, end: float = 0.7, geometry: str = "current",
                    law: str = "alart-curnier", mu_f: float = 0.0, comm: MPI.Comm = MPI.COMM_WORLD,
-                   shape: str = "sphere") -> ContactProblem:
+                   shape: str = "sphere", degree: int = 1, ny: int | None = None,
+                   cell_type: str = "hexahedron") -> ContactProblem:
     """The issue's sliding sphere on an n³ unit cube (module docstring); ``shape="cylinder"``: a
-    cylinder of the same radius with its axis along z instead."""
-    mesh, ct, ft = build_block_stack(comm, 1.0, 1.0, [1.0], [(n, n, n)])
+    cylinder of the same radius with its axis along z instead; ``degree``: of the displacements
+    (2: Q2 hexahedra or P2 tetrahedra, every node of the top face a slave node); ``ny``: the layers of
+    cells along y (default n); ``cell_type``: "hexahedron" or "tetrahedron" (``build_block_stack``)."""
+    mesh, ct, ft = build_block_stack(comm, 1.0, 1.0, [1.0], [(n, n if ny is None else ny, n)], cell_type=cell_type)
     path = PiecewiseLinearPath([[0.0, 0.0, 0.0, 0.0], [PRESSED_AT, 0.0, -DEPTH, 0.0], [1.0, end - start, -DEPTH, 0.0]])
     centre = (start, 1.0 + RADIUS, 0.5)
     obstacle: RigidObstacle
@@ -58,7 +61,7 @@ def sliding_sphere(n: int, *, start: float = 0.3, end: float = 0.7, geometry: st
         obstacle = Sphere(centre=centre, radius=RADIUS, motion=path)
     else:
         obstacle = Cylinder(point=centre, axis=(0.0, 0.0, 1.0), radius=RADIUS, motion=path)
-    return ContactProblem(mesh, ct, ft, materials=MATERIAL, dirichlet=[Dirichlet(T.bottom(1))],
+    return ContactProblem(mesh, ct, ft, materials=MATERIAL, dirichlet=[Dirichlet(T.bottom(1))], degree=degree,
                           contact=Contact(obstacle, T.top(1), mu_f=mu_f, law=law, geometry=geometry))
 
 

@@ -51,7 +51,7 @@ from dolfinx_nnqem.contact.surfaces import (GatheredSurfaces, check_no_shared_no
 if TYPE_CHECKING:
     import dolfinx
 
-__all__ = ["GEOMETRIES", "MortarTracker", "ObstacleTracker", "SurfaceTracker", "displacement_at", "match_pairs",
+__all__ = ["GEOMETRIES", "CombinedObstacleTracker", "MortarTracker", "ObstacleTracker", "SurfaceTracker", "displacement_at", "match_pairs",
            "moved_surfaces", "remapper", "surface_tracker"]
 
 GEOMETRIES = ("auto", "reference", "current")
@@ -184,6 +184,36 @@ class ObstacleTracker:
         columns = 3 * pairs.slave_blocks[:, None] + np.arange(3)
         return replace(pairs, R=R, g0=g - np.einsum("ij,ij->i", n, relative), X_master=p,
                        rows=PairRows.from_blocks(columns, R))
+
+
+@dataclass(frozen=True)
+class CombinedObstacleTracker:
+    """Re-evaluates a rigid obstacle's pairs on 6-node triangle facets (P2 tetrahedra) at (u, ℓ).
+
+    Pair i acts on the transformed displacement d̂_i = Σ_k a_ik u(k) of its nodes
+    (:class:`~dolfinx_nnqem.contact.obstacles.CombinedNodes`): it is the point X̂_i + d̂_i, projected
+    onto the obstacle at rest like a slave node at degree 1, with the rows R_i a_ik on its nodes. Its
+    geometry is frozen within a solve (the solvers' obstacle terms are one 3 × 3 block per node);
+    load stepping evaluates it again at the solution and solves again until a solve starts converged.
+    """
+
+    reference: ObstaclePairs
+
+    def pairs_at(self, u: dolfinx.fem.Function, load_factor: float) -> ObstaclePairs:
+        """The pairs at X̂ + d̂(u) and the obstacle at d(ℓ), gaps rebased (module; collective)."""
+        pairs = self.reference
+        nodes = pairs.combination
+        assert nodes is not None  # a tri6 surface's pairs
+        blocks = np.unique(np.concatenate(pairs.comm.allgather(nodes.blocks)))  # the same on every rank
+        u_nodes = displacement_at(u, blocks)[np.searchsorted(blocks, nodes.blocks)]
+        pair = np.repeat(np.arange(pairs.num_local), np.diff(nodes.indptr))
+        u_hat = np.zeros((pairs.num_local, 3))
+        np.add.at(u_hat, pair, nodes.coefficients[:, None] * u_nodes)
+        relative = u_hat - pairs.obstacle.displacement(load_factor)  # the pair's point seen from the obstacle
+        g, n, p = pairs.obstacle.project(nodes.X + relative)
+        R = local_frames(n) if len(n) else np.zeros((0, 3, 3))
+        return replace(pairs, R=R, g0=g - np.einsum("ij,ij->i", n, relative), X_master=p,
+                       rows=PairRows.from_weighted_nodes(R, nodes.indptr, nodes.blocks, nodes.coefficients))
 
 
 @dataclass

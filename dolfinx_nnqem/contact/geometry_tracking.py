@@ -23,7 +23,8 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from dolfinx_nnqem.contact.current_geometry import (EDGE_ALLOWANCE, MortarTracker, ObstacleTracker, SurfaceTracker,
+from dolfinx_nnqem.contact.current_geometry import (EDGE_ALLOWANCE, CombinedObstacleTracker, MortarTracker,
+                                                     ObstacleTracker, SurfaceTracker,
                                                      displacement_at, moved_surfaces, surface_tracker,
                                                      with_moved_normals)
 from dolfinx_nnqem.contact.discretisation import discretise
@@ -43,9 +44,9 @@ if TYPE_CHECKING:
     import dolfinx
 
 __all__ = ["ContactGeometry", "GeometryTracker", "LostContactError", "Remap", "TrackedInterface", "TrackedModel",
-           "reference_pairs", "starting_pairs", "tracker_of", "zero_displacement"]
+           "current_geometry_refusal", "reference_pairs", "starting_pairs", "tracker_of", "zero_displacement"]
 
-GeometryTracker = ObstacleTracker | SurfaceTracker | MortarTracker
+GeometryTracker = ObstacleTracker | CombinedObstacleTracker | SurfaceTracker | MortarTracker
 
 Remap = Callable[[np.ndarray, np.ndarray], np.ndarray]
 """``remap(old, fill)``: per-pair rows laid out like the pairs before a re-evaluation, in the new
@@ -81,13 +82,35 @@ def starting_pairs(contact: Contact, V: dolfinx.fem.FunctionSpace, facet_tags: d
     """
     if contact.geometry != "current":
         return reference_pairs(contact, V, facet_tags, supported), None
-    if space_degree(V) != 1:
-        raise ValueError(f"contact {contact.label}: geometry = 'current' takes degree-1 displacements in "
-                         f"this version (its closest points and pair rows are those of linear facets); "
-                         f"the displacements here have degree {space_degree(V)}: use geometry = "
-                         f"'reference', or degree 1")
+    kind = "rigid obstacle" if isinstance(contact.surface1, RigidObstacle) else (
+        "mortar" if contact.discretisation == "mortar" else "node-to-surface")  # auto: node-to-surface
+    refusal = current_geometry_refusal(kind, V)
+    if refusal is not None:
+        reason, remedy = refusal
+        raise ValueError(f"contact {contact.label}: {reason}: use geometry = 'reference', or {remedy}")
     tracker = tracker_of(contact, V, facet_tags, supported)
     return tracker.pairs_at(zero_displacement(V), 0.0), tracker
+
+
+def current_geometry_refusal(kind: str, V: dolfinx.fem.FunctionSpace) -> tuple[str, str] | None:
+    """Why pairs of the kind ``kind`` (``PairSet.kind``: "rigid obstacle", "node-to-surface", "mortar")
+    cannot be evaluated in the current configuration with the displacement space V, and what to use
+    instead; None if they can.
+
+    Degree 1 takes every kind. Degree 2 takes rigid obstacles: on hexahedra a 9-node quadrilateral
+    facet gives every node a pair of its own (the node alone, as at degree 1), which the tracker
+    re-evaluates where that node is; on tetrahedra a 6-node triangle's pairs act on combinations of
+    its nodes (the transformed basis, :mod:`~dolfinx_nnqem.contact.quadratic_facets`), re-evaluated
+    between solves (:class:`~dolfinx_nnqem.contact.current_geometry.CombinedObstacleTracker`).
+    Node-to-surface and mortar pairs are projected onto linear facets in the current configuration.
+    """
+    degree = space_degree(V)
+    if degree == 1 or kind == "rigid obstacle":
+        return None
+    what = ("segments, dual basis and weighted gaps" if kind == "mortar" else "closest points and pair rows")
+    return (f"the current geometry takes {kind} pairs with degree-1 displacements only in this version (its {what} "
+            f"are those of linear facets; of degree 2 it takes rigid obstacles only); the displacements "
+            f"here have degree {degree}", "degree 1")
 
 
 def reference_pairs(contact: Contact, V: dolfinx.fem.FunctionSpace, facet_tags: dolfinx.mesh.MeshTags,
@@ -112,8 +135,9 @@ def tracker_of(contact: Contact, V: dolfinx.fem.FunctionSpace, facet_tags: dolfi
     """
     if isinstance(contact.surface1, RigidObstacle):
         tolerance = mesh_tolerance(V.mesh) if contact.tolerance is None else float(contact.tolerance)
-        return ObstacleTracker(obstacle_pairs(V, facet_tags, int(contact.surface2), contact.surface1,
-                                              tolerance=tolerance))
+        pairs = obstacle_pairs(V, facet_tags, int(contact.surface2), contact.surface1, tolerance=tolerance)
+        # the same kind on every rank: whether pairs combine nodes is a property of the gathered surface
+        return ObstacleTracker(pairs) if pairs.combination is None else CombinedObstacleTracker(pairs)
     slave = contact.slave
     if reference is not None:
         discretisation = "mortar" if reference.kind == "mortar" else "node-to-surface"
@@ -221,8 +245,9 @@ class ContactGeometry:
 
     @property
     def obstacles_follow(self) -> bool:
-        """True if some interface is a rigid obstacle in the current geometry (whose pairs
-        :meth:`refresh_obstacles` re-evaluates in place)."""
+        """True if some interface is a rigid obstacle in the current geometry whose pairs
+        :meth:`refresh_obstacles` re-evaluates in place (one node per pair: degree 1, Q2 hexahedra; on
+        P2 tetrahedra they are re-evaluated between solves, by :meth:`update`)."""
         return any(isinstance(t, ObstacleTracker) for t in self._trackers)
 
     @property
@@ -246,11 +271,8 @@ class ContactGeometry:
         if interface.pairs.kind == "node-to-node":
             return ("node-to-node pairs join nodes that faced each other in the reference configuration (use "
                     "discretisation = 'node-to-surface' or 'mortar' for large sliding)")
-        if space_degree(self._V) != 1:
-            return (f"the current geometry takes degree-1 displacements in this version (its closest points and "
-                    f"pair rows are those of linear facets); the displacements here have degree "
-                    f"{space_degree(self._V)} (use degree 1 for large sliding)")
-        return None
+        refusal = current_geometry_refusal(interface.pairs.kind, self._V)
+        return None if refusal is None else f"{refusal[0]} (use {refusal[1]} for large sliding)"
 
     def start_following(self, k: int) -> None:
         """Re-evaluate interface ``k`` in the current configuration from now on (collective): its tracker

@@ -41,7 +41,7 @@ from dolfinx_nnqem.contact.surfaces import (ContactPairError, first_by_position,
                                             gather_surfaces, local_frames, mesh_tolerance)
 from dolfinx_nnqem.numerics.ranges import check_magnitude, shown
 
-__all__ = ["OBSTACLES", "Cylinder", "ObstaclePairs", "Plane", "RigidObstacle", "Sphere", "obstacle_pairs",
+__all__ = ["OBSTACLES", "CombinedNodes", "Cylinder", "ObstaclePairs", "Plane", "RigidObstacle", "Sphere", "obstacle_pairs",
            "obstacle_parameters", "obstacle_reaction"]
 
 
@@ -246,6 +246,29 @@ def _check_off_axis(distance: np.ndarray, x: np.ndarray, what: str) -> None:
         raise ContactPairError(f"the slave node at {format_point(x[i])} lies on {what}: no closest point")
 
 
+@dataclass(frozen=True)
+class CombinedNodes:
+    """The nodes of the local pairs of a surface of 6-node triangles: pair i acts on the transformed
+    displacement d̂_i = Σ_k a_ik u(k) (:mod:`~dolfinx_nnqem.contact.quadratic_facets`).
+
+    Attributes
+    ----------
+    indptr
+        (n + 1,) pair i combines ``blocks[indptr[i]:indptr[i + 1]]``.
+    blocks
+        Global dof blocks of the combined nodes (a pair's may be owned by other ranks).
+    coefficients
+        a_ik, one per entry of ``blocks`` (they sum to 1 per pair).
+    X
+        (n, 3) X̂_i = Σ_k a_ik X(k), the reference position the pair's displacement d̂_i moves.
+    """
+
+    indptr: np.ndarray
+    blocks: np.ndarray
+    coefficients: np.ndarray
+    X: np.ndarray
+
+
 @dataclass(eq=False)
 class ObstaclePairs:
     """The pairs between a tagged surface and a rigid obstacle owned by this rank (a PairSet).
@@ -269,6 +292,7 @@ class ObstaclePairs:
     rows: PairRows
     kind: str = "rigid obstacle"
     pins_supported_slave_tangents: bool = False  #: see contact.constrained_directions.supported_slave_tangents
+    combination: CombinedNodes | None = None  #: tri6 facets: what each pair combines; None: the node alone
 
     def motion(self, load_factor: float) -> np.ndarray:
         """m(ℓ) = −R d(ℓ): the obstacle's translation seen in each pair's frame."""
@@ -320,16 +344,19 @@ def obstacle_pairs(V: dolfinx.fem.FunctionSpace, facet_tags: dolfinx.mesh.MeshTa
     if len(combination.columns) == len(nodes.index):  # linear or quad9 facets: the node alone
         g0 = np.where(np.abs(g0) <= tolerance, 0.0, g0)  # touching within the tolerance: no gap
         rows = PairRows.from_blocks(3 * index[mine, None] + np.arange(3), R[mine])
+        combined_nodes = None
     else:  # tri6 facets: pair j acts on d̂_j = Σ_i t_ji u_i (quadratic_facets), its gap is Σ_i t_ji g0_i
         combined = combination.take(order)  # rows in this order; columns: positions in `nodes`
         g0 = combined.apply(_in_node_order(g0, order))
         g0 = np.where(np.abs(g0) <= tolerance, 0.0, g0)
         local = combined.take(mine)
         rows = PairRows.from_weighted_nodes(R[mine], local.indptr, nodes.index[local.columns], local.coefficients)
+        combined_nodes = CombinedNodes(local.indptr, nodes.index[local.columns], local.coefficients,
+                                       local.apply(nodes.x))
     return ObstaclePairs(
         comm=comm, obstacle=obstacle, surface=int(surface), num_local=len(mine), num_global=num_global,
         offset=offset, slave_blocks=index[mine], X_slave=x[mine], X_master=p[mine], R=R[mine], g0=g0[mine],
-        area=area[mine], rows=rows,
+        area=area[mine], rows=rows, combination=combined_nodes,
     )
 
 

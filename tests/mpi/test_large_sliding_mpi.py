@@ -5,7 +5,8 @@ The cases of tests/mpi_scripts/large_sliding.py (a sphere slid over a block; a f
 from the gathered surfaces, with the displacements of their nodes summed over the ranks, so a
 slave node finds its master facet on whichever rank holds it. Pairs are owned by the rank of their
 slave node, so they are compared after sorting by the slave node's position. NNEQM2 (current
-geometry since issue 41) on the sphere and the block slide, on 2 ranks.
+geometry since issue 41) on the sphere and the block slide, on 2 ranks. The sphere slid over Q2
+hexahedra (degree 2, issue 41) with every solver, on 2 ranks.
 """
 
 import subprocess
@@ -21,7 +22,7 @@ from dolfinx_nnqem import compat
 SCRIPTS = Path(__file__).resolve().parents[1] / "mpi_scripts"
 sys.path.insert(0, str(SCRIPTS))
 
-from large_sliding import CASES, METHODS, solve  # noqa: E402
+from large_sliding import DEGREE_1, METHODS, solve  # noqa: E402
 
 
 def _order(position):
@@ -31,11 +32,11 @@ def _order(position):
 
 @pytest.fixture(scope="module")
 def serial():
-    return {(case, method): solve(case, method, MPI.COMM_SELF) for case in CASES for method in METHODS}
+    return {(case, method): solve(case, method, MPI.COMM_SELF) for case in DEGREE_1 for method in METHODS}
 
 
 @pytest.mark.mpi
-@pytest.mark.parametrize("ranks, cases", [(2, tuple(CASES)), (3, ("sphere", "blocks"))])  # 3 ranks: time
+@pytest.mark.parametrize("ranks, cases", [(2, DEGREE_1), (3, ("sphere", "blocks"))])  # 3 ranks: time
 def test_large_sliding_on_several_ranks_matches_serial(ranks, cases, serial, tmp_path):
     out = tmp_path / "out.npz"
     cmd = [*compat.mpiexec(), "-n", str(ranks), sys.executable, str(SCRIPTS / "large_sliding.py"), str(out), *cases]
@@ -90,3 +91,32 @@ def test_nneqm2_large_sliding_on_two_ranks_matches_serial(tmp_path):
         assert p["following"].all() and s["following"].all()
         if case == "blocks":
             assert p["foreign_masters"] > 0
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("case, num_pairs", [("sphere-q2", 81), ("sphere-p2", 65)])
+def test_degree_2_obstacle_on_two_ranks_matches_serial(tmp_path, case, num_pairs):
+    """The frictional sphere (μ_f = 0.3) slid in the current geometry (issue 41: every node of the top face a
+    pair) over 4 × 1 × 4 Q2 hexahedra and over 3 × 2 × 3 × 6 P2 tetrahedra (pairs that combine the nodes of
+    a 6-node triangle, some of them on the other rank), on 2 ranks, monolithic, NNEQM1 and NNEQM2: the
+    serial pair forces and resultant to 1e-8."""
+    out = tmp_path / "out.npz"
+    methods = ("monolithic", "nneqm1", "nneqm2")
+    cmd = [*compat.mpiexec(), "-n", "2", sys.executable, str(SCRIPTS / "large_sliding.py"), str(out),
+           *(f"{case}/{method}" for method in methods)]
+    run = subprocess.run(cmd, capture_output=True, text=True, timeout=900, env=compat.mpi_environment())
+    assert run.returncode == 0, f"{' '.join(cmd)} failed:\n{run.stdout[-3000:]}\n{run.stderr[-3000:]}"
+    parallel = dict(np.load(out))
+    for method in methods:
+        s = solve(case, method, MPI.COMM_SELF)
+        p = {key.rsplit("/", 1)[1]: value for key, value in parallel.items() if key.startswith(f"{case}/{method}/")}
+        i, j = _order(p["position"]), _order(s["position"])
+        df = np.abs(p["force"][i] - s["force"][j]).max() / np.abs(s["force"]).max()
+        dF = np.linalg.norm(p["total"] - s["total"]) / np.linalg.norm(s["total"])
+        print(f"\n  {case}/{method}, 2 ranks vs serial: {len(i)} pairs (per rank {p['pairs_per_rank'].tolist()}); "
+              f"pair forces {df:.1e}, resultant {dF:.1e} (tolerance 1e-8); iterations serial "
+              f"{s['iterations'].tolist()}, 2 ranks {p['iterations'].tolist()}")
+        assert len(i) == len(j) == num_pairs and np.abs(p["position"][i] - s["position"][j]).max() < 1e-9
+        assert np.count_nonzero(p["pairs_per_rank"]) == 2  # the pairs are split
+        assert df < 1e-8 and dF < 1e-8
+        assert p["following"].all() and s["following"].all()

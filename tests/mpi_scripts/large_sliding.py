@@ -6,7 +6,7 @@
 The frictionless sphere slid over the block (6³, rigid obstacle), the frictional block slid 1.6
 master facets over another (node-to-surface, μ_f = 0.3; the same with dual mortar) and the ironing of an elastoplastic strip
 by a cylinder dragged 8 facets (μ_f = 0.1; the default geometry = "auto", which moves it to the current
-geometry once the punch slides), current geometry, monolithic and NNEQM1 (NNEQM2 when named)
+geometry once the punch slides), the sphere slid over 4 × 1 × 4 Q2 hexahedra and over 3 × 2 × 3 × 6 P2 tetrahedra with μ_f = 0.3 (degree 2), current geometry, monolithic and NNEQM1 (NNEQM2 when named)
 (:mod:`dolfinx_nnqem.cases.large_sliding`). Rank 0 writes, per ``CASE/METHOD/``, the pair table's
 slave positions and forces on the master side in global pair order, the resultant force, the
 Newton iterations per increment, the pairs each rank owns and how many pairs have a master node
@@ -34,7 +34,11 @@ CASES = {
     "blocks": (lambda comm: sliding_blocks(slide=0.4, mu_f=0.3, comm=comm), slave_force, 12),
     "mortar": (lambda comm: sliding_blocks(slide=0.4, mu_f=0.3, discretisation="mortar", comm=comm), slave_force, 12),
     "ironing": (lambda comm: ironing(16, geometry=None, comm=comm), obstacle_force, 40),
+    "sphere-q2": (lambda comm: sliding_sphere(4, degree=2, ny=1, mu_f=0.3, comm=comm), obstacle_force, 16),
+    "sphere-p2": (lambda comm: sliding_sphere(3, degree=2, ny=2, mu_f=0.3, cell_type="tetrahedron", comm=comm),
+                  obstacle_force, 16),
 }
+DEGREE_1 = ("sphere", "blocks", "mortar", "ironing")  #: what a run without CASE names runs
 
 
 def solve(case: str, method: str, comm=MPI.COMM_WORLD) -> dict[str, np.ndarray]:
@@ -76,7 +80,7 @@ def runs(names: list[str]) -> list[tuple[str, str]]:
 
 
 if __name__ == "__main__":
-    out, names = sys.argv[1], sys.argv[2:] or list(CASES)
+    out, names = sys.argv[1], sys.argv[2:] or list(DEGREE_1)
     data = {f"{case}/{method}/{key}": value for case, method in runs(names)
             for key, value in solve(case, method).items()}
     if MPI.COMM_WORLD.rank == 0:
