@@ -25,6 +25,7 @@ from petsc4py import PETSc
 
 from dolfinx_nnqem.contact.geometric_stiffness import GeometricTerms
 from dolfinx_nnqem.contact.pairset import PairRows, rows_matrix
+from dolfinx_nnqem.contact.surface_stiffness import SurfaceTerms, stiffness_matrix
 
 if TYPE_CHECKING:
     from dolfinx_nnqem.contact.model import ContactModel
@@ -122,6 +123,11 @@ class _ContactBlocks:
         start = self.model.rows.indptr[3 * terms.pairs]
         return self.column_free[start[:, None] + np.arange(3)]  # row n of the pair: its 3 columns
 
+    def pair_free(self, pairs: np.ndarray, c: int) -> np.ndarray:
+        """(k, c): 1 at the free columns of the local pairs ``pairs`` (each with c columns), 0 at constrained ones."""
+        start = self.model.rows.indptr[3 * np.asarray(pairs, dtype=np.int64)]
+        return self.column_free[start[:, None] + np.arange(c)]
+
     def fill(self, M: np.ndarray, dH_dw: np.ndarray, dH_dz: np.ndarray,
              B_values: np.ndarray | None = None) -> tuple[PETSc.Mat, PETSc.Mat, PETSc.Mat]:
         """The three blocks for the per-pair matrices M (A01 = B_freeᵀ M), ∂H/∂w and ∂H/∂z;
@@ -171,8 +177,7 @@ class MonolithicMatrix:
 
     def pair_free(self, pairs: np.ndarray, c: int) -> np.ndarray:
         """(k, c): 1 at the free columns of the local pairs ``pairs`` (each with c columns), 0 at constrained ones."""
-        start = self._blocks.model.rows.indptr[3 * np.asarray(pairs, dtype=np.int64)]
-        return self._blocks.column_free[start[:, None] + np.arange(c)]
+        return self._blocks.pair_free(pairs, c)
 
     def assemble(self, K: PETSc.Mat, dH_dw: np.ndarray, dH_dz: np.ndarray, dlam_dz: np.ndarray,
                  B_values: np.ndarray | None = None, new_pattern: bool = False) -> PETSc.Mat:
@@ -226,6 +231,12 @@ class AugmentedSystem:
     matrix, widened once to K's pattern plus the 6×6 couplings of all pairs and kept so over
     the iterations: no second copy of K, and PETSc reuses its symbolic work. With several
     interfaces, c = ``augmentation`` / max r.
+
+    Node-to-surface and mortar pairs in the consistent current geometry
+    (:mod:`~dolfinx_nnqem.contact.surface_stiffness`) have rows B + W and forces whose derivative
+    at fixed λ is K (:meth:`surface_blocks`): the u block is then K_t − K + Bᵀ P (B + W)_free
+    (the augmentation of rows B + W), and A10 scales B + W. K and Bᵀ P W couple only columns of
+    one pair, each pair's columns being its row's in B: they fall in the widened pattern.
     """
 
     def __init__(self, model, free_mask: PETSc.Vec, r: float, augmentation: float):
@@ -244,8 +255,10 @@ class AugmentedSystem:
         self._b: PETSc.Vec | None = None  # the right-hand side, created once (the nest's layout is fixed)
         self.A00: PETSc.Mat | None = None  # K, widened at the first matrix
 
-    def _u_block(self, K: PETSc.Mat, dH_dw: np.ndarray) -> PETSc.Mat:
-        """K + B_freeᵀ P B_free, added in place to ``K``.
+    def _u_block(self, K: PETSc.Mat, dH_dw: np.ndarray,
+                 surface: tuple[PETSc.Mat, np.ndarray] | None = None) -> PETSc.Mat:
+        """K + B_freeᵀ P B_free, added in place to ``K``; with ``surface`` = (G, W_free) of
+        :meth:`surface_blocks` also − G + B_freeᵀ P W_free.
 
         The first call widens K's sparsity to include the pair couplings (K then keeps that
         pattern: the caller assembles the next tangent into the same matrix, whose extra
@@ -265,7 +278,39 @@ class AugmentedSystem:
             raise ValueError("AugmentedSystem: assemble the tangent into the matrix returned before")
         else:
             K.axpy(1.0, self._BtPB, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)  # type: ignore[arg-type]  # as above
+        if surface is not None:
+            self._add_surface_blocks(K, P, *surface)
         return K
+
+    def _add_surface_blocks(self, K: PETSc.Mat, P: PETSc.Mat, G: PETSc.Mat, W_free: np.ndarray) -> None:
+        """K − G + B_freeᵀ P W_free in place (both on the pairs' columns, in K's widened pattern; PETSc
+        checks that and widens it if need be, the local-to-global maps kept)."""
+        model = self.model
+        W = rows_matrix(model.comm, PairRows(model.rows.indptr, model.rows.columns, W_free), model.num_global,
+                        model.V.dofmap.index_map)
+        PW = P.matMult(W)
+        BtPW = self.B_free.transposeMatMult(PW)
+        lgmap = K.getLGMap()
+        unknown = PETSc.Mat.Structure.UNKNOWN_NONZERO_PATTERN
+        K.axpy(-1.0, G, structure=unknown)  # type: ignore[arg-type]  # as above
+        K.axpy(1.0, BtPW, structure=unknown)  # type: ignore[arg-type]  # as above
+        K.setLGMap(*lgmap)
+        for m in (W, PW, BtPW):
+            m.destroy()
+
+    def surface_blocks(self, terms: list[SurfaceTerms], K: PETSc.Mat, B_values: np.ndarray | None
+                       ) -> tuple[np.ndarray, PETSc.Mat, np.ndarray]:
+        """(B + W, G, W_free) of the node-to-surface and mortar pairs' geometric ``terms`` (collective):
+        the pair rows' values with W added (``B_values``: the rows' values so far, with an obstacle's W;
+        default B's), G the pairs' blocks K laid out like the tangent ``K`` (constrained rows and columns
+        left out), and W alone in B's layout with its constrained columns zeroed."""
+        rows = self.model.rows
+        W = np.zeros_like(rows.values)
+        for part in terms:
+            part.add_rows(W, rows)
+        G = stiffness_matrix(terms, [self._blocks.pair_free(t.pairs, t.columns.shape[1]) for t in terms], K)
+        base = rows.values if B_values is None else B_values
+        return base + W, G, W * self._blocks.column_free
 
     def slave_free(self, terms: GeometricTerms) -> np.ndarray:
         """(k, 3): 1 at the free dofs of the slave nodes of ``terms``' pairs."""
@@ -282,14 +327,16 @@ class AugmentedSystem:
         return self.c * np.einsum("kri,kqr,kqs,ksj->kij", B_f, D, D, terms.W)
 
     def matrix(self, K: PETSc.Mat, dH_dw: np.ndarray, dH_dz: np.ndarray, dlam_dz: np.ndarray,
-               B_values: np.ndarray | None = None) -> PETSc.Mat:
+               B_values: np.ndarray | None = None, surface: tuple[PETSc.Mat, np.ndarray] | None = None
+               ) -> PETSc.Mat:
         """The augmented Newton matrix (MatNest) at the current law evaluation (``K`` with the
-        geometric blocks already added, if any; ``B_values``: B + W for the pair rows)."""
+        obstacles' geometric blocks already added, if any; ``B_values``: B + W for the pair rows;
+        ``surface``: (G, W_free) of the node-to-surface and mortar pairs, :meth:`surface_blocks`)."""
         self._blocks.refresh_rows()
         rows = self._blocks.rows_free
         self.B_free.setValuesCSR(rows.indptr, rows.columns, rows.values)  # type: ignore[arg-type]  # as in BlockDiagonal.fill
         self.B_free.assemble()
-        A00 = self._u_block(K, dH_dw)
+        A00 = self._u_block(K, dH_dw, surface)
         M = -dlam_dz + self.c * np.einsum("nki,nkj->nij", dH_dw, dH_dz)
         A01, A10, A11 = self._blocks.fill(M, dH_dw, dH_dz, B_values)
         if self._nest is None:

@@ -109,7 +109,7 @@ class MonolithicOptions:
         the weights M_jk / m_j and of the weighted gap) to the Newton matrix
         (:mod:`~dolfinx_nnqem.contact.geometric_stiffness`, :mod:`~dolfinx_nnqem.contact.surface_stiffness`,
         :mod:`~dolfinx_nnqem.contact.mortar_linearisation`; node-to-surface and mortar with the direct
-        linear solver);
+        linear solver, and with the iterative one on one rank);
         False freezes the geometry within a solve and leaves it to load stepping's repeated solves, as
         NNEQM1 does (``docs/theory.md``).
     globalisation

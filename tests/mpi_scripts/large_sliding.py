@@ -6,7 +6,9 @@
 The frictionless sphere slid over the block (6³, rigid obstacle), the frictional block slid 1.6
 master facets over another (node-to-surface, μ_f = 0.3; the same with dual mortar) and the ironing of an elastoplastic strip
 by a cylinder dragged 8 facets (μ_f = 0.1; the default geometry = "auto", which moves it to the current
-geometry once the punch slides), the sphere slid over 4 × 1 × 4 Q2 hexahedra and over 3 × 2 × 3 × 6 P2 tetrahedra with μ_f = 0.3 (degree 2), current geometry, monolithic and NNEQM1 (NNEQM2 when named)
+geometry once the punch slides), the sphere slid over 4 × 1 × 4 Q2 hexahedra and over 3 × 2 × 3 × 6 P2 tetrahedra
+with μ_f = 0.3 (degree 2), current geometry, monolithic and NNEQM1 (NNEQM2, or ``iterative``: the monolithic
+solver with the iterative linear solver, when named)
 (:mod:`dolfinx_nnqem.cases.large_sliding`). Rank 0 writes, per ``CASE/METHOD/``, the pair table's
 slave positions and forces on the master side in global pair order, the resultant force, the
 Newton iterations per increment, the pairs each rank owns and how many pairs have a master node
@@ -25,10 +27,10 @@ from mpi4py import MPI  # noqa: E402
 from dolfinx_nnqem.cases.large_sliding import (ironing, obstacle_force, slave_force, sliding_blocks,  # noqa: E402
                                                sliding_sphere)
 from dolfinx_nnqem.io.results import pair_table  # noqa: E402
-from dolfinx_nnqem.solvers import SolverOptions, make_solver, solve_load_steps  # noqa: E402
+from dolfinx_nnqem.solvers import MonolithicOptions, SolverOptions, make_solver, solve_load_steps  # noqa: E402
 
 METHODS = ("monolithic", "nneqm1")  #: what a bare CASE runs
-ALL_METHODS = (*METHODS, "nneqm2")
+ALL_METHODS = (*METHODS, "nneqm2", "iterative")
 CASES = {
     "sphere": (lambda comm: sliding_sphere(6, comm=comm), obstacle_force, 16),
     "blocks": (lambda comm: sliding_blocks(slide=0.4, mu_f=0.3, comm=comm), slave_force, 12),
@@ -45,7 +47,12 @@ def solve(case: str, method: str, comm=MPI.COMM_WORLD) -> dict[str, np.ndarray]:
     """Solve ``case`` with ``method``; the gathered results (the same on every rank)."""
     build, force, increments = CASES[case]
     problem = build(comm)
-    with make_solver(method, problem, SolverOptions(rtol=1e-12, max_iterations=40)) as solver:
+    options = SolverOptions(rtol=1e-12, max_iterations=40)
+    if method == "iterative":  # the monolithic solver, its linear systems by the iterative solver
+        solver = make_solver("monolithic", problem, options, monolithic=MonolithicOptions(linear_solver="iterative"))
+    else:
+        solver = make_solver(method, problem, options)
+    with solver:
         results = solve_load_steps(problem, solver, increments)
     t = pair_table(problem)
     assert problem.contact is not None
