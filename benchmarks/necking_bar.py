@@ -27,6 +27,7 @@ Usage::
     python benchmarks/necking_bar.py OUTDIR [--meshes coarse medium fine] [--increments 56] [--ccx]
         [--ccx-substeps 1] [--ccx-reuse] [--quadrature-degree 2] [--min-shape-ratio 0.002] [--tag T]
     python benchmarks/necking_bar.py OUTDIR --plot   # necking_bar.png from OUTDIR/necking_{mesh}.json
+    python benchmarks/necking_bar.py OUTDIR --summary   # the mesh convergence table from the same
 
 Each mesh's run writes ``OUTDIR/necking_{mesh}{T}.json``; with ``--ccx`` also CalculiX's ``.inp`` and outputs.
 """
@@ -123,7 +124,8 @@ def run_ours(problem, increments: int, min_shape_ratio: float = MIN_SHAPE_RATIO,
     except ConvergenceError as error:
         stopped = str(error).splitlines()[0]
     history = np.array(rows)
-    return {"stopped": stopped, "elongation": history[:, 0].tolist(), "force": history[:, 1].tolist(),
+    J = np.linalg.det(problem.state.F_n.x.array.reshape(-1, 3, 3))  # at the Gauss points, at the end
+    return {"stopped": stopped, "J range": [float(J.min()), float(J.max())], "elongation": history[:, 0].tolist(), "force": history[:, 1].tolist(),
             "neck ratio": history[:, 2].tolist(), "quarter ratio": history[:, 3].tolist(),
             "iterations": iterations, "min shape ratio": shape, "wall seconds": time.perf_counter() - wall,
             "cpu seconds": time.process_time() - cpu, "dofs": int(X.shape[0] * 3),
@@ -216,7 +218,8 @@ def print_history(name: str, ours: dict, theirs: dict | None) -> None:
     """The curve, increment by increment, and CalculiX's with the differences if there."""
     print(f"== {name}: {ours['cells']} tetrahedra, {ours['dofs']} dofs, {ours['wall seconds']:.0f} s wall, "
           f"{ours['cpu seconds']:.0f} s CPU, Newton iterations {sum(ours['iterations'])}; largest p {ours['max p']:.3f}; "
-          f"smallest deformed/undeformed cell shape {min(ours['min shape ratio'], default=float('nan')):.4f}")
+          f"smallest deformed/undeformed cell shape {min(ours['min shape ratio'], default=float('nan')):.4f}; "
+          f"J at the end {ours['J range'][0]:.5f} to {ours['J range'][1]:.5f}")
     head = f"{'Δl (mm)':>8} {'F (kN)':>9} {'a/a0':>7} {'a(L/4)':>7}"
     if theirs is not None:
         head += f" {'F ccx':>9} {'ΔF/F':>8} {'a/a0 ccx':>9}"
@@ -239,7 +242,7 @@ def plot(outdir: Path, figure: Path) -> None:
     import matplotlib.pyplot as plt
 
     fig, (left, right) = plt.subplots(1, 2, figsize=(9.6, 3.8))
-    for name in geometry.MESHES:
+    for colour, name in enumerate(geometry.MESHES):
         path = outdir / f"necking_{name}.json"
         if not path.exists():
             continue
@@ -247,10 +250,10 @@ def plot(outdir: Path, figure: Path) -> None:
         for ax, key, scale in ((left, "force", 1e-3), (right, "neck ratio", 1.0)):
             ours = run["ours"]
             ax.plot([0.0] + ours["elongation"], [0.0 if key == "force" else 1.0] + [v * scale for v in ours[key]],
-                    "-", label=f"dolfinx_nnqem, {name} ({ours['dofs']} dofs)")
+                    "-", color=f"C{colour}", label=f"dolfinx_nnqem, {name} ({ours['dofs']} dofs)")
             if "ccx" in run:
                 ccx = run["ccx"]
-                ax.plot(ccx["elongation"], [v * scale for v in ccx[key]], "o", ms=3, mfc="none",
+                ax.plot(ccx["elongation"], [v * scale for v in ccx[key]], "o", ms=3, mfc="none", color=f"C{colour}",
                         label=f"CalculiX 2.20 NLGEOM, {name}")
     left.set_ylabel("axial force (kN)")
     right.set_ylabel("neck radius / initial neck radius")
@@ -261,6 +264,31 @@ def plot(outdir: Path, figure: Path) -> None:
     fig.tight_layout()
     fig.savefig(figure, dpi=120)
     plt.close(fig)
+
+
+def summary(outdir: Path, at: tuple[float, ...] = (3.5, 7.0, 10.5, 14.0)) -> None:
+    """The mesh convergence and the agreement with CalculiX, from OUTDIR/necking_{mesh}.json: the peak
+    force and where it is, the force and the neck's radius ratio at the elongations ``at``."""
+    print(f"{'mesh':>11} {'dofs':>6} {'peak F (kN)':>11} {'at (mm)':>7} "
+          + " ".join(f"{'F ' + format(a, 'g'):>8} {'a/a0 ' + format(a, 'g'):>9}" for a in at) + "   CPU (s)")
+    for name in geometry.MESHES:
+        path = outdir / f"necking_{name}.json"
+        if not path.exists():
+            continue
+        run = json.loads(path.read_text())
+        for label, h in (("", run["ours"]), (" ccx", run.get("ccx"))):
+            if h is None:
+                continue
+            dl, force, ratio = np.array(h["elongation"]), np.array(h["force"]) / 1e3, np.array(h["neck ratio"])
+            k = int(np.argmax(force))
+            cells = " ".join(f"{force[np.argmin(abs(dl - a))]:8.3f} {ratio[np.argmin(abs(dl - a))]:9.4f}" for a in at)
+            dofs = h.get("dofs", "")
+            print(f"{name + label:>11} {dofs:>6} {force[k]:11.3f} {dl[k]:7.2f} {cells}   {h.get('cpu seconds', float('nan')):.0f}")
+        if "ccx" in run:
+            f_o, f_c = np.array(run["ours"]["force"]), np.array(run["ccx"]["force"])
+            d = (f_c - f_o) / f_o
+            print(f"{'':>11} CalculiX − package: force {d.min():+.3%} to {d.max():+.3%} (peak {f_c.max() / f_o.max() - 1:+.3%}), "
+                  f"neck ratio {np.abs(np.array(run['ccx']['neck ratio']) - run['ours']['neck ratio']).max():.4f} at most")
 
 
 def main(argv=None) -> int:
@@ -277,10 +305,14 @@ def main(argv=None) -> int:
                         help="the check's smallest deformed/undeformed scaled Jacobian of a cell")
     parser.add_argument("--tag", default="", help="added to the json's name (the figure draws untagged runs)")
     parser.add_argument("--plot", action="store_true", help="only draw OUTDIR/necking_bar.png from the json files")
+    parser.add_argument("--summary", action="store_true", help="only print the convergence table from the json files")
     args = parser.parse_args(argv)
     args.outdir.mkdir(parents=True, exist_ok=True)
     if args.plot:
         plot(args.outdir, args.outdir / "necking_bar.png")
+        return 0
+    if args.summary:
+        summary(args.outdir)
         return 0
     for name in args.meshes:
         problem = necking_problem(*geometry.MESHES[name], quadrature_degree=args.quadrature_degree)

@@ -74,19 +74,23 @@ def test_the_calculix_model_is_the_same_case(coarse):
 @pytest.mark.slow
 @pytest.mark.skipif(shutil.which("ccx") is None, reason="CalculiX (ccx) is not on PATH")
 def test_necking_bar_agrees_with_calculix_nlgeom(tmp_path, coarse):
-    """The coarse mesh to 7 mm of elongation in 28 increments, both programs. The force rises to its peak
-    and falls; the neck forms (its radius falls well below the radius at L/4, which stops shrinking once
-    the neck localises); the two programs' peak forces, the forces along the curve and the neck's
-    radius agree within the tolerances of ``docs/verification-materials.md``'s measurement."""
+    """The coarse mesh along the whole 14 mm in 56 increments, both programs. The force rises to its peak
+    and falls by half; the neck forms: its radius falls below 0.6 of its initial one while the radius at
+    L/4 stops shrinking at the peak (outside the neck the bar unloads elastically). The two programs'
+    forces agree within 1 % at every increment and their neck radii within 0.003 (measured: CalculiX's
+    force +0.10 % to +0.64 % above the package's, +0.21 % at the peak; the neck radius ratio within
+    0.0009; ``docs/verification-materials.md``)."""
     theirs = bench.run_calculix(coarse, INCREMENTS, tmp_path, "necking")
     ours = bench.run_ours(coarse, INCREMENTS)
     assert ours["stopped"] is None
     f_ours, f_ccx = np.array(ours["force"]), np.array(theirs["force"])
     assert len(f_ours) == len(f_ccx) == INCREMENTS
-    assert np.allclose(ours["elongation"], theirs["elongation"], rtol=1e-12)
+    assert np.allclose(ours["elongation"], theirs["elongation"], rtol=1e-6)  # CalculiX prints 7 digits
     peak = int(np.argmax(f_ours))
     assert 0 < peak < len(f_ours) - 2 and f_ours[-1] < 0.99 * f_ours[peak]  # past the peak: necking
-    assert ours["neck ratio"][-1] < ours["quarter ratio"][-1] - 0.05
+    assert f_ours[-1] < 0.6 * f_ours[peak]
+    assert ours["neck ratio"][-1] < 0.6 and ours["quarter ratio"][-1] > 0.9
+    assert abs(ours["quarter ratio"][-1] - ours["quarter ratio"][peak]) < 0.003
     assert abs(f_ccx.max() - f_ours.max()) / f_ours.max() < 0.005
-    assert np.abs(f_ccx - f_ours).max() / f_ours.max() < 0.01
-    assert abs(theirs["neck ratio"][-1] - ours["neck ratio"][-1]) < 0.003
+    assert np.abs((f_ccx - f_ours) / f_ours).max() < 0.01
+    assert np.abs(np.array(theirs["neck ratio"]) - ours["neck ratio"]).max() < 0.003
