@@ -43,7 +43,7 @@ def test_the_mesh_is_the_tapered_eighth_of_the_bar(coarse):
     assert len(nodes) > 50
     assert np.abs(np.hypot(nodes[:, 0], nodes[:, 1]) - geometry.radius_at(nodes[:, 2])).max() < 1e-9
     assert geometry.radius_at(0.0) == pytest.approx(0.982 * 6.413) and geometry.radius_at(26.667) == pytest.approx(6.413)
-    assert coarse.V.element.basix_element.degree == 2 and coarse.kinematics == "finite"
+    assert coarse.definition.degree == 2 and coarse.kinematics == "finite"
 
 
 def test_the_calculix_model_is_the_same_case(coarse):
