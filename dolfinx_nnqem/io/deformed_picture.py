@@ -167,9 +167,14 @@ LABELS = {"von_mises": "von Mises stress (Pa)", "p": "equivalent plastic strain 
 
 
 def _add_bodies(plotter, grid, field: str) -> None:
-    """The deformed bodies coloured by the cell field ``field`` (actor ``bodies``), its colour bar."""
+    """The deformed bodies coloured by the cell field ``field`` (actor ``bodies``), its colour bar.
+
+    Not rendered meanwhile (``render=False``): once a plotter has rendered, pyvista renders the
+    whole scene again at every actor added or removed unless told not to, and only the
+    screenshot's render is wanted (the scene recoloured for ``error_indicator.png`` rendered it
+    three times)."""
     plotter.add_mesh(grid, scalars=field, show_edges=True, cmap="viridis", name="bodies",
-                     scalar_bar_args={"title": LABELS.get(field, field)})
+                     scalar_bar_args={"title": LABELS.get(field, field)}, render=False)
 
 
 class DeformedScene:
@@ -195,7 +200,7 @@ class DeformedScene:
             grid = self.plotter.actors["bodies"].mapper.dataset
             if field not in grid.cell_data:
                 raise ValueError(f"field {field!r}: the results hold {sorted(grid.cell_data)}")
-            self.plotter.remove_scalar_bar(LABELS.get(self.field or "", self.field))
+            self.plotter.remove_scalar_bar(LABELS.get(self.field or "", self.field), render=False)
             _add_bodies(self.plotter, grid, field)  # (replaces the actor of that name)
         self.field = field
         self.plotter.screenshot(str(path))

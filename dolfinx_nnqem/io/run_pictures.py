@@ -107,14 +107,20 @@ def _matplotlib():
     return plt
 
 
-def _curve_margins(fig) -> None:
-    """Fixed margins (inches) for a row of curve panels whose y tick labels have a bounded width:
-    the load factor (0 to 1) and the relative residuals of a log axis ("1e−16"). ``tight_layout``
-    found about the same margins, but it costs a second pass over the ticks and texts, a third of
-    these figures' drawing time."""
+def _curve_margins(fig, panels: int, *, left: float = 0.85, right: float = 0.3, gap: float = 0.85,
+                   top: float = 0.55) -> None:
+    """Fixed margins (inches) for a row of panels whose tick labels have a bounded width: the load
+    factor (0 to 1), the relative residuals of a log axis ("1e−16"), the coordinates and pressures
+    of ``pair_pressure.png`` (at most about seven characters: matplotlib's tick labels switch to an
+    offset or a power of ten beyond). ``tight_layout`` found about the same margins, but it costs a
+    second pass over the ticks and texts, a third of these figures' drawing time.
+
+    ``panels``: the figure's row of panels (a panel's colour bar, made by ``fig.colorbar(..., ax=ax)``,
+    is inside its panel; its labels stick out to the right). ``left``, ``right``, ``gap``: the room
+    left of the first panel, right of the last one and between two panels (a colour bar's labels
+    need more); ``top``: above the panels (the figure's title, the panels' own titles)."""
     width, height = fig.get_size_inches()
-    panels = len(fig.axes)
-    left, right, gap, bottom, top = 0.85, 0.3, 0.85, 0.6, 0.55
+    bottom = 0.6
     fig.subplots_adjust(left=left / width, right=1 - right / width, bottom=bottom / height, top=1 - top / height,
                         wspace=gap / ((width - left - right - gap * (panels - 1)) / panels))
 
@@ -164,7 +170,8 @@ def draw_pair_pressure(rows: list[dict], path: Path, *, title: str = "") -> Path
         ax.set_aspect("equal", adjustable="datalim")
         ax.set_title(f"interface {name}: max {pressure.max():.3g} Pa", fontsize=9)
     fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
+    # the colour bar's labels on the right; both titles above (not tight_layout: a second layout pass)
+    _curve_margins(fig, len(groups), left=1.0, right=0.75, gap=1.75, top=0.62)
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return path
@@ -213,7 +220,7 @@ def draw_load_curve(summary: dict, path: Path, *, title: str = "") -> Path:
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=7, loc="best")
     fig.suptitle(title, fontsize=10)
-    _curve_margins(fig)  # (not tight_layout: a second layout pass)
+    _curve_margins(fig, len(panels))  # (not tight_layout: a second layout pass)
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return path
@@ -243,7 +250,7 @@ def draw_convergence(summary: dict, path: Path, *, title: str = "") -> Path:
         if len(histories) <= 12:
             ax.legend(fontsize=7)
     fig.suptitle(title, fontsize=10)
-    _curve_margins(fig)  # (not tight_layout: a second layout pass)
+    _curve_margins(fig, len(names))  # (not tight_layout: a second layout pass)
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return path

@@ -103,6 +103,26 @@ def test_a_dead_worker_leaves_its_pictures_to_the_run(reference, tmp_path, monke
     _same_pixels(reference[0], tmp_path / "out")
 
 
+def test_the_worker_imports_without_collections_and_draws_with_them(monkeypatch):
+    """Issue 43 (the pictures' CPU): the worker's imports run with the cyclic garbage collector
+    off (from the first line of its program), the drawing with it on, the imported objects frozen."""
+    import gc
+
+    boot = picture_worker._BOOT
+    assert boot.index("gc.disable()") < boot.index("import types") < boot.index("from dolfinx_nnqem")
+    seen = []
+    monkeypatch.setattr(picture_worker, "_warm_up", lambda role: seen.append((role, gc.isenabled())))
+    frozen = gc.get_freeze_count()
+    gc.disable()
+    try:
+        picture_worker._warm_up_uncollected("pictures")
+        assert seen == [("pictures", False)]  # imported with the collector off
+        assert gc.isenabled() and gc.get_freeze_count() > frozen
+    finally:
+        gc.unfreeze()
+        gc.enable()
+
+
 def test_no_worker_without_pictures(monkeypatch):
     """--no-pictures, --check, DOLFINX_NNQEM_PICTURES=0, a rank other than 0, a job of several
     ranks, a user's program calling main(): no worker is started (nothing is spent)."""
