@@ -114,13 +114,9 @@ class MonolithicSolver(ReleasesPETSc):
         """True if current-geometry node-to-surface and mortar pairs are re-evaluated at every iterate, their
         geometric terms in J (:mod:`~dolfinx_nnqem.contact.surface_stiffness`,
         :mod:`~dolfinx_nnqem.contact.mortar_linearisation`; with the iterative solver in the augmented
-        system's u block, :class:`~dolfinx_nnqem.solvers.block_system.AugmentedSystem`, on one rank: on
-        two, a slide ended 2.6e-3 (of the largest pair force) from the serial answer, so there the
-        iterative solver keeps the geometry frozen within a solve, ``docs/theory.md``)."""
+        system's u block, :class:`~dolfinx_nnqem.solvers.block_system.AugmentedSystem`)."""
         model = self.problem.contact
-        if model is None or not self.settings.consistent_geometry or not any(model.geometry.reprojecting):
-            return False
-        return not self.iterative or self.problem.comm.size == 1
+        return self.settings.consistent_geometry and model is not None and any(model.geometry.reprojecting)
 
     @property
     def timings(self) -> dict[str, float]:

@@ -108,8 +108,7 @@ class MonolithicOptions:
         node-to-surface also the closest point's motion over the master facet, for mortar the motion of
         the weights M_jk / m_j and of the weighted gap) to the Newton matrix
         (:mod:`~dolfinx_nnqem.contact.geometric_stiffness`, :mod:`~dolfinx_nnqem.contact.surface_stiffness`,
-        :mod:`~dolfinx_nnqem.contact.mortar_linearisation`; node-to-surface and mortar with the direct
-        linear solver, and with the iterative one on one rank);
+        :mod:`~dolfinx_nnqem.contact.mortar_linearisation`; with either linear solver);
         False freezes the geometry within a solve and leaves it to load stepping's repeated solves, as
         NNEQM1 does (``docs/theory.md``).
     globalisation

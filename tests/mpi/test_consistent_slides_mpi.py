@@ -64,23 +64,32 @@ def test_consistent_slide_on_two_ranks_matches_serial(tmp_path, case, fraction):
 
 
 
+
 @pytest.mark.mpi
 @pytest.mark.parametrize("case", ["blocks", "mortar"], ids=["node-to-surface", "mortar"])
-def test_the_iterative_solver_on_two_ranks_keeps_the_frozen_geometry(tmp_path, case):
-    """On several ranks the iterative linear solver keeps the geometry frozen within a solve (the
-    consistent terms are taken on one rank only: ``docs/theory.md``): it ends on the serial direct
-    solver's pair forces, in the frozen geometry's many Newton iterations."""
+def test_consistent_slide_with_the_iterative_solver_on_two_ranks(tmp_path, case):
+    """The iterative linear solver takes the consistent terms on 2 ranks too: about the serial direct
+    solver's Newton iterations, far fewer than NNEQM1's frozen geometry. The slide's frictional problem
+    has more than one solution at its first slip increment (they differ in the out-of-plane friction,
+    ``docs/theory.md``), so the pair forces are not compared; the resultant's in-plane components are,
+    and every increment passed the independent check (the run would have stopped)."""
     out = tmp_path / "out.npz"
-    cmd = [*compat.mpiexec(), "-n", "2", sys.executable, str(SCRIPTS / "large_sliding.py"), str(out), f"{case}/iterative"]
+    cmd = [*compat.mpiexec(), "-n", "2", sys.executable, str(SCRIPTS / "large_sliding.py"), str(out),
+           f"{case}/iterative", f"{case}/nneqm1"]
     run = subprocess.run(cmd, capture_output=True, text=True, timeout=900, env=compat.mpi_environment())
     assert run.returncode == 0, f"{' '.join(cmd)} failed:\n{run.stdout[-3000:]}\n{run.stderr[-3000:]}"
     parallel = dict(np.load(out))
     s = solve(case, "monolithic", MPI.COMM_SELF)
     p = {key.rsplit("/", 1)[1]: value for key, value in parallel.items() if key.startswith(f"{case}/iterative/")}
+    nneqm1 = parallel[f"{case}/nneqm1/iterations"]
     i, j = _order(p["position"]), _order(s["position"])
+    d_total = np.abs(p["total"][:2] - s["total"][:2]).max() / np.abs(s["total"]).max()
     df = np.abs(p["force"][i] - s["force"][j]).max() / np.abs(s["force"]).max()
-    print(f"\n  {case}, iterative linear solver on 2 ranks vs the direct one serial: pair forces {df:.1e}; "
-          f"Newton iterations {p['iterations'].sum()} against {s['iterations'].sum()} (consistent, serial)")
-    assert len(i) == len(j) and np.abs(p["position"][i] - s["position"][j]).max() < 1e-9
-    assert df < 1e-8
-    assert p["iterations"].sum() > 2 * s["iterations"].sum()  # the frozen geometry's repeated solves
+    print(f"\n  {case}, iterative linear solver on 2 ranks vs the direct one serial: resultant in the plane {d_total:.1e}, "
+          f"out of it {p['total'][2]:.3e} against {s['total'][2]:.3e}; pair forces {df:.1e}; Newton iterations "
+          f"{p['iterations'].tolist()} ({p['iterations'].sum()}) against {s['iterations'].tolist()} "
+          f"({s['iterations'].sum()}); NNEQM1 (frozen geometry) {nneqm1.sum()}")
+    assert len(i) == len(j) and np.abs(p["position"][i] - s["position"][j]).max() < 1e-4  # the same pairs (the
+    # two solutions move the slave nodes apart by 7e-6 out of the plane)
+    assert d_total < 1e-6
+    assert p["iterations"].sum() <= 1.3 * s["iterations"].sum() and p["iterations"].sum() < 0.6 * nneqm1.sum()
