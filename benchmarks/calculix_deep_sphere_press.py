@@ -67,7 +67,7 @@ import numpy as np
 from mpi4py import MPI
 
 from calculix_ironing import C3D8_FACES, faces_on, node_set, outward, run_ccx, strip_elements
-from calculix_sphere_press import read_dat
+from calculix_sphere_press import press_mesh_lines, read_dat
 
 R_SPHERE = 1.0  # mm
 DEPTH = 0.2 * R_SPHERE  # mm: the sphere's travel below first touch
@@ -132,32 +132,12 @@ def model_text(problem, increments: int, *, h: float, penalty_factor: float, fac
     increment: ``docs/verification-materials.md``); its output is at their ends.
     """
     coords, cells = strip_elements(problem)
-    lo, hi = coords.min(axis=0), coords.max(axis=0)
     c_coords, c_cells = cap_elements(R_SPHERE, facet)
-    n_block, n_el = len(coords), len(cells)
-    centre = [0.0, R_SPHERE, 0.0]
-    all_coords = np.vstack([coords, c_coords, centre, centre])
-    ref, rot = n_block + len(c_coords) + 1, n_block + len(c_coords) + 2  # 1-based ids
-    all_cells = np.vstack([cells, c_cells + n_block])
-    on_top = np.isclose(coords[:, 1], hi[1])
-    top = faces_on(cells, on_top)
-    face = faces_on(c_cells, np.isclose(np.linalg.norm(c_coords - centre, axis=1), R_SPHERE))
-    centroid = coords[cells].mean(axis=1)
-    fine = np.flatnonzero((centroid[:, 0] < FINE_WIDTH) & (centroid[:, 2] < FINE_WIDTH) & (centroid[:, 1] > -FINE_DEPTH))
-
-    lines = ["*HEADING", f"dolfinx_nnqem deep sphere press, h = {h:g} mm, mu_f = {mu_f:g}", "*NODE"]
-    lines += [f"{i + 1}, {x:.12e}, {y:.12e}, {z:.12e}" for i, (x, y, z) in enumerate(all_coords)]
-    lines.append("*ELEMENT, TYPE=C3D8, ELSET=BLOCK")
-    lines += [f"{e + 1}, " + ", ".join(str(n + 1) for n in all_cells[e]) for e in range(n_el)]
-    lines.append("*ELEMENT, TYPE=C3D8, ELSET=SPHERE")
-    lines += [f"{e + 1}, " + ", ".join(str(n + 1) for n in all_cells[e]) for e in range(n_el, len(all_cells))]
-    lines += ["*ELSET, ELSET=FINE"] + [", ".join(str(e + 1) for e in fine[k:k + 8]) for k in range(0, len(fine), 8)]
-    lines += node_set("BOTTOM", np.flatnonzero(np.isclose(coords[:, 1], lo[1])) + 1)
-    lines += node_set("XSYM", np.flatnonzero(np.isclose(coords[:, 0], lo[0])) + 1)
-    lines += node_set("ZSYM", np.flatnonzero(np.isclose(coords[:, 2], lo[2])) + 1)
-    lines += node_set("TOP", np.flatnonzero(on_top) + 1) + node_set("REF", [ref]) + node_set("ROT", [rot])
-    lines += ["*SURFACE, NAME=BLOCKTOP, TYPE=ELEMENT"] + [f"{e + 1}, S{f}" for e, f in top]
-    lines += ["*SURFACE, NAME=SPHEREFACE, TYPE=ELEMENT"] + [f"{e + 1 + n_el}, S{f}" for e, f in face]
+    on_top = np.isclose(coords[:, 1], coords[:, 1].max())
+    lines, ref = press_mesh_lines(f"dolfinx_nnqem deep sphere press, h = {h:g} mm, mu_f = {mu_f:g}", coords, cells,
+                                  c_coords, c_cells, R_SPHERE, FINE_WIDTH, FINE_DEPTH,
+                                  node_set("TOP", np.flatnonzero(on_top) + 1))
+    rot = ref + 1
     lines += ["*MATERIAL, NAME=BLOCK", "*ELASTIC", f"{E:.12e}, {NU}", "*PLASTIC",
               f"{SIGMA_Y0:.12e}, 0.0", f"{SIGMA_Y0 + H_LIN * P_MAX:.12e}, {P_MAX:.12e}",
               "*MATERIAL, NAME=RIGID", "*ELASTIC", f"{1e3 * E:.6e}, 0.3",

@@ -105,29 +105,30 @@ def plastic_lines(material: str) -> list[str]:
     raise ValueError(f"material = {material!r}; expected one of {list(case.MATERIALS)}")
 
 
-def model_text(problem, material: str, cycles: int, increments: int, *, h: float, penalty_factor: float,
-               facet: float, nlgeom: bool = True) -> str:
-    """The whole ``.inp`` text of ``case.sphere_press_problem(h, material, cycles)``.
+def press_mesh_lines(heading: str, coords: np.ndarray, cells: np.ndarray, c_coords: np.ndarray, c_cells: np.ndarray,
+                     radius: float, fine_width: float, fine_depth: float, marked: list[str]) -> tuple[list[str], int]:
+    """The mesh cards of a block (``coords``, ``cells``: its C3D8 elements) under a rigid sphere's cap
+    (``c_coords``, ``c_cells``, :func:`cap_elements`; the sphere of ``radius`` about (0, radius, 0)),
+    from ``*HEADING`` to the two contact surfaces; (lines, ref): the rigid body's reference node
+    ``ref`` and rotation node ``ref + 1`` (1-based) follow the cap's nodes.
 
-    ``increments``: the package's equal increments per press and per lift.
+    Sets: BLOCK and SPHERE (elements), FINE (the block's elements with x, z < ``fine_width`` and
+    within ``fine_depth`` of the top), BOTTOM, XSYM, ZSYM, the node-set lines ``marked``, REF, ROT;
+    surfaces BLOCKTOP and SPHEREFACE (the cap's outer faces).
     """
-    coords, cells = strip_elements(problem)
     lo, hi = coords.min(axis=0), coords.max(axis=0)
-    c_coords, c_cells = cap_elements(case.R_SPHERE, facet)
-    n_block = len(coords)
-    all_coords = np.vstack([coords, c_coords, [0.0, case.R_SPHERE, 0.0], [0.0, case.R_SPHERE, 0.0]])
+    n_block, n_el = len(coords), len(cells)
+    centre = [0.0, radius, 0.0]
+    all_coords = np.vstack([coords, c_coords, centre, centre])
     ref, rot = n_block + len(c_coords) + 1, n_block + len(c_coords) + 2  # 1-based ids
     all_cells = np.vstack([cells, c_cells + n_block])
-    n_el = len(cells)
     top = faces_on(cells, np.isclose(coords[:, 1], hi[1]))
-    c_radius = np.linalg.norm(c_coords - [0.0, case.R_SPHERE, 0.0], axis=1)
-    face = faces_on(c_cells, np.isclose(c_radius, case.R_SPHERE))
+    face = faces_on(c_cells, np.isclose(np.linalg.norm(c_coords - centre, axis=1), radius))
     centroid = coords[cells].mean(axis=1)
-    fine = np.flatnonzero((centroid[:, 0] < case.FINE_WIDTH) & (centroid[:, 2] < case.FINE_WIDTH)
-                          & (centroid[:, 1] > -case.FINE_DEPTH))
-    centre = np.flatnonzero(np.linalg.norm(coords, axis=1) < 1e-9)
+    fine = np.flatnonzero((centroid[:, 0] < fine_width) & (centroid[:, 2] < fine_width)
+                          & (centroid[:, 1] > -fine_depth))
 
-    lines = ["*HEADING", f"dolfinx_nnqem sphere press, {material} hardening, {cycles} cycle(s), h = {h:g} mm", "*NODE"]
+    lines = ["*HEADING", heading, "*NODE"]
     lines += [f"{i + 1}, {x:.12e}, {y:.12e}, {z:.12e}" for i, (x, y, z) in enumerate(all_coords)]
     lines.append("*ELEMENT, TYPE=C3D8, ELSET=BLOCK")
     lines += [f"{e + 1}, " + ", ".join(str(n + 1) for n in all_cells[e]) for e in range(n_el)]
@@ -137,9 +138,25 @@ def model_text(problem, material: str, cycles: int, increments: int, *, h: float
     lines += node_set("BOTTOM", np.flatnonzero(np.isclose(coords[:, 1], lo[1])) + 1)
     lines += node_set("XSYM", np.flatnonzero(np.isclose(coords[:, 0], lo[0])) + 1)
     lines += node_set("ZSYM", np.flatnonzero(np.isclose(coords[:, 2], lo[2])) + 1)
-    lines += node_set("CENTRE", centre + 1) + node_set("REF", [ref]) + node_set("ROT", [rot])
+    lines += marked + node_set("REF", [ref]) + node_set("ROT", [rot])
     lines += ["*SURFACE, NAME=BLOCKTOP, TYPE=ELEMENT"] + [f"{e + 1}, S{f}" for e, f in top]
     lines += ["*SURFACE, NAME=SPHEREFACE, TYPE=ELEMENT"] + [f"{e + 1 + n_el}, S{f}" for e, f in face]
+    return lines, ref
+
+
+def model_text(problem, material: str, cycles: int, increments: int, *, h: float, penalty_factor: float,
+               facet: float, nlgeom: bool = True) -> str:
+    """The whole ``.inp`` text of ``case.sphere_press_problem(h, material, cycles)``.
+
+    ``increments``: the package's equal increments per press and per lift.
+    """
+    coords, cells = strip_elements(problem)
+    c_coords, c_cells = cap_elements(case.R_SPHERE, facet)
+    centre = np.flatnonzero(np.linalg.norm(coords, axis=1) < 1e-9)
+    lines, ref = press_mesh_lines(f"dolfinx_nnqem sphere press, {material} hardening, {cycles} cycle(s), h = {h:g} mm",
+                                  coords, cells, c_coords, c_cells, case.R_SPHERE, case.FINE_WIDTH, case.FINE_DEPTH,
+                                  node_set("CENTRE", centre + 1))
+    rot = ref + 1
     lines += ["*MATERIAL, NAME=BLOCK", "*ELASTIC", f"{case.E:.12e}, {case.NU}"] + plastic_lines(material)
     lines += ["*MATERIAL, NAME=RIGID", "*ELASTIC", f"{1e3 * case.E:.6e}, 0.3",
               "*SOLID SECTION, ELSET=BLOCK, MATERIAL=BLOCK", "*SOLID SECTION, ELSET=SPHERE, MATERIAL=RIGID",

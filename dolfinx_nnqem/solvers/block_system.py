@@ -254,6 +254,10 @@ class AugmentedSystem:
         self._Btg = self.B_free.createVecRight()
         self._b: PETSc.Vec | None = None  # the right-hand side, created once (the nest's layout is fixed)
         self.A00: PETSc.Mat | None = None  # K, widened at the first matrix
+        # node-to-surface and mortar pairs' W, P W and B_freeᵀ P W (made at the first use, refilled afterwards)
+        self._W: PETSc.Mat | None = None
+        self._PW: PETSc.Mat | None = None
+        self._BtPW: PETSc.Mat | None = None
 
     def _u_block(self, K: PETSc.Mat, dH_dw: np.ndarray,
                  surface: tuple[PETSc.Mat, np.ndarray] | None = None) -> PETSc.Mat:
@@ -285,18 +289,23 @@ class AugmentedSystem:
     def _add_surface_blocks(self, K: PETSc.Mat, P: PETSc.Mat, G: PETSc.Mat, W_free: np.ndarray) -> None:
         """K − G + B_freeᵀ P W_free in place (both on the pairs' columns, in K's widened pattern; PETSc
         checks that and widens it if need be, the local-to-global maps kept)."""
-        model = self.model
-        W = rows_matrix(model.comm, PairRows(model.rows.indptr, model.rows.columns, W_free), model.num_global,
-                        model.V.dofmap.index_map)
-        PW = P.matMult(W)
-        BtPW = self.B_free.transposeMatMult(PW)
+        rows = self.model.rows
+        if self._W is None:  # made at the first use, refilled afterwards (B's pattern is this system's)
+            self._W = rows_matrix(self.model.comm, PairRows(rows.indptr, rows.columns, W_free), self.model.num_global,
+                                  self.model.V.dofmap.index_map)
+            self._PW = P.matMult(self._W)
+            self._BtPW = self.B_free.transposeMatMult(self._PW)
+        else:
+            assert self._PW is not None and self._BtPW is not None  # (made with _W)
+            self._W.setValuesCSR(rows.indptr, rows.columns, W_free)  # type: ignore[arg-type]  # as in BlockDiagonal.fill
+            self._W.assemble()
+            P.matMult(self._W, self._PW)  # MAT_REUSE_MATRIX
+            self.B_free.transposeMatMult(self._PW, self._BtPW)
         lgmap = K.getLGMap()
         unknown = PETSc.Mat.Structure.UNKNOWN_NONZERO_PATTERN
         K.axpy(-1.0, G, structure=unknown)  # type: ignore[arg-type]  # as above
-        K.axpy(1.0, BtPW, structure=unknown)  # type: ignore[arg-type]  # as above
+        K.axpy(1.0, self._BtPW, structure=unknown)  # type: ignore[arg-type]  # as above
         K.setLGMap(*lgmap)
-        for m in (W, PW, BtPW):
-            m.destroy()
 
     def surface_blocks(self, terms: list[SurfaceTerms], K: PETSc.Mat, B_values: np.ndarray | None
                        ) -> tuple[np.ndarray, PETSc.Mat, np.ndarray]:
@@ -361,6 +370,6 @@ class AugmentedSystem:
         """Free the blocks, B_free, the nest and the work vectors (collective)."""
         self._blocks.destroy()
         self._P.destroy()
-        for m in (self.B_free, self._BtPB, self._nest, self._g, self._Btg, self._b):
+        for m in (self.B_free, self._BtPB, self._nest, self._g, self._Btg, self._b, self._W, self._PW, self._BtPW):
             if m is not None:
                 m.destroy()
