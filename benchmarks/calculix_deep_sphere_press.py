@@ -80,8 +80,9 @@ CAP_THICKNESS = 0.1  # radial depth of the cap's elements, in radii (any value: 
 
 
 # -- the case --------------------------------------------------------------------------------
-def deep_press_problem(h: float, mu_f: float = 0.0, *, comm: MPI.Comm = MPI.COMM_SELF):
-    """The quarter model (module docstring) at finite strain, elements of size ``h`` (mm) at the contact."""
+def deep_press_problem(h: float, mu_f: float = 0.0, *, comm: MPI.Comm = MPI.COMM_SELF, kinematics: str = "finite"):
+    """The quarter model (module docstring) at finite strain, elements of size ``h`` (mm) at the contact
+    (``kinematics="small"``: the same problem at small strain, ``benchmarks/small_strain_limit.py``)."""
     from dolfinx_nnqem.cases.geometries import BlockStackTags as T
     from dolfinx_nnqem.cases.geometries import build_graded_block
     from dolfinx_nnqem.contact.obstacles import Sphere
@@ -93,7 +94,7 @@ def deep_press_problem(h: float, mu_f: float = 0.0, *, comm: MPI.Comm = MPI.COMM
     sphere = Sphere(centre=(0.0, R_SPHERE, 0.0), radius=R_SPHERE, motion=(0.0, -DEPTH, 0.0))
     dirichlet = [Dirichlet(T.bottom(1)), Dirichlet(T.xmin(1), 0.0, [0]), Dirichlet(T.zmin(1), 0.0, [2])]
     return ContactProblem(mesh, cell_tags, facet_tags, materials=VonMises(E=E, nu=NU, sigma_y0=SIGMA_Y0, H=H_LIN),
-                          dirichlet=dirichlet, kinematics="finite",
+                          dirichlet=dirichlet, kinematics=kinematics,
                           contact=Contact(sphere, T.top(1), mu_f=mu_f, geometry="current"))
 
 

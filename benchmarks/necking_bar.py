@@ -71,8 +71,9 @@ def hardening():
 
 # -- the case --------------------------------------------------------------------------------
 def necking_problem(h_neck: float, h_end: float, quadrature_degree: int | None = 2, *,
-                    comm: MPI.Comm = MPI.COMM_SELF):
-    """The eighth of the bar (module docstring) on :func:`necking_bar_mesh.build_necking_bar`'s mesh."""
+                    comm: MPI.Comm = MPI.COMM_SELF, kinematics: str = "finite"):
+    """The eighth of the bar (module docstring) on :func:`necking_bar_mesh.build_necking_bar`'s mesh
+    (``kinematics="small"``: the same problem at small strain, ``benchmarks/small_strain_limit.py``)."""
     from dolfinx_nnqem.material import VonMises
     from dolfinx_nnqem.problem import ContactProblem, Dirichlet
 
@@ -81,7 +82,7 @@ def necking_problem(h_neck: float, h_end: float, quadrature_degree: int | None =
     dirichlet = [Dirichlet(T.END, (0.0, 0.0, STRETCH)), Dirichlet(T.SYMMETRY_X, 0.0, [0]),
                  Dirichlet(T.SYMMETRY_Y, 0.0, [1]), Dirichlet(T.MIDDLE, 0.0, [2])]
     return ContactProblem(mesh, cell_tags, facet_tags, materials=VonMises(E=E, nu=NU, hardening=hardening()),
-                          dirichlet=dirichlet, kinematics="finite", degree=2, quadrature_degree=quadrature_degree)
+                          dirichlet=dirichlet, kinematics=kinematics, degree=2, quadrature_degree=quadrature_degree)
 
 
 def watched_nodes(X: np.ndarray) -> tuple[int, int]:

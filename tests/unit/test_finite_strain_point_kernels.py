@@ -92,3 +92,46 @@ def test_exponential_map_matches_the_numpy_formulas():
     assert np.abs(F_inv - F_inv_ref).max() <= 1e-11 * np.abs(F_inv_ref).max()
     assert np.abs(P - tau @ np.swapaxes(F_inv_ref, 1, 2)).max() <= 1e-11 * np.abs(P).max()
     assert np.array_equal(sigma, tau / J[:, None, None])
+
+
+def _half_log_series(X: np.ndarray) -> np.ndarray:
+    """½ ln(I + X) by its series to the fourth power: exact to rounding where |X| ≤ 1e-5."""
+    X2 = X @ X
+    return 0.5 * (X - X2 / 2.0 + X2 @ X / 3.0 - X2 @ X2 / 4.0)
+
+
+@pytest.mark.parametrize("size", [1e-5, 1e-7, 1e-9])
+def test_elastic_trial_keeps_the_digits_of_a_small_strain(size):
+    """Strains of 1e-5 to 1e-9 from F = I + H (H a multiple of 2⁻⁵², so F holds it exactly) after a
+    converged state with a small elastic strain (b_e,n = I + β, β exact too): ε^tr to 1e-12 of its
+    size. Formed as b_e^tr near I and decomposed, it kept about 1e-16 / size (1e-7 at 1e-9)."""
+    rng = np.random.default_rng(5)
+    n = 50
+    unit = 2.0 ** -52  # the spacing of the doubles at 1
+    H = np.round(size * rng.standard_normal((n, 3, 3)) / unit) * unit
+    beta = np.round(size * rng.standard_normal((n, 3, 3)) / unit) * unit
+    beta = beta + np.swapaxes(beta, 1, 2)
+    F, F_n, b_n = np.eye(3) + H, np.broadcast_to(np.eye(3), (n, 3, 3)).copy(), np.eye(3) + beta
+    assert np.array_equal(F - np.eye(3), H) and np.array_equal(b_n - np.eye(3), beta)
+    F_n_inv, f, left, Q, eps_tr = (np.empty((n, 3, 3)) for _ in range(5))
+    lam = np.empty((n, 3))
+    elastic_trial(F, F_n, b_n, F_n_inv, f, left, lam, Q, eps_tr)
+    X = H + np.swapaxes(H, 1, 2) + H @ np.swapaxes(H, 1, 2) + (np.eye(3) + H) @ beta @ (np.eye(3) + np.swapaxes(H, 1, 2))
+    eps_ref = _half_log_series(X)
+    assert np.abs(eps_tr - eps_ref).max() <= 1e-12 * np.abs(eps_ref).max()
+
+
+def test_exponential_map_keeps_the_digits_of_a_small_strain():
+    """The off-diagonal entries of b_e for an elastic strain of 1e-9, to 1e-11 of their size (formed as
+    Σ exp(2λ) q ⊗ q they carried a few ulps of 1: 1e-7 of their size); its diagonal 1 + x holds one ulp."""
+    rng = np.random.default_rng(13)
+    n = 50
+    Q_e = np.stack([_random_rotation(rng) for _ in range(n)])
+    lam_e = 1e-9 * rng.standard_normal((n, 3))
+    F = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
+    b_e, F_inv, P, sigma = (np.empty((n, 3, 3)) for _ in range(4))
+    exponential_map(F, np.ones(n), np.zeros((n, 3, 3)), Q_e, lam_e, b_e, F_inv, P, sigma)
+    X = (Q_e * np.expm1(2.0 * lam_e)[:, None, :]) @ np.swapaxes(Q_e, 1, 2)
+    off = ~np.eye(3, dtype=bool)
+    assert np.abs(b_e[:, off] - X[:, off]).max() <= 1e-11 * np.abs(X[:, off]).max()
+    assert np.abs(b_e[:, ~off] - (1.0 + X[:, ~off])).max() <= 2.3e-16

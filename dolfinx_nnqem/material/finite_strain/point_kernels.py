@@ -9,6 +9,20 @@ Here each point's steps run in one pass:
   eigen-decomposition (:func:`symmetric_eigen`) and ε^tr = Σ_a ½ ln λ_a q_a ⊗ q_a;
 * :func:`exponential_map`: b_e = Σ_a exp(2 λ_a^e) q_a ⊗ q_a, F⁻¹, P = τ F⁻ᵀ and σ = τ / J.
 
+**Small strains without cancellation.** At a strain of 10⁻⁵ the entries of b_e^tr are 1 plus
+10⁻⁵: formed as such and decomposed, its eigenvalues carry a few ulps of 1, and ln λ_a loses
+the digits the 1 took: a relative error of about 10⁻¹⁶ / 10⁻⁵ in the strain, which puts a floor
+under the residual that rises as the load falls (10⁻¹⁰ of the force at 10⁻⁵ strain, enough to stall
+a solve asked for 10⁻¹⁰, and cutting the increment back only makes it worse). So the trial works
+on the departures from the identity: h = f − I = (F − F_n) F_n⁻¹, β = b_e,n − I (both exact
+subtractions of nearby numbers) and
+
+    d = b_e^tr − I = h + hᵀ + h hᵀ + f β fᵀ,
+
+decomposed as it is (the Jacobi rotations are scale-free) into λ_a − 1 = eig(d) and the same
+eigenvectors, with ½ ln λ_a = ½ log1p(eig(d)). Likewise the exponential map forms
+b_e = I + Σ_a expm1(2 λ_a^e) q_a ⊗ q_a. What remains is the rounding of F = I + ∇u itself (one ulp).
+
 **The eigen-decomposition** of a symmetric 3 × 3 tensor is the cyclic Jacobi method (Golub & Van
 Loan §8.5): plane rotations that zero one off-diagonal entry at a time, until the off-diagonal part
 is negligible against the diagonal. Its eigenvalues are accurate to a few ulps of |A|, its
@@ -114,21 +128,31 @@ def elastic_trial(F: np.ndarray, F_n: np.ndarray, b_n: np.ndarray, F_n_inv: np.n
     """The elastic trial state at n points into the outputs: F_n⁻¹, f = F F_n⁻¹, ``left`` = f b_e,n,
     the eigenvalues ``lam`` (n, 3) (ascending) and eigenvectors ``Q`` of b_e^tr = f b_e,n fᵀ, and
     ε^tr = ½ ln b_e^tr (all (n, 3, 3) but ``lam``)."""
-    b_tr, A, half_log = np.empty((3, 3)), np.empty((3, 3)), np.empty(3)
+    dF, h, beta, f_beta, d, A = (np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3)),
+                                 np.empty((3, 3)), np.empty((3, 3)))
+    d_lam, half_log = np.empty(3), np.empty(3)
     for g in range(F.shape[0]):
         inverse_3x3(F_n[g], F_n_inv[g])
         for i in range(3):
             for j in range(3):
-                f[g, i, j] = F[g, i, 0] * F_n_inv[g, 0, j] + F[g, i, 1] * F_n_inv[g, 1, j] + F[g, i, 2] * F_n_inv[g, 2, j]
+                dF[i, j] = F[g, i, j] - F_n[g, i, j]
+                beta[i, j] = b_n[g, i, j] - (1.0 if i == j else 0.0)
+        for i in range(3):
+            for j in range(3):
+                h[i, j] = dF[i, 0] * F_n_inv[g, 0, j] + dF[i, 1] * F_n_inv[g, 1, j] + dF[i, 2] * F_n_inv[g, 2, j]
+                f[g, i, j] = h[i, j] + (1.0 if i == j else 0.0)
         for i in range(3):
             for j in range(3):
                 left[g, i, j] = f[g, i, 0] * b_n[g, 0, j] + f[g, i, 1] * b_n[g, 1, j] + f[g, i, 2] * b_n[g, 2, j]
-        for i in range(3):
+                f_beta[i, j] = f[g, i, 0] * beta[0, j] + f[g, i, 1] * beta[1, j] + f[g, i, 2] * beta[2, j]
+        for i in range(3):  # d = b_e^tr − I = h + hᵀ + h hᵀ + f β fᵀ (the module docstring)
             for j in range(3):
-                b_tr[i, j] = left[g, i, 0] * f[g, j, 0] + left[g, i, 1] * f[g, j, 1] + left[g, i, 2] * f[g, j, 2]
-        symmetric_eigen(b_tr, lam[g], Q[g], A)
+                d[i, j] = (h[i, j] + h[j, i] + h[i, 0] * h[j, 0] + h[i, 1] * h[j, 1] + h[i, 2] * h[j, 2]
+                           + f_beta[i, 0] * f[g, j, 0] + f_beta[i, 1] * f[g, j, 1] + f_beta[i, 2] * f[g, j, 2])
+        symmetric_eigen(d, d_lam, Q[g], A)
         for a in range(3):
-            half_log[a] = 0.5 * math.log(lam[g, a]) if lam[g, a] > 0.0 else np.nan
+            lam[g, a] = 1.0 + d_lam[a]
+            half_log[a] = 0.5 * math.log1p(d_lam[a]) if d_lam[a] > -1.0 else np.nan
         _spectral_sum(Q[g], half_log, eps_tr[g])
 
 
@@ -142,8 +166,10 @@ def exponential_map(F: np.ndarray, J: np.ndarray, tau: np.ndarray, Q_e: np.ndarr
     stretch = np.empty(3)
     for g in range(F.shape[0]):
         for a in range(3):
-            stretch[a] = math.exp(2.0 * lam_e[g, a])
-        _spectral_sum(Q_e[g], stretch, b_e[g])
+            stretch[a] = math.expm1(2.0 * lam_e[g, a])
+        _spectral_sum(Q_e[g], stretch, b_e[g])  # b_e − I, then the identity (the module docstring)
+        for a in range(3):
+            b_e[g, a, a] += 1.0
         inverse_3x3(F[g], F_inv[g])
         for i in range(3):
             for j in range(3):
