@@ -65,3 +65,21 @@ def test_consistent_slide_with_the_iterative_solver_on_two_ranks(tmp_path, case)
     # nodes apart by 7e-6 out of the plane)
     assert d_total < 1e-6
     assert p["iterations"].sum() <= 1.3 * s["iterations"].sum() and p["iterations"].sum() < 0.6 * nneqm1.sum()
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("case", ["blocks-frictionless", "mortar-frictionless"], ids=["node-to-surface", "mortar"])
+def test_frictionless_slide_with_the_iterative_solver_on_two_ranks_is_the_serial_one(tmp_path, case):
+    """Without friction the slide has one answer: the iterative linear solver with the consistent terms
+    on 2 ranks gives the serial direct solver's pair forces and slave positions (to its Krylov
+    tolerances), about in its Newton iterations."""
+    parallel = run_on_ranks(tmp_path / "out.npz", 2, [f"{case}/iterative"])
+    s = solve(case, "monolithic", MPI.COMM_SELF)
+    p = results(parallel, case, "iterative")
+    c = compare(p, s)
+    print(f"\n  {case}, iterative linear solver on 2 ranks vs the direct one serial: {c.pairs[0]} pairs, pair forces "
+          f"{c.force:.1e}, slave positions {c.position:.1e}, resultant {c.total:.1e}; Newton iterations "
+          f"{p['iterations'].tolist()} ({p['iterations'].sum()}) against {s['iterations'].tolist()} ({s['iterations'].sum()})")
+    assert c.pairs[0] == c.pairs[1] and c.position < 1e-9
+    assert c.force < 1e-7 and c.total < 1e-8
+    assert p["iterations"].sum() <= 1.3 * s["iterations"].sum()

@@ -4,7 +4,8 @@
     mpiexec -n N python large_sliding.py OUT.npz CASE/METHOD ...   (one method, any of ALL_METHODS)
 
 The frictionless sphere slid over the block (6³, rigid obstacle), the frictional block slid 1.6
-master facets over another (node-to-surface, μ_f = 0.3; the same with dual mortar) and the ironing of an elastoplastic strip
+master facets over another (node-to-surface, μ_f = 0.3; the same with dual mortar; both frictionless
+as ``blocks-frictionless`` and ``mortar-frictionless``) and the ironing of an elastoplastic strip
 by a cylinder dragged 8 facets (μ_f = 0.1; the default geometry = "auto", which moves it to the current
 geometry once the punch slides), the sphere slid over 4 × 1 × 4 Q2 hexahedra and over 3 × 2 × 3 × 6 P2 tetrahedra
 with μ_f = 0.3 (degree 2), current geometry, monolithic and NNEQM1 (NNEQM2, or ``iterative``: the monolithic
@@ -35,6 +36,9 @@ CASES = {
     "sphere": (lambda comm: sliding_sphere(6, comm=comm), obstacle_force, 16),
     "blocks": (lambda comm: sliding_blocks(slide=0.4, mu_f=0.3, comm=comm), slave_force, 12),
     "mortar": (lambda comm: sliding_blocks(slide=0.4, mu_f=0.3, discretisation="mortar", comm=comm), slave_force, 12),
+    "blocks-frictionless": (lambda comm: sliding_blocks(slide=0.4, mu_f=0.0, comm=comm), slave_force, 12),
+    "mortar-frictionless": (lambda comm: sliding_blocks(slide=0.4, mu_f=0.0, discretisation="mortar", comm=comm),
+                            slave_force, 12),
     "ironing": (lambda comm: ironing(16, geometry=None, comm=comm), obstacle_force, 40),
     "sphere-q2": (lambda comm: sliding_sphere(4, degree=2, ny=1, mu_f=0.3, comm=comm), obstacle_force, 16),
     "sphere-p2": (lambda comm: sliding_sphere(3, degree=2, ny=2, mu_f=0.3, cell_type="tetrahedron", comm=comm),
