@@ -192,16 +192,18 @@ class CombinedObstacleTracker:
 
     Pair i acts on the transformed displacement d̂_i = Σ_k a_ik u(k) of its nodes
     (:class:`~dolfinx_nnqem.contact.obstacles.CombinedNodes`): it is the point X̂_i + d̂_i, projected
-    onto the obstacle at rest like a slave node at degree 1, with the rows R_i a_ik on its nodes. Its
-    geometry is frozen within a solve (the solvers' obstacle terms are one 3 × 3 block per node);
-    load stepping evaluates it again at the solution and solves again until a solve starts converged.
+    onto the obstacle at rest like a slave node at degree 1, with the rows R_i a_ik on its nodes. The
+    monolithic solver and NNEQM1 evaluate it at every Newton iterate, with its geometric terms on the
+    combined nodes (:mod:`~dolfinx_nnqem.contact.combined_stiffness`); with NNEQM2 it is frozen within
+    a solve, and load stepping evaluates it again at the solution and solves again until a solve
+    starts converged.
     """
 
     reference: ObstaclePairs
 
-    def pairs_at(self, u: dolfinx.fem.Function, load_factor: float) -> ObstaclePairs:
-        """The pairs at X̂ + d̂(u) and the obstacle at d(ℓ), gaps rebased (module; collective)."""
-        pairs = self.reference
+    def displacement(self, pairs: ObstaclePairs, u: dolfinx.fem.Function) -> np.ndarray:
+        """d̂ (num_local, 3) of the ``pairs`` (this tracker's, evaluated anywhere: they combine the same
+        nodes) at the displacement u (collective)."""
         nodes = pairs.combination
         assert nodes is not None  # a tri6 surface's pairs
         blocks = np.unique(np.concatenate(pairs.comm.allgather(nodes.blocks)))  # the same on every rank
@@ -209,6 +211,14 @@ class CombinedObstacleTracker:
         pair = np.repeat(np.arange(pairs.num_local), np.diff(nodes.indptr))
         u_hat = np.zeros((pairs.num_local, 3))
         np.add.at(u_hat, pair, nodes.coefficients[:, None] * u_nodes)
+        return u_hat
+
+    def pairs_at(self, u: dolfinx.fem.Function, load_factor: float) -> ObstaclePairs:
+        """The pairs at X̂ + d̂(u) and the obstacle at d(ℓ), gaps rebased (module; collective)."""
+        pairs = self.reference
+        nodes = pairs.combination
+        assert nodes is not None  # a tri6 surface's pairs
+        u_hat = self.displacement(pairs, u)
         relative = u_hat - pairs.obstacle.displacement(load_factor)  # the pair's point seen from the obstacle
         g, n, p = pairs.obstacle.project(nodes.X + relative)
         R = local_frames(n) if len(n) else np.zeros((0, 3, 3))

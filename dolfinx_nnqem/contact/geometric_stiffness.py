@@ -23,6 +23,9 @@ normal row. ∂r_i/∂x = ∂r_i/∂n · ∂n/∂x with ∂n/∂x the obstacle's
 (:func:`~dolfinx_nnqem.contact.surfaces.local_frames_derivative`). For a frictionless pair only
 p_n ∂n/∂x remains; the frame's rotation enters with friction (q ≠ 0, and the slip a ≠ 0).
 
+An obstacle's pairs on 6-node triangle facets (P2 tetrahedra) act on combinations of nodes: their
+blocks are these at the combined point, put on the nodes with the coefficients
+(:mod:`~dolfinx_nnqem.contact.combined_stiffness`, :attr:`GeometricTerms.combined`).
 Node-to-surface pairs have theirs in :mod:`~dolfinx_nnqem.contact.surface_stiffness` (their closest
 point moves too, and the force acts on the master nodes), dual mortar pairs in
 :mod:`~dolfinx_nnqem.contact.mortar_linearisation` (``docs/theory.md``, "Large sliding").
@@ -30,7 +33,9 @@ point moves too, and the force acts on the master nodes), dual mortar pairs in
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from petsc4py import PETSc
@@ -38,6 +43,9 @@ from petsc4py import PETSc
 from dolfinx_nnqem.contact.obstacles import ObstaclePairs
 from dolfinx_nnqem.contact.pairset import PairRows
 from dolfinx_nnqem.contact.surfaces import local_frames_derivative
+
+if TYPE_CHECKING:
+    from dolfinx_nnqem.contact.combined_stiffness import CombinedTerms
 
 __all__ = ["GeometricTerms", "frame_derivative", "no_terms", "obstacle_terms"]
 
@@ -56,21 +64,30 @@ class GeometricTerms:
         (k, 3, 3) ∂(R(x)ᵀλ)/∂u_s = Σ_i λ_i ∂r_i/∂x.
     W
         (k, 3, 3) ∂(gap, slip)/∂u_s − R(x): the rows of B a consistent Newton step adds.
+    combined
+        The terms of the pairs that combine nodes (6-node triangle facets,
+        :mod:`~dolfinx_nnqem.contact.combined_stiffness`), on every rank where some interface has such
+        pairs (empty on a rank without them); None where none has. The attributes above, and
+        :meth:`add_to_tangent`, are the other pairs'.
     """
 
     pairs: np.ndarray
     slave_blocks: np.ndarray
     K: np.ndarray
     W: np.ndarray
+    combined: CombinedTerms | None = None
 
     def __len__(self) -> int:
-        return len(self.pairs)
+        return len(self.pairs) + (0 if self.combined is None else len(self.combined))
 
     def rows_values(self, rows: PairRows) -> np.ndarray:
         """The values of B + W in B's layout ``rows`` (the pairs with terms have their slave node's 3
-        columns only, in order: their 9 entries are the 3 × 3 block, row by row)."""
+        columns only, in order: their 9 entries are the 3 × 3 block, row by row; those that combine
+        nodes, their nodes' columns)."""
         values = rows.values.copy()
-        if len(self):
+        if self.combined is not None:
+            self.combined.add_rows(values, rows)
+        if len(self.pairs):
             start = rows.indptr[3 * self.pairs]
             if np.any(rows.indptr[3 * self.pairs + 3] - start != 9):
                 raise ValueError("GeometricTerms: a pair with geometric terms has other columns than its slave node's")
@@ -81,10 +98,12 @@ class GeometricTerms:
         """(k, 3) the slave nodes' global dofs."""
         return 3 * self.slave_blocks[:, None] + np.arange(3)
 
-    def add_to_tangent(self, K: PETSc.Mat, free: np.ndarray, extra: np.ndarray | None = None) -> None:
+    def add_to_tangent(self, K: PETSc.Mat, free: np.ndarray, extra: np.ndarray | None = None, *,
+                       combined: tuple[np.ndarray, Sequence[np.ndarray] | None] | None = None) -> None:
         """K −= K_s (+ ``extra``) on every slave node's free rows and columns (the constrained rows
         keep their identity), in place; K must hold the slave nodes' 3 × 3 blocks already (it does:
-        a node's dofs are coupled within its elements).
+        a node's dofs are coupled within its elements). With ``combined``, the blocks of the pairs
+        that combine nodes too (:meth:`~dolfinx_nnqem.contact.combined_stiffness.CombinedTerms.add_values`).
 
         Parameters
         ----------
@@ -94,12 +113,17 @@ class GeometricTerms:
             (k, 3) 1 at the slave nodes' free dofs, 0 at constrained ones.
         extra
             (k, 3, 3) blocks added as they are (the iterative solver's augmentation of W), or None.
+        combined
+            (free, extra) of :attr:`combined`'s pairs: (nnz, 3) 1 at their nodes' free dofs, and per pair
+            a block added as it is, or None; None (default) leaves them out.
         """
         blocks = -self.K if extra is None else extra - self.K
         blocks = free[:, :, None] * blocks * free[:, None, :]
         dofs = self.slave_dofs().astype(PETSc.IntType)
         for index, block in zip(dofs, blocks):
             K.setValues(index, index, block, addv=PETSc.InsertMode.ADD_VALUES)
+        if self.combined is not None and combined is not None:
+            self.combined.add_values(K, *combined)
         K.assemble()
 
     def tangent_action(self, delta: np.ndarray, start: int) -> np.ndarray:

@@ -15,6 +15,7 @@ tracker.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import replace
 from typing import TYPE_CHECKING, Protocol
 
 from dolfinx_nnqem import compat  # noqa: F401, I001  (first: loads MPI/PETSc for the PyPI wheel)
@@ -27,6 +28,7 @@ from dolfinx_nnqem.contact.current_geometry import (EDGE_ALLOWANCE, CombinedObst
                                                      ObstacleTracker, SurfaceTracker,
                                                      displacement_at, moved_surfaces, surface_tracker,
                                                      with_moved_normals)
+from dolfinx_nnqem.contact.combined_stiffness import combined_terms
 from dolfinx_nnqem.contact.discretisation import discretise
 from dolfinx_nnqem.contact.mortar_linearisation import MortarPoints, mortar_terms, remortared_pairs
 from dolfinx_nnqem.contact.geometric_stiffness import GeometricTerms, no_terms, obstacle_terms
@@ -101,7 +103,7 @@ def current_geometry_refusal(kind: str, V: dolfinx.fem.FunctionSpace) -> tuple[s
     facet gives every node a pair of its own (the node alone, as at degree 1), which the tracker
     re-evaluates where that node is; on tetrahedra a 6-node triangle's pairs act on combinations of
     its nodes (the transformed basis, :mod:`~dolfinx_nnqem.contact.quadratic_facets`), re-evaluated
-    between solves (:class:`~dolfinx_nnqem.contact.current_geometry.CombinedObstacleTracker`).
+    where the combination is (:class:`~dolfinx_nnqem.contact.current_geometry.CombinedObstacleTracker`).
     Node-to-surface and mortar pairs are projected onto linear facets in the current configuration.
     """
     degree = space_degree(V)
@@ -246,9 +248,9 @@ class ContactGeometry:
     @property
     def obstacles_follow(self) -> bool:
         """True if some interface is a rigid obstacle in the current geometry whose pairs
-        :meth:`refresh_obstacles` re-evaluates in place (one node per pair: degree 1, Q2 hexahedra; on
-        P2 tetrahedra they are re-evaluated between solves, by :meth:`update`)."""
-        return any(isinstance(t, ObstacleTracker) for t in self._trackers)
+        :meth:`refresh_obstacles` re-evaluates in place (one node per pair: degree 1, Q2 hexahedra; a
+        combination of nodes per pair: P2 tetrahedra)."""
+        return any(isinstance(t, (ObstacleTracker, CombinedObstacleTracker)) for t in self._trackers)
 
     @property
     def surfaces_follow(self) -> bool:
@@ -351,14 +353,18 @@ class ContactGeometry:
         if self._comm.allreduce(same, op=MPI.LAND):
             return
         pairs = {k: tracker.pairs_at(u, load_factor) for k, tracker in enumerate(self._trackers)
-                 if isinstance(tracker, ObstacleTracker)}
+                 if isinstance(tracker, (ObstacleTracker, CombinedObstacleTracker))}
         self._model.refill_pairs(pairs, u_n, load_factor_n)
         self._refreshed_at = key
 
     def _refresh_key(self, u, load_factor: float, u_n, load_factor_n: float) -> np.ndarray:
-        """What an obstacle refresh depends on: the slave nodes' u and u_n, ℓ and ℓ_n."""
+        """What an obstacle refresh depends on: the slave nodes' u and u_n, ℓ and ℓ_n (pairs that combine
+        nodes: the owned u and u_n, their nodes may be owned by another rank)."""
         start = u.function_space.dofmap.index_map.local_range[0]
         parts = [np.array([load_factor, load_factor_n])]
+        if any(isinstance(t, CombinedObstacleTracker) for t in self._trackers):
+            owned = 3 * u.function_space.dofmap.index_map.size_local
+            parts += [u.x.array[:owned], u_n.x.array[:owned]]
         for interface, tracker in zip(self._model.interfaces, self._trackers):
             if isinstance(tracker, ObstacleTracker):
                 blocks = interface.pairs.slave_blocks - start
@@ -369,7 +375,8 @@ class ContactGeometry:
                         lam: np.ndarray | None = None) -> GeometricTerms:
         """The geometric blocks K_s, W_s of the current-geometry obstacle pairs at (u, ℓ) and the forces
         ``lam`` (default: the model's λ(z)), their geometry refreshed there first
-        (:mod:`~dolfinx_nnqem.contact.geometric_stiffness`)."""
+        (:mod:`~dolfinx_nnqem.contact.geometric_stiffness`); those of pairs that combine nodes (P2
+        tetrahedra) in ``combined`` (:mod:`~dolfinx_nnqem.contact.combined_stiffness`; collective)."""
         lam = self._model.force() if lam is None else lam
         start = u.function_space.dofmap.index_map.local_range[0]
         pairs_, blocks, Ks, Ws = [], [], [], []
@@ -386,10 +393,11 @@ class ContactGeometry:
             blocks.append(pairs.slave_blocks)
             Ks.append(K)
             Ws.append(W)
+        combined = combined_terms(self._model.interfaces, self._trackers, u, load_factor, u_n, load_factor_n, lam)
         if not pairs_:
-            return no_terms()
+            return no_terms() if combined is None else replace(no_terms(), combined=combined)
         return GeometricTerms(np.concatenate(pairs_), np.concatenate(blocks).astype(np.int64), np.concatenate(Ks),
-                              np.concatenate(Ws))
+                              np.concatenate(Ws), combined)
 
     @property
     def reprojecting(self) -> list[bool]:

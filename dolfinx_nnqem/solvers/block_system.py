@@ -28,6 +28,7 @@ from dolfinx_nnqem.contact.pairset import PairRows, rows_matrix
 from dolfinx_nnqem.contact.surface_stiffness import SurfaceTerms, stiffness_matrix
 
 if TYPE_CHECKING:
+    from dolfinx_nnqem.contact.combined_stiffness import CombinedTerms
     from dolfinx_nnqem.contact.model import ContactModel
     from dolfinx_nnqem.solvers.contract import SolvableProblem
 
@@ -123,6 +124,10 @@ class _ContactBlocks:
         start = self.model.rows.indptr[3 * terms.pairs]
         return self.column_free[start[:, None] + np.arange(3)]  # row n of the pair: its 3 columns
 
+    def combined_free(self, terms: CombinedTerms) -> np.ndarray:
+        """(nnz, 3): 1 at the free dofs of the nodes that ``terms``' pairs combine, 0 at constrained ones."""
+        return terms.free_in(self.column_free, self.model.rows)
+
     def pair_free(self, pairs: np.ndarray, c: int) -> np.ndarray:
         """(k, c): 1 at the free columns of the local pairs ``pairs`` (each with c columns), 0 at constrained ones."""
         start = self.model.rows.indptr[3 * np.asarray(pairs, dtype=np.int64)]
@@ -174,6 +179,11 @@ class MonolithicMatrix:
     def slave_free(self, terms: GeometricTerms) -> np.ndarray:
         """(k, 3): 1 at the free dofs of the slave nodes of ``terms``' pairs."""
         return self._blocks.slave_free(terms)
+
+    def combined_blocks(self, terms: GeometricTerms) -> tuple[np.ndarray, None] | None:
+        """(free, None) for ``terms``' pairs that combine nodes (:meth:`GeometricTerms.add_to_tangent`:
+        1 at their nodes' free dofs, no extra block), or None if it has none."""
+        return None if terms.combined is None else (self._blocks.combined_free(terms.combined), None)
 
     def pair_free(self, pairs: np.ndarray, c: int) -> np.ndarray:
         """(k, c): 1 at the free columns of the local pairs ``pairs`` (each with c columns), 0 at constrained ones."""
@@ -334,6 +344,19 @@ class AugmentedSystem:
         B_f = self._blocks.rows_free.values[start[:, None] + np.arange(9)].reshape(-1, 3, 3)
         D = dH_dw[terms.pairs]
         return self.c * np.einsum("kri,kqr,kqs,ksj->kij", B_f, D, D, terms.W)
+
+    def combined_blocks(self, terms: GeometricTerms, dH_dw: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]] | None:
+        """(free, extra) for ``terms``' pairs that combine nodes (:meth:`GeometricTerms.add_to_tangent`: 1 at
+        their nodes' free dofs, and :meth:`augmented_combined_blocks`), or None if it has none."""
+        if terms.combined is None:
+            return None
+        return self._blocks.combined_free(terms.combined), self.augmented_combined_blocks(terms.combined, dH_dw)
+
+    def augmented_combined_blocks(self, terms: CombinedTerms, dH_dw: np.ndarray) -> list[np.ndarray]:
+        """Per pair of ``terms`` (pairs that combine nodes), c B_fᵀ D_wᵀ D_w W on its nodes: what
+        :meth:`augmented_geometric_blocks` is for a pair on one node."""
+        self._blocks.refresh_rows()
+        return terms.augmentation(self._blocks.rows_free.values, self.model.rows, dH_dw, self.c)
 
     def matrix(self, K: PETSc.Mat, dH_dw: np.ndarray, dH_dz: np.ndarray, dlam_dz: np.ndarray,
                B_values: np.ndarray | None = None, surface: tuple[PETSc.Mat, np.ndarray] | None = None

@@ -335,7 +335,8 @@ class MonolithicSolver(ReleasesPETSc):
             self._matrix = MonolithicMatrix(p.contact, self._mask)
         B_values = None
         if ev.geometric is not None:  # on every rank, pairs or none: K's assembly in it is collective
-            ev.geometric.add_to_tangent(self._K, self._matrix.slave_free(ev.geometric))
+            ev.geometric.add_to_tangent(self._K, self._matrix.slave_free(ev.geometric),
+                                        combined=self._matrix.combined_blocks(ev.geometric))
             B_values = ev.geometric.rows_values(p.contact.rows)
         K, new_pattern = self._K, False
         if ev.surface is not None:  # on every rank, pairs or none: the matrices are collective
@@ -358,7 +359,8 @@ class MonolithicSolver(ReleasesPETSc):
         if ev.geometric is not None:  # on every rank, pairs or none: K's assembly in it is collective
             terms = ev.geometric
             terms.add_to_tangent(self._K, self._augmented.slave_free(terms),
-                                 self._augmented.augmented_geometric_blocks(terms, ev.law.dH_dw))
+                                 self._augmented.augmented_geometric_blocks(terms, ev.law.dH_dw),
+                                 combined=self._augmented.combined_blocks(terms, ev.law.dH_dw))
             B_values = terms.rows_values(p.contact.rows)
         surface = None
         if ev.surface is not None:  # on every rank, pairs or none: the matrices are collective

@@ -173,6 +173,8 @@ class NodalFlexibility:
 
         The blocks are gathered; a slave node's dof outside D (constrained) drops out, as in the
         monolithic solver, which keeps the identity rows of constrained dofs (collective)."""
+        if terms.combined is not None:
+            return self._combined_update(terms, positions)
         comm = self.condensation.problem.comm
         pressed = np.any(terms.K != 0.0, axis=(1, 2))
         dofs = np.concatenate(comm.allgather(terms.slave_dofs()[pressed].reshape(-1).astype(np.int64)))
@@ -183,6 +185,31 @@ class NodalFlexibility:
         where = np.minimum(np.searchsorted(D, dofs), len(D) - 1)
         inside = D[where] == dofs
         Kg = scipy.linalg.block_diag(*blocks) * np.outer(inside, inside)
+        S_AA = self.S[np.ix_(positions[where], positions[where])]
+        return GeometricUpdate(where, Kg, scipy.linalg.lu_factor(np.eye(len(where)) - Kg @ S_AA))
+
+    def _combined_update(self, terms: GeometricTerms, positions: np.ndarray) -> GeometricUpdate | None:
+        """:meth:`geometric_update` with pairs that combine nodes (P2 tetrahedra): a pair's block
+        (a aᵀ) ⊗ K_i couples its nodes, and a node belongs to several pairs, so K_g is summed on the
+        union A of the pressed pairs' dofs (collective)."""
+        assert terms.combined is not None  # the caller's branch
+        pressed = np.any(terms.K != 0.0, axis=(1, 2))
+        local = [(dofs, block) for dofs, block in zip(terms.slave_dofs()[pressed], terms.K[pressed])]
+        local += [(dofs, block) for dofs, block in terms.combined.node_blocks() if np.any(block != 0.0)]
+        gathered = [part for parts in self.condensation.problem.comm.allgather(local) for part in parts]
+        if not gathered:
+            return None
+        all_dofs = np.unique(np.concatenate([dofs for dofs, _ in gathered]))
+        D = self.dofs[positions]  # sorted (pair_dofs)
+        inside = all_dofs[np.isin(all_dofs, D)]  # a constrained dof drops out, as in the monolithic solver
+        if len(inside) == 0:
+            return None
+        Kg = np.zeros((len(inside), len(inside)))
+        for dofs, block in gathered:
+            keep = np.isin(dofs, inside)
+            at = np.searchsorted(inside, dofs[keep])
+            Kg[np.ix_(at, at)] += block[np.ix_(keep, keep)]
+        where = np.searchsorted(D, inside)
         S_AA = self.S[np.ix_(positions[where], positions[where])]
         return GeometricUpdate(where, Kg, scipy.linalg.lu_factor(np.eye(len(where)) - Kg @ S_AA))
 

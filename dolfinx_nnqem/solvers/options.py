@@ -107,8 +107,9 @@ class MonolithicOptions:
         Newton iterate and add the geometric terms (the normal's and the friction frame's rotation; for
         node-to-surface also the closest point's motion over the master facet, for mortar the motion of
         the weights M_jk / m_j and of the weighted gap) to the Newton matrix
-        (:mod:`~dolfinx_nnqem.contact.geometric_stiffness`, :mod:`~dolfinx_nnqem.contact.surface_stiffness`,
-        :mod:`~dolfinx_nnqem.contact.mortar_linearisation`; with either linear solver);
+        (:mod:`~dolfinx_nnqem.contact.geometric_stiffness`, :mod:`~dolfinx_nnqem.contact.combined_stiffness`,
+        :mod:`~dolfinx_nnqem.contact.surface_stiffness`, :mod:`~dolfinx_nnqem.contact.mortar_linearisation`;
+        with either linear solver);
         False freezes the geometry within a solve and leaves it to load stepping's repeated solves, as
         NNEQM1 does (``docs/theory.md``).
     globalisation

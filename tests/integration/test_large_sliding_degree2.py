@@ -4,8 +4,9 @@ Q2 hexahedra: a 9-node quadrilateral facet gives every node of the contact surfa
 edge and centre nodes) a pair of its own, the node alone, which the current geometry re-evaluates
 where the node is, as at degree 1, with its geometric terms in the Newton matrices. P2
 tetrahedra: a 6-node triangle's pair acts on a combination of its nodes (the transformed basis);
-the current geometry re-evaluates the combined point between solves, frozen within one
-(``CombinedObstacleTracker``).
+the current geometry re-evaluates the combined point (``CombinedObstacleTracker``) at every Newton
+iterate with the monolithic solver and NNEQM1, its geometric terms on the combined nodes
+(``tests/integration/test_p2_obstacle_consistent.py``), and between solves with NNEQM2.
 
 * the issue's sphere slid 0.3 -> 0.7 over a 3³ Q2 block, and over 3³ × 6 P2 tetrahedra, ends with
   the force of a press made in place there, with every solver (monolithic, NNEQM1, NNEQM2) and
@@ -65,8 +66,9 @@ def test_q2_sphere_slid_equals_press_in_place(method, law):
                                          ("nneqm2", "alart-curnier")])
 def test_p2_tetrahedra_sphere_slid_equals_press_in_place(method, law):
     """The sphere slid 0.3 -> 0.7 over a block of 3³ × 6 P2 tetrahedra: its 65 pairs combine the nodes of their
-    6-node triangles (CombinedObstacleTracker), frozen within a solve and evaluated again between solves;
-    the force of a press made in place at 0.7, 1e-8."""
+    6-node triangles (CombinedObstacleTracker), evaluated at every Newton iterate (one solve per increment)
+    with the monolithic solver and NNEQM1, between solves with NNEQM2; the force of a press made in place at
+    0.7, 1e-8."""
     slid = sliding_sphere(3, degree=2, law=law, cell_type="tetrahedron")
     results = _run(slid, method, 16)
     in_place = sliding_sphere(3, start=0.7, end=0.7, degree=2, law=law, cell_type="tetrahedron")
@@ -78,6 +80,7 @@ def test_p2_tetrahedra_sphere_slid_equals_press_in_place(method, law):
           f"{[r.report.geometry_passes for r in results]}")
     assert slid.num_pairs == 65 and slid.contact.geometry.following == [True]
     assert error < 1e-8 and f_place[1] < 0
+    assert all(r.report.geometry_passes == 1 for r in results) == (method != "nneqm2")
 
 
 def test_q2_cylinder_slid_equals_press_in_place():

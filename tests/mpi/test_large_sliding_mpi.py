@@ -72,9 +72,10 @@ def test_nneqm2_large_sliding_on_two_ranks_matches_serial(tmp_path):
 def test_degree_2_obstacle_on_two_ranks_matches_serial(tmp_path, case, num_pairs):
     """The frictional sphere (μ_f = 0.3) slid in the current geometry (issue 41: every node of the top face a
     pair) over 4 × 1 × 4 Q2 hexahedra and over 3 × 2 × 3 × 6 P2 tetrahedra (pairs that combine the nodes of
-    a 6-node triangle, some of them on the other rank), on 2 ranks, monolithic, NNEQM1 and NNEQM2: the
-    serial pair forces and resultant to 1e-8."""
-    methods = ("monolithic", "nneqm1", "nneqm2")
+    a 6-node triangle, some of them on the other rank), on 2 ranks, monolithic, NNEQM1 and NNEQM2 (P2: the
+    monolithic solver with the iterative linear solver too): the serial pair forces and resultant to 1e-8;
+    one solve per increment but with NNEQM2 (the geometric terms on the pairs' nodes, on either rank)."""
+    methods = ("monolithic", "nneqm1", "nneqm2") + (("iterative",) if case == "sphere-p2" else ())
     parallel = run_on_ranks(tmp_path / "out.npz", 2, [f"{case}/{method}" for method in methods])
     for method in methods:
         s = solve(case, method, MPI.COMM_SELF)
@@ -82,8 +83,10 @@ def test_degree_2_obstacle_on_two_ranks_matches_serial(tmp_path, case, num_pairs
         c = compare(p, s)
         print(f"\n  {case}/{method}, 2 ranks vs serial: {c.pairs[0]} pairs (per rank {p['pairs_per_rank'].tolist()}); "
               f"pair forces {c.force:.1e}, resultant {c.total:.1e} (tolerance 1e-8); iterations serial "
-              f"{s['iterations'].tolist()}, 2 ranks {p['iterations'].tolist()}")
+              f"{s['iterations'].tolist()}, 2 ranks {p['iterations'].tolist()}; solves serial {s['solves'].tolist()}, "
+              f"2 ranks {p['solves'].tolist()}")
         assert c.pairs == (num_pairs, num_pairs) and c.position < 1e-9
         assert np.count_nonzero(p["pairs_per_rank"]) == 2  # the pairs are split
+        assert bool((p["solves"] == 1).all()) == bool((s["solves"] == 1).all()) == (method != "nneqm2")
         assert c.force < 1e-8 and c.total < 1e-8
         assert p["following"].all() and s["following"].all()

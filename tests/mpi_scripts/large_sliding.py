@@ -12,7 +12,7 @@ with μ_f = 0.3 (degree 2), current geometry, monolithic and NNEQM1 (NNEQM2, or 
 solver with the iterative linear solver, when named)
 (:mod:`dolfinx_nnqem.cases.large_sliding`). Rank 0 writes, per ``CASE/METHOD/``, the pair table's
 slave positions and forces on the master side in global pair order, the resultant force, the
-Newton iterations per increment, the pairs each rank owns and how many pairs have a master node
+Newton iterations and solves per increment, the pairs each rank owns and how many pairs have a master node
 owned by another rank than their slave node.
 """
 
@@ -62,6 +62,7 @@ def solve(case: str, method: str, comm=MPI.COMM_WORLD) -> dict[str, np.ndarray]:
     assert problem.contact is not None
     return {"position": t["position_b"], "force": t["force_on_body1"], "total": force(problem),
             "iterations": np.array([r.iterations for r in results]),
+            "solves": np.array([r.report.geometry_passes for r in results]),
             "pairs_per_rank": np.array(comm.allgather(problem.contact.num_local)),
             "following": np.array(problem.contact.geometry.following),
             "foreign_masters": np.array(comm.allreduce(foreign_masters(problem), op=MPI.SUM))}
