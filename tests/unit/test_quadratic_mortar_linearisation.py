@@ -76,7 +76,10 @@ def _surfaces(ids, x, slave, master) -> GatheredSurfaces:
 
 
 def _exact(ids, x, slave, master, block: int, cols: np.ndarray):
-    """(a over ``cols``, g̃_j / m_j, pair normal) of slave node ``block`` at node positions ``x``."""
+    """(a over ``cols``, g̃_j / m_j, pair normal) of slave node ``block`` at node positions ``x``: the
+    integrals of the slave facets around it (its dual function's support, where its normal's moments are)
+    against the whole master patch."""
+    slave = slave[(slave == block).any(axis=1)]
     xs, xm = x[np.searchsorted(ids, slave)], x[np.searchsorted(ids, master)]
     mi = quadratic_mortar_integrals(slave, xs, _area_vectors(xs, True), master, xm, _area_vectors(xm, False),
                                     search_distance=1.0)
@@ -103,7 +106,7 @@ def _central(function, ids, x, cols):
 
 def _pair(triangles: bool, block: int):
     ids, x, slave, master = _setup(triangles)
-    cd = quadratic_interface_derivatives(_surfaces(ids, x, slave, master), 1.0)
+    cd = quadratic_interface_derivatives(_surfaces(ids, x, slave, master), 1.0, np.array([block]))
     s = int(np.searchsorted(cd.integrals.slave_index, block))
     pg, gap = pair_geometry(cd, QuadraticIncidence(cd), s, -cd.integrals.normal[s], held_open=False)
     return ids, x, slave, master, pg, gap
@@ -152,7 +155,7 @@ def test_moment_derivatives_match_finite_differences(k):
 
 
 @pytest.mark.parametrize("triangles", [False, True])
-@pytest.mark.parametrize("block", [12, 7])
+@pytest.mark.parametrize("block", [12, 1])
 def test_rows_and_forces_match_global_differences(triangles, block):
     """W (∂(gap, slip)/∂u − B) and K (∂(Bᵀλ)/∂u) of a pair against central differences of the gap, the
     slips t_α · Σ a_i (x_i − x_n,i) and the nodal forces a_i Rᵀλ."""
