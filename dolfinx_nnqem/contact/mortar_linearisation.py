@@ -44,6 +44,9 @@ A pair whose node is covered less than :data:`~dolfinx_nnqem.contact.mortar.MIN_
 iterate keeps its pair within the solve (the pair unknowns' layout is fixed) with the gap g = the
 master's facet size: the pair opens, as node-to-surface pairs beyond the master do, and the
 re-evaluation between solves then drops it. Nodes newly covered get their pair there too.
+
+Quadratic facets (degree 2: quad9, tri6) take the same chain rule with their own couple integrals,
+nodal normals and slave sides (:mod:`~dolfinx_nnqem.contact.quadratic_mortar_linearisation`).
 """
 
 from __future__ import annotations
