@@ -40,9 +40,14 @@ def _blocks(cell_type: str = "hexahedron", law: str = "alart-curnier", slide: fl
 
 
 def _run(problem, method: str, increments: int = INCREMENTS, consistent: bool = True):
-    """(results, every solve's (load factor, report))."""
+    """(results, every solve's (load factor, report)); ``method`` "iterative": the monolithic solver with
+    the iterative linear solver."""
     reports = []
-    options = {"monolithic": MonolithicOptions(consistent_geometry=consistent)} if method == "monolithic" else {}
+    options = {}
+    if method in ("monolithic", "iterative"):
+        linear_solver = "iterative" if method == "iterative" else "direct"
+        options = {"monolithic": MonolithicOptions(consistent_geometry=consistent, linear_solver=linear_solver)}
+        method = "monolithic"
     with make_solver(method, problem, OPTIONS, **options) as solver:
         solve_increment = solver.solve_increment
 
@@ -109,11 +114,12 @@ def q2_slide():
 
 @pytest.mark.parametrize("method, law", [("monolithic", "alart-curnier"), ("monolithic", "polar"),
                                          ("nneqm1", "alart-curnier"), ("nneqm1", "polar"),
-                                         ("nneqm2", "alart-curnier"), ("nneqm2", "polar")])
+                                         ("nneqm2", "alart-curnier"), ("nneqm2", "polar"), ("iterative", "alart-curnier")])
 def test_every_solver_and_law_ends_in_the_same_state(q2_slide, method, law):
     """The Q2 slide by every solver and law: the state of the monolithic run whose geometry is frozen
     within a solve (re-evaluated between solves until a solve starts converged), force and displacement
-    to 1e-8; the consistent monolithic solver (slow tier) in fewer Newton iterations."""
+    to 1e-8; the consistent monolithic solver (slow tier; with the direct or the iterative linear solver)
+    in fewer Newton iterations."""
     reference, reference_results = q2_slide
     problem = _blocks(law=law)
     results, _ = _run(problem, method)
@@ -126,7 +132,7 @@ def test_every_solver_and_law_ends_in_the_same_state(q2_slide, method, law):
           f"{[r.report.geometry_passes for r in results]}")
     assert problem.num_pairs == reference.num_pairs and problem.contact.geometry.following == [True]
     assert np.linalg.norm(f - f_ref) < 1e-8 * np.linalg.norm(f_ref) and du < 1e-7
-    if method == "monolithic":  # consistent: one Newton solve per increment, and one to confirm it
+    if method in ("monolithic", "iterative"):  # consistent: one Newton solve per increment, and one to confirm it
         assert n < 0.5 * n_ref
 
 
