@@ -124,13 +124,17 @@ def with_moved_normals(surfaces: GatheredSurfaces) -> GatheredSurfaces:
     :func:`moved_surfaces` keeps the reference area vectors (they only orient the facets there);
     mortar takes its nodal normals from them, so on a moved surface they must be the current
     ones. Each facet keeps its outward side: its vertices are put in the cyclic order that the
-    reference area vector orients (:func:`~dolfinx_nnqem.contact.projection.cyclic_order`).
+    reference area vector orients (:func:`~dolfinx_nnqem.contact.projection.cyclic_order`). A quadratic
+    facet's area vector is that of its vertices, as in the reference configuration
+    (:func:`~dolfinx_nnqem.contact.surfaces.gather_surfaces`): its edge and centre nodes move with it
+    (:func:`moved_surfaces`), the quadratic mortar integrals take them from there.
     """
     from dolfinx_nnqem.contact.projection import cyclic_order, newell_area_vectors
 
     facets = surfaces.facets
-    order = cyclic_order(facets.x, facets.area)
-    area = newell_area_vectors(np.take_along_axis(facets.x, order[:, :, None], axis=1))
+    vertices = facets.x[:, :facets.num_vertices]
+    order = cyclic_order(vertices, facets.area)
+    area = newell_area_vectors(np.take_along_axis(vertices, order[:, :, None], axis=1))
     return GatheredSurfaces(surfaces.tags, replace(facets, area=area), surfaces.nodes)
 
 

@@ -69,8 +69,8 @@ from dolfinx_nnqem.contact.quadratic_facets import (NUM_VERTICES, facet_geometry
                                                     transformed_shape_functions)
 from dolfinx_nnqem.contact.surfaces import ContactPairError, format_point
 
-__all__ = ["SEGMENT_RULE_POINTS", "SUB_FACETS", "quadratic_dual_coefficients", "quadratic_mortar_integrals",
-           "segment_rule"]
+__all__ = ["SEGMENT_RULE_POINTS", "SUB_FACETS", "integrate_quadratic_couples", "quadratic_candidate_couples",
+           "quadratic_dual_coefficients", "quadratic_mortar_integrals", "segment_rule"]
 
 # numba's on-disk cache invalidates a kernel when ITS file changes, not a callee's: after editing
 # mortar_geometry's _clip / _inverse_map / _polygon_area, projection._shape or
@@ -401,6 +401,45 @@ def _reach_beyond_vertices(x: np.ndarray, nv: int) -> float:
     return float(max((d.max(axis=1) - d[:, :nv].max(axis=1)).max(), 0.0))
 
 
+def quadratic_candidate_couples(xs: np.ndarray, slave_area: np.ndarray, xm: np.ndarray, master_area: np.ndarray,
+                                search_distance: float) -> tuple[np.ndarray, np.ndarray]:
+    """The couples (slave facet, master facet) of quadratic facets that may overlap: from their
+    vertices (cyclic), their reach widened by how far curved facets' nodes lie beyond them (0 for
+    straight-sided facets); see :func:`~dolfinx_nnqem.contact.mortar_geometry.candidate_couples`."""
+    ks, km = xs.shape[1], xm.shape[1]
+    vs, _ = _cyclic(xs[:, :NUM_VERTICES[ks]], slave_area)
+    vm, _ = _cyclic(xm[:, :NUM_VERTICES[km]], master_area)
+    margin = 2.0 * max(_reach_beyond_vertices(xs, NUM_VERTICES[ks]), _reach_beyond_vertices(xm, NUM_VERTICES[km]))
+    return candidate_couples(vs, vm, float(search_distance), margin)
+
+
+def integrate_quadratic_couples(ci: np.ndarray, cj: np.ndarray, xs: np.ndarray, sign_s: np.ndarray, A: np.ndarray,
+                                xm: np.ndarray, sign_m: np.ndarray, relative_tolerance: float = RELATIVE_TOLERANCE,
+                                min_facing_cosine: float = MIN_FACING_COSINE
+                                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The integrals of the couples (slave facet ``ci[c]``, master facet ``cj[c]``) of quadratic facets.
+
+    Parameters
+    ----------
+    xs, xm
+        (ms, ks, 3), (mm, km, 3) the facets' nodes (:mod:`~dolfinx_nnqem.contact.quadratic_facets`' order).
+    sign_s, sign_m
+        (ms,), (mm,) :func:`~dolfinx_nnqem.contact.quadratic_facets.outward_signs` of the facets.
+    A
+        (ms, ks, ks) the slave facets' dual coefficients (:func:`quadratic_dual_coefficients`).
+
+    Returns
+    -------
+    (M (c, ks, km), g̃ (c, ks), the slave area of each overlap (0: the couple does not count), the
+    Gauss points whose inverse map failed (c,)).
+    """
+    ks, km = xs.shape[1], xm.shape[1]
+    qb, qw = segment_rule()
+    return _integrate_quadratic_couples(ci, cj, xs, sign_s, transformation(ks), A, xm, sign_m, SUB_FACETS[ks],
+                                        SUB_FACETS[km], reference_nodes(ks), reference_nodes(km), qb, qw,
+                                        relative_tolerance, min_facing_cosine)
+
+
 def _area_coverage(s_pos: np.ndarray, facet_area: np.ndarray, covered_area: np.ndarray) -> np.ndarray:
     """(p,) the covered fraction of the area of each slave node's facets: 1 where master facets cover
     them (to the quadrature error), 0 where none does, above 1 where master facets overlap in projection.
@@ -455,19 +494,11 @@ def quadratic_mortar_integrals(slave_nodes: npt.ArrayLike, slave_x: npt.ArrayLik
     xm = np.ascontiguousarray(master_x, dtype=np.float64)
     slave_area = np.asarray(slave_area, dtype=np.float64)
     master_area = np.asarray(master_area, dtype=np.float64)
-    ks, km = xs.shape[1], xm.shape[1]
     A, De = quadratic_dual_coefficients(xs)
-    # candidate couples from the vertices (cyclic), their reach widened by how far curved facets'
-    # nodes lie beyond them (0 for straight-sided facets)
-    vs, _ = _cyclic(xs[:, :NUM_VERTICES[ks]], slave_area)
-    vm, _ = _cyclic(xm[:, :NUM_VERTICES[km]], master_area)
-    margin = 2.0 * max(_reach_beyond_vertices(xs, NUM_VERTICES[ks]), _reach_beyond_vertices(xm, NUM_VERTICES[km]))
-    ci, cj = candidate_couples(vs, vm, float(search_distance), margin)
-    qb, qw = segment_rule()
-    Mc, gc, area, failed = _integrate_quadratic_couples(
-        ci, cj, xs, outward_signs(xs, slave_area), transformation(ks), A, xm, outward_signs(xm, master_area),
-        SUB_FACETS[ks], SUB_FACETS[km], reference_nodes(ks), reference_nodes(km), qb, qw, relative_tolerance,
-        min_facing_cosine)
+    ci, cj = quadratic_candidate_couples(xs, slave_area, xm, master_area, search_distance)
+    Mc, gc, area, failed = integrate_quadratic_couples(ci, cj, xs, outward_signs(xs, slave_area), A, xm,
+                                                       outward_signs(xm, master_area), relative_tolerance,
+                                                       min_facing_cosine)
     used = area > 0.0
     ci, cj, Mc, gc = ci[used], cj[used], Mc[used], gc[used]
 

@@ -104,15 +104,17 @@ def current_geometry_refusal(kind: str, V: dolfinx.fem.FunctionSpace) -> tuple[s
     re-evaluates where that node is; on tetrahedra a 6-node triangle's pairs act on combinations of
     its nodes (the transformed basis, :mod:`~dolfinx_nnqem.contact.quadratic_facets`), re-evaluated
     where the combination is (:class:`~dolfinx_nnqem.contact.current_geometry.CombinedObstacleTracker`).
-    Node-to-surface and mortar pairs are projected onto linear facets in the current configuration.
+    Mortar pairs of degree 2 (quad9 and tri6 facets) are integrated on the moved quadratic facets
+    (:mod:`~dolfinx_nnqem.contact.quadratic_mortar_linearisation`).
+    Node-to-surface pairs are projected onto linear facets in the current configuration.
     """
     degree = space_degree(V)
-    if degree == 1 or kind == "rigid obstacle":
+    if degree == 1 or kind in ("rigid obstacle", "mortar"):
         return None
-    what = ("segments, dual basis and weighted gaps" if kind == "mortar" else "closest points and pair rows")
+    what = "closest points and pair rows"
     return (f"the current geometry takes {kind} pairs with degree-1 displacements only in this version (its {what} "
-            f"are those of linear facets; of degree 2 it takes rigid obstacles only); the displacements "
-            f"here have degree {degree}", "degree 1")
+            f"are those of linear facets; of degree 2 it takes rigid obstacles and mortar pairs only); the "
+            f"displacements here have degree {degree}", "degree 1")
 
 
 def reference_pairs(contact: Contact, V: dolfinx.fem.FunctionSpace, facet_tags: dolfinx.mesh.MeshTags,

@@ -44,6 +44,9 @@ A pair whose node is covered less than :data:`~dolfinx_nnqem.contact.mortar.MIN_
 iterate keeps its pair within the solve (the pair unknowns' layout is fixed) with the gap g = the
 master's facet size: the pair opens, as node-to-surface pairs beyond the master do, and the
 re-evaluation between solves then drops it. Nodes newly covered get their pair there too.
+
+Quadratic facets (degree 2: quad9, tri6) take the same chain rule with their own couple integrals,
+nodal normals and slave sides (:mod:`~dolfinx_nnqem.contact.quadratic_mortar_linearisation`).
 """
 
 from __future__ import annotations
@@ -198,17 +201,22 @@ class _Incidence:
     """Which (couple, slave vertex) entries and which slave facets hold each slave node."""
 
     def __init__(self, cd: CoupleDerivatives):
+        self._index(cd)
+        d = cd.slave_x - cd.slave_x[:, :1]
+        self.area = 0.5 * np.cross(d, np.roll(d, -1, axis=1)).sum(axis=1)  #: (ms, 3) the slave facets' Newell vectors
+        self.d_area = newell_derivative(cd.slave_x)  #: (ms, 3, 3 ks) their derivatives
+
+    def _index(self, cd: CoupleDerivatives) -> None:
+        """Sort the (couple, slave vertex) entries and the slave facets' nodes by node."""
         ks = cd.slave_nodes.shape[1]
         at = cd.slave_nodes[cd.couples[:, 0]].ravel()  # (c·ks,) the node of entry (couple, vertex)
         self._entry_order = np.argsort(at, kind="stable")
         self._entry_nodes = at[self._entry_order]
         self._ks = ks
         facets = cd.slave_nodes.ravel()
-        d = cd.slave_x - cd.slave_x[:, :1]
-        self.area = 0.5 * np.cross(d, np.roll(d, -1, axis=1)).sum(axis=1)  #: (ms, 3) the slave facets' Newell vectors
-        self.d_area = newell_derivative(cd.slave_x)  #: (ms, 3, 3 ks) their derivatives
         self._facet_order = np.argsort(facets, kind="stable")
         self._facet_nodes = facets[self._facet_order]
+        self._slave_index = cd.integrals.slave_index
 
     def entries(self, block: int) -> tuple[np.ndarray, np.ndarray]:
         """(couples, slave vertices) whose slave vertex is node ``block``."""
@@ -221,16 +229,32 @@ class _Incidence:
         lo, hi = np.searchsorted(self._facet_nodes, [block, block + 1])
         return self._facet_order[lo:hi] // self._ks
 
+    def nodal_areas(self, facets: np.ndarray, block: int | None) -> tuple[np.ndarray, np.ndarray]:
+        """The area vectors (f, 3) whose sum is node ``block``'s ν on its slave facets ``facets`` (linear
+        facets: the facets' Newell vectors) and their derivatives (f, 3, 3 ks)."""
+        return self.area[facets], self.d_area[facets]
+
+    def slave_row(self, s: int) -> tuple[np.ndarray, np.ndarray]:
+        """The global dof blocks and coefficients of pair ``s``'s slave side (row s of the integrals):
+        linear facets, its node alone."""
+        return np.array([self._slave_index[s]]), np.ones(1)
+
+    def slave_rows(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """The slave sides of the rows ``rows`` as CSR; None: every row is its node alone."""
+        return None
+
 
 def _normal_derivative(cd: CoupleDerivatives, incidence: _Incidence, facets: np.ndarray, cols: np.ndarray,
-                       normal: np.ndarray, given: np.ndarray) -> np.ndarray:
+                       normal: np.ndarray, given: np.ndarray, block: int | None = None) -> np.ndarray:
     """∂n/∂x (3, 3c) over ``cols`` of the pair normal ``normal``: n_f = −ν/|ν| (``given``) of the Newell
     vectors ν of the slave facets ``facets`` (module docstring), or ``given`` turned into symmetry planes
-    (:func:`~dolfinx_nnqem.contact.surfaces.symmetry_normals` removed its components along them)."""
+    (:func:`~dolfinx_nnqem.contact.surfaces.symmetry_normals` removed its components along them); ν of
+    node ``block`` on quadratic facets: the sum of its moments (:meth:`_Incidence.nodal_areas`)."""
+    areas, d_areas = incidence.nodal_areas(facets, block)
     dnu = np.zeros((3, 3 * len(cols)))
     at = (3 * np.searchsorted(cols, cd.slave_nodes[facets])[:, :, None] + np.arange(3)).reshape(len(facets), -1)
-    np.add.at(dnu, (np.arange(3)[None, :, None], at[:, None, :]), incidence.d_area[facets])
-    length = np.linalg.norm(incidence.area[facets].sum(axis=0))
+    np.add.at(dnu, (np.arange(3)[None, :, None], at[:, None, :]), d_areas)
+    length = np.linalg.norm(areas.sum(axis=0))
     dn = -(np.eye(3) - np.outer(given, given)) @ dnu / length
     if np.array_equal(normal, given):
         return dn
@@ -252,7 +276,8 @@ def pair_geometry(cd: CoupleDerivatives, incidence: _Incidence, s: int, normal: 
     masters = mi.master_index[mi.M.indices[row]]
     couple_nodes = np.concatenate([cd.slave_nodes[cd.couples[couples, 0]], cd.master_nodes[cd.couples[couples, 1]]],
                                   axis=1)
-    cols = np.unique(np.concatenate([[block], masters, couple_nodes[active].ravel(), cd.slave_nodes[facets].ravel()]))
+    row_blocks, row_coefficients = incidence.slave_row(s)  # the slave side: node j, or d̂_j on tri6
+    cols = np.unique(np.concatenate([row_blocks, masters, couple_nodes[active].ravel(), cd.slave_nodes[facets].ravel()]))
     c = len(cols)
     M = np.zeros(c)
     M[np.searchsorted(cols, masters)] = mi.M.data[row]
@@ -271,10 +296,11 @@ def pair_geometry(cd: CoupleDerivatives, incidence: _Incidence, s: int, normal: 
         dm, coefficient, dc = np.zeros(3 * c), np.zeros(c), np.zeros_like(dM)
     gap = float(mi.weighted_gap[s] / m) if not held_open else np.nan
     dg = np.zeros(3 * c) if held_open else (dgt - gap * dm) / m
-    slave = np.searchsorted(cols, block)
+    slave = np.searchsorted(cols, row_blocks)
     a, da = -coefficient, -dc
-    a[slave], da[slave] = 1.0, 0.0
-    return PairGeometry(cols, a, da, dg, _normal_derivative(cd, incidence, facets, cols, normal, -mi.normal[s])), gap
+    a[slave], da[slave] = row_coefficients, 0.0
+    return PairGeometry(cols, a, da, dg, _normal_derivative(cd, incidence, facets, cols, normal, -mi.normal[s],
+                                                            block)), gap
 
 
 @dataclass(frozen=True)
@@ -332,10 +358,13 @@ def mortar_terms(points: MortarPoints, lam: np.ndarray, pairs: np.ndarray) -> li
 
 
 def _all_normals(mi: MortarIntegrals, every: np.ndarray, moved: GatheredSurfaces,
-                 V: dolfinx.fem.FunctionSpace | None, supported: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
+                 V: dolfinx.fem.FunctionSpace | None, supported: np.ndarray | None,
+                 slave_rows: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+                 ) -> tuple[np.ndarray, np.ndarray | None]:
     """(the unit normals of every pair of the interface (rows ``every`` of ``mi``), their pinned
     directions or None): the averaged normals, turned into the interface's symmetry planes as
-    :func:`~dolfinx_nnqem.contact.surface_pairs.surface_pairs` does (collective)."""
+    :func:`~dolfinx_nnqem.contact.surface_pairs.surface_pairs` does (collective); ``slave_rows``: the
+    pairs' slave sides where they combine nodes (tri6; :meth:`_Incidence.slave_rows`)."""
     from dolfinx_nnqem.contact.surface_pairs import _pair_nodes
     from dolfinx_nnqem.contact.symmetry_planes import IN_PLANE, support_rules
 
@@ -347,7 +376,7 @@ def _all_normals(mi: MortarIntegrals, every: np.ndarray, moved: GatheredSurfaces
     weights = M.data / np.repeat(np.where(m > 0.0, m, 1.0), np.diff(M.indptr))
     masters = mi.master_index[M.indices]
     master = moved.nodes[0]
-    rows = _pair_nodes(np.arange(len(every)), mi.slave_index[every], None, M.indptr, masters, weights)[2]
+    rows = _pair_nodes(np.arange(len(every)), mi.slave_index[every], slave_rows, M.indptr, masters, weights)[2]
     rules = support_rules(V, supported, mi.slave_index[every], mi.x[every], given, M.indptr, masters,
                           master.x[np.searchsorted(master.index, masters)], rows,
                           IN_PLANE * facet_size(moved.facets_of(0)))
@@ -362,6 +391,20 @@ def _nodal(reference: GatheredSurfaces, moved: GatheredSurfaces, u_n: tuple[np.n
     u = x - np.concatenate([n.x for n in reference.nodes])
     order = np.argsort(blocks)
     return blocks[order], x[order], u[order], (u - np.concatenate(u_n))[order]
+
+
+def _interface_geometry(moved: GatheredSurfaces, search_distance: float | None, slave_blocks: np.ndarray
+                        ) -> tuple[CoupleDerivatives, _Incidence]:
+    """The couple derivatives of the moved surfaces and their incidence: of linear facets, or of quadratic
+    ones (:mod:`~dolfinx_nnqem.contact.quadratic_mortar_linearisation`)."""
+    if moved.facets_of(1).degree == 2:  # imported here: its numba kernels are compiled only where quadratic facets are
+        from dolfinx_nnqem.contact.quadratic_mortar_linearisation import (QuadraticIncidence,
+                                                                          quadratic_interface_derivatives)
+
+        quadratic = quadratic_interface_derivatives(moved, search_distance, slave_blocks)
+        return quadratic, QuadraticIncidence(quadratic)
+    cd = interface_derivatives(moved, search_distance, slave_blocks)
+    return cd, _Incidence(cd)
 
 
 def remortared_pairs(pairs: SurfacePairs, reference: GatheredSurfaces, moved: GatheredSurfaces,
@@ -392,18 +435,18 @@ def remortared_pairs(pairs: SurfacePairs, reference: GatheredSurfaces, moved: Ga
     the slave node or in M's row), and their :class:`MortarPoints`. A pair whose node is covered
     less than :data:`~dolfinx_nnqem.contact.mortar.MIN_COVERED` is held open (module docstring).
     """
-    cd = interface_derivatives(moved, search_distance, pairs.slave_blocks)
+    cd, incidence = _interface_geometry(moved, search_distance, pairs.slave_blocks)
     mi = cd.integrals
     gathered = pairs.comm.allgather(pairs.slave_blocks)  # every pair of the interface, in the global order
     every = np.searchsorted(mi.slave_index, np.concatenate(gathered))
-    normals, pinned = _all_normals(mi, every, moved, V, supported)
+    normals, pinned = _all_normals(mi, every, moved, V, supported, incidence.slave_rows(every))
     start = sum(len(blocks) for blocks in gathered[:pairs.comm.rank])
     local = every[start:start + pairs.num_local]
     normal = normals[start:start + pairs.num_local]
     m = np.asarray(mi.M[local].sum(axis=1)).ravel()
     held = m < MIN_COVERED * mi.D[local]
     blocks, x, u, du = _nodal(reference, moved, u_n)
-    incidence, size = _Incidence(cd), facet_size(moved.facets_of(0))
+    size = facet_size(moved.facets_of(0))
     geometry, du_pairs, g0 = [], [], np.empty(len(local))
     masters: list[np.ndarray] = []
     weights: list[np.ndarray] = []
