@@ -75,15 +75,17 @@ def _slide(load_factor: float) -> float:
 
 def sliding_blocks(*, slide: float = 0.4, offset: float = 0.0, geometry: str = "current", law: str = "alart-curnier",
                    mu_f: float = 0.0, discretisation: str = "node-to-surface",
-                   comm: MPI.Comm = MPI.COMM_WORLD) -> ContactProblem:
-    """The upper block pressed and slid over the lower one, node-to-surface or mortar (module docstring)."""
-    mesh, ct, ft = build_block_stack(comm, 1.0, 1.0, [0.5, 0.5], [(4, 2, 4), (6, 2, 6)])
+                   comm: MPI.Comm = MPI.COMM_WORLD, degree: int = 1, cell_type: str = "hexahedron") -> ContactProblem:
+    """The upper block pressed and slid over the lower one, node-to-surface or mortar (module docstring);
+    ``degree``: of the displacements (2: Q2 hexahedra or P2 tetrahedra); ``cell_type``: "hexahedron" or
+    "tetrahedron" (``build_block_stack``)."""
+    mesh, ct, ft = build_block_stack(comm, 1.0, 1.0, [0.5, 0.5], [(4, 2, 4), (6, 2, 6)], cell_type=cell_type)
     if offset:
         nodes = np.unique(compat.geometry_dofmap(mesh)[ct.indices[ct.values == T.body(2)]])
         mesh.geometry.x[nodes, 0] += offset
     dirichlet = [Dirichlet(T.bottom(1)), Dirichlet(T.top(2), -DEPTH, [1], amplitude=_press),
                  Dirichlet(T.top(2), slide, [0], amplitude=_slide), Dirichlet(T.top(2), 0.0, [2])]
-    return ContactProblem(mesh, ct, ft, materials=MATERIAL, dirichlet=dirichlet,
+    return ContactProblem(mesh, ct, ft, materials=MATERIAL, dirichlet=dirichlet, degree=degree,
                           contact=Contact(T.top(1), T.bottom(2), mu_f=mu_f, law=law, discretisation=discretisation,
                                           geometry=geometry))
 

@@ -553,12 +553,11 @@ def test_problem_file_refuses_an_unknown_geometry(tmp_path):
 
 
 @pytest.mark.parametrize("cell_type, discretisation, refused", [
-    ("tetrahedron", "node-to-surface", "takes node-to-surface pairs with degree-1 displacements only"),
-    ("hexahedron", "node-to-surface", "takes node-to-surface pairs with degree-1 displacements only"),
     ("hexahedron", "mortar", "takes mortar pairs with degree-1 displacements only")])
 def test_current_geometry_with_degree_2_refusals_before_solving(cell_type, discretisation, refused):
-    """What degree 2 in the current geometry still refuses (issue 41 lifted it for rigid obstacles:
-    tests/integration/test_large_sliding_degree2.py), each naming the kind of pairs and why."""
+    """What degree 2 in the current geometry still refuses (issue 41 lifted it for rigid obstacles and
+    node-to-surface pairs: tests/integration/test_large_sliding_degree2.py,
+    tests/integration/test_large_sliding_nts_degree2.py), naming the kind of pairs and why."""
     from mpi4py import MPI
 
     from dolfinx_nnqem.cases.large_sliding import MATERIAL, T
