@@ -7,7 +7,8 @@ The frictionless sphere slid over the block (6³, rigid obstacle), the frictiona
 master facets over another (node-to-surface, μ_f = 0.3; the same with dual mortar) and the ironing of an elastoplastic strip
 by a cylinder dragged 8 facets (μ_f = 0.1; the default geometry = "auto", which moves it to the current
 geometry once the punch slides), the sphere slid over 4 × 1 × 4 Q2 hexahedra and over 3 × 2 × 3 × 6 P2 tetrahedra
-with μ_f = 0.3 (degree 2), current geometry, monolithic and NNEQM1 (NNEQM2, or ``iterative``: the monolithic
+with μ_f = 0.3 (degree 2), the frictional block slide with degree 2 on Q2 hexahedra and P2 tetrahedra
+(node-to-surface), current geometry, monolithic and NNEQM1 (NNEQM2, or ``iterative``: the monolithic
 solver with the iterative linear solver, when named)
 (:mod:`dolfinx_nnqem.cases.large_sliding`). Rank 0 writes, per ``CASE/METHOD/``, the pair table's
 slave positions and forces on the master side in global pair order, the resultant force, the
@@ -39,6 +40,9 @@ CASES = {
     "sphere-q2": (lambda comm: sliding_sphere(4, degree=2, ny=1, mu_f=0.3, comm=comm), obstacle_force, 16),
     "sphere-p2": (lambda comm: sliding_sphere(3, degree=2, ny=2, mu_f=0.3, cell_type="tetrahedron", comm=comm),
                   obstacle_force, 16),
+    "blocks-q2": (lambda comm: sliding_blocks(slide=0.4, mu_f=0.3, degree=2, comm=comm), slave_force, 12),
+    "blocks-p2": (lambda comm: sliding_blocks(slide=0.4, mu_f=0.3, degree=2, cell_type="tetrahedron", comm=comm),
+                  slave_force, 12),
 }
 DEGREE_1 = ("sphere", "blocks", "mortar", "ironing")  #: what a run without CASE names runs
 
