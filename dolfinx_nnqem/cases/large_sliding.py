@@ -79,8 +79,8 @@ def sliding_blocks(*, slide: float = 0.4, offset: float = 0.0, geometry: str = "
                    divisions: tuple[tuple[int, int, int], tuple[int, int, int]] = ((4, 2, 4), (6, 2, 6)),
                    depth: float = DEPTH) -> ContactProblem:
     """The upper block pressed ``depth`` and slid ``slide`` over the lower one, node-to-surface or mortar
-    (module docstring); ``degree`` of the displacements, ``cell_type`` and the ``divisions`` of the lower
-    and upper blocks (``build_block_stack``)."""
+    (module docstring); ``degree`` of the displacements (2: Q2 hexahedra or P2 tetrahedra), ``cell_type``
+    ("hexahedron" or "tetrahedron") and the ``divisions`` of the lower and upper blocks (``build_block_stack``)."""
     mesh, ct, ft = build_block_stack(comm, 1.0, 1.0, [0.5, 0.5], list(divisions), cell_type=cell_type)
     if offset:
         nodes = np.unique(compat.geometry_dofmap(mesh)[ct.indices[ct.values == T.body(2)]])

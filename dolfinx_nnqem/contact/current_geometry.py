@@ -258,6 +258,17 @@ class SurfaceTracker:
         self.facets = self.gathered_facets(pairs)
         return rebased(pairs, self.V, u)
 
+    @property
+    def combines_nodes(self) -> bool:
+        """True if the pairs act on combinations of slave nodes (6-node triangle slave facets, P2
+        tetrahedra: the transformed basis). Their geometry is then frozen within a solve and evaluated
+        again between solves, as :class:`CombinedObstacleTracker`'s: the exact derivative of a pair couples
+        every node of its combination with each one's own master facet, which the consistent terms
+        (:mod:`~dolfinx_nnqem.contact.surface_stiffness`, one slave node and one master facet per pair)
+        do not hold."""
+        combination = self.surfaces.nodes[1].combination
+        return len(combination.columns) != len(self.surfaces.nodes[1].index)
+
     def gathered_facets(self, pairs: SurfacePairs) -> np.ndarray:
         """Every slave node's master facet (−1: no pair), the same on every rank (collective)."""
         assert pairs.master_facet is not None  # node-to-surface pairs carry it

@@ -99,22 +99,24 @@ def current_geometry_refusal(kind: str, V: dolfinx.fem.FunctionSpace) -> tuple[s
     cannot be evaluated in the current configuration with the displacement space V, and what to use
     instead; None if they can.
 
-    Degree 1 takes every kind. Degree 2 takes rigid obstacles: on hexahedra a 9-node quadrilateral
-    facet gives every node a pair of its own (the node alone, as at degree 1), which the tracker
-    re-evaluates where that node is; on tetrahedra a 6-node triangle's pairs act on combinations of
-    its nodes (the transformed basis, :mod:`~dolfinx_nnqem.contact.quadratic_facets`), re-evaluated
-    where the combination is (:class:`~dolfinx_nnqem.contact.current_geometry.CombinedObstacleTracker`).
-    Mortar pairs of degree 2 (quad9 and tri6 facets) are integrated on the moved quadratic facets
-    (:mod:`~dolfinx_nnqem.contact.quadratic_mortar_linearisation`).
-    Node-to-surface pairs are projected onto linear facets in the current configuration.
+    Degrees 1 and 2 take every kind. At degree 2, on hexahedra a 9-node quadrilateral facet gives
+    every node a pair of its own (the node alone, as at degree 1), which the tracker re-evaluates
+    where that node is (node-to-surface: projected onto the moved quadratic master facets,
+    :mod:`~dolfinx_nnqem.contact.quadratic_surface_stiffness`); on tetrahedra a 6-node triangle's
+    pairs act on combinations of its nodes (the transformed basis,
+    :mod:`~dolfinx_nnqem.contact.quadratic_facets`): a rigid obstacle's are re-evaluated where the
+    combination is (:class:`~dolfinx_nnqem.contact.current_geometry.CombinedObstacleTracker`),
+    node-to-surface pairs between solves
+    (:attr:`~dolfinx_nnqem.contact.current_geometry.SurfaceTracker.combines_nodes`). Mortar pairs of
+    degree 2 (quad9 and tri6 facets) are integrated on the moved quadratic facets
+    (:mod:`~dolfinx_nnqem.contact.quadratic_mortar_linearisation`). Other degrees have no contact
+    facets of their own (the pair sets refuse them), and no current geometry either.
     """
     degree = space_degree(V)
-    if degree == 1 or kind in ("rigid obstacle", "mortar"):
+    if degree in (1, 2):
         return None
-    what = "closest points and pair rows"
-    return (f"the current geometry takes {kind} pairs with degree-1 displacements only in this version (its {what} "
-            f"are those of linear facets; of degree 2 it takes rigid obstacles and mortar pairs only); the "
-            f"displacements here have degree {degree}", "degree 1")
+    return (f"the current geometry takes {kind} pairs with displacements of degree 1 or 2; the displacements "
+            f"here have degree {degree}", "degree 1 or 2")
 
 
 def reference_pairs(contact: Contact, V: dolfinx.fem.FunctionSpace, facet_tags: dolfinx.mesh.MeshTags,
@@ -404,8 +406,10 @@ class ContactGeometry:
     @property
     def reprojecting(self) -> list[bool]:
         """Per interface: True if :meth:`refresh_surfaces` re-evaluates it (node-to-surface and mortar in
-        the current geometry)."""
-        return [isinstance(t, (SurfaceTracker, MortarTracker)) for t in self._trackers]
+        the current geometry; not node-to-surface pairs that combine slave nodes, P2 tetrahedra: those are
+        re-evaluated between solves)."""
+        return [isinstance(t, MortarTracker) or (isinstance(t, SurfaceTracker) and not t.combines_nodes)
+                for t in self._trackers]
 
     def refresh_surfaces(self, u: dolfinx.fem.Function, u_n: dolfinx.fem.Function, load_factor_n: float) -> None:
         """Re-evaluate the node-to-surface and mortar interfaces of :attr:`reprojecting` at u, keeping their
@@ -423,7 +427,7 @@ class ContactGeometry:
             return
         interfaces, new = self._model.interfaces, {}
         for k, tracker in enumerate(self._trackers):
-            if isinstance(tracker, SurfaceTracker):
+            if isinstance(tracker, SurfaceTracker) and not tracker.combines_nodes:
                 new[k], self._closest_points[k] = _reprojected(interfaces[k].pairs, tracker, u, u_n,
                                                                self._supports_of(k, tracker))
             elif isinstance(tracker, MortarTracker):

@@ -97,7 +97,7 @@ def node_to_surface_pairs(V: dolfinx.fem.FunctionSpace, surfaces: GatheredSurfac
         search_distance = 2.0 * max(master_size, facet_size(slave))
     project = project_points_quadratic if master.degree == 2 else project_points
     p = project(nodes.x, master.x, master.area, max_distance=search_distance)
-    if preferred is not None:  # current geometry (linear facets only: refused with degree 2 before solving)
+    if preferred is not None:  # current geometry
         p = keep_preferred(p, nodes.x, master, preferred, 0.0 if edge_allowance is None else edge_allowance)
     found = p.facet >= 0
     inside = found & (p.tangential_offset <= (tolerance if edge_allowance is None else edge_allowance))
@@ -175,9 +175,10 @@ def keep_preferred(p: Projection, x: np.ndarray, master: Facets, preferred: np.n
         return p
     out = Projection(*(np.array(a, copy=True) for a in (p.facet, p.xi, p.N, p.point, p.normal, p.g0, p.distance,
                                                           p.tangential_offset)))
+    project = project_points_quadratic if master.degree == 2 else project_points
     for i in changed:
         f = int(preferred[i])
-        q = project_points(x[i:i + 1], master.x[f:f + 1], master.area[f:f + 1])
+        q = project(x[i:i + 1], master.x[f:f + 1], master.area[f:f + 1])
         best = p.distance[i] if p.facet[i] >= 0 else np.inf
         if q.tangential_offset[0] <= allowance and q.distance[0] <= best + allowance:
             for name in ("xi", "N", "point", "normal", "g0", "distance", "tangential_offset"):

@@ -48,6 +48,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from petsc4py import PETSc
 
+from dolfinx_nnqem.contact.facet_layout import QUADRATIC
 from dolfinx_nnqem.contact.pairset import PairRows
 from dolfinx_nnqem.contact.projection import (Projection, cyclic_order, project_onto_facets, project_points,
                                              reference_vertices,
@@ -225,13 +226,13 @@ def pair_terms(points: ClosestPoints, lam: np.ndarray) -> tuple[np.ndarray, np.n
     vertices in cyclic order)."""
     q = points
     m = q.x_m.shape[1]
-    dxi, dn_facet, n_facet = closest_point_derivatives(q.x_s, q.x_m, q.xi, q.interior)
+    dxi, dn_facet, n_facet = _derivatives(m)(q.x_s, q.x_m, q.xi, q.interior)
     sign = np.sign(np.einsum("pj,pj->p", q.normal, n_facet))  # the pair's orientation
     n_facet, dn_facet = sign[:, None] * n_facet, sign[:, None, None] * dn_facet
     dn = dn_facet if q.turned is None else _turned_derivative(n_facet, dn_facet, q.normal, q.turned)
     R = local_frames(q.normal)
     dR = np.einsum("pikl,plc->pikc", local_frames_derivative(q.normal), dn)
-    N, dN = shape_functions(m, q.xi), shape_derivatives(m, q.xi)
+    N, dN = _shapes(m, q.xi)
     a_facet = np.einsum("pka,pkj->paj", dN, q.x_m)
     d = q.x_s - np.einsum("pk,pkj->pj", N, q.x_m)
     c, dNj = _node_weights(N, dN)
@@ -249,6 +250,27 @@ def pair_terms(points: ClosestPoints, lam: np.ndarray) -> tuple[np.ndarray, np.n
     K = (np.einsum("pj,pic->pjic", c, dv)
          - np.einsum("pi,pjb,pbc->pjic", v, dNj, dxi)).reshape(len(N), -1, dxi.shape[2])
     return K, W
+
+
+def _derivatives(m: int):
+    """The closest point's and normal's derivatives for facets of m nodes: linear (3, 4) or quadratic
+    (6, 9: :mod:`~dolfinx_nnqem.contact.quadratic_surface_stiffness`)."""
+    if m in QUADRATIC:
+        from dolfinx_nnqem.contact.quadratic_surface_stiffness import quadratic_closest_point_derivatives
+
+        return quadratic_closest_point_derivatives
+    return closest_point_derivatives
+
+
+def _shapes(m: int, xi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(N (p, m), ∂N/∂ξ (p, m, 2)) of facets of m nodes at ``xi``, in the facets' node order (linear
+    facets: cyclic; quadratic ones: :mod:`~dolfinx_nnqem.contact.quadratic_facets`')."""
+    if m in QUADRATIC:
+        from dolfinx_nnqem.contact.quadratic_surface_stiffness import quadratic_shapes
+
+        N, dN, _ = quadratic_shapes(m, xi)
+        return N, dN
+    return shape_functions(m, xi), shape_derivatives(m, xi)
 
 
 @dataclass(frozen=True)
@@ -399,7 +421,12 @@ def reprojected_pairs(pairs: SurfacePairs, reference: GatheredSurfaces, moved: G
     x_s = moved.nodes[1].x[slaves]
     u_s = x_s - reference.nodes[1].x[slaves]
     assert pairs.master_facet is not None  # node-to-surface pairs carry it
-    p, order, interior = closest_points(x_s, master, pairs.master_facet, allowance, size)
+    if master.degree == 2:  # the facets' own node order (quadratic_facets), curved or not
+        from dolfinx_nnqem.contact.quadratic_surface_stiffness import quadratic_closest_points
+
+        p, order, interior = quadratic_closest_points(x_s, master, pairs.master_facet, allowance, size, INTERIOR)
+    else:
+        p, order, interior = closest_points(x_s, master, pairs.master_facet, allowance, size)
     f, k = p.facet, master.x.shape[1]
     u_m = master.x[f] - master_ref.x[f]  # caller's vertex order, like N
     g = np.where(np.abs(p.g0) <= gap_rounding, 0.0, p.g0)

@@ -20,8 +20,8 @@ iterate with the monolithic solver and NNEQM1, its geometric terms on the combin
   Q2 on 2³, 3³, 6³ against Q1 on 12³ (slow tier);
 * ``geometry = "auto"`` moves the Q2 interface to the current geometry once it slides (it stopped
   the run before); the problem file takes ``degree = 2`` with ``geometry = "current"``;
-* what stays refused, with the reason (tests/integration/test_large_sliding.py): node-to-surface and
-  mortar pairs of degree 2.
+* what stays refused, with the reason (tests/integration/test_large_sliding.py): mortar pairs of
+  degree 2 (node-to-surface pairs of degree 2: tests/integration/test_large_sliding_nts_degree2.py).
 """
 
 import numpy as np

@@ -9,7 +9,8 @@ as ``blocks-frictionless`` and ``mortar-frictionless``) and the ironing of an el
 by a cylinder dragged 8 facets (μ_f = 0.1; the default geometry = "auto", which moves it to the current
 geometry once the punch slides), the sphere slid over 4 × 1 × 4 Q2 hexahedra and over 3 × 2 × 3 × 6 P2 tetrahedra
 with μ_f = 0.3 (degree 2), the mortar block slide on 2 × 1 × 2 | 3 × 1 × 3 Q2 hexahedra and P2 tetrahedra
-(degree 2, 8 increments), current geometry, monolithic and NNEQM1 (NNEQM2, or ``iterative``: the monolithic
+(degree 2, 8 increments), the node-to-surface block slide with degree 2 on Q2 hexahedra and P2 tetrahedra,
+current geometry, monolithic and NNEQM1 (NNEQM2, or ``iterative``: the monolithic
 solver with the iterative linear solver, when named)
 (:mod:`dolfinx_nnqem.cases.large_sliding`). Rank 0 writes, per ``CASE/METHOD/``, the pair table's
 slave positions and forces on the master side in global pair order, the resultant force, the
@@ -49,6 +50,9 @@ CASES = {
     "mortar-p2": (lambda comm: sliding_blocks(slide=0.4, mu_f=0.3, discretisation="mortar", degree=2,
                                               cell_type="tetrahedron", divisions=((2, 1, 2), (3, 1, 3)), comm=comm),
                   slave_force, 8),
+    "blocks-q2": (lambda comm: sliding_blocks(slide=0.4, mu_f=0.3, degree=2, comm=comm), slave_force, 12),
+    "blocks-p2": (lambda comm: sliding_blocks(slide=0.4, mu_f=0.3, degree=2, cell_type="tetrahedron", comm=comm),
+                  slave_force, 12),
 }
 DEGREE_1 = ("sphere", "blocks", "mortar", "ironing")  #: what a run without CASE names runs
 
