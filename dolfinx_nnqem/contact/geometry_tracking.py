@@ -40,13 +40,13 @@ from dolfinx_nnqem.contact.surface_stiffness import (ClosestPoints, Supports, Su
                                                      surface_terms)
 from dolfinx_nnqem.contact.symmetry_planes import IN_PLANE, supports_of
 from dolfinx_nnqem.contact.specification import Contact
-from dolfinx_nnqem.contact.surfaces import ContactPairError, NoPairsError, mesh_tolerance, space_degree
+from dolfinx_nnqem.contact.surfaces import ContactPairError, NoPairsError, mesh_tolerance
 
 if TYPE_CHECKING:
     import dolfinx
 
 __all__ = ["ContactGeometry", "GeometryTracker", "LostContactError", "Remap", "TrackedInterface", "TrackedModel",
-           "current_geometry_refusal", "reference_pairs", "starting_pairs", "tracker_of", "zero_displacement"]
+           "reference_pairs", "starting_pairs", "tracker_of", "zero_displacement"]
 
 GeometryTracker = ObstacleTracker | CombinedObstacleTracker | SurfaceTracker | MortarTracker
 
@@ -84,39 +84,8 @@ def starting_pairs(contact: Contact, V: dolfinx.fem.FunctionSpace, facet_tags: d
     """
     if contact.geometry != "current":
         return reference_pairs(contact, V, facet_tags, supported), None
-    kind = "rigid obstacle" if isinstance(contact.surface1, RigidObstacle) else (
-        "mortar" if contact.discretisation == "mortar" else "node-to-surface")  # auto: node-to-surface
-    refusal = current_geometry_refusal(kind, V)
-    if refusal is not None:
-        reason, remedy = refusal
-        raise ValueError(f"contact {contact.label}: {reason}: use geometry = 'reference', or {remedy}")
     tracker = tracker_of(contact, V, facet_tags, supported)
     return tracker.pairs_at(zero_displacement(V), 0.0), tracker
-
-
-def current_geometry_refusal(kind: str, V: dolfinx.fem.FunctionSpace) -> tuple[str, str] | None:
-    """Why pairs of the kind ``kind`` (``PairSet.kind``: "rigid obstacle", "node-to-surface", "mortar")
-    cannot be evaluated in the current configuration with the displacement space V, and what to use
-    instead; None if they can.
-
-    Degrees 1 and 2 take every kind. At degree 2, on hexahedra a 9-node quadrilateral facet gives
-    every node a pair of its own (the node alone, as at degree 1), which the tracker re-evaluates
-    where that node is (node-to-surface: projected onto the moved quadratic master facets,
-    :mod:`~dolfinx_nnqem.contact.quadratic_surface_stiffness`); on tetrahedra a 6-node triangle's
-    pairs act on combinations of its nodes (the transformed basis,
-    :mod:`~dolfinx_nnqem.contact.quadratic_facets`): a rigid obstacle's are re-evaluated where the
-    combination is (:class:`~dolfinx_nnqem.contact.current_geometry.CombinedObstacleTracker`),
-    node-to-surface pairs between solves
-    (:attr:`~dolfinx_nnqem.contact.current_geometry.SurfaceTracker.combines_nodes`). Mortar pairs of
-    degree 2 (quad9 and tri6 facets) are integrated on the moved quadratic facets
-    (:mod:`~dolfinx_nnqem.contact.quadratic_mortar_linearisation`). Other degrees have no contact
-    facets of their own (the pair sets refuse them), and no current geometry either.
-    """
-    degree = space_degree(V)
-    if degree in (1, 2):
-        return None
-    return (f"the current geometry takes {kind} pairs with displacements of degree 1 or 2; the displacements "
-            f"here have degree {degree}", "degree 1 or 2")
 
 
 def reference_pairs(contact: Contact, V: dolfinx.fem.FunctionSpace, facet_tags: dolfinx.mesh.MeshTags,
@@ -277,8 +246,7 @@ class ContactGeometry:
         if interface.pairs.kind == "node-to-node":
             return ("node-to-node pairs join nodes that faced each other in the reference configuration (use "
                     "discretisation = 'node-to-surface' or 'mortar' for large sliding)")
-        refusal = current_geometry_refusal(interface.pairs.kind, self._V)
-        return None if refusal is None else f"{refusal[0]} (use {refusal[1]} for large sliding)"
+        return None  # every other kind follows the bodies, with degree-1 and degree-2 displacements
 
     def start_following(self, k: int) -> None:
         """Re-evaluate interface ``k`` in the current configuration from now on (collective): its tracker
