@@ -155,8 +155,9 @@ class _Forms:
     """Compiled objects of one problem used by the check (built on first use).
 
     Only the compiled expressions and forms are kept between checks: the Gauss-point functions
-    they fill (72 bytes a point for a tensor) are made for each check and dropped after it, so
-    that they do not add to the memory the linear solver's set-up needs in the next increment.
+    they fill (72 bytes a point for a tensor) and the material at the points are made for each
+    check and dropped after it, so that they do not add to the memory the linear solver's set-up
+    needs in the next increment.
     """
 
     def __init__(self, problem):
@@ -165,8 +166,6 @@ class _Forms:
         self.grad_expr = jit.expression(ufl.grad(problem.u), points)
         self.strain_increment_expr = jit.expression(strain(problem.u) - strain(st.u_n), points)
         self._own_force: tuple[fem.Function, fem.Form] | None = None
-        self._material: PointwiseMaterial | None = None
-        self._material_version = 0  # the state's parameters_version of _material
         # the state, not the problem: this object is the value of a WeakKeyDictionary keyed by
         # the problem, and a reference to its key would keep both alive for the whole process
         self._state = st
@@ -189,12 +188,10 @@ class _Forms:
         return form
 
     def material_at_points(self) -> PointwiseMaterial:
-        """The material at the owned Gauss points (computed once; made per check instead, they did not
-        lower the measured peak memory, ``docs/performance.md``)."""
-        version = getattr(self._state, "parameters_version", 0)  # a parameter study changes them
-        if self._material is None or version != self._material_version:
-            self._material, self._material_version = self._state.at_points(), version
-        return self._material
+        """The material at the owned Gauss points, made for each check and dropped after it: kept, its
+        arrays (five values a point for von Mises) stayed resident under every later AMG set-up and
+        Krylov solve, where a run on several ranks peaks (``docs/performance.md``)."""
+        return self._state.at_points()
 
 
 def radial_return_values(problem: SolvableProblem) -> GaussPointValues:

@@ -28,6 +28,7 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from dolfinx_nnqem.numerics.heap import release_free_heap
 from dolfinx_nnqem.solvers.convergence import logger
 from dolfinx_nnqem.numerics.linalg import (ITERATIVE_NO_CONTACT_OPTIONS, ITERATIVE_NO_CONTACT_UNSYMMETRIC_OPTIONS,
                                            ITERATIVE_SOLVER_OPTIONS, clear_options, create_ksp,
@@ -272,6 +273,7 @@ class IterativeSolver:
 
     def _krylov_solve(self, b: PETSc.Vec, x: PETSc.Vec, pair_state) -> None:
         """Set up (lagging the u block's AMG where it may) and solve; PETSc errors are raised."""
+        release_free_heap()  # the set-up and the Krylov basis are where a run peaks: not on top of freed memory
         t0 = time.perf_counter()
         try:
             # the AMG set-up happens within the solve; its products' reuse data would outlive it

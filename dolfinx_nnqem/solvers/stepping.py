@@ -29,6 +29,7 @@ from dolfinx_nnqem.material.interface import GaussPointValues
 from dolfinx_nnqem.solvers.checks import CheckOptions, StateCheck, check_state, failure_details, values_to_commit
 from dolfinx_nnqem.solvers.contract import SolvableProblem, Solver
 from dolfinx_nnqem.solvers.convergence import ConvergenceError, SolveReport, logger
+from dolfinx_nnqem.numerics.heap import release_free_heap
 from dolfinx_nnqem.numerics.linalg import free_dropped_objects
 from dolfinx_nnqem.solvers.step_control import AutomaticIncrements, as_step_control
 from dolfinx_nnqem.problem.validation import check_load_factors, check_stepping_arguments
@@ -131,6 +132,7 @@ def solve_load_steps(
     while not schedule.reached(ell):
         target = schedule.target(ell)
         free_dropped_objects(problem.petsc_comms)
+        release_free_heap()  # what the last increment's check and commit freed
         t0 = time.perf_counter()
         report, verdict, values = _solve_and_check(problem, solver, target, check, max_displacement)
         if report.converged and _moved_to_current_geometry(problem, solver, report, target, index0 + len(results) + 1,

@@ -1,4 +1,5 @@
-"""The Gauss-point values an increment commits are not held through the next increment's solve.
+"""The Gauss-point values an increment commits are not held through the next increment's solve, nor
+the material at the Gauss points that the independent check makes.
 
 They are σ and Δε_p at every Gauss point (two tensor arrays: 190 MB a rank on the million-dof
 pressed blocks), and the next solve's AMG set-up is where the run's memory peaks
@@ -11,7 +12,7 @@ import weakref
 from mpi4py import MPI
 
 from dolfinx_nnqem.cases.pressed_blocks import pressed_blocks_problem
-from dolfinx_nnqem.solvers import MonolithicOptions, solve_load_path, solve_load_steps, stepping
+from dolfinx_nnqem.solvers import MonolithicOptions, checks, solve_load_path, solve_load_steps, stepping
 from dolfinx_nnqem.solvers.monolithic import MonolithicSolver
 
 
@@ -55,3 +56,23 @@ def test_committed_values_are_released_on_an_explicit_load_path(monkeypatch):
         solve_load_path(problem, solver, [0.1, 0.2])
     assert len(refs) == 2
     assert alive == [0, 0]
+
+
+def test_the_check_keeps_no_material_arrays_between_increments(monkeypatch):
+    # the material at the Gauss points (five values a point for von Mises) is made for each check
+    # and dropped after it: kept, it stayed resident under every later AMG set-up and Krylov solve
+    materials: list[weakref.ref] = []
+    material_at_points = checks._Forms.material_at_points
+
+    def recorded(self):
+        material = material_at_points(self)
+        materials.append(weakref.ref(material))
+        return material
+
+    monkeypatch.setattr(checks._Forms, "material_at_points", recorded)
+    problem = pressed_blocks_problem(1, MPI.COMM_SELF)
+    with MonolithicSolver(problem, monolithic=MonolithicOptions(linear_solver="direct")) as solver:
+        solve_load_steps(problem, solver, 2)
+    gc.collect()
+    assert len(materials) == 2
+    assert [ref() is None for ref in materials] == [True, True]
