@@ -45,7 +45,7 @@ from dolfinx_nnqem.contact.pairset import PairRows
 from dolfinx_nnqem.contact.surfaces import local_frames_derivative
 
 if TYPE_CHECKING:
-    from dolfinx_nnqem.contact.combined_stiffness import CombinedTerms
+    from dolfinx_nnqem.contact.combined_terms import CombinedTerms
 
 __all__ = ["GeometricTerms", "frame_derivative", "no_terms", "obstacle_terms"]
 

@@ -473,8 +473,14 @@ def _remortared(pairs: PairSet, tracker: MortarTracker, u, u_n) -> tuple[Surface
     assert isinstance(pairs, SurfacePairs)  # a mortar tracker's pairs
     surfaces = tracker.surfaces
     u_n_nodes = (displacement_at(u_n, surfaces.nodes[0].index), displacement_at(u_n, surfaces.nodes[1].index))
-    return remortared_pairs(pairs, surfaces, with_moved_normals(moved_surfaces(surfaces, u)), u_n_nodes,
-                            tracker.gap_rounding, tracker.search_distance, tracker.V, tracker.supported)
+    moved = with_moved_normals(moved_surfaces(surfaces, u))
+    couples = None
+    if moved.facets_of(1).degree == 2:  # imported here: its numba kernels are compiled only where quadratic facets are
+        from dolfinx_nnqem.contact.quadratic_mortar_linearisation import quadratic_couples
+
+        couples = quadratic_couples(moved, tracker.search_distance, pairs.slave_blocks)
+    return remortared_pairs(pairs, surfaces, moved, u_n_nodes, tracker.gap_rounding, tracker.search_distance,
+                            tracker.V, tracker.supported, couples=couples)
 
 
 def _pairs_or_lost(interface: TrackedInterface, tracker: GeometryTracker, u, load_factor: float) -> PairSet:

@@ -393,23 +393,10 @@ def _nodal(reference: GatheredSurfaces, moved: GatheredSurfaces, u_n: tuple[np.n
     return blocks[order], x[order], u[order], (u - np.concatenate(u_n))[order]
 
 
-def _interface_geometry(moved: GatheredSurfaces, search_distance: float | None, slave_blocks: np.ndarray
-                        ) -> tuple[CoupleDerivatives, _Incidence]:
-    """The couple derivatives of the moved surfaces and their incidence: of linear facets, or of quadratic
-    ones (:mod:`~dolfinx_nnqem.contact.quadratic_mortar_linearisation`)."""
-    if moved.facets_of(1).degree == 2:  # imported here: its numba kernels are compiled only where quadratic facets are
-        from dolfinx_nnqem.contact.quadratic_mortar_linearisation import (QuadraticIncidence,
-                                                                          quadratic_interface_derivatives)
-
-        quadratic = quadratic_interface_derivatives(moved, search_distance, slave_blocks)
-        return quadratic, QuadraticIncidence(quadratic)
-    cd = interface_derivatives(moved, search_distance, slave_blocks)
-    return cd, _Incidence(cd)
-
-
 def remortared_pairs(pairs: SurfacePairs, reference: GatheredSurfaces, moved: GatheredSurfaces,
                      u_n: tuple[np.ndarray, np.ndarray], gap_rounding: float, search_distance: float | None,
-                     V: dolfinx.fem.FunctionSpace | None = None, supported: np.ndarray | None = None) -> tuple[SurfacePairs, MortarPoints]:
+                     V: dolfinx.fem.FunctionSpace | None = None, supported: np.ndarray | None = None, *,
+                     couples: tuple[CoupleDerivatives, _Incidence] | None = None) -> tuple[SurfacePairs, MortarPoints]:
     """The mortar ``pairs`` (the same slave nodes, in the same order) integrated again on the moved
     surfaces, and their :class:`MortarPoints` (collective).
 
@@ -427,6 +414,10 @@ def remortared_pairs(pairs: SurfacePairs, reference: GatheredSurfaces, moved: Ga
     V, supported
         The displacement space and its prescribed dofs (None: no support known): the normals of slave
         nodes on the interface's symmetry planes are turned into them.
+    couples
+        The couple derivatives of the moved surfaces and their incidence, where the caller made them
+        (quadratic facets: :func:`~dolfinx_nnqem.contact.quadratic_mortar_linearisation.quadratic_couples`);
+        None: those of linear facets, made here.
 
     Returns
     -------
@@ -435,7 +426,10 @@ def remortared_pairs(pairs: SurfacePairs, reference: GatheredSurfaces, moved: Ga
     the slave node or in M's row), and their :class:`MortarPoints`. A pair whose node is covered
     less than :data:`~dolfinx_nnqem.contact.mortar.MIN_COVERED` is held open (module docstring).
     """
-    cd, incidence = _interface_geometry(moved, search_distance, pairs.slave_blocks)
+    if couples is None:
+        cd = interface_derivatives(moved, search_distance, pairs.slave_blocks)
+        couples = (cd, _Incidence(cd))
+    cd, incidence = couples
     mi = cd.integrals
     gathered = pairs.comm.allgather(pairs.slave_blocks)  # every pair of the interface, in the global order
     every = np.searchsorted(mi.slave_index, np.concatenate(gathered))

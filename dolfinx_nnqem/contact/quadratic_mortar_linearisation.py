@@ -42,7 +42,7 @@ from dolfinx_nnqem.contact.surface_pairs import facet_size
 from dolfinx_nnqem.contact.surfaces import GatheredSurfaces
 
 __all__ = ["QuadraticCoupleDerivatives", "QuadraticIncidence", "moment_derivatives", "quadratic_couple_derivatives",
-           "quadratic_interface_derivatives"]
+           "quadratic_couples", "quadratic_interface_derivatives"]
 
 
 def quadratic_couple_derivatives(xs: np.ndarray, sign_s: np.ndarray, xm: np.ndarray, sign_m: np.ndarray,
@@ -194,3 +194,11 @@ class QuadraticIncidence(_Incidence):
         if len(taken.columns) == len(rows):
             return None
         return taken.indptr, self._cd.integrals.slave_index[taken.columns], taken.coefficients
+
+
+def quadratic_couples(moved: GatheredSurfaces, search_distance: float | None, slave_blocks: np.ndarray
+                      ) -> tuple[QuadraticCoupleDerivatives, QuadraticIncidence]:
+    """The couple derivatives of the moved quadratic surfaces and their incidence, as
+    :func:`~dolfinx_nnqem.contact.mortar_linearisation.remortared_pairs` takes them (``couples``)."""
+    quadratic = quadratic_interface_derivatives(moved, search_distance, slave_blocks)
+    return quadratic, QuadraticIncidence(quadratic)
