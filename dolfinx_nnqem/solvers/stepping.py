@@ -71,6 +71,13 @@ Checkpoint = Callable[[Any, StepperState, "IncrementResult"], object]
 :class:`~dolfinx_nnqem.problem.contact_problem.ContactProblem`: hence ``Any`` for it here)."""
 
 
+def _free_dropped_memory(problem: SolvableProblem) -> None:
+    """Before an increment (collective): the PETSc objects dropped since the last one destroyed, and
+    the C heap's free pages, what the last increment's check and commit freed, given back."""
+    free_dropped_objects(problem.petsc_comms)
+    release_free_heap()
+
+
 def solve_load_steps(
     problem: SolvableProblem,
     solver: Solver,
@@ -131,8 +138,7 @@ def solve_load_steps(
     ell = problem.load_factor_n
     while not schedule.reached(ell):
         target = schedule.target(ell)
-        free_dropped_objects(problem.petsc_comms)
-        release_free_heap()  # what the last increment's check and commit freed
+        _free_dropped_memory(problem)
         t0 = time.perf_counter()
         report, verdict, values = _solve_and_check(problem, solver, target, check, max_displacement)
         if report.converged and _moved_to_current_geometry(problem, solver, report, target, index0 + len(results) + 1,
