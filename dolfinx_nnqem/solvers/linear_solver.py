@@ -73,7 +73,7 @@ class DirectSolver:
     def begin_increment(self) -> None:
         """Nothing to reset (forcing belongs to the iterative strategy)."""
 
-    def set_forcing(self, eps: float, record: bool = True) -> None:
+    def set_forcing(self, eps: float, record: bool = True, cap: float | None = None) -> None:
         """A direct solve is exact: no forcing."""
 
     def solve(self, J: PETSc.Mat, b: PETSc.Vec, x: PETSc.Vec, pair_state: np.ndarray | None = None) -> str | None:
@@ -181,8 +181,9 @@ class IterativeSolver:
         """Forget the last step's forcing (the "finishing step" rule is per increment)."""
         self._last_forcing = None
 
-    def set_forcing(self, eps: float, record: bool = True) -> None:
-        """Inexact Newton: the Krylov tolerance η of the next step, by :attr:`forcing`'s rule.
+    def set_forcing(self, eps: float, record: bool = True, cap: float | None = None) -> None:
+        """Inexact Newton: the Krylov tolerance η of the next step, by :attr:`forcing`'s rule, at
+        most ``cap`` if given (the lifted predictor's ``lift_forcing``).
 
         Both rules share a floor and a finishing step. 0.1·rtol/ε, ε the relative residual, is
         just the accuracy that lets the step reach the tolerance; η is never below ``ksp_rtol`` of
@@ -201,6 +202,8 @@ class IterativeSolver:
             eps_prev, eta_prev = self._last_forcing
             if eps <= 2.0 * eta_prev * eps_prev:
                 eta = min(eta, floor)
+        if cap is not None:
+            eta = min(eta, cap)
         eta = max(eta, self._rtol_floor)
         self._last_forcing = (eps, eta) if record else None
         self.ksp.setTolerances(rtol=eta)

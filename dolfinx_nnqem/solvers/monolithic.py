@@ -273,7 +273,8 @@ class MonolithicSolver(ReleasesPETSc):
             with delta_vec.localForm() as local:
                 local.array[:] = delta
             H_lifted = ev.H + np.einsum("nij,nj->ni", ev.law.dH_dw, p.contact.B_times(delta_vec))
-        self.linear.set_forcing(1.0, record=False)  # the lifted system's residual is not the iterate's
+        # the lifted system's residual is not the iterate's; the step sets the pairs' starting states
+        self.linear.set_forcing(1.0, record=False, cap=self.settings.lift_forcing)
         u0 = p.u.x.array[:ev.R_free.getLocalSize()].copy()
         z0 = p.contact.z.copy() if p.contact is not None else None
         lifted = _Evaluation(R_lifted, H_lifted, ev.law, ev.scale, math.nan, math.nan, ev.lin)

@@ -102,6 +102,12 @@ class MonolithicOptions:
         step's own reduction of the residual, at most ``max_forcing`` (``docs/theory.md``).
     max_forcing
         Iterative solver: the loosest Krylov tolerance of a Newton step, in (0, 0.9].
+    lift_forcing
+        Iterative solver: the Krylov tolerance of an increment's lifted predictor step (the step
+        that carries the prescribed displacements' jump), in (0, 0.9]. It is tighter than
+        ``max_forcing`` because that step sets the pairs' starting states: an inexact one can put a
+        pair on the wrong branch (slip for stick), which the semismooth iterations leave only after
+        many steps, and a frictional path then follows another history (``docs/theory.md``).
     consistent_geometry
         Current-geometry rigid obstacles, node-to-surface and dual mortar pairs: re-evaluate them at every
         Newton iterate and add the geometric terms (the normal's and the friction frame's rotation; for
@@ -124,6 +130,7 @@ class MonolithicOptions:
     lag_preconditioner: bool = True
     forcing: str = "eisenstat-walker"
     max_forcing: float = 1e-2
+    lift_forcing: float = 1e-4
     consistent_geometry: bool = True
     globalisation: Globalisation = field(default_factory=lambda: Globalisation(
         min_step=1.0 / 64, watchdog=6, watchdog_progress=0.5, watchdog_restarts=2,
@@ -137,6 +144,7 @@ class MonolithicOptions:
         if self.forcing not in FORCING_RULES:
             raise ValueError(f"MonolithicOptions: forcing = {self.forcing!r}; expected one of {list(FORCING_RULES)}")
         _check_real("MonolithicOptions", "max_forcing", self.max_forcing, 0.0, 0.9)
+        _check_real("MonolithicOptions", "lift_forcing", self.lift_forcing, 0.0, 0.9)
         if isinstance(self.augmentation, bool) or not isinstance(self.augmentation, numbers.Real) \
                 or not (math.isfinite(float(self.augmentation)) and self.augmentation > 0):
             raise ValueError(f"MonolithicSolver: augmentation = {self.augmentation!r}; expected a finite value > 0 "

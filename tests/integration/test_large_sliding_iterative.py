@@ -12,25 +12,32 @@ from dolfinx_nnqem.solvers import MonolithicOptions, SolverOptions, make_solver,
 OPTIONS = SolverOptions(rtol=1e-10, max_iterations=40)
 
 
-def _slide(discretisation: str, linear_solver: str, consistent: bool):
+def _slide(discretisation: str, linear_solver: str, consistent: bool, degree: int = 1):
     """The frictional block slide (μ_f = 0.3, 12 increments); (u, the slave body's contact force, Newton
     iterations per increment)."""
-    problem = sliding_blocks(slide=0.4, mu_f=0.3, discretisation=discretisation)
+    problem = sliding_blocks(slide=0.4, mu_f=0.3, discretisation=discretisation, degree=degree)
     settings = MonolithicOptions(consistent_geometry=consistent, linear_solver=linear_solver)
     with make_solver("monolithic", problem, OPTIONS, monolithic=settings) as solver:
         results = solve_load_steps(problem, solver, 12)
     return problem.u.x.array.copy(), slave_force(problem), [r.iterations for r in results]
 
 
-@pytest.mark.parametrize("discretisation", ["node-to-surface", "mortar"])
-def test_the_iterative_solver_takes_the_consistent_geometry(discretisation):
-    u_d, f_d, its_d = _slide(discretisation, "direct", True)
-    u_i, f_i, its_i = _slide(discretisation, "iterative", True)
-    _, _, its_frozen = _slide(discretisation, "iterative", False)
+@pytest.mark.parametrize("discretisation, degree", [
+    pytest.param("node-to-surface", 1, id="node-to-surface"), pytest.param("mortar", 1, id="mortar"),
+    pytest.param("node-to-surface", 2, id="node-to-surface-q2")])
+def test_the_iterative_solver_takes_the_consistent_geometry(discretisation, degree):
+    """Degree 2: Q2 hexahedra, whose node-to-surface pairs get the quadratic facets' consistent terms
+    (``contact/quadratic_surface_stiffness.py``). With the lifted predictor solved only to η_max = 1e-2
+    instead of ``lift_forcing`` its first increment took 20 Newton iterations and the slide another
+    friction history (u 1.6e-8, force 2.8e-7 from the direct solver's at the end)."""
+    u_d, f_d, its_d = _slide(discretisation, "direct", True, degree)
+    u_i, f_i, its_i = _slide(discretisation, "iterative", True, degree)
+    _, _, its_frozen = _slide(discretisation, "iterative", False, degree)
     du = np.abs(u_i - u_d).max() / np.abs(u_d).max()
     df = np.abs(np.asarray(f_i) - np.asarray(f_d)).max() / np.abs(np.asarray(f_d)).max()
     print(f"\n  {discretisation}: Newton iterations, iterative consistent {sum(its_i)} {its_i}, direct consistent "
           f"{sum(its_d)}, iterative frozen {sum(its_frozen)} {its_frozen}; state against the direct solver's: "
           f"u {du:.1e}, force {df:.1e}")
     assert du < 1e-9 and df < 1e-9
-    assert sum(its_i) <= 1.3 * sum(its_d) and sum(its_i) < 0.4 * sum(its_frozen)
+    # Q2: one inexact step more than the direct solver in most slip increments (58 against 45 measured)
+    assert sum(its_i) <= (1.3 if degree == 1 else 1.45) * sum(its_d) and sum(its_i) < 0.4 * sum(its_frozen)

@@ -70,6 +70,25 @@ def test_bad_forcing_options_are_refused(forcing, max_forcing, match):
         MonolithicOptions(linear_solver="iterative", forcing=forcing, max_forcing=max_forcing)
 
 
+def test_the_lifted_predictor_is_solved_to_lift_forcing():
+    """The increment's lifted step (ε = 1, not recorded) gets min(η, lift_forcing) under either rule:
+    it sets the pairs' starting states (``MonolithicOptions.lift_forcing``)."""
+    for forcing in FORCING_RULES:
+        solver = _solver(forcing, max_forcing=1e-2)
+        try:
+            solver.set_forcing(1.0, record=False, cap=MonolithicOptions().lift_forcing)
+            assert solver.ksp.getTolerances()[0] == pytest.approx(1e-4)
+            assert _eta(solver, 1.0) == pytest.approx(1e-2)  # the Newton steps after it: η_max again
+        finally:
+            solver.destroy()
+
+
+@pytest.mark.parametrize("value", [0.0, 1.0, math.nan])
+def test_a_bad_lift_forcing_is_refused(value):
+    with pytest.raises(ValueError, match="lift_forcing"):
+        MonolithicOptions(linear_solver="iterative", lift_forcing=value)
+
+
 def test_forcing_rules_are_listed():
     assert set(FORCING_RULES) == {"eisenstat-walker", "quadratic"}
     assert MonolithicOptions().forcing in FORCING_RULES
