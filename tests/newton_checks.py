@@ -70,3 +70,35 @@ def newton_matrix_against_differences(problem, solver, seed: int = 0) -> tuple[f
 
     u_rows, pair_rows = slice(0, n_u), slice(n_u, None)
     return error(u_rows, Jd), error(pair_rows, Jd), error(u_rows, J_frozen_d), error(pair_rows, J_frozen_d)
+
+
+def direct_step_in_augmented_system(problem, options, leave_out, min_sliding: int = 1) -> tuple[float, float]:
+    """The direct solver's Newton step at a sliding iterate (load factor 0.52 after 8 increments to 0.5),
+    put into the iterative solver's augmented system: |J_aug d − b_aug| / |b_aug|, then the same after
+    ``leave_out()`` (which takes a part of the augmentation away, e.g. by a monkeypatch). The first is
+    round-off where the augmented system holds every term of the direct one."""
+    from dolfinx_nnqem.solvers import MonolithicOptions, make_solver, solve_load_steps
+
+    settings = {kind: MonolithicOptions(linear_solver=kind) for kind in ("direct", "iterative")}
+    with make_solver("monolithic", problem, options, monolithic=settings["direct"]) as direct, \
+            make_solver("monolithic", problem, options, monolithic=settings["iterative"]) as iterative:
+        solve_load_steps(problem, direct, 8, final_load_factor=0.5)
+        problem.apply_prescribed_displacements(0.52)
+        ev = direct.evaluate()
+        assert np.count_nonzero(ev.law.state == 2) >= min_sliding
+        du, dz = direct.newton_direction(ev)
+
+        def residual() -> float:
+            J, b = iterative._augmented_system(iterative.evaluate())
+            x, r = b.duplicate(), b.duplicate()
+            x.getArray()[:] = np.concatenate([du, dz.ravel()])
+            J.mult(x, r)
+            r.axpy(-1.0, b)
+            out = r.norm() / b.norm()
+            for vector in (x, r):
+                vector.destroy()
+            return out
+
+        error = residual()
+        leave_out()
+        return error, residual()

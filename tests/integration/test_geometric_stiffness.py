@@ -19,6 +19,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 from mpi4py import MPI
+from newton_checks import direct_step_in_augmented_system
 
 from dolfinx_nnqem.cases.large_sliding import obstacle_force, sliding_blocks, sliding_sphere
 from dolfinx_nnqem.contact.obstacles import Cylinder, Plane, Sphere
@@ -147,30 +148,10 @@ def test_iterative_linear_solver_takes_the_geometric_terms(monkeypatch):
     from dolfinx_nnqem.solvers.block_system import AugmentedSystem
 
     problem = sliding_sphere(8, mu_f=0.3, shape="cylinder")
-    settings = {kind: MonolithicOptions(linear_solver=kind) for kind in ("direct", "iterative")}
-    with make_solver("monolithic", problem, OPTIONS, monolithic=settings["direct"]) as direct, \
-            make_solver("monolithic", problem, OPTIONS, monolithic=settings["iterative"]) as iterative:
-        solve_load_steps(problem, direct, 8, final_load_factor=0.5)
-        problem.apply_prescribed_displacements(0.52)
-        ev = direct.evaluate()
-        assert np.count_nonzero(ev.law.state == 2) >= 3
-        du, dz = direct.newton_direction(ev)
-
-        def residual() -> float:
-            J, b = iterative._augmented_system(iterative.evaluate())
-            x, r = b.duplicate(), b.duplicate()
-            x.getArray()[:] = np.concatenate([du, dz.ravel()])
-            J.mult(x, r)
-            r.axpy(-1.0, b)
-            out = r.norm() / b.norm()
-            for vector in (x, r):
-                vector.destroy()
-            return out
-
-        error = residual()
-        monkeypatch.setattr(AugmentedSystem, "augmented_geometric_blocks",
-                            lambda self, terms, dH_dw: np.zeros_like(terms.W))
-        error_without = residual()
+    error, error_without = direct_step_in_augmented_system(
+        problem, OPTIONS, lambda: monkeypatch.setattr(AugmentedSystem, "augmented_geometric_blocks",
+                                                      lambda self, terms, dH_dw: np.zeros_like(terms.W)),
+        min_sliding=3)
     print(f"\n  |J_aug d_direct − b_aug|/|b_aug| = {error:.1e}, {error_without:.1e} without the augmentation's W")
     assert error < 1e-12
     assert error_without > 100 * error

@@ -17,7 +17,7 @@ coefficients (a_ik a_il K_i on the u rows, a_il W_i on the pair rows). On the sp
 
 import numpy as np
 import pytest
-from newton_checks import last_step, newton_matrix_against_differences, residuals
+from newton_checks import direct_step_in_augmented_system, last_step, newton_matrix_against_differences, residuals
 
 from dolfinx_nnqem.cases.large_sliding import PRESSED_AT, obstacle_force, sliding_sphere
 from dolfinx_nnqem.solvers import MonolithicOptions, NNEQM1Options, SolverOptions, make_solver, solve_load_steps
@@ -64,30 +64,10 @@ def test_iterative_linear_solver_takes_the_combined_terms(monkeypatch):
     from dolfinx_nnqem.solvers.block_system import AugmentedSystem
 
     problem = _p2_sphere("polar")
-    settings = {kind: MonolithicOptions(linear_solver=kind) for kind in ("direct", "iterative")}
-    with make_solver("monolithic", problem, OPTIONS, monolithic=settings["direct"]) as direct, \
-            make_solver("monolithic", problem, OPTIONS, monolithic=settings["iterative"]) as iterative:
-        solve_load_steps(problem, direct, 8, final_load_factor=0.5)
-        problem.apply_prescribed_displacements(0.52)
-        ev = direct.evaluate()
-        assert np.count_nonzero(ev.law.state == 2) >= 1
-        du, dz = direct.newton_direction(ev)
-
-        def residual() -> float:
-            J, b = iterative._augmented_system(iterative.evaluate())
-            x, r = b.duplicate(), b.duplicate()
-            x.getArray()[:] = np.concatenate([du, dz.ravel()])
-            J.mult(x, r)
-            r.axpy(-1.0, b)
-            out = r.norm() / b.norm()
-            for vector in (x, r):
-                vector.destroy()
-            return out
-
-        error = residual()
-        monkeypatch.setattr(AugmentedSystem, "augmented_combined_blocks",
-                            lambda self, terms, dH_dw: [0.0 * block for _, block in terms.node_blocks()])
-        error_without = residual()
+    error, error_without = direct_step_in_augmented_system(
+        problem, OPTIONS, lambda: monkeypatch.setattr(
+            AugmentedSystem, "augmented_combined_blocks",
+            lambda self, terms, dH_dw: [0.0 * block for _, block in terms.node_blocks()]))
     print(f"\n  |J_aug d_direct − b_aug|/|b_aug| = {error:.1e}, {error_without:.1e} without the combined W's augmentation")
     assert error < 1e-12
     assert error_without > 100 * error
