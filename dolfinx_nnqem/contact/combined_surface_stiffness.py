@@ -178,6 +178,8 @@ def combined_reprojected_pairs(pairs: SurfacePairs, combination: NodeCombination
     :class:`~dolfinx_nnqem.contact.mortar_linearisation.MortarPoints` (per pair its
     :class:`~dolfinx_nnqem.contact.mortar_linearisation.PairGeometry`, normal and Δu at its nodes).
     """
+    if pairs.num_local == 0:  # on 3 ranks the slave surface may lie on two of them
+        return pairs, MortarPoints([], np.zeros((0, 3)), [])
     master, slaves = moved.facets_of(0), moved.nodes[1]
     rows = combination.take(np.searchsorted(slaves.index, pairs.slave_blocks))
     involved, position = np.unique(rows.columns, return_inverse=True)  # the rows' slave nodes, by position
