@@ -41,7 +41,7 @@ def _state(xi_b=(0.3, 0.45), offset_b=(0.02, 0.03, 0.12)):
     """All positions (3 slave nodes, 9 master nodes), the positions at u_n, λ."""
     master = _master()
     offsets = [(0.02, -0.03, 0.21), (-0.01, 0.02, 0.15), offset_b]
-    points = [((0.35, 0.3)), (0.15, 0.2), xi_b]
+    points = [(0.35, 0.3), (0.15, 0.2), xi_b]
     slaves = [facet_geometry(master[FACETS[f] - 3][None], np.array([xi]))[0][0, 0] + np.array(o)
               for f, xi, o in zip(ON, points, offsets)]
     x = np.vstack([slaves, master])
