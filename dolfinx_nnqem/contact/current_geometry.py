@@ -261,11 +261,10 @@ class SurfaceTracker:
     @property
     def combines_nodes(self) -> bool:
         """True if the pairs act on combinations of slave nodes (6-node triangle slave facets, P2
-        tetrahedra: the transformed basis). Their geometry is then frozen within a solve and evaluated
-        again between solves, as :class:`CombinedObstacleTracker`'s: the exact derivative of a pair couples
-        every node of its combination with each one's own master facet, which the consistent terms
-        (:mod:`~dolfinx_nnqem.contact.surface_stiffness`, one slave node and one master facet per pair)
-        do not hold."""
+        tetrahedra: the transformed basis). Re-evaluated at every Newton iterate, such a pair couples
+        every node of its combination with each one's own master facet
+        (:mod:`~dolfinx_nnqem.contact.combined_surface_stiffness`; one slave node and one master facet
+        per pair otherwise: :mod:`~dolfinx_nnqem.contact.surface_stiffness`)."""
         combination = self.surfaces.nodes[1].combination
         return len(combination.columns) != len(self.surfaces.nodes[1].index)
 

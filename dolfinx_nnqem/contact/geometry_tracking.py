@@ -374,10 +374,8 @@ class ContactGeometry:
     @property
     def reprojecting(self) -> list[bool]:
         """Per interface: True if :meth:`refresh_surfaces` re-evaluates it (node-to-surface and mortar in
-        the current geometry; not node-to-surface pairs that combine slave nodes, P2 tetrahedra: those are
-        re-evaluated between solves)."""
-        return [isinstance(t, MortarTracker) or (isinstance(t, SurfaceTracker) and not t.combines_nodes)
-                for t in self._trackers]
+        the current geometry)."""
+        return [isinstance(t, (MortarTracker, SurfaceTracker)) for t in self._trackers]
 
     def refresh_surfaces(self, u: dolfinx.fem.Function, u_n: dolfinx.fem.Function, load_factor_n: float) -> None:
         """Re-evaluate the node-to-surface and mortar interfaces of :attr:`reprojecting` at u, keeping their
@@ -395,7 +393,7 @@ class ContactGeometry:
             return
         interfaces, new = self._model.interfaces, {}
         for k, tracker in enumerate(self._trackers):
-            if isinstance(tracker, SurfaceTracker) and not tracker.combines_nodes:
+            if isinstance(tracker, SurfaceTracker):
                 new[k], self._closest_points[k] = _reprojected(interfaces[k].pairs, tracker, u, u_n,
                                                                self._supports_of(k, tracker))
             elif isinstance(tracker, MortarTracker):
@@ -450,21 +448,32 @@ class ContactGeometry:
 
 
 def _reprojected(pairs: PairSet, tracker: SurfaceTracker, u, u_n, supports: tuple[np.ndarray, np.ndarray] | None
-                 ) -> tuple[SurfacePairs, ClosestPoints]:
+                 ) -> tuple[SurfacePairs, ClosestPoints | MortarPoints]:
     """The interface's pairs projected again at u, and where they project (collective); ``supports``:
-    the prescribed components of its slave nodes and master vertices (:meth:`ContactGeometry._supports_of`)."""
+    the prescribed components of its slave nodes and master vertices (:meth:`ContactGeometry._supports_of`).
+    Pairs that combine slave nodes (P2 tetrahedra) get their geometry as a mortar pair's
+    (:mod:`~dolfinx_nnqem.contact.combined_surface_stiffness`)."""
     assert isinstance(pairs, SurfacePairs)  # a node-to-surface tracker's pairs
     master = tracker.surfaces.facets_of(0)
     u_n_master = displacement_at(u_n, master.nodes.ravel()).reshape(master.x.shape)
-    start = u.function_space.dofmap.index_map.local_range[0]
-    u_n_slave = u_n.x.array.reshape(-1, 3)[pairs.slave_blocks - start]  # the pairs' slave nodes are owned
     size = facet_size(master)
     known = None
     if supports is not None:
         slave = supports[0][np.searchsorted(tracker.surfaces.nodes[1].index, pairs.slave_blocks)]
         known = Supports(slave, supports[1], IN_PLANE * size)
-    return reprojected_pairs(pairs, tracker.surfaces, moved_surfaces(tracker.surfaces, u), u_n_slave, u_n_master,
-                             tracker.gap_rounding, EDGE_ALLOWANCE * size, size, known)
+    moved = moved_surfaces(tracker.surfaces, u)
+    if tracker.combines_nodes:  # imported here: its numba kernels are compiled only where quadratic facets are
+        from dolfinx_nnqem.contact.combined_surface_stiffness import combined_reprojected_pairs
+
+        facets = tracker.gathered_facets(pairs) if tracker.facets is None else tracker.facets  # same on every rank
+        nodes = tracker.surfaces.nodes[1]
+        return combined_reprojected_pairs(pairs, nodes.combination, tracker.surfaces, moved, facets,
+                                          displacement_at(u_n, nodes.index), u_n_master, tracker.gap_rounding,
+                                          EDGE_ALLOWANCE * size, size, known)
+    start = u.function_space.dofmap.index_map.local_range[0]
+    u_n_slave = u_n.x.array.reshape(-1, 3)[pairs.slave_blocks - start]  # the pairs' slave nodes are owned
+    return reprojected_pairs(pairs, tracker.surfaces, moved, u_n_slave, u_n_master, tracker.gap_rounding,
+                             EDGE_ALLOWANCE * size, size, known)
 
 
 def _remortared(pairs: PairSet, tracker: MortarTracker, u, u_n) -> tuple[SurfacePairs, MortarPoints]:

@@ -19,8 +19,8 @@ The gap, slip and force terms W, K built from these are those of linear facets
 (:func:`~dolfinx_nnqem.contact.surface_stiffness.pair_terms`, with the quadratic N_k, ∂N_k/∂ξ). They
 hold where every pair is one slave node: Q2 hexahedra (9-node quadrilateral slave facets). On P2
 tetrahedra a pair acts on a combination of the 6-node triangle's slave nodes (the transformed basis),
-which the current geometry re-evaluates between solves instead
-(:attr:`~dolfinx_nnqem.contact.current_geometry.SurfaceTracker.combines_nodes`).
+each node with its own closest point and these derivatives
+(:mod:`~dolfinx_nnqem.contact.combined_surface_stiffness`).
 """
 
 from __future__ import annotations

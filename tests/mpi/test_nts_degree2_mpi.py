@@ -3,8 +3,9 @@
 The frictional block slid 1.6 master facets over another (μ_f = 0.3, tests/mpi_scripts/large_sliding.py)
 with degree-2 displacements: on Q2 hexahedra (every slave node a pair, re-evaluated at every Newton
 iterate by the monolithic solver with the quadratic facets' geometric terms, K assembled across the
-ranks) and on P2 tetrahedra (pairs combining the nodes of 6-node triangles, re-evaluated between
-solves), monolithic, NNEQM1 and NNEQM2: the serial pair forces and resultant.
+ranks) and on P2 tetrahedra (pairs combining the nodes of 6-node triangles, each on its own master
+facet, re-evaluated at every iterate by the monolithic solver with their geometric terms, between solves
+by NNEQM1 and NNEQM2), monolithic, NNEQM1 and NNEQM2: the serial pair forces and resultant.
 """
 
 import numpy as np
