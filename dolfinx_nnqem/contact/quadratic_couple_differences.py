@@ -6,8 +6,10 @@ of the slave facet and the integrals over the overlaps of the sub-facets
 
     K_ik = ∫ N̂_i (N_k ∘ π) dA,   G_i = ∫ N̂_i g0 dA,   g0 = n_0 · (x_m(ξ_m) − x_s(ξ_s)),
 
-so that ∂M = ∂A_e K + A_e ∂K (∂A_e: central differences of
-:func:`~dolfinx_nnqem.contact.dual_quadratic.quadratic_dual_coefficients`, once per slave facet).
+so that ∂M = ∂A_e K + A_e ∂K, with A_e = D_e M_e⁻¹ of
+:func:`~dolfinx_nnqem.contact.dual_quadratic.quadratic_dual_coefficients` and
+∂A_e = ∂D_e M_e⁻¹ − A_e ∂M_e M_e⁻¹, ∂M_e the quadrature of N̂ N̂ᵀ ∂|x_ξ × x_η|
+(:func:`dual_coefficient_derivatives`).
 
 K and G are sums over Gauss points whose places (the clip of two projected sub-facets, the
 local coordinates ζ → ξ_s, ξ_m, the ratio of the area elements) depend on the nodes' in-plane
@@ -46,9 +48,10 @@ from dolfinx_nnqem.contact.dual_quadratic import (SUB_FACETS, _plane_coordinates
                                                   _to_parent, quadratic_dual_coefficients, segment_rule)
 from dolfinx_nnqem.contact.mortar_geometry import (MIN_FACING_COSINE, RELATIVE_TOLERANCE, _clip, _cross, _dot,
                                                    _polygon_area)
-from dolfinx_nnqem.contact.quadratic_facets import reference_nodes, shape_at, transformation
+from dolfinx_nnqem.contact.quadratic_facets import (reference_nodes, reference_rule, shape_at, shape_derivatives,
+                                                    transformation, transformed_shape_functions)
 
-__all__ = ["quadratic_couple_derivatives"]
+__all__ = ["dual_coefficient_derivatives", "quadratic_couple_derivatives"]
 
 # numba's on-disk cache invalidates a kernel when ITS file changes, not a callee's: after editing a
 # kernel of dual_quadratic, mortar_geometry or quadratic_facets that these call, clear
@@ -344,6 +347,31 @@ def _all_couple_derivatives(ci, cj, xs, sign_s, xm, sign_m, T, sub_s, sub_m, ref
     return K, G, dK, dG
 
 
+def dual_coefficient_derivatives(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The dual coefficients A_e (m, k, k) of quadratic slave facets
+    (:func:`~dolfinx_nnqem.contact.dual_quadratic.quadratic_dual_coefficients`) and their derivatives
+    (m, 3k, k, k) with respect to the facets' node coordinates: ∂A_e = ∂D_e M_e⁻¹ − A_e ∂M_e M_e⁻¹,
+    ∂M_e = Σ_q w_q N̂(ξ_q) N̂(ξ_q)ᵀ ∂|x_ξ × x_η|(ξ_q) and ∂D_e its row sums (module docstring)."""
+    x = np.asarray(x, dtype=np.float64)
+    m, k = x.shape[:2]
+    A, _ = quadratic_dual_coefficients(x)
+    xi, w = reference_rule(k)
+    dN = shape_derivatives(k, xi)  # (q, k, 2)
+    Nhat = transformed_shape_functions(k, xi)  # (q, k)
+    J = np.einsum("qab,maj->mqbj", dN, x)  # rows x_ξ, x_η
+    c = np.cross(J[:, :, 0], J[:, :, 1])
+    length = np.linalg.norm(c, axis=2)
+    u, v = np.cross(J[:, :, 1], c), np.cross(c, J[:, :, 0])  # ∂|c|/∂x_b = (∂_ξN_b u + ∂_ηN_b v) / |c|
+    d_length = ((dN[None, :, :, 0, None] * u[:, :, None] + dN[None, :, :, 1, None] * v[:, :, None])
+                / length[:, :, None, None]).reshape(m, len(w), 3 * k)
+    NN = (Nhat[:, :, None] * Nhat[:, None, :]).reshape(len(w), k * k)
+    Me = ((w * length) @ NN).reshape(m, k, k)
+    dMe = (np.swapaxes(d_length * w[None, :, None], 1, 2) @ NN).reshape(m, 3 * k, k, k)
+    inverse = np.linalg.inv(Me)[:, None]
+    dA = dMe.sum(axis=3)[..., None] * inverse - A[:, None] @ dMe @ inverse
+    return A, dA
+
+
 def quadratic_couple_derivatives(xs: np.ndarray, sign_s: np.ndarray, xm: np.ndarray, sign_m: np.ndarray,
                                  ci: np.ndarray, cj: np.ndarray, step: float,
                                  relative_tolerance: float = RELATIVE_TOLERANCE,
@@ -375,12 +403,8 @@ def quadratic_couple_derivatives(xs: np.ndarray, sign_s: np.ndarray, xm: np.ndar
     xs = np.ascontiguousarray(xs, dtype=np.float64)
     xm = np.ascontiguousarray(xm, dtype=np.float64)
     facets, at = np.unique(ci, return_inverse=True)  # the slave facets of the couples
-    plain = xs[facets].reshape(-1, 1, S)
-    e = step * np.eye(S)[None]
-    A_moved = quadratic_dual_coefficients(np.concatenate([plain + e, plain - e], axis=1)
-                                          .reshape(-1, ks, 3))[0].reshape(len(facets), 2, S, ks, ks)
-    A = quadratic_dual_coefficients(xs[facets])[0][at]  # (c, ks, ks)
-    dA = ((A_moved[:, 0] - A_moved[:, 1]) / (2.0 * step))[at]  # (c, S, ks, ks)
+    A, dA = dual_coefficient_derivatives(xs[facets])
+    A, dA = A[at], dA[at]  # (c, ks, ks), (c, S, ks, ks)
     qb, qw = segment_rule()
     K, G, dK, dG = _all_couple_derivatives(np.asarray(ci, dtype=np.int64), np.asarray(cj, dtype=np.int64), xs,
                                            np.asarray(sign_s, dtype=np.float64), xm,
