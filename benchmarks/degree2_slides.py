@@ -16,7 +16,8 @@ increment, the solves, and the re-evaluations of the surface pairs: at the Newto
 between solves (the trackers' ``pairs_at``), their count and CPU seconds each; then the ratios
 monolithic / NNEQM1. CPU seconds are ``time.process_time`` (the machine may be shared: wall
 seconds are printed too). With ``--save DIR`` every run's displacements and pair forces go to
-``DIR/<case>-<method>.npz``; ``--compare DIR`` prints the largest differences from such a run::
+``DIR/<case>-<method>.npz`` (the pair forces by slave node); ``--compare DIR`` prints the largest
+differences from such a run::
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/degree2_slides.py [--cases mortar-q2,nts-q2]
         [--methods monolithic,nneqm1] [--save DIR] [--compare DIR]
@@ -90,8 +91,10 @@ def run(case: str, method: str, clock: Clock) -> dict:
     print(f"{case:10s} {method:10s} {cpu:7.1f} s CPU ({wall:6.1f} s wall), {cpu / len(results):.2f} s per "
           f"increment; Newton {sum(iterations)} {iterations}; solves {sum(r.report.geometry_passes for r in results)}; "
           f"re-evaluations at iterates {clock.line('iterate')}, between solves {clock.line('between')}", flush=True)
+    blocks = np.concatenate([interface.pairs.slave_blocks for interface in problem.contact.interfaces])
+    order = np.argsort(blocks, kind="stable")  # pairs added between solves may come in another order
     return {"cpu": cpu, "iterations": sum(iterations), "u": problem.u.x.array.copy(),
-            "lam": problem.contact.force(), "force": slave_force(problem),
+            "lam": problem.contact.force()[order], "force": slave_force(problem),
             "iterate": clock.seconds.get("iterate", 0.0) / max(clock.calls.get("iterate", 0), 1)}
 
 
