@@ -7,11 +7,12 @@ shares; what differs is where the pieces come from:
 
 * the couple integrals M_c, g̃_c are those of :mod:`~dolfinx_nnqem.contact.dual_quadratic` (each
   facet split into four linear sub-facets, the quadratic maps evaluated at the Gauss points); their
-  derivatives are central differences with respect to the 3 (k_e + k_f) coordinates of ALL the
-  nodes of the two quadratic facets (vertices, edge nodes, quad9 centres), the moved slave facet's
-  dual coefficients A_e computed again; only the pairs of sub-facets whose Gauss points a coordinate
-  moves are integrated again, the others' derivatives are explicit
-  (:func:`~dolfinx_nnqem.contact.quadratic_couple_differences.quadratic_couple_derivatives`);
+  derivatives with respect to the 3 (k_e + k_f) coordinates of ALL the nodes of the two quadratic
+  facets (vertices, edge nodes, quad9 centres) are those of
+  :func:`~dolfinx_nnqem.contact.quadratic_couple_differences.quadratic_couple_derivatives`: central
+  differences in the nodes' projected in-plane points (each re-integrating the pairs of sub-facets
+  that hold the node), the rest of the chain rule (the node's motion, the turn of the auxiliary
+  plane, the integrands at fixed Gauss points, the dual coefficients A_e) exact;
 * the nodal normal is n = −ν/|ν| with ν = Σ_e ∫_e N̂_j n dA, the moments of
   :func:`~dolfinx_nnqem.contact.quadratic_facets.nodal_integrals` summed over the slave facets e
   around node j. A moment is a quadrature of N̂_j(ξ_q) x_ξ × x_η, bilinear in the facet's nodes, so

@@ -15,7 +15,8 @@ from test_quadratic_mortar_linearisation import _area_vectors, _facets, _grid, _
 
 from dolfinx_nnqem.contact.dual_quadratic import (integrate_quadratic_couples, quadratic_candidate_couples,
                                                   quadratic_dual_coefficients)
-from dolfinx_nnqem.contact.quadratic_couple_differences import dual_coefficient_derivatives, quadratic_couple_derivatives
+from dolfinx_nnqem.contact.quadratic_couple_differences import (dual_coefficient_derivatives,
+                                                                quadratic_couple_derivatives)
 from dolfinx_nnqem.contact.quadratic_facets import outward_signs, reference_nodes
 
 STEP = 1e-6
@@ -88,7 +89,8 @@ def test_flat_patches_with_edges_on_each_other(triangles, offset, tolerance):
     xs, sign_s, xm, sign_m, ci, cj = _couples(ids, np.vstack([s_x, m_x]), _facets(2, s_ids, triangles),
                                               _facets(4, m_ids, triangles))
     error_M, error_g = _compare(xs, sign_s, xm, sign_m, ci, cj)
-    print(f"\n  {'tri6' if triangles else 'quad9'}, offset {offset}: {len(ci)} couples; dM {error_M:.1e}, dg {error_g:.1e}")
+    print(f"\n  {'tri6' if triangles else 'quad9'}, offset {offset}: {len(ci)} couples; "
+          f"dM {error_M:.1e}, dg {error_g:.1e}")
     assert error_M < tolerance and error_g < tolerance
 
 
@@ -97,7 +99,8 @@ def test_dual_coefficient_derivatives_match_central_differences(k):
     """∂A_e of curved, distorted tri6 and quad9 facets against central differences of
     quadratic_dual_coefficients (measured 5e-10 and 3e-9 of the largest entry); A_e itself bit-identical."""
     rng = np.random.default_rng(1)
-    x = np.column_stack([reference_nodes(k), 0.1 * rng.standard_normal(k)])[None] + 0.03 * rng.standard_normal((3, k, 3))
+    x = np.column_stack([reference_nodes(k), 0.1 * rng.standard_normal(k)])[None]
+    x = x + 0.03 * rng.standard_normal((3, k, 3))  # three curved, distorted facets
     A, dA = dual_coefficient_derivatives(x)
     differences = np.empty_like(dA)
     for p in range(3 * k):
