@@ -61,7 +61,7 @@ import numpy.typing as npt
 import scipy.sparse
 
 from dolfinx_nnqem.contact.mortar_geometry import (MIN_FACING_COSINE, RELATIVE_TOLERANCE, MortarIntegrals,
-                                                    _clip, _cross, _dot, _inverse_map, _polygon_area,
+                                                    _clip, _cross, _dot, _inverse_map_into, _polygon_area,
                                                     candidate_couples)
 from dolfinx_nnqem.contact.projection import _cyclic, _shape
 from dolfinx_nnqem.contact.quadratic_facets import (NUM_VERTICES, facet_geometry, nodal_integrals, outward_signs,
@@ -73,7 +73,7 @@ __all__ = ["SEGMENT_RULE_POINTS", "SUB_FACETS", "integrate_quadratic_couples", "
            "quadratic_dual_coefficients", "quadratic_mortar_integrals", "segment_rule"]
 
 # numba's on-disk cache invalidates a kernel when ITS file changes, not a callee's: after editing
-# mortar_geometry's _clip / _inverse_map / _polygon_area, projection._shape or
+# mortar_geometry's _clip / _inverse_map(_into) / _polygon_area, projection._shape or
 # quadratic_facets.shape_at, clear __pycache__/dual_quadratic*.nbi / *.nbc.
 
 SUB_FACETS = {6: np.array([[0, 5, 4], [5, 1, 3], [4, 3, 2], [3, 4, 5]], dtype=np.int64),
@@ -212,14 +212,12 @@ def _sub_polygon(P, ref, nodes):
 
 
 @numba.njit(cache=True)
-def _to_parent(poly, r, y0, y1, zeta, xi):
+def _to_parent(poly, r, y0, y1, zeta, xi, N, dN):
     """ξ of the parent facet at the plane point y through the sub-facet (poly, r); returns
-    |det ∂ξ/∂ζ| / |det ∂y/∂ζ| (0 on failure of the inverse map)."""
+    |det ∂ξ/∂ζ| / |det ∂y/∂ζ| (0 on failure of the inverse map). N (4,), dN (4, 2): work arrays."""
     nv = poly.shape[0]
-    if not _inverse_map(poly, nv, y0, y1, zeta):
+    if not _inverse_map_into(poly, nv, y0, y1, zeta, N, dN):
         return 0.0
-    N = np.empty(nv)
-    dN = np.empty((nv, 2))
     _shape(nv, zeta[0], zeta[1], N, dN)
     xi[0] = 0.0
     xi[1] = 0.0
@@ -274,6 +272,8 @@ def _integrate_segment(poly, n, Ss, rs, Pm, rm, xs, xm, T, A, n0, qb, qw, M, g):
     xa = np.empty(3)
     xb = np.empty(3)
     cr = np.empty(3)
+    N4 = np.empty(4)
+    dN4 = np.empty((4, 2))
     total = 0.0
     failed = 0
     for i in range(n):
@@ -284,8 +284,8 @@ def _integrate_segment(poly, n, Ss, rs, Pm, rm, xs, xm, T, A, n0, qb, qw, M, g):
         for q in range(qw.shape[0]):
             y0 = qb[q, 0] * c0 + qb[q, 1] * poly[i, 0] + qb[q, 2] * poly[j, 0]
             y1 = qb[q, 0] * c1 + qb[q, 1] * poly[i, 1] + qb[q, 2] * poly[j, 1]
-            ratio = _to_parent(Ss, rs, y0, y1, zeta, xi_s)
-            if ratio == 0.0 or _to_parent(Pm, rm, y0, y1, zeta, xi_m) == 0.0:
+            ratio = _to_parent(Ss, rs, y0, y1, zeta, xi_s, N4, dN4)
+            if ratio == 0.0 or _to_parent(Pm, rm, y0, y1, zeta, xi_m, N4, dN4) == 0.0:
                 failed += 1
                 continue
             shape_at(ks, xi_s[0], xi_s[1], Ns, dNs, d2Ns)

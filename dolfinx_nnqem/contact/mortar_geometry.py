@@ -235,20 +235,39 @@ def _inverse_map(P, k, y0, y1, xi):
     quadrilateral and y inside it; one step for a parallelogram). Returns False on failure.
     """
     if k == 3:
-        a0 = P[1, 0] - P[0, 0]
-        a1 = P[1, 1] - P[0, 1]
-        b0 = P[2, 0] - P[0, 0]
-        b1 = P[2, 1] - P[0, 1]
-        r0 = y0 - P[0, 0]
-        r1 = y1 - P[0, 1]
-        det = a0 * b1 - a1 * b0
-        if det == 0.0:
-            return False
-        xi[0] = (r0 * b1 - r1 * b0) / det
-        xi[1] = (a0 * r1 - a1 * r0) / det
-        return True
-    N = np.empty(4)
-    dN = np.empty((4, 2))
+        return _inverse_map_triangle(P, y0, y1, xi)
+    return _inverse_map_quadrilateral(P, y0, y1, xi, np.empty(4), np.empty((4, 2)))
+
+
+@numba.njit(cache=True)
+def _inverse_map_into(P, k, y0, y1, xi, N, dN):
+    """:func:`_inverse_map` with the caller's work arrays N (4,) and dN (4, 2) for a quad4's shape
+    functions (no allocation per point: the degree-2 couple differences call it millions of times)."""
+    if k == 3:
+        return _inverse_map_triangle(P, y0, y1, xi)
+    return _inverse_map_quadrilateral(P, y0, y1, xi, N, dN)
+
+
+@numba.njit(cache=True)
+def _inverse_map_triangle(P, y0, y1, xi):
+    """:func:`_inverse_map` of a tri3: one linear solve."""
+    a0 = P[1, 0] - P[0, 0]
+    a1 = P[1, 1] - P[0, 1]
+    b0 = P[2, 0] - P[0, 0]
+    b1 = P[2, 1] - P[0, 1]
+    r0 = y0 - P[0, 0]
+    r1 = y1 - P[0, 1]
+    det = a0 * b1 - a1 * b0
+    if det == 0.0:
+        return False
+    xi[0] = (r0 * b1 - r1 * b0) / det
+    xi[1] = (a0 * r1 - a1 * r0) / det
+    return True
+
+
+@numba.njit(cache=True)
+def _inverse_map_quadrilateral(P, y0, y1, xi, N, dN):
+    """:func:`_inverse_map` of a quad4: Newton from the centre, N (4,) and dN (4, 2) its work arrays."""
     xi[0] = 0.0
     xi[1] = 0.0
     size = np.inf

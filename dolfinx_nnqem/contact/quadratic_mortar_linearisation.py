@@ -7,9 +7,12 @@ shares; what differs is where the pieces come from:
 
 * the couple integrals M_c, g̃_c are those of :mod:`~dolfinx_nnqem.contact.dual_quadratic` (each
   facet split into four linear sub-facets, the quadratic maps evaluated at the Gauss points); their
-  derivatives are central differences with respect to the 3 (k_e + k_f) coordinates of ALL the
-  nodes of the two quadratic facets (vertices, edge nodes, quad9 centres), the moved slave facet's
-  dual coefficients A_e computed again (:func:`quadratic_couple_derivatives`);
+  derivatives with respect to the 3 (k_e + k_f) coordinates of ALL the nodes of the two quadratic
+  facets (vertices, edge nodes, quad9 centres) are those of
+  :func:`~dolfinx_nnqem.contact.quadratic_couple_differences.quadratic_couple_derivatives`: central
+  differences in the nodes' projected in-plane points (each re-integrating the pairs of sub-facets
+  that hold the node), the rest of the chain rule (the node's motion, the turn of the auxiliary
+  plane, the integrands at fixed Gauss points, the dual coefficients A_e) exact;
 * the nodal normal is n = −ν/|ν| with ν = Σ_e ∫_e N̂_j n dA, the moments of
   :func:`~dolfinx_nnqem.contact.quadratic_facets.nodal_integrals` summed over the slave facets e
   around node j. A moment is a quadrature of N̂_j(ξ_q) x_ξ × x_η, bilinear in the facet's nodes, so
@@ -31,64 +34,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dolfinx_nnqem.contact.dual_quadratic import (integrate_quadratic_couples, quadratic_candidate_couples,
-                                                  quadratic_dual_coefficients, quadratic_mortar_integrals)
+from dolfinx_nnqem.contact.dual_quadratic import quadratic_candidate_couples, quadratic_mortar_integrals
 from dolfinx_nnqem.contact.facet_layout import NodeCombination, node_combination
 from dolfinx_nnqem.contact.mortar import _drop_round_off
 from dolfinx_nnqem.contact.mortar_linearisation import STEP, CoupleDerivatives, _Incidence
+from dolfinx_nnqem.contact.quadratic_couple_differences import quadratic_couple_derivatives
 from dolfinx_nnqem.contact.quadratic_facets import (outward_signs, reference_rule, shape_derivatives,
                                                     transformed_shape_functions)
 from dolfinx_nnqem.contact.surface_pairs import facet_size
 from dolfinx_nnqem.contact.surfaces import GatheredSurfaces
 
-__all__ = ["QuadraticCoupleDerivatives", "QuadraticIncidence", "moment_derivatives", "quadratic_couple_derivatives",
-           "quadratic_couples", "quadratic_interface_derivatives"]
-
-
-def quadratic_couple_derivatives(xs: np.ndarray, sign_s: np.ndarray, xm: np.ndarray, sign_m: np.ndarray,
-                                 ci: np.ndarray, cj: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
-    """Central differences of the integrals of couples (slave facet ``ci``, master facet ``cj``) of
-    quadratic facets.
-
-    Parameters
-    ----------
-    xs, xm
-        (ms, ks, 3), (mm, km, 3) the facets' nodes (:mod:`~dolfinx_nnqem.contact.quadratic_facets`' order).
-    sign_s, sign_m
-        (ms,), (mm,) their :func:`~dolfinx_nnqem.contact.quadratic_facets.outward_signs` (a facet's
-        outward side does not change with a small move of a node).
-    ci, cj
-        (c,) the couples.
-    step
-        The length a coordinate is moved by, each way.
-
-    Returns
-    -------
-    (dM (c, ks, km, P), dg (c, ks, P)): ∂M_c and ∂g̃_c with respect to the P = 3 (ks + km) node
-    coordinates (the slave facet's nodes, then the master's, each x, y, z); the dual coefficients
-    of a moved slave facet are computed again (once per slave facet and coordinate).
-    """
-    c, ks, km = len(ci), xs.shape[1], xm.shape[1]
-    P, S = 3 * (ks + km), 3 * ks
-    e = step * np.eye(P)[None]
-    x = np.concatenate([xs[ci], xm[cj]], axis=1).reshape(c, 1, P)
-    moved = np.concatenate([x + e, x - e], axis=1).reshape(-1, ks + km, 3)  # (c·2P): +h each, then −h each
-    xs_p, xm_p = np.ascontiguousarray(moved[:, :ks]), np.ascontiguousarray(moved[:, ks:])
-    facets, at = np.unique(ci, return_inverse=True)  # the slave facets of the couples
-    A0 = quadratic_dual_coefficients(xs[facets])[0]
-    plain = xs[facets].reshape(-1, 1, S)
-    A_moved = quadratic_dual_coefficients(np.concatenate([plain + e[:, :S, :S], plain - e[:, :S, :S]], axis=1)
-                                          .reshape(-1, ks, 3))[0].reshape(len(facets), 2, S, ks, ks)
-    A = np.broadcast_to(A0[at][:, None, None], (c, 2, P, ks, ks)).copy()
-    A[:, :, :S] = A_moved[at]
-    A = np.ascontiguousarray(A.reshape(-1, ks, ks))
-    every = np.arange(len(moved), dtype=np.int64)
-    M, g, _, _ = integrate_quadratic_couples(every, every, xs_p, np.repeat(sign_s[ci], 2 * P), A, xm_p,
-                                             np.repeat(sign_m[cj], 2 * P))
-    M, g = M.reshape(c, 2, P, ks, km), g.reshape(c, 2, P, ks)
-    dM = (M[:, 0] - M[:, 1]).transpose(0, 2, 3, 1) / (2.0 * step)
-    dg = (g[:, 0] - g[:, 1]).transpose(0, 2, 1) / (2.0 * step)
-    return dM, dg
+__all__ = ["QuadraticCoupleDerivatives", "QuadraticIncidence", "moment_derivatives", "quadratic_couples",
+           "quadratic_interface_derivatives"]
 
 
 def _cross_matrices(v: np.ndarray) -> np.ndarray:

@@ -29,7 +29,7 @@ from dolfinx_nnqem.contact.projection import TIE_TOLERANCE, Projection, _candida
 from dolfinx_nnqem.contact.quadratic_facets import (facet_geometry, is_quadratic, outward_signs, shape_at,
                                                     shape_derivatives, shape_functions)
 
-__all__ = ["project_points_quadratic"]
+__all__ = ["project_onto_facets", "project_points_quadratic"]
 
 NEWTON_MAX_ITERATIONS = 30
 """Bound on the local Newton iterations (interior point and each edge)."""
@@ -270,7 +270,6 @@ def project_points_quadratic(points: npt.ArrayLike, x: npt.ArrayLike, outward: n
     if x.ndim != 3 or not is_quadratic(x.shape[1]) or x.shape[2] != 3 or len(x) == 0 or outward.shape != (len(x), 3):
         raise ValueError(f"expected quadratic facets (m >= 1, 6 or 9, 3) and outward vectors (m, 3), got {x.shape} "
                          f"and {outward.shape}")
-    k = x.shape[1]
     centre, radius = _bounding_balls(x)
     diagonal = float(np.linalg.norm(x.reshape(-1, 3).max(axis=0) - x.reshape(-1, 3).min(axis=0)))
     tie = tie_tolerance * diagonal
@@ -278,6 +277,29 @@ def project_points_quadratic(points: npt.ArrayLike, x: npt.ArrayLike, outward: n
     facet, xi, dist = _project_kernel(points, x, offsets, candidates, tie, NEWTON_MAX_ITERATIONS)
     if max_distance is not None:
         facet[dist > max_distance] = -1
+    return _projection(points, x, outward, facet, xi, dist)
+
+
+def project_onto_facets(points: npt.ArrayLike, x: npt.ArrayLike, outward: npt.ArrayLike,
+                        facets: npt.ArrayLike) -> Projection:
+    """The closest point of each point on its own facet: point i onto facet ``facets[i]`` of the tri6 or
+    quad9 facets (x, outward) of :func:`project_points_quadratic`, all in one call (what that function
+    gives for the one point and the one facet)."""
+    points = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
+    x = np.ascontiguousarray(x, dtype=np.float64)
+    facets = np.ascontiguousarray(facets, dtype=np.int64)
+    if facets.shape != (len(points),) or np.any((facets < 0) | (facets >= len(x))):
+        raise ValueError(f"expected a facet in 0..{len(x) - 1} per point ({len(points)}), got {facets}")
+    offsets = np.arange(len(points) + 1, dtype=np.int64)
+    facet, xi, dist = _project_kernel(points, x, offsets, facets, 0.0, NEWTON_MAX_ITERATIONS)
+    return _projection(points, x, np.asarray(outward, dtype=np.float64), facet, xi, dist)
+
+
+def _projection(points: np.ndarray, x: np.ndarray, outward: np.ndarray, facet: np.ndarray, xi: np.ndarray,
+                dist: np.ndarray) -> Projection:
+    """The :class:`~dolfinx_nnqem.contact.projection.Projection` of ``points`` at the reference points ``xi``
+    of their facets ``facet`` (−1: none)."""
+    k = x.shape[1]
     n = len(points)
     found = facet >= 0
     xi[~found] = np.nan
