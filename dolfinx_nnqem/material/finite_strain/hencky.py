@@ -162,12 +162,14 @@ def _spatial(trial: _Trial, coordinates: np.ndarray) -> np.ndarray:
     return _rotated(trial.r, symmetric_tensors(coordinates)) if trial.rotating else symmetric_tensors(coordinates)
 
 
-def _tangent(trial: _Trial, ret: LogarithmicReturn, F_inv: np.ndarray, P: np.ndarray) -> np.ndarray:
+def _tangent(trial: _Trial, ret: LogarithmicReturn, F_inv: np.ndarray, P: np.ndarray,
+             out: np.ndarray | None = None) -> np.ndarray:
     """∂P_ij/∂F_kl (n, 3, 3, 3, 3) along the nine directions e_k⊗e_l (the module docstring), by the
-    compiled loop over the points of :mod:`.kernels`, given F⁻¹ and P = τ F⁻ᵀ."""
+    compiled loop over the points of :mod:`.kernels`, given F⁻¹ and P = τ F⁻ᵀ; into ``out`` (C-contiguous)
+    if given."""
     from dolfinx_nnqem.material.finite_strain.kernels import hencky_tangent  # (imports numba: here, when needed)
 
-    out = np.empty((F_inv.shape[0], 3, 3, 3, 3))
+    out = np.empty((F_inv.shape[0], 3, 3, 3, 3)) if out is None else out
     hencky_tangent(trial.F_n_inv, trial.left, trial.lam, trial.Q, trial.r, trial.u, trial.eps_bar, ret.D,
                    _COORDINATE_BASIS, symmetric_tensors(ret.tau), F_inv, P, trial.rotating, out)
     return out
@@ -264,10 +266,12 @@ class HenckyAtPoints:
         alpha = back_stresses(alpha_n, ret.deps_p[:, :5], ret.dp, pw.C, pw.gamma)
         return {name: _rotated(r, deviator_tensors(alpha[:, k])) for k, name in enumerate(self.back_stress_names)}
 
-    def update(self, F: np.ndarray, state: FiniteStrainState, tangent: bool = True) -> FiniteStrainResponse:
+    def update(self, F: np.ndarray, state: FiniteStrainState, tangent: bool = True,
+               J: np.ndarray | None = None) -> FiniteStrainResponse:
         """The return map at the deformation gradients ``F`` (n, 3, 3) from the converged ``state``
-        (the module docstring), with the consistent tangent ∂P/∂F if ``tangent``."""
-        F, J = checked_deformation_gradients(F, self.size)
+        (the module docstring), with the consistent tangent ∂P/∂F if ``tangent``; ``J`` = det F if
+        the caller has it (:meth:`~.interface.FiniteStrainMaterial.update`)."""
+        F, J = checked_deformation_gradients(F, self.size, J)
         F = np.ascontiguousarray(F)  # (the compiled steps take C-ordered arrays)
         trial = _trial(F, state, rotating=bool(self.back_stress_names))
         internal = {name: np.asarray(v) for name, v in state.internal.items()}
@@ -283,5 +287,5 @@ class HenckyAtPoints:
             return FiniteStrainResponse(P=P, tau=tau, sigma=sigma, dp=ret.dp, state=new_state,
                                         tangent=_tangent(trial, ret, F_inv, P))
         return FiniteStrainResponse(P=P, tau=tau, sigma=sigma, dp=ret.dp, state=new_state,
-                                    tangent_later=lambda: _tangent(trial, ret, F_inv, P))
+                                    tangent_later=lambda out=None: _tangent(trial, ret, F_inv, P, out))
 
