@@ -447,6 +447,11 @@ def test_an_evaluation_takes_det_f_once_a_point_and_writes_the_tangent_in_place(
     reference = material.update(st.deformation_gradients(problem.u)[body.points], st._converged(body.points)).tangent
     assert np.count_nonzero(st.dp_q.x.array > 0.0) > 0
     assert np.array_equal(st.A_q.x.array.reshape(-1, 3, 3, 3, 3)[body.points], reference)
+    written = {f: getattr(st, f).x.array.copy() for f in ("A_q", "P_q", "sigma_q", "tau_q", "dp_q")}
+    body.rows = body.points  # points that are not consecutive (a body's on some rank): written by index, the same
+    st._evaluated = None
+    st.evaluate(problem.u)
+    assert all(np.array_equal(value, getattr(st, f).x.array) for f, value in written.items())
 
 
 # -- refusals --------------------------------------------------------------------------------------------

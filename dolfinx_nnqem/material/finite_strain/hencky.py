@@ -64,7 +64,8 @@ from dolfinx_nnqem.material.kinematics import (deviator_coordinates, deviator_te
                                                symmetric_tensors)
 from dolfinx_nnqem.material.von_mises import VonMisesAtPoints
 
-__all__ = ["SUPPORTED_POINTWISE", "HenckyAtPoints", "LogarithmicReturn", "algorithmic_tangent", "logarithmic_return"]
+__all__ = ["SUPPORTED_POINTWISE", "HenckyAtPoints", "LogarithmicReturn", "algorithmic_tangent", "flow_tangent",
+           "logarithmic_return"]
 
 SUPPORTED_POINTWISE = (VonMisesAtPoints, IsotropicAtPoints, KinematicAtPoints, DruckerPragerAtPoints, ElasticAtPoints)
 """The pointwise materials the route takes: each is a small-strain return map with C = 2μ on the
@@ -123,9 +124,18 @@ def logarithmic_return(pointwise: PointwiseMaterial, eps_tr: np.ndarray, interna
 
 def algorithmic_tangent(pointwise: PointwiseMaterial, eps_tr: np.ndarray, internal: dict[str, np.ndarray]
                         ) -> np.ndarray:
-    """D = dτ/dε^tr = C (I − ∂Δε_p/∂ε) (n, 6, 6) of :func:`logarithmic_return` at the same arguments:
-    the material's ∂Δε_p/∂e (n, 5, 5) for a deviatoric flow, ∂Δε_p/∂ε (n, 6, 6) otherwise. Apart
-    from the return, for an update whose tangent is asked for later (or never)."""
+    """D = dτ/dε^tr = C (I − ∂Δε_p/∂ε) (n, 6, 6) of :func:`logarithmic_return` at the same arguments
+    (from :func:`flow_tangent`)."""
+    C6, R = flow_tangent(pointwise, eps_tr, internal)
+    return C6[:, :, None] * (np.eye(6) - R)
+
+
+def flow_tangent(pointwise: PointwiseMaterial, eps_tr: np.ndarray, internal: dict[str, np.ndarray]
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """(C (n, 6), ∂Δε_p/∂ε (n, 6, 6)) of :func:`logarithmic_return` at the same arguments, the factors of
+    its algorithmic tangent D = C (I − ∂Δε_p/∂ε): the material's ∂Δε_p/∂e (n, 5, 5) for a deviatoric
+    flow, ∂Δε_p/∂ε (n, 6, 6) otherwise. Apart from the return, for an update whose tangent is asked
+    for later (or never); the compiled tangent forms D point by point (:mod:`.kernels`)."""
     C6 = _moduli(pointwise)
     e = symmetric_coordinates(eps_tr)
     t = _trial_stress(pointwise, C6, e)
@@ -134,7 +144,7 @@ def algorithmic_tangent(pointwise: PointwiseMaterial, eps_tr: np.ndarray, intern
         R[:, :5, :5] = pointwise.plastic_strain_tangent(t, internal)
     else:
         R = pointwise.plastic_strain_tangent(t, internal)
-    return C6[:, :, None] * (np.eye(6) - R)
+    return C6, R
 
 
 @dataclass(frozen=True)
@@ -185,15 +195,15 @@ def _spatial(trial: _Trial, coordinates: np.ndarray) -> np.ndarray:
     return _rotated(trial.r, symmetric_tensors(coordinates)) if trial.rotating else symmetric_tensors(coordinates)
 
 
-def _tangent(trial: _Trial, D: np.ndarray, tau_bar: np.ndarray, F_inv: np.ndarray, P: np.ndarray,
-             out: np.ndarray | None = None) -> np.ndarray:
+def _tangent(trial: _Trial, flow: tuple[np.ndarray, np.ndarray], tau_bar: np.ndarray, F_inv: np.ndarray,
+             P: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """∂P_ij/∂F_kl (n, 3, 3, 3, 3) along the nine directions e_k⊗e_l (the module docstring), by the
-    compiled loop over the points of :mod:`.kernels`, given the algorithmic tangent D, τ̄'s coordinates,
-    F⁻¹ and P = τ F⁻ᵀ; into ``out`` (C-contiguous) if given."""
+    compiled loop over the points of :mod:`.kernels`, given the algorithmic tangent's factors
+    (:func:`flow_tangent`), τ̄'s coordinates, F⁻¹ and P = τ F⁻ᵀ; into ``out`` (C-contiguous) if given."""
     from dolfinx_nnqem.material.finite_strain.kernels import hencky_tangent  # (imports numba: here, when needed)
 
     out = np.empty((F_inv.shape[0], 3, 3, 3, 3)) if out is None else out
-    hencky_tangent(trial.F_n_inv, trial.left, trial.lam, trial.Q, trial.r, trial.u, trial.eps_bar, D,
+    hencky_tangent(trial.F_n_inv, trial.left, trial.lam, trial.Q, trial.r, trial.u, trial.eps_bar, *flow,
                    _COORDINATE_BASIS, symmetric_tensors(tau_bar), F_inv, P, trial.rotating, out)
     return out
 
@@ -304,7 +314,7 @@ class HenckyAtPoints:
         F = np.ascontiguousarray(F)  # (the compiled steps take C-ordered arrays)
         trial = _trial(F, state, rotating=bool(self.back_stress_names))
         internal = {name: np.asarray(v) for name, v in state.internal.items()}
-        ret = logarithmic_return(self.pointwise, trial.eps_bar, internal, tangent=tangent)
+        ret = logarithmic_return(self.pointwise, trial.eps_bar, internal, tangent=False)
         tau, eps_e = _spatial(trial, ret.tau), _spatial(trial, ret.eps_e)
         lam_e, Q_e = _elastic_eigen(trial, eps_e)
         new_internal = {**internal, "p": internal["p"] + ret.dp,
@@ -312,11 +322,10 @@ class HenckyAtPoints:
         b_e, F_inv, P, sigma = (np.empty_like(F) for _ in range(4))
         _exponential_map(F, J, tau, Q_e, lam_e, b_e, F_inv, P, sigma)
         new_state = FiniteStrainState(F.copy(), b_e, new_internal)
-        if ret.D is not None:
-            return FiniteStrainResponse(P=P, tau=tau, sigma=sigma, dp=ret.dp, state=new_state,
-                                        tangent=_tangent(trial, ret.D, ret.tau, F_inv, P))
 
-        def later(out: np.ndarray | None = None) -> np.ndarray:  # D, then ∂P/∂F, from this update's arrays
-            return _tangent(trial, algorithmic_tangent(self.pointwise, trial.eps_bar, internal), ret.tau, F_inv, P, out)
+        def later(out: np.ndarray | None = None) -> np.ndarray:  # D's factors, then ∂P/∂F, from this update's arrays
+            return _tangent(trial, flow_tangent(self.pointwise, trial.eps_bar, internal), ret.tau, F_inv, P, out)
+        if tangent:
+            return FiniteStrainResponse(P=P, tau=tau, sigma=sigma, dp=ret.dp, state=new_state, tangent=later())
         return FiniteStrainResponse(P=P, tau=tau, sigma=sigma, dp=ret.dp, state=new_state, tangent_later=later)
 

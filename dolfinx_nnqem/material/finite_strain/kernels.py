@@ -230,20 +230,25 @@ def _coaxial_point(g, Fn_inv, left, Q, L, D, B, F_inv, P, h, Z, X, Y, c, t, out)
 
 @numba.njit(cache=True)
 def hencky_tangent(Fn_inv: np.ndarray, left: np.ndarray, lam: np.ndarray, Q: np.ndarray, r: np.ndarray,
-                   u: np.ndarray, eps_bar: np.ndarray, D: np.ndarray, B: np.ndarray, tau_bar: np.ndarray,
-                   F_inv: np.ndarray, P: np.ndarray, rotating: bool, out: np.ndarray
+                   u: np.ndarray, eps_bar: np.ndarray, C6: np.ndarray, R: np.ndarray, B: np.ndarray,
+                   tau_bar: np.ndarray, F_inv: np.ndarray, P: np.ndarray, rotating: bool, out: np.ndarray
                    ) -> None:  # pragma: no cover  (compiled)
     """∂P_ij/∂F_kl (n, 3, 3, 3, 3) into ``out`` from the trial state's F_n⁻¹, f b_e,n, λ, Q, r, u and
-    ε̄, the algorithmic tangent D (n, 6, 6) in the coordinates of the basis B (6, 9), τ̄, F⁻¹ and
-    P = τ F⁻ᵀ (the module docstring): direction by direction in the rotated frame if ``rotating``,
-    else (r = I, an isotropic law: :mod:`.hencky`) by the six pairs of :func:`_pair_responses`."""
+    ε̄, the algorithmic tangent D = C (I − ∂Δε_p/∂ε) (n, 6, 6) in the coordinates of the basis B (6, 9)
+    given by its factors C6 (n, 6) and R = ∂Δε_p/∂ε (n, 6, 6) (formed point by point, as numpy's
+    ``C6[:, :, None] * (np.eye(6) - R)``), τ̄, F⁻¹ and P = τ F⁻ᵀ (the module docstring): direction by
+    direction in the rotated frame if ``rotating``, else (r = I, an isotropic law: :mod:`.hencky`) by
+    the six pairs of :func:`_pair_responses`."""
     point, work, c = np.empty((11, 3, 3)), np.empty((8, 3, 3)), np.empty(6)
-    Z, t = np.empty((6, 3, 3)), np.empty(6)
+    Z, t, D = np.empty((6, 3, 3)), np.empty(6), np.empty((6, 6))
     B3 = B.reshape(6, 3, 3)
     for g in range(Fn_inv.shape[0]):
+        for i in range(6):
+            for j in range(6):
+                D[i, j] = C6[g, i] * ((1.0 if i == j else 0.0) - R[g, i, j])
         _log_divided_differences(lam[g], point[3])
         if not rotating:
-            _coaxial_point(g, Fn_inv[g], left[g], Q[g], point[3], D[g], B3, F_inv[g], P[g], point[1], Z, work[0],
+            _coaxial_point(g, Fn_inv[g], left[g], Q[g], point[3], D, B3, F_inv[g], P[g], point[1], Z, work[0],
                            work[1], c, t, out)
             continue
         _point_setup(Fn_inv[g], left[g], Q[g], r[g], u[g], point[1], point[4], work[7], point[5])
@@ -251,4 +256,4 @@ def hencky_tangent(Fn_inv: np.ndarray, left: np.ndarray, lam: np.ndarray, Q: np.
             point[m] = a[g]
         for k in range(3):
             for ll in range(3):
-                _direction(k, ll, g, point, work, c, D[g], B3, out)
+                _direction(k, ll, g, point, work, c, D, B3, out)
