@@ -15,6 +15,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
 import math
@@ -411,6 +412,46 @@ def test_a_tangent_left_out_by_the_internal_force_is_the_one_computed_with_it(ma
     problem.assemble_internal_force()
     problem.assemble_tangent()
     assert not np.array_equal(A_later, st.A_q.x.array)
+
+
+def test_an_evaluation_takes_det_f_once_a_point_and_writes_the_tangent_in_place(monkeypatch):
+    """The state's update computes det F once a Gauss point (its inversion check's J is the one the
+    material takes), and the material writes its tangent into A_q's own array (the body's points are
+    consecutive): A_q equal, bit for bit, to the material's tangent computed on its own."""
+    problem = uniaxial_problem(LAWS["voce"][0], 0.3)
+    solve_load_steps(problem, make_solver("monolithic", problem), 2, final_load_factor=0.5)
+    st = problem.state
+    (body,) = st.bodies
+    material, outs, determinants = body.material, [], []
+
+    class Recording:  # the body's material, recording where its tangent is written
+        size = material.size
+
+        def update(self, F, state, tangent=True, J=None):
+            response = material.update(F, state, tangent, **({} if J is None else {"J": J}))
+            later = response.tangent_later
+
+            def spy(*out):
+                outs.extend(out)
+                return later(*out)
+            return dataclasses.replace(response, tangent_later=spy if later is not None else None)
+
+    det = np.linalg.det
+    monkeypatch.setattr(body, "material", Recording())
+    monkeypatch.setattr(np.linalg, "det", lambda a: determinants.append(np.shape(a)[:-2]) or det(a))
+    problem.u.x.array[:] *= 1.01  # a new iterate, plastic
+    st.evaluate(problem.u)
+    monkeypatch.undo()
+    assert determinants == [(st.p_n.x.array.size,)]  # one det F a Gauss point
+    assert len(outs) == 1 and np.shares_memory(outs[0], st.A_q.x.array)
+    reference = material.update(st.deformation_gradients(problem.u)[body.points], st._converged(body.points)).tangent
+    assert np.count_nonzero(st.dp_q.x.array > 0.0) > 0
+    assert np.array_equal(st.A_q.x.array.reshape(-1, 3, 3, 3, 3)[body.points], reference)
+    written = {f: getattr(st, f).x.array.copy() for f in ("A_q", "P_q", "sigma_q", "tau_q", "dp_q")}
+    body.rows = body.points  # points that are not consecutive (a body's on some rank): written by index, the same
+    st._evaluated = None
+    st.evaluate(problem.u)
+    assert all(np.array_equal(value, getattr(st, f).x.array) for f, value in written.items())
 
 
 # -- refusals --------------------------------------------------------------------------------------------

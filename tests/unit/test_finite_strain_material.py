@@ -419,3 +419,38 @@ def test_bad_deformation_gradients_are_refused(name: str) -> None:
         material.update(np.eye(3), state)
     with pytest.raises(ValueError, match="F is not finite"):
         material.update(_diag(1.0, np.nan, 1.0), state)
+
+
+@pytest.mark.parametrize("name", ["von-mises-linear", "neo-hooke"])
+def test_a_determinant_given_by_the_caller_is_checked_and_taken(name: str) -> None:
+    """The Gauss-point state computes det F once (its inversion check) and hands it over: the update
+    with that J is the update without it, bit for bit, and a J of the wrong shape or ≤ 0 is refused."""
+    material = finite_strain_material(MATERIALS[name], 2)
+    state = material.initial_state()
+    F = np.stack([_diag(1.01, 0.995, 1.0)[0], _rotation((1, 2, 3), 0.3) @ _diag(1.002, 0.99, 1.01)[0]])
+    alone, given = material.update(F, state), material.update(F, state, J=np.linalg.det(F))
+    for a, b in ((alone.P, given.P), (alone.sigma, given.sigma), (alone.tangent, given.tangent),
+                 (alone.state.b_e, given.state.b_e)):
+        assert np.array_equal(a, b)
+    with pytest.raises(ValueError, match=r"J has shape \(1,\); expected \(2,\)"):
+        material.update(F, state, J=np.ones(1))
+    with pytest.raises(ValueError, match=r"det F <= 0 at 1 Gauss point\(s\) \(smallest J = -1"):
+        material.update(F, state, J=np.array([1.0, -1.0]))
+
+
+@pytest.mark.parametrize("name", ["von-mises-voce", "kinematic-af-on-voce", "neo-hooke"])
+def test_the_tangent_computed_later_into_an_array_is_the_updates_tangent(name: str) -> None:
+    """``tangent_later(out)`` writes the update's tangent into ``out`` (the Gauss-point state's
+    quadrature function: no copy) and returns it; bit for bit the tangent computed with the update."""
+    rng = np.random.default_rng(7)
+    material = finite_strain_material(MATERIALS[name], 5)
+    F = np.eye(3) + 0.004 * rng.standard_normal((5, 3, 3))
+    state = material.update(F, material.initial_state(), tangent=False).state
+    F = F @ (np.eye(3) + 0.004 * rng.standard_normal((5, 3, 3)))
+    now, later = material.update(F, state), material.update(F, state, tangent=False)
+    assert later.tangent is None and later.tangent_later is not None and now.tangent is not None
+    out = np.full((5, 3, 3, 3, 3), np.nan)
+    assert later.tangent_later(out) is out
+    assert np.array_equal(out, now.tangent) and np.array_equal(later.tangent_later(), now.tangent)
+    if name != "neo-hooke":
+        assert np.count_nonzero(now.dp > 0.0) >= 3  # (plastic points compared)

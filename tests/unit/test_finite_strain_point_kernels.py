@@ -1,12 +1,13 @@
 """The compiled per-point algebra of the logarithmic-strain route (``material/finite_strain/point_kernels.py``)
 against numpy's batched forms: the Jacobi eigen-decomposition (also at repeated and nearly repeated
-eigenvalues), the elastic trial state and the exponential map."""
+eigenvalues), the elastic trial state, the eigenvalues of a coaxial tensor and the exponential map."""
 
 import numpy as np
 import pytest
 
 import dolfinx_nnqem  # noqa: F401  (first: the PyPI wheel loads MPI/PETSc before dolfinx)
-from dolfinx_nnqem.material.finite_strain.point_kernels import elastic_trial, exponential_map, symmetric_eigen
+from dolfinx_nnqem.material.finite_strain.point_kernels import (coaxial_eigenvalues, elastic_trial, exponential_map,
+                                                                 symmetric_eigen)
 
 
 def _random_rotation(rng) -> np.ndarray:
@@ -135,3 +136,21 @@ def test_exponential_map_keeps_the_digits_of_a_small_strain():
     off = ~np.eye(3, dtype=bool)
     assert np.abs(b_e[:, off] - X[:, off]).max() <= 1e-11 * np.abs(X[:, off]).max()
     assert np.abs(b_e[:, ~off] - (1.0 + X[:, ~off])).max() <= 2.3e-16
+
+
+def test_coaxial_eigenvalues_are_numpys_in_the_given_eigenvectors():
+    """q_aᵀ A q_a (compiled) against numpy's batched form, and the eigenvalues themselves where Q are
+    A's eigenvectors (also repeated ones), to a few ulps of |A|."""
+    rng = np.random.default_rng(5)
+    n = 40
+    Q = np.stack([_random_rotation(rng) for _ in range(n)])
+    values = rng.standard_normal((n, 3))
+    values[:10, 1] = values[:10, 0]  # repeated eigenvalues
+    A = (Q * values[:, None, :]) @ np.swapaxes(Q, 1, 2)
+    A[20:] += 1e-3 * rng.standard_normal((n - 20, 3, 3))  # not coaxial: q_aᵀ A q_a all the same
+    A = 0.5 * (A + np.swapaxes(A, 1, 2))
+    lam = np.empty((n, 3))
+    coaxial_eigenvalues(A, Q, lam)
+    scale = np.abs(A).max(axis=(1, 2))[:, None]
+    assert (np.abs(lam - np.sum(Q * (A @ Q), axis=1)) / scale).max() <= 4e-15
+    assert (np.abs(lam - values) / scale)[:20].max() <= 4e-15

@@ -91,6 +91,16 @@ class FiniteStrainBody:
     tag: int | None  #: the cell tag (None: every cell)
     points: np.ndarray  #: its local Gauss points (owned and ghost), indices into the quadrature spaces
     material: FiniteStrainMaterial  #: at those points, in that order
+    #: the same points as a slice where they are consecutive (the quadrature functions' rows written in
+    #: place), else ``points``
+    rows: slice | np.ndarray
+
+
+def point_rows(points: np.ndarray) -> slice | np.ndarray:
+    """``points`` (sorted, distinct) as a slice where they are consecutive, else themselves."""
+    if points.size and int(points[-1]) - int(points[0]) + 1 == points.size:
+        return slice(int(points[0]), int(points[-1]) + 1)
+    return points
 
 
 def finite_strain_state(V: fem.FunctionSpace, materials, cell_tags=None,
@@ -141,13 +151,13 @@ class FiniteStrainGaussState(GaussPointFields):
         self._gradient: tuple[fem.Function, fem.Expression, fem.Function] | None = None
         self._evaluated: tuple[fem.Function, np.ndarray, int] | None = None
         #: per body, what computes the tangent the last update left out (empty: A_q is at that update)
-        self._tangent_later: list[tuple[FiniteStrainBody, Callable[[], np.ndarray] | None, np.ndarray,
+        self._tangent_later: list[tuple[FiniteStrainBody, Callable[..., np.ndarray] | None, np.ndarray, np.ndarray,
                                         FiniteStrainState]] = []
         self.reset()
 
     def _body(self, tag: int | None, material) -> FiniteStrainBody:
         points = self.points_of(self.cells_of(tag))
-        return FiniteStrainBody(tag, points, finite_strain_material(material, points.size))
+        return FiniteStrainBody(tag, points, finite_strain_material(material, points.size), point_rows(points))
 
     # -- set-up -------------------------------------------------------------------------------------------
     def parameters_changed(self) -> None:
@@ -216,49 +226,56 @@ class FiniteStrainGaussState(GaussPointFields):
         return u_then is u and version == self.version and np.array_equal(array, u.x.array)
 
     def _update(self, u: fem.Function, tangent: bool) -> None:
-        """Every body's update at ``u`` into the quadrature data (A_q if ``tangent``, else the means to
-        compute it later, :meth:`_complete_tangent`)."""
+        """Every body's update at ``u`` into the quadrature data, and A_q if ``tangent`` (else the means
+        to compute it later, :meth:`_complete_tangent`). det F is computed once a point: the inversion
+        check's J is the one the materials take."""
         F = self.deformation_gradients(u)
         F_n = self.F_n.x.array.reshape(-1, 3, 3)
-        self._inverted = ~(np.isfinite(F).all(axis=(1, 2)) & (np.linalg.det(np.where(np.isfinite(F), F, 1.0)) > 0.0))
+        J = np.linalg.det(np.where(np.isfinite(F), F, 1.0))
+        self._inverted = ~(np.isfinite(F).all(axis=(1, 2)) & (J > 0.0))
         self._tangent_later = []
         for body in self.bodies:
-            pts = body.points
-            bad = self._inverted[pts]
-            # an inverted point has no stress: the update runs at the converged F there, and P is NaN
-            F_body = np.where(bad[:, None, None], F_n[pts], F[pts])
-            converged = self._converged(pts)
-            response = body.material.update(F_body, converged, tangent=tangent)
-            if tangent:
-                assert response.tangent is not None  # (asked for)
-                self.A_q.x.array.reshape(-1, 81)[pts] = response.tangent.reshape(-1, 81)
-            else:
-                self._tangent_later.append((body, response.tangent_later, F_body, converged))
-            P = response.P.copy()
-            P[bad] = np.nan
-            self.P_q.x.array.reshape(-1, 9)[pts] = P.reshape(-1, 9)
-            self.sigma_q.x.array.reshape(-1, 9)[pts] = response.sigma.reshape(-1, 9)
-            self.tau_q.x.array.reshape(-1, 9)[pts] = response.tau.reshape(-1, 9)
-            self.dp_q.x.array[pts] = response.dp
+            rows = body.rows
+            bad = self._inverted[rows]
+            F_body, J_body = F[rows], J[rows]
+            if np.any(bad):  # an inverted point has no stress: the update runs at the converged F there, and P is NaN
+                F_body = np.where(bad[:, None, None], F_n[rows], F_body)
+                J_body = np.where(bad, np.linalg.det(F_n[rows]), J_body)
+            converged = self._converged(body.points)
+            response = body.material.update(F_body, converged, tangent=False, J=J_body)
+            self._tangent_later.append((body, response.tangent_later, F_body, J_body, converged))
+            P = np.where(bad[:, None, None], np.nan, response.P) if np.any(bad) else response.P
+            self.P_q.x.array.reshape(-1, 9)[rows] = P.reshape(-1, 9)
+            self.sigma_q.x.array.reshape(-1, 9)[rows] = response.sigma.reshape(-1, 9)
+            self.tau_q.x.array.reshape(-1, 9)[rows] = response.tau.reshape(-1, 9)
+            self.dp_q.x.array[rows] = response.dp
             new = response.state
-            self._trial["F"][pts], self._trial["b_e"][pts] = new.F, new.b_e
+            self._trial["F"][rows], self._trial["b_e"][rows] = new.F, new.b_e
             for name, value in new.internal.items():
-                self._trial[name][pts] = value
+                self._trial[name][rows] = value
         self._evaluated = (u, u.x.array.copy(), self.version)
+        if tangent:
+            self._complete_tangent()
 
     def _complete_tangent(self) -> None:
-        """A_q of the last update, which left it out: each body's tangent from its update's arrays, or
-        by the update again where its material keeps none."""
-        for body, later, F_body, converged in self._tangent_later:
-            A = later() if later is not None else body.material.update(F_body, converged, tangent=True).tangent
+        """A_q of the last update, which left it out: each body's tangent from its update's arrays (written
+        into A_q's array where the body's points are consecutive), or by the update again where its
+        material keeps none."""
+        A_q = self.A_q.x.array.reshape(-1, 3, 3, 3, 3)
+        for body, later, F_body, J_body, converged in self._tangent_later:
+            if later is not None and isinstance(body.rows, slice):
+                later(A_q[body.rows])
+                continue
+            A = later() if later is not None else body.material.update(F_body, converged, tangent=True,
+                                                                       J=J_body).tangent
             assert A is not None
-            self.A_q.x.array.reshape(-1, 81)[body.points] = A.reshape(-1, 81)
+            A_q[body.rows] = A
         self._tangent_later = []
 
     def _converged(self, points: np.ndarray) -> FiniteStrainState:
-        """The converged state (F_n, b_e,n, internal variables) at the local Gauss points ``points``."""
-        return FiniteStrainState(self.F_n.x.array.reshape(-1, 3, 3)[points].copy(),
-                                 self.b_e_n.x.array.reshape(-1, 3, 3)[points].copy(), self.local_internal(points))
+        """The converged state (F_n, b_e,n, internal variables) at the local Gauss points ``points`` (copies)."""
+        return FiniteStrainState(self.F_n.x.array.reshape(-1, 3, 3)[points],
+                                 self.b_e_n.x.array.reshape(-1, 3, 3)[points], self.local_internal(points))
 
     # -- the return map's values ----------------------------------------------------------------------------
     def num_inverted_points(self, u: fem.Function) -> int:
@@ -366,9 +383,9 @@ class FiniteStrainGaussState(GaussPointFields):
     # -- internal variables ----------------------------------------------------------------------------------
     def local_internal(self, points: np.ndarray) -> dict[str, np.ndarray]:
         """The converged internal variables at the local Gauss points ``points``, by name ("p" first)."""
-        out = {"p": self.p_n.x.array[points].copy()}
+        out = {"p": self.p_n.x.array[points]}  # (copies: ``points`` is an index array)
         for name, f in self._others.items():
-            out[name] = f.x.array.reshape(-1, 3, 3)[points].copy()
+            out[name] = f.x.array.reshape(-1, 3, 3)[points]
         return out
 
     def internal_at_points(self, values: GaussPointValues | None = None) -> dict[str, np.ndarray]:

@@ -64,7 +64,8 @@ from dolfinx_nnqem.material.kinematics import (deviator_coordinates, deviator_te
                                                symmetric_tensors)
 from dolfinx_nnqem.material.von_mises import VonMisesAtPoints
 
-__all__ = ["SUPPORTED_POINTWISE", "HenckyAtPoints", "LogarithmicReturn", "logarithmic_return"]
+__all__ = ["SUPPORTED_POINTWISE", "HenckyAtPoints", "LogarithmicReturn", "algorithmic_tangent", "flow_tangent",
+           "logarithmic_return"]
 
 SUPPORTED_POINTWISE = (VonMisesAtPoints, IsotropicAtPoints, KinematicAtPoints, DruckerPragerAtPoints, ElasticAtPoints)
 """The pointwise materials the route takes: each is a small-strain return map with C = 2μ on the
@@ -84,34 +85,66 @@ class LogarithmicReturn:
     deps_p: np.ndarray  #: (n, 6) plastic strain increment Δε_p
     dp: np.ndarray  #: (n,) equivalent plastic strain increment Δp
     tau: np.ndarray  #: (n, 6) Kirchhoff stress τ = C : ε_e
-    D: np.ndarray  #: (n, 6, 6) algorithmic tangent dτ/dε^tr = C (I − ∂Δε_p/∂ε)
+    D: np.ndarray | None  #: (n, 6, 6) algorithmic tangent dτ/dε^tr = C (I − ∂Δε_p/∂ε); None if not asked for
 
 
-def logarithmic_return(pointwise: PointwiseMaterial, eps_tr: np.ndarray, internal: dict[str, np.ndarray]
-                       ) -> LogarithmicReturn:
-    """The material's own return map (:class:`~dolfinx_nnqem.material.interface.PointwiseMaterial`)
-    at the trial logarithmic strains ``eps_tr`` (n, 3, 3) from the converged ``internal`` variables.
-
-    A deviatoric flow takes the trial deviator t = 2μ dev ε^tr (coordinates (n, 5)) and gives
-    ∂Δε_p/∂e (n, 5, 5); a pressure-dependent one (``deviatoric_flow`` False) the full trial stress
-    C : ε^tr (n, 6) and ∂Δε_p/∂ε (n, 6, 6).
-    """
+def _moduli(pointwise: PointwiseMaterial) -> np.ndarray:
+    """C in the coordinates (n, 6): 2μ on the five deviatoric ones, 3κ on the volumetric one."""
     mu, kappa = pointwise.mu, pointwise.lmbda + 2.0 * pointwise.mu / 3.0
-    C6 = np.concatenate([np.repeat((2.0 * mu)[:, None], 5, axis=1), (3.0 * kappa)[:, None]], axis=1)
+    return np.concatenate([np.repeat((2.0 * mu)[:, None], 5, axis=1), (3.0 * kappa)[:, None]], axis=1)
+
+
+def _trial_stress(pointwise: PointwiseMaterial, C6: np.ndarray, e: np.ndarray) -> np.ndarray:
+    """What the return map takes at the trial strain's coordinates e (n, 6): the trial deviator
+    t = 2μ dev ε^tr (n, 5) for a deviatoric flow, else the full trial stress C : ε^tr (n, 6)."""
+    return 2.0 * pointwise.mu[:, None] * e[:, :5] if pointwise.deviatoric_flow else C6 * e
+
+
+def logarithmic_return(pointwise: PointwiseMaterial, eps_tr: np.ndarray, internal: dict[str, np.ndarray],
+                       tangent: bool = True) -> LogarithmicReturn:
+    """The material's own return map (:class:`~dolfinx_nnqem.material.interface.PointwiseMaterial`)
+    at the trial logarithmic strains ``eps_tr`` (n, 3, 3) from the converged ``internal`` variables,
+    with its algorithmic tangent D if ``tangent`` (:func:`algorithmic_tangent`).
+
+    A deviatoric flow takes the trial deviator t = 2μ dev ε^tr (coordinates (n, 5)); a
+    pressure-dependent one (``deviatoric_flow`` False) the full trial stress C : ε^tr (n, 6).
+    """
+    C6 = _moduli(pointwise)
     e = symmetric_coordinates(eps_tr)
-    n = e.shape[0]
-    deps_p, R = np.zeros((n, 6)), np.zeros((n, 6, 6))
+    t = _trial_stress(pointwise, C6, e)
     if pointwise.deviatoric_flow:
-        t = 2.0 * mu[:, None] * e[:, :5]
+        deps_p = np.zeros((e.shape[0], 6))
         deps_p[:, :5], dp = pointwise.plastic_strain(t, internal)
+    else:
+        deps_p, dp = pointwise.plastic_strain(t, internal)
+    eps_e = e - deps_p
+    D = algorithmic_tangent(pointwise, eps_tr, internal) if tangent else None
+    return LogarithmicReturn(eps_e, deps_p, dp, C6 * eps_e, D)
+
+
+def algorithmic_tangent(pointwise: PointwiseMaterial, eps_tr: np.ndarray, internal: dict[str, np.ndarray]
+                        ) -> np.ndarray:
+    """D = dτ/dε^tr = C (I − ∂Δε_p/∂ε) (n, 6, 6) of :func:`logarithmic_return` at the same arguments
+    (from :func:`flow_tangent`)."""
+    C6, R = flow_tangent(pointwise, eps_tr, internal)
+    return C6[:, :, None] * (np.eye(6) - R)
+
+
+def flow_tangent(pointwise: PointwiseMaterial, eps_tr: np.ndarray, internal: dict[str, np.ndarray]
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """(C (n, 6), ∂Δε_p/∂ε (n, 6, 6)) of :func:`logarithmic_return` at the same arguments, the factors of
+    its algorithmic tangent D = C (I − ∂Δε_p/∂ε): the material's ∂Δε_p/∂e (n, 5, 5) for a deviatoric
+    flow, ∂Δε_p/∂ε (n, 6, 6) otherwise. Apart from the return, for an update whose tangent is asked
+    for later (or never); the compiled tangent forms D point by point (:mod:`.kernels`)."""
+    C6 = _moduli(pointwise)
+    e = symmetric_coordinates(eps_tr)
+    t = _trial_stress(pointwise, C6, e)
+    if pointwise.deviatoric_flow:
+        R = np.zeros((e.shape[0], 6, 6))
         R[:, :5, :5] = pointwise.plastic_strain_tangent(t, internal)
     else:
-        t = C6 * e
-        deps_p, dp = pointwise.plastic_strain(t, internal)
         R = pointwise.plastic_strain_tangent(t, internal)
-    eps_e = e - deps_p
-    D = C6[:, :, None] * (np.eye(6) - R)
-    return LogarithmicReturn(eps_e, deps_p, dp, C6 * eps_e, D)
+    return C6, R
 
 
 @dataclass(frozen=True)
@@ -162,14 +195,16 @@ def _spatial(trial: _Trial, coordinates: np.ndarray) -> np.ndarray:
     return _rotated(trial.r, symmetric_tensors(coordinates)) if trial.rotating else symmetric_tensors(coordinates)
 
 
-def _tangent(trial: _Trial, ret: LogarithmicReturn, F_inv: np.ndarray, P: np.ndarray) -> np.ndarray:
+def _tangent(trial: _Trial, flow: tuple[np.ndarray, np.ndarray], tau_bar: np.ndarray, F_inv: np.ndarray,
+             P: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """∂P_ij/∂F_kl (n, 3, 3, 3, 3) along the nine directions e_k⊗e_l (the module docstring), by the
-    compiled loop over the points of :mod:`.kernels`, given F⁻¹ and P = τ F⁻ᵀ."""
+    compiled loop over the points of :mod:`.kernels`, given the algorithmic tangent's factors
+    (:func:`flow_tangent`), τ̄'s coordinates, F⁻¹ and P = τ F⁻ᵀ; into ``out`` (C-contiguous) if given."""
     from dolfinx_nnqem.material.finite_strain.kernels import hencky_tangent  # (imports numba: here, when needed)
 
-    out = np.empty((F_inv.shape[0], 3, 3, 3, 3))
-    hencky_tangent(trial.F_n_inv, trial.left, trial.lam, trial.Q, trial.r, trial.u, trial.eps_bar, ret.D,
-                   _COORDINATE_BASIS, symmetric_tensors(ret.tau), F_inv, P, trial.rotating, out)
+    out = np.empty((F_inv.shape[0], 3, 3, 3, 3)) if out is None else out
+    hencky_tangent(trial.F_n_inv, trial.left, trial.lam, trial.Q, trial.r, trial.u, trial.eps_bar, *flow,
+                   _COORDINATE_BASIS, symmetric_tensors(tau_bar), F_inv, P, trial.rotating, out)
     return out
 
 
@@ -177,6 +212,7 @@ def tangent_by_arrays(F: np.ndarray, trial: _Trial, ret: LogarithmicReturn, tau:
     """∂P_ij/∂F_kl (n, 3, 3, 3, 3) as :func:`_tangent` (with r of ``trial``), written on numpy arrays of the nine directions
     (n, 9, 3, 3) (the module docstring's formulas as they read): the reference the compiled
     kernel is tested against."""
+    assert ret.D is not None, "the reference tangent needs the return's D (logarithmic_return with tangent=True)"
     n = F.shape[0]
     dF = np.broadcast_to(_DIRECTIONS, (n, 9, 3, 3))
     df = dF @ trial.F_n_inv[:, None]
@@ -208,10 +244,15 @@ def _exponential_map(F: np.ndarray, J: np.ndarray, tau: np.ndarray, Q_e: np.ndar
 def _elastic_eigen(trial: _Trial, eps_e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(λ, Q) of the elastic logarithmic strain ε_e (n, 3, 3), for b_e = exp(2 ε_e). Where r = I (an
     isotropic law) ε_e is an isotropic function of ε^tr, hence coaxial with it: its eigenvalues are
-    q_aᵀ ε_e q_a in the trial's eigenvectors Q (no second decomposition); else numpy's."""
+    q_aᵀ ε_e q_a in the trial's eigenvectors Q (no second decomposition, compiled:
+    :func:`.point_kernels.coaxial_eigenvalues`); else numpy's."""
+    from dolfinx_nnqem.material.finite_strain.point_kernels import coaxial_eigenvalues  # (imports numba: when needed)
+
     if trial.rotating:
         return eigen(eps_e)
-    return np.sum(trial.Q * (eps_e @ trial.Q), axis=1), trial.Q
+    lam = np.empty((eps_e.shape[0], 3))
+    coaxial_eigenvalues(np.ascontiguousarray(eps_e), np.ascontiguousarray(trial.Q), lam)
+    return lam, trial.Q
 
 
 class HenckyAtPoints:
@@ -264,14 +305,16 @@ class HenckyAtPoints:
         alpha = back_stresses(alpha_n, ret.deps_p[:, :5], ret.dp, pw.C, pw.gamma)
         return {name: _rotated(r, deviator_tensors(alpha[:, k])) for k, name in enumerate(self.back_stress_names)}
 
-    def update(self, F: np.ndarray, state: FiniteStrainState, tangent: bool = True) -> FiniteStrainResponse:
+    def update(self, F: np.ndarray, state: FiniteStrainState, tangent: bool = True,
+               J: np.ndarray | None = None) -> FiniteStrainResponse:
         """The return map at the deformation gradients ``F`` (n, 3, 3) from the converged ``state``
-        (the module docstring), with the consistent tangent ∂P/∂F if ``tangent``."""
-        F, J = checked_deformation_gradients(F, self.size)
+        (the module docstring), with the consistent tangent ∂P/∂F if ``tangent``; ``J`` = det F if
+        the caller has it (:meth:`~.interface.FiniteStrainMaterial.update`)."""
+        F, J = checked_deformation_gradients(F, self.size, J)
         F = np.ascontiguousarray(F)  # (the compiled steps take C-ordered arrays)
         trial = _trial(F, state, rotating=bool(self.back_stress_names))
         internal = {name: np.asarray(v) for name, v in state.internal.items()}
-        ret = logarithmic_return(self.pointwise, trial.eps_bar, internal)
+        ret = logarithmic_return(self.pointwise, trial.eps_bar, internal, tangent=False)
         tau, eps_e = _spatial(trial, ret.tau), _spatial(trial, ret.eps_e)
         lam_e, Q_e = _elastic_eigen(trial, eps_e)
         new_internal = {**internal, "p": internal["p"] + ret.dp,
@@ -279,9 +322,10 @@ class HenckyAtPoints:
         b_e, F_inv, P, sigma = (np.empty_like(F) for _ in range(4))
         _exponential_map(F, J, tau, Q_e, lam_e, b_e, F_inv, P, sigma)
         new_state = FiniteStrainState(F.copy(), b_e, new_internal)
+
+        def later(out: np.ndarray | None = None) -> np.ndarray:  # D's factors, then ∂P/∂F, from this update's arrays
+            return _tangent(trial, flow_tangent(self.pointwise, trial.eps_bar, internal), ret.tau, F_inv, P, out)
         if tangent:
-            return FiniteStrainResponse(P=P, tau=tau, sigma=sigma, dp=ret.dp, state=new_state,
-                                        tangent=_tangent(trial, ret, F_inv, P))
-        return FiniteStrainResponse(P=P, tau=tau, sigma=sigma, dp=ret.dp, state=new_state,
-                                    tangent_later=lambda: _tangent(trial, ret, F_inv, P))
+            return FiniteStrainResponse(P=P, tau=tau, sigma=sigma, dp=ret.dp, state=new_state, tangent=later())
+        return FiniteStrainResponse(P=P, tau=tau, sigma=sigma, dp=ret.dp, state=new_state, tangent_later=later)
 

@@ -65,6 +65,8 @@ class FiniteStrainResponse:
         arrays (the same values as ``tangent``, without the update again), or None where the
         material gives none (the caller updates again with ``tangent=True``). A Newton iteration
         needs the tangent at every iterate but the last, whose residual alone it evaluates.
+        Called as ``tangent_later()`` (a new array) or ``tangent_later(out)``: into ``out``, a
+        C-contiguous (n, 3, 3, 3, 3) array (the Gauss-point state's quadrature function), returned.
     """
 
     P: np.ndarray
@@ -73,7 +75,7 @@ class FiniteStrainResponse:
     dp: np.ndarray
     state: FiniteStrainState
     tangent: np.ndarray | None = None
-    tangent_later: Callable[[], np.ndarray] | None = None
+    tangent_later: Callable[..., np.ndarray] | None = None
 
 
 @runtime_checkable
@@ -89,28 +91,39 @@ class FiniteStrainMaterial(Protocol):
         """The undeformed, unstressed state: F = b_e = I, every internal variable 0."""
         ...
 
-    def update(self, F: np.ndarray, state: FiniteStrainState, tangent: bool = True) -> FiniteStrainResponse:
+    def update(self, F: np.ndarray, state: FiniteStrainState, tangent: bool = True,
+               J: np.ndarray | None = None) -> FiniteStrainResponse:
         """The stresses at the deformation gradients ``F`` (n, 3, 3) from the converged ``state``
         (the return map, for an elastoplastic law), with the consistent tangent ∂P/∂F if ``tangent``.
+        ``J`` (n,): det F where the caller has computed it (``numpy.linalg.det`` of the same F, as
+        the Gauss-point state's inversion check does), not computed again.
 
         Raises
         ------
         ValueError
-            ``F`` not (n, 3, 3), not finite, or with det F ≤ 0 at some point (named).
+            ``F`` not (n, 3, 3), not finite, or with det F ≤ 0 at some point (named); ``J`` not (n,).
         """
         ...
 
 
-def checked_deformation_gradients(F: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+def checked_deformation_gradients(F: np.ndarray, n: int, J: np.ndarray | None = None
+                                  ) -> tuple[np.ndarray, np.ndarray]:
     """(F as floats (n, 3, 3), J = det F (n,)), or a ValueError naming what is wrong: the shape, a
-    value that is not finite, a point with J ≤ 0 (an inverted or degenerate material element)."""
+    value that is not finite, a point with J ≤ 0 (an inverted or degenerate material element).
+    ``J`` given: the caller's det F (``numpy.linalg.det`` of the same F), checked but not computed
+    again."""
     F = np.asarray(F, dtype=float)
     if F.shape != (n, 3, 3):
         raise ValueError(f"F has shape {F.shape}; expected ({n}, 3, 3), one deformation gradient per Gauss point")
     bad = ~np.isfinite(F).all(axis=(1, 2))
     if np.any(bad):
         raise ValueError(f"F is not finite at {np.count_nonzero(bad)} Gauss point(s) (first: {np.flatnonzero(bad)[0]})")
-    J = np.linalg.det(F)
+    if J is None:
+        J = np.linalg.det(F)
+    else:
+        J = np.asarray(J, dtype=float)
+        if J.shape != (n,):
+            raise ValueError(f"J has shape {J.shape}; expected ({n},), det F at every Gauss point")
     inverted = J <= 0.0
     if np.any(inverted):
         k = int(np.argmin(J))

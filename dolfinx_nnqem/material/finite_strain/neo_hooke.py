@@ -107,10 +107,11 @@ class NeoHookeAtPoints:
         eye = np.broadcast_to(np.eye(3), (self.size, 3, 3)).copy()
         return FiniteStrainState(eye, eye.copy(), {"p": np.zeros(self.size)})
 
-    def update(self, F: np.ndarray, state: FiniteStrainState, tangent: bool = True) -> FiniteStrainResponse:
+    def update(self, F: np.ndarray, state: FiniteStrainState, tangent: bool = True,
+               J: np.ndarray | None = None) -> FiniteStrainResponse:
         """P, τ, σ at the deformation gradients ``F`` (n, 3, 3) (``state`` only carried: the law has no
-        history), with ∂P/∂F if ``tangent``."""
-        F, J = checked_deformation_gradients(F, self.size)
+        history), with ∂P/∂F if ``tangent``; ``J`` = det F if the caller has it."""
+        F, J = checked_deformation_gradients(F, self.size, J)
         F_inv = np.linalg.inv(F)
         F_inv_T = np.swapaxes(F_inv, 1, 2)
         log_J = np.log(J)
@@ -119,8 +120,12 @@ class NeoHookeAtPoints:
         b = F @ np.swapaxes(F, 1, 2)
         tau = mu * (b - np.eye(3)) + lmbda * log_J[:, None, None] * np.eye(3)
         new_state = FiniteStrainState(F.copy(), b, {"p": np.asarray(state.internal["p"]).copy()})
-        def later() -> np.ndarray:
-            return neo_hooke_tangent(F_inv, log_J, self.mu, self.lmbda)
+        def later(out: np.ndarray | None = None) -> np.ndarray:
+            A = neo_hooke_tangent(F_inv, log_J, self.mu, self.lmbda)
+            if out is None:
+                return A
+            out[...] = A
+            return out
 
         return FiniteStrainResponse(P=P, tau=tau, sigma=tau / J[:, None, None], dp=np.zeros(self.size),
                                     state=new_state, tangent=later() if tangent else None,

@@ -7,6 +7,8 @@ Here each point's steps run in one pass:
 
 * :func:`elastic_trial`: F_n⁻¹ (cofactors), f = F F_n⁻¹, f b_e,n, b_e^tr = (f b_e,n) fᵀ, its
   eigen-decomposition (:func:`symmetric_eigen`) and ε^tr = Σ_a ½ ln λ_a q_a ⊗ q_a;
+* :func:`coaxial_eigenvalues`: λ_a^e = q_aᵀ ε_e q_a, the eigenvalues of ε_e in the trial's
+  eigenvectors (an isotropic law: ε_e coaxial with ε^tr);
 * :func:`exponential_map`: b_e = Σ_a exp(2 λ_a^e) q_a ⊗ q_a, F⁻¹, P = τ F⁻ᵀ and σ = τ / J.
 
 **Small strains without cancellation.** At a strain of 10⁻⁵ the entries of b_e^tr are 1 plus
@@ -40,7 +42,7 @@ import numpy as np
 
 from dolfinx_nnqem.chatter import apply_numba_options
 
-__all__ = ["elastic_trial", "exponential_map", "inverse_3x3", "symmetric_eigen"]
+__all__ = ["coaxial_eigenvalues", "elastic_trial", "exponential_map", "inverse_3x3", "symmetric_eigen"]
 
 apply_numba_options()
 
@@ -175,3 +177,15 @@ def exponential_map(F: np.ndarray, J: np.ndarray, tau: np.ndarray, Q_e: np.ndarr
             for j in range(3):
                 P[g, i, j] = tau[g, i, 0] * F_inv[g, j, 0] + tau[g, i, 1] * F_inv[g, j, 1] + tau[g, i, 2] * F_inv[g, j, 2]
                 sigma[g, i, j] = tau[g, i, j] / J[g]
+
+
+@numba.njit(cache=True)
+def coaxial_eigenvalues(A: np.ndarray, Q: np.ndarray, lam: np.ndarray) -> None:  # pragma: no cover  (compiled)
+    """lam[g, a] = q_aᵀ A q_a (n, 3) for symmetric tensors A (n, 3, 3) and orthonormal vectors Q (n, 3, 3,
+    columns q_a): the eigenvalues of A where Q are its eigenvectors."""
+    for g in range(A.shape[0]):
+        for a in range(3):
+            s = 0.0
+            for i in range(3):
+                s += Q[g, i, a] * (A[g, i, 0] * Q[g, 0, a] + A[g, i, 1] * Q[g, 1, a] + A[g, i, 2] * Q[g, 2, a])
+            lam[g, a] = s
