@@ -211,15 +211,18 @@ def test_frictional_block_slides_on_the_cone(method, law):
     assert f[0] < 0 and 0.28 < abs(f[0]) / f[1] <= mu_f  # < μ_f: the Poisson effect adds a transverse slip
 
 
-def _blocks_file(*, E1: float, press: float, pressed_at: float, slide: float, z_tags: list[int], increments: int) -> str:
+def _blocks_file(*, E1: float, press: float, pressed_at: float, slide: float, z_tags: list[int], increments: int,
+                 degree: int = 1, discretisation: str = "node-to-surface", rtol: float | None = None) -> str:
     """A problem file for two blocks (surfaces 201 | 102, body 1 clamped at 101): body 2's top (202)
     pressed down by ``press`` over ℓ ≤ ``pressed_at``, then slid ``slide`` along x; u_z = 0 on
-    ``z_tags``; MESH, METHOD and LAW to be replaced."""
+    ``z_tags``; MESH, METHOD and LAW to be replaced. ``degree``, ``rtol``: written only if given (not 1, None)."""
     fixed_z = "".join(f"[[dirichlet]]\ntag = {tag}\ncomponents = [2]\n" for tag in z_tags)
+    mesh_degree = "" if degree == 1 else f"degree = {degree}\n"
+    solver_rtol = "" if rtol is None else f"rtol = {rtol!r}\n"
     return f"""
 [mesh]
 file = "MESH"
-[materials.1]
+{mesh_degree}[materials.1]
 E = {E1!r}
 nu = 0.3
 [materials.2]
@@ -230,7 +233,7 @@ surface1 = 201
 surface2 = 102
 mu_f = 0.3
 law = "LAW"
-discretisation = "node-to-surface"
+discretisation = "{discretisation}"
 geometry = "current"
 [[dirichlet]]
 tag = 101
@@ -247,7 +250,7 @@ amplitude = [[0.0, 0.0], [{pressed_at!r}, 0.0], [1.0, 1.0]]
 {fixed_z}[solver]
 method = "METHOD"
 increments = {increments}
-"""
+{solver_rtol}"""
 
 
 BLOCKS_FILE = _blocks_file(E1=1.0e3, press=-0.01, pressed_at=0.25, slide=0.4, z_tags=[202], increments=12)

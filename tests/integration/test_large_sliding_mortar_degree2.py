@@ -24,6 +24,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 from newton_checks import newton_matrix_against_differences, residuals, solves_by_increment
+from test_large_sliding import _blocks_file
 
 from dolfinx_nnqem.cases.large_sliding import PRESSED_AT, slave_force, sliding_blocks
 from dolfinx_nnqem.solvers import MonolithicOptions, SolverOptions, make_solver, solve_load_steps
@@ -203,43 +204,8 @@ def test_degree_2_mortar_auto_geometry_follows_the_slide(q2_slide):
     assert problem.contact.geometry.following == [True] and error < 1e-8
 
 
-BLOCKS_FILE = """
-[mesh]
-file = "MESH"
-degree = 2
-[materials.1]
-E = 1.0e3
-nu = 0.3
-[materials.2]
-E = 1.0e3
-nu = 0.3
-[contact]
-surface1 = 201
-surface2 = 102
-mu_f = 0.3
-law = "LAW"
-discretisation = "mortar"
-geometry = "current"
-[[dirichlet]]
-tag = 101
-[[dirichlet]]
-tag = 202
-components = [1]
-value = -0.01
-amplitude = [[0.0, 0.0], [0.25, 1.0], [1.0, 1.0]]
-[[dirichlet]]
-tag = 202
-components = [0]
-value = 0.4
-amplitude = [[0.0, 0.0], [0.25, 0.0], [1.0, 1.0]]
-[[dirichlet]]
-tag = 202
-components = [2]
-[solver]
-method = "METHOD"
-increments = 8
-rtol = 1e-10
-"""
+BLOCKS_FILE = _blocks_file(E1=1.0e3, press=-0.01, pressed_at=0.25, slide=0.4, z_tags=[202], increments=8,
+                          degree=2, discretisation="mortar", rtol=1e-10)
 
 
 @pytest.mark.parametrize("method, law", [("monolithic", "alart-curnier"), ("nneqm1", "polar")])

@@ -26,6 +26,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 from newton_checks import last_step, newton_matrix_against_differences, residuals, solves_by_increment
+from test_large_sliding import _blocks_file
 
 from dolfinx_nnqem.cases.large_sliding import PRESSED_AT, slave_force, sliding_blocks
 from dolfinx_nnqem.solvers import SolverOptions, make_solver, solve_load_steps
@@ -214,43 +215,8 @@ def test_degree_2_current_geometry_tends_to_reference_at_a_tiny_slide(cell_type)
     assert error < 1e-8 and abs(forces["reference"][0]) > 1e-4 * abs(forces["reference"][1])
 
 
-BLOCKS_FILE = """
-[mesh]
-file = "MESH"
-degree = 2
-[materials.1]
-E = 1.0e3
-nu = 0.3
-[materials.2]
-E = 1.0e3
-nu = 0.3
-[contact]
-surface1 = 201
-surface2 = 102
-mu_f = 0.3
-law = "LAW"
-discretisation = "node-to-surface"
-geometry = "current"
-[[dirichlet]]
-tag = 101
-[[dirichlet]]
-tag = 202
-components = [1]
-value = -0.01
-amplitude = [[0.0, 0.0], [0.25, 1.0], [1.0, 1.0]]
-[[dirichlet]]
-tag = 202
-components = [0]
-value = 0.4
-amplitude = [[0.0, 0.0], [0.25, 0.0], [1.0, 1.0]]
-[[dirichlet]]
-tag = 202
-components = [2]
-[solver]
-method = "METHOD"
-increments = 12
-rtol = 1e-10
-"""
+BLOCKS_FILE = _blocks_file(E1=1.0e3, press=-0.01, pressed_at=0.25, slide=0.4, z_tags=[202], increments=12,
+                          degree=2, discretisation="node-to-surface", rtol=1e-10)
 
 
 @pytest.mark.slow
