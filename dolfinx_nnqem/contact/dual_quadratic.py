@@ -61,7 +61,7 @@ import numpy.typing as npt
 import scipy.sparse
 
 from dolfinx_nnqem.contact.mortar_geometry import (MIN_FACING_COSINE, RELATIVE_TOLERANCE, MortarIntegrals,
-                                                    _clip, _cross, _dot, _inverse_map_into, _polygon_area,
+                                                    _clip, _cross, _dot, _inverse_map_into, _plane_axes, _polygon_area,
                                                     candidate_couples)
 from dolfinx_nnqem.contact.projection import _cyclic, _shape
 from dolfinx_nnqem.contact.quadratic_facets import (NUM_VERTICES, facet_geometry, nodal_integrals, outward_signs,
@@ -184,6 +184,29 @@ def _plane_coordinates(x, x0, n0, t1, t2):
         P[a, 0] = _dot(d, t1)
         P[a, 1] = _dot(d, t2)
     return P
+
+
+@numba.njit(cache=True)
+def _couple_plane(xs, sign_s, xm, sign_m, min_cos, S, P, frame):
+    """A couple's auxiliary plane (steps 1-2 of the module docstring): fill the in-plane coordinates
+    S (ks, 2), P (km, 2) and ``frame`` (4, 3): its centre x_0, normal n_0 and axes t_1, t_2; return the
+    clip tolerance, or −1 if the couple does not count (a degenerate facet, or facets not facing each other)."""
+    ks = xs.shape[0]
+    x0, n, js = _quadratic_frame(xs, ks, sign_s)
+    _, nm, jm = _quadratic_frame(xm, xm.shape[0], sign_m)
+    if js == 0.0 or jm == 0.0 or _dot(nm, n) > -min_cos:
+        return -1.0
+    t1, t2 = _plane_axes(xs, n)
+    S[:] = _plane_coordinates(xs, x0, n, t1, t2)
+    P[:] = _plane_coordinates(xm, x0, n, t1, t2)
+    frame[0] = x0
+    frame[1] = n
+    frame[2] = t1
+    frame[3] = t2
+    diameter = 0.0
+    for a in range(ks):
+        diameter = max(diameter, 2.0 * np.sqrt(S[a, 0] ** 2 + S[a, 1] ** 2))
+    return 1e-12 * diameter
 
 
 @numba.njit(cache=True)
@@ -324,29 +347,11 @@ def _quadratic_couple(xs, sign_s, T, A, xm, sign_m, sub_s, sub_m, ref_s, ref_m, 
                       min_cos, M, g):
     """Add one couple's integrals to M (ks, km) and g (ks,); return the slave area of the
     overlap (0: the couple does not count) and the Gauss points whose inverse map failed."""
-    ks = xs.shape[0]
-    km = xm.shape[0]
-    x0, n0, js = _quadratic_frame(xs, ks, sign_s)
-    _, nm, jm = _quadratic_frame(xm, km, sign_m)
-    if js == 0.0 or jm == 0.0 or _dot(nm, n0) > -min_cos:
+    S, P, frame = np.empty((xs.shape[0], 2)), np.empty((xm.shape[0], 2)), np.empty((4, 3))
+    tol = _couple_plane(xs, sign_s, xm, sign_m, min_cos, S, P, frame)
+    if tol < 0.0:
         return 0.0, 0
-    t1 = np.empty(3)
-    t2 = np.empty(3)
-    for j in range(3):
-        t1[j] = xs[1, j] - xs[0, j]
-    tn = _dot(t1, n0)
-    for j in range(3):
-        t1[j] -= tn * n0[j]
-    tl = np.sqrt(_dot(t1, t1))
-    for j in range(3):
-        t1[j] /= tl
-    _cross(n0, t1, t2)
-    S = _plane_coordinates(xs, x0, n0, t1, t2)
-    P = _plane_coordinates(xm, x0, n0, t1, t2)
-    diameter = 0.0
-    for a in range(ks):
-        diameter = max(diameter, 2.0 * np.sqrt(S[a, 0] ** 2 + S[a, 1] ** 2))
-    tol = 1e-12 * diameter
+    n0 = frame[1]
     poly = np.empty((16, 2))
     subject = np.empty((16, 2))
     total = 0.0

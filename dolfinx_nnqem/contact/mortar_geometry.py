@@ -370,13 +370,11 @@ def _polygon_area(P, n):
 
 
 @numba.njit(cache=True)
-def _in_plane(xs, ks, xm, km, x0, n0):
-    """Both facets' nodes in the plane through x0 normal to n0: the in-plane coordinates S (ks, 2)
-    and Pm (km, 2), the heights hs (ks,) and hm (km,) above the plane, and the slave facet's
-    diameter. In-plane axes: t1 along the first slave edge, t2 = n0 × t1 (right-handed with n0)."""
+def _plane_axes(xs, n0):
+    """The in-plane axes of a couple's plane normal to n0: t1 along the first slave edge (its
+    in-plane part, normalised), t2 = n0 × t1 (right-handed with n0)."""
     t1 = np.empty(3)
     t2 = np.empty(3)
-    d = np.empty(3)
     for j in range(3):
         t1[j] = xs[1, j] - xs[0, j]
     tn = _dot(t1, n0)
@@ -386,6 +384,16 @@ def _in_plane(xs, ks, xm, km, x0, n0):
     for j in range(3):
         t1[j] /= tl
     _cross(n0, t1, t2)
+    return t1, t2
+
+
+@numba.njit(cache=True)
+def _in_plane(xs, ks, xm, km, x0, n0):
+    """Both facets' nodes in the plane through x0 normal to n0: the in-plane coordinates S (ks, 2)
+    and Pm (km, 2), the heights hs (ks,) and hm (km,) above the plane, and the slave facet's
+    diameter. In-plane axes: :func:`_plane_axes`."""
+    t1, t2 = _plane_axes(xs, n0)
+    d = np.empty(3)
     S = np.empty((ks, 2))
     hs = np.empty(ks)
     diameter = 0.0

@@ -44,8 +44,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from dolfinx_nnqem.contact.dual_quadratic import (SUB_FACETS, _plane_coordinates, _quadratic_frame, _sub_polygon,
-                                                  _to_parent, quadratic_dual_coefficients, segment_rule)
+from dolfinx_nnqem.contact.dual_quadratic import (SUB_FACETS, _couple_plane, _sub_polygon, _to_parent,
+                                                  quadratic_dual_coefficients, segment_rule)
 from dolfinx_nnqem.contact.mortar_geometry import (MIN_FACING_COSINE, RELATIVE_TOLERANCE, _clip, _cross, _dot,
                                                    _polygon_area)
 from dolfinx_nnqem.contact.quadratic_facets import (reference_nodes, reference_rule, shape_at, shape_derivatives,
@@ -56,39 +56,6 @@ __all__ = ["dual_coefficient_derivatives", "quadratic_couple_derivatives"]
 # numba's on-disk cache invalidates a kernel when ITS file changes, not a callee's: after editing a
 # kernel of dual_quadratic, mortar_geometry or quadratic_facets that these call, clear
 # __pycache__/quadratic_couple_differences*.nbi / *.nbc.
-
-
-@numba.njit(cache=True)
-def _plane(xs, sign_s, xm, sign_m, min_cos, S, P, frame):
-    """The couple's auxiliary plane (dual_quadratic's steps 1-2): fill the in-plane coordinates S (ks, 2),
-    P (km, 2) and ``frame`` (4, 3): its centre x_0, normal n_0 and axes t_1, t_2; return the clip
-    tolerance, or −1 if the couple does not count (a degenerate facet, or facets not facing each other)."""
-    ks = xs.shape[0]
-    x0, n, js = _quadratic_frame(xs, ks, sign_s)
-    _, nm, jm = _quadratic_frame(xm, xm.shape[0], sign_m)
-    if js == 0.0 or jm == 0.0 or _dot(nm, n) > -min_cos:
-        return -1.0
-    t1 = np.empty(3)
-    t2 = np.empty(3)
-    for j in range(3):
-        t1[j] = xs[1, j] - xs[0, j]
-    tn = _dot(t1, n)
-    for j in range(3):
-        t1[j] -= tn * n[j]
-    tl = np.sqrt(_dot(t1, t1))
-    for j in range(3):
-        t1[j] /= tl
-    _cross(n, t1, t2)
-    S[:] = _plane_coordinates(xs, x0, n, t1, t2)
-    P[:] = _plane_coordinates(xm, x0, n, t1, t2)
-    frame[0] = x0
-    frame[1] = n
-    frame[2] = t1
-    frame[3] = t2
-    diameter = 0.0
-    for a in range(ks):
-        diameter = max(diameter, 2.0 * np.sqrt(S[a, 0] ** 2 + S[a, 1] ** 2))
-    return 1e-12 * diameter
 
 
 @numba.njit(cache=True)
@@ -311,7 +278,7 @@ def _couple_derivatives(xs, sign_s, xm, sign_m, T, sub_s, sub_m, ref_s, ref_m, q
     ks = xs.shape[0]
     km = xm.shape[0]
     S, P, frame = np.empty((ks, 2)), np.empty((km, 2)), np.empty((4, 3))
-    tol = _plane(xs, sign_s, xm, sign_m, min_cos, S, P, frame)
+    tol = _couple_plane(xs, sign_s, xm, sign_m, min_cos, S, P, frame)
     if tol < 0.0:
         return
     n0 = frame[1].copy()
