@@ -102,3 +102,20 @@ def direct_step_in_augmented_system(problem, options, leave_out, min_sliding: in
         error = residual()
         leave_out()
         return error, residual()
+
+
+def recorded_load_steps(problem, solver, increments: int, **kwargs) -> tuple[list, list]:
+    """``solve_load_steps`` with every solve the solver makes recorded: (its results, [(load factor, report)]
+    per solve, in order)."""
+    from dolfinx_nnqem.solvers import solve_load_steps
+
+    reports: list = []
+    solve_increment = solver.solve_increment
+
+    def recording(load_factor):
+        report = solve_increment(load_factor)
+        reports.append((load_factor, report))
+        return report
+
+    solver.solve_increment = recording
+    return solve_load_steps(problem, solver, increments, **kwargs), reports

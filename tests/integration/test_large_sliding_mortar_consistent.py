@@ -15,7 +15,8 @@ integrals are evaluated again at every Newton iterate and their derivatives are 
 
 import numpy as np
 import pytest
-from newton_checks import last_step, newton_matrix_against_differences, residuals, solves_by_increment
+from newton_checks import (last_step, newton_matrix_against_differences, recorded_load_steps, residuals,
+                           solves_by_increment)
 
 from dolfinx_nnqem.cases.large_sliding import PRESSED_AT, slave_force, sliding_blocks
 from dolfinx_nnqem.solvers import MonolithicOptions, SolverOptions, make_solver, solve_load_steps
@@ -26,18 +27,9 @@ OPTIONS = SolverOptions(rtol=1e-10, max_iterations=40)
 def _slide(consistent: bool):
     """The frictional mortar slide; (problem, results, every solve's (load factor, report))."""
     problem = sliding_blocks(slide=0.4, mu_f=0.3, discretisation="mortar")
-    reports = []
     with make_solver("monolithic", problem, OPTIONS,
                      monolithic=MonolithicOptions(consistent_geometry=consistent)) as solver:
-        solve_increment = solver.solve_increment
-
-        def recording(load_factor):
-            report = solve_increment(load_factor)
-            reports.append((load_factor, report))
-            return report
-
-        solver.solve_increment = recording
-        results = solve_load_steps(problem, solver, 12)
+        results, reports = recorded_load_steps(problem, solver, 12)
     return problem, results, reports
 
 

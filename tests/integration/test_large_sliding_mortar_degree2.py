@@ -23,7 +23,8 @@ integrals are evaluated again at every Newton iterate and their derivatives are 
 import numpy as np
 import pytest
 from mpi4py import MPI
-from newton_checks import newton_matrix_against_differences, residuals, solves_by_increment
+from newton_checks import (newton_matrix_against_differences, recorded_load_steps, residuals,
+                           solves_by_increment)
 from test_large_sliding import _blocks_file
 
 from dolfinx_nnqem.cases.large_sliding import PRESSED_AT, slave_force, sliding_blocks
@@ -43,23 +44,13 @@ def _blocks(cell_type: str = "hexahedron", law: str = "alart-curnier", slide: fl
 def _run(problem, method: str, increments: int = INCREMENTS, consistent: bool = True):
     """(results, every solve's (load factor, report)); ``method`` "iterative": the monolithic solver with
     the iterative linear solver."""
-    reports = []
     options = {}
     if method in ("monolithic", "iterative"):
         linear_solver = "iterative" if method == "iterative" else "direct"
         options = {"monolithic": MonolithicOptions(consistent_geometry=consistent, linear_solver=linear_solver)}
         method = "monolithic"
     with make_solver(method, problem, OPTIONS, **options) as solver:
-        solve_increment = solver.solve_increment
-
-        def recording(load_factor):
-            report = solve_increment(load_factor)
-            reports.append((load_factor, report))
-            return report
-
-        solver.solve_increment = recording
-        results = solve_load_steps(problem, solver, increments)
-    return results, reports
+        return recorded_load_steps(problem, solver, increments)
 
 
 ROUND_OFF = 1e-13  #: residuals below this (relative to the force scale) are round-off: no rate is read there

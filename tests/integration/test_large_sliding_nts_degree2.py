@@ -25,7 +25,8 @@ node-to-surface, geometry = "current", with degree-2 displacements:
 import numpy as np
 import pytest
 from mpi4py import MPI
-from newton_checks import last_step, newton_matrix_against_differences, residuals, solves_by_increment
+from newton_checks import (last_step, newton_matrix_against_differences, recorded_load_steps, residuals,
+                           solves_by_increment)
 from test_large_sliding import _blocks_file
 
 from dolfinx_nnqem.cases.large_sliding import PRESSED_AT, slave_force, sliding_blocks
@@ -43,27 +44,14 @@ def _recorded_slide(**kwargs):
     """The degree-2 block slide with the monolithic solver; (problem, results, every solve's (load factor,
     report))."""
     problem = sliding_blocks(slide=0.4, degree=2, **kwargs)
-    reports = []
     with make_solver("monolithic", problem, OPTIONS) as solver:
-        solve_increment = solver.solve_increment
-
-        def recording(load_factor):
-            report = solve_increment(load_factor)
-            reports.append((load_factor, report))
-            return report
-
-        solver.solve_increment = recording
-        results = solve_load_steps(problem, solver, 12)
+        results, reports = recorded_load_steps(problem, solver, 12)
     return problem, results, reports
 
 
-@pytest.mark.slow
-def test_q2_node_to_surface_slide_converges_quadratically():
-    """μ_f = 0.3, Q2: every pair re-evaluated at every iterate (the tracker re-projects, nothing frozen);
-    the first solve of every slip increment ends within 10 ε_k² of its last step above round-off, and the
-    solve that load stepping makes at the re-evaluated geometry starts converged."""
-    problem, _, reports = _recorded_slide(mu_f=0.3)
-    assert problem.contact.geometry.following == [True] and problem.contact.geometry.reprojecting == [True]
+def _assert_quadratic_slip_increments(reports) -> None:
+    """The first solve of every slip increment ends within 10 ε_k² of its last step above round-off, and the
+    solve that load stepping makes at the re-evaluated geometry starts converged (printing the sequences)."""
     print()
     for load_factor, solves in solves_by_increment(reports, PRESSED_AT).items():
         eps = residuals(solves[0])
@@ -73,6 +61,16 @@ def test_q2_node_to_surface_slide_converges_quadratically():
               f"{[len(r.history) for r in solves]}")
         assert step is not None and step[1] <= 10.0 * step[0] ** 2
         assert [len(r.history) for r in solves[1:]] == [1] and solves[1].history[0].iteration == 0
+
+
+@pytest.mark.slow
+def test_q2_node_to_surface_slide_converges_quadratically():
+    """μ_f = 0.3, Q2: every pair re-evaluated at every iterate (the tracker re-projects, nothing frozen);
+    the first solve of every slip increment ends within 10 ε_k² of its last step above round-off, and the
+    solve that load stepping makes at the re-evaluated geometry starts converged."""
+    problem, _, reports = _recorded_slide(mu_f=0.3)
+    assert problem.contact.geometry.following == [True] and problem.contact.geometry.reprojecting == [True]
+    _assert_quadratic_slip_increments(reports)
 
 
 def test_q2_newton_matrix_matches_finite_differences_mid_slide():
@@ -131,15 +129,7 @@ def test_p2_node_to_surface_slide_converges_quadratically():
     two solves per increment (frozen within a solve before, 6 – 11)."""
     problem, results, reports = _recorded_slide(mu_f=0.3, cell_type="tetrahedron")
     assert problem.contact.geometry.following == [True] and problem.contact.geometry.reprojecting == [True]
-    print()
-    for load_factor, solves in solves_by_increment(reports, PRESSED_AT).items():
-        eps = residuals(solves[0])
-        step = last_step(solves[0])
-        print(f"  ℓ = {load_factor:.4f}: max(|R|, |H|)/F = {', '.join(f'{e:.1e}' for e in eps)}; last step "
-              f"{'–' if step is None else f'{step[0]:.1e} -> {step[1]:.1e}'}; iterates per solve "
-              f"{[len(r.history) for r in solves]}")
-        assert step is not None and step[1] <= 10.0 * step[0] ** 2
-        assert [len(r.history) for r in solves[1:]] == [1] and solves[1].history[0].iteration == 0
+    _assert_quadratic_slip_increments(reports)
     assert max(r.report.geometry_passes for r in results) == 2
 
 
