@@ -166,10 +166,17 @@ class Checkpointer:
             for old in kept[:-max(self.keep, 2)]:
                 shutil.rmtree(old, ignore_errors=True)
 
-        on_rank0(comm, stage)
         folder = self.folder.parent
-        commit(comm, folder, *[w.staged for w in self.writers if isinstance(getattr(w, "staged", None), StagedFiles)],
-               self.staged)
+        try:
+            on_rank0(comm, stage)
+            commit(comm, folder, *[w.staged for w in self.writers if isinstance(getattr(w, "staged", None), StagedFiles)],
+                   self.staged)
+        except BaseException:
+            # Ctrl-C, SIGTERM or an error before the renames (the sync takes up to 0.2 s): the
+            # staged latest.json is dropped, so the previous checkpoint stays the latest one.
+            # Nothing else ends this object's staged files (the run's writer ends only its own).
+            self.staged.discard()
+            raise
         on_rank0(comm, tidy)
         return target
 

@@ -53,3 +53,27 @@ def test_an_interrupt_during_the_renames_leaves_every_file_renamed(tmp_path, mon
     print(f"\n  renames before the interrupt was raised: {len(calls)}; files: {names}")
     assert len(calls) == 3 and names == ["fields.xdmf", "pairs.pvd", "summary.json"]
     assert (tmp_path / "summary.json").read_text() == "new summary.json"
+
+
+def test_an_interrupt_during_a_checkpoints_sync_leaves_no_staged_latest(tmp_path, monkeypatch):
+    """Found by the SIGTERM test of the command line (1 run of CI in about 10): a signal during
+    the checkpoint's sync left ``checkpoints/.latest.json.tmp-PID-staged``, which no writer ended."""
+    from dolfinx_nnqem.cases.two_beams import two_beams_problem
+    from dolfinx_nnqem.io import checkpoint, safe_io
+    from dolfinx_nnqem.solvers.stepping import StepperState
+
+    problem = two_beams_problem(law="alart-curnier")
+    checkpointer = checkpoint.Checkpointer(tmp_path)
+    checkpointer.save(problem, StepperState(start=0.0, step=0.1, cutbacks=0, index=1))
+    latest = (tmp_path / "checkpoints" / "latest.json").read_text()
+
+    def sync_then_interrupt(folder):
+        os.kill(os.getpid(), signal.SIGINT)  # Ctrl-C while the file system is synced
+
+    monkeypatch.setattr(safe_io, "sync_file_system", sync_then_interrupt)
+    with pytest.raises(KeyboardInterrupt):
+        checkpointer.save(problem, StepperState(start=0.0, step=0.1, cutbacks=0, index=2))
+    left = sorted(p.name for p in tmp_path.rglob(".*.tmp-*"))
+    print(f"\n  temporaries left: {left}; latest.json {(tmp_path / 'checkpoints' / 'latest.json').read_text()}")
+    assert not left
+    assert (tmp_path / "checkpoints" / "latest.json").read_text() == latest  # the previous checkpoint
