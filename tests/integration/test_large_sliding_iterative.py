@@ -41,3 +41,50 @@ def test_the_iterative_solver_takes_the_consistent_geometry(discretisation, degr
     assert du < 1e-9 and df < 1e-9
     # Q2: one inexact step more than the direct solver in most slip increments (58 against 45 measured)
     assert sum(its_i) <= (1.3 if degree == 1 else 1.45) * sum(its_d) and sum(its_i) < 0.4 * sum(its_frozen)
+
+
+@pytest.mark.parametrize("linear_solver", ["iterative", "auto"])
+def test_polar_law_on_degree_2_surface_pairs_is_refused_by_the_iterative_solver(linear_solver):
+    """The Q2 frictional slide with the polar law fails with the iterative linear solver after cutbacks
+    (docs/theory.md, "A known failure"): refused when the solver is made, before any increment, with
+    the two remedies; the direct solver takes the same problem."""
+    from dolfinx_nnqem.solvers.options import MonolithicOptions as Options
+
+    problem = sliding_blocks(slide=0.4, mu_f=0.3, discretisation="node-to-surface", degree=2, law="polar")
+    settings = Options(linear_solver=linear_solver, auto_iterative_dofs=1)  # "auto": iterative from 1 dof
+    with pytest.raises(ValueError) as refusal:
+        make_solver("monolithic", problem, OPTIONS, monolithic=settings)
+    message = str(refusal.value)
+    print(f"\n  {linear_solver}: {message}")
+    assert "polar" in message and "degree-2 node-to-surface" in message and "direct" in message
+    assert "alart-curnier" in message and ("auto" in message) == (linear_solver == "auto")
+    make_solver("monolithic", problem, OPTIONS, monolithic=Options(linear_solver="direct")).destroy()
+    # the same pairs without friction, or with Alart–Curnier, are taken
+    for mu_f, law in ((0.0, "polar"), (0.3, "alart-curnier")):
+        other = sliding_blocks(slide=0.4, mu_f=mu_f, discretisation="node-to-surface", degree=2, law=law)
+        make_solver("monolithic", other, OPTIONS, monolithic=settings).destroy()
+
+
+def test_polar_law_refusal_from_a_problem_file(tmp_path, capsys):
+    """The same refusal from a problem file: exit code 3 (bad input), the reason, no increment solved."""
+    import json
+
+    from mpi4py import MPI
+
+    from dolfinx_nnqem.cli import EXIT_BAD_INPUT, main
+    from dolfinx_nnqem.cases.geometries import build_block_stack
+    from test_large_sliding import _blocks_file
+
+    if MPI.COMM_WORLD.size > 1:
+        pytest.skip("the CLI test runs serially")
+    build_block_stack(MPI.COMM_SELF, 1.0, 1.0, [0.5, 0.5], [(4, 2, 4), (6, 2, 6)], msh_file=tmp_path / "blocks.msh")
+    text = _blocks_file(E1=1.0e3, press=-0.01, pressed_at=0.25, slide=0.4, z_tags=[202], increments=12, degree=2)
+    text = (text.replace("MESH", (tmp_path / "blocks.msh").as_posix()).replace("METHOD", "monolithic")
+            .replace("LAW", "polar") + 'linear_solver = "iterative"\n')
+    (tmp_path / "slide.toml").write_text(text)
+    code = main(["-q", "run", str(tmp_path / "slide.toml"), "--out", str(tmp_path / "out")])
+    summary_file = tmp_path / "out" / "summary.json"
+    increments = len(json.loads(summary_file.read_text())["load_factors"]) if summary_file.exists() else 0
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    print(f"\n  exit {code}; increments written {increments}; {err}")
+    assert code == EXIT_BAD_INPUT and increments == 0 and "polar law" in err and "Traceback" not in err
