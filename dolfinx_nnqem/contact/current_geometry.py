@@ -44,7 +44,7 @@ from mpi4py import MPI
 
 from dolfinx_nnqem.contact.obstacles import ObstaclePairs
 from dolfinx_nnqem.contact.pairset import PairRows, rows_matrix
-from dolfinx_nnqem.contact.surface_pairs import SurfacePairs, facet_size
+from dolfinx_nnqem.contact.surface_pairs import RUN_INTERFERENCE, SurfacePairs, facet_size
 from dolfinx_nnqem.contact.surfaces import (GatheredSurfaces, check_no_shared_nodes, gather_surfaces, local_frames,
                                             mesh_tolerance)
 
@@ -254,7 +254,7 @@ class SurfaceTracker:
         pairs = node_to_surface_pairs(self.V, moved_surfaces(self.surfaces, u), tolerance=self.gap_rounding,
                                       search_distance=self.search_distance, note=self.note,
                                       supported=self.supported, edge_allowance=EDGE_ALLOWANCE * master_size,
-                                      preferred=self.facets)
+                                      preferred=self.facets, max_interference=RUN_INTERFERENCE)
         self.facets = self.gathered_facets(pairs)
         return rebased(pairs, self.V, u)
 
@@ -302,7 +302,7 @@ class MortarTracker:
 
         moved = with_moved_normals(moved_surfaces(self.surfaces, u))
         pairs = mortar_pairs(self.V, moved, tolerance=self.gap_rounding, search_distance=self.search_distance,
-                             note=self.note, supported=self.supported)
+                             note=self.note, supported=self.supported, max_interference=RUN_INTERFERENCE)
         return rebased(pairs, self.V, u)
 
 

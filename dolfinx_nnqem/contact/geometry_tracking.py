@@ -35,7 +35,7 @@ from dolfinx_nnqem.contact.geometric_stiffness import GeometricTerms, no_terms, 
 from dolfinx_nnqem.contact.obstacles import ObstaclePairs, RigidObstacle, obstacle_pairs
 from dolfinx_nnqem.contact.pairset import PairSet
 from dolfinx_nnqem.contact.slip_check import Slip, facet_size_of, slipped_interfaces
-from dolfinx_nnqem.contact.surface_pairs import SurfacePairs, facet_size
+from dolfinx_nnqem.contact.surface_pairs import InterferenceError, SurfacePairs, facet_size
 from dolfinx_nnqem.contact.surface_stiffness import (ClosestPoints, Supports, SurfaceTerms, reprojected_pairs,
                                                      surface_terms)
 from dolfinx_nnqem.contact.symmetry_planes import IN_PLANE, supports_of
@@ -45,7 +45,7 @@ from dolfinx_nnqem.contact.surfaces import ContactPairError, NoPairsError, mesh_
 if TYPE_CHECKING:
     import dolfinx
 
-__all__ = ["ContactGeometry", "GeometryTracker", "LostContactError", "Remap", "TrackedInterface", "TrackedModel",
+__all__ = ["ContactGeometry", "GeometryTracker", "LostContactError", "DeepPenetrationError", "GeometryStepError", "Remap", "TrackedInterface", "TrackedModel",
            "reference_pairs", "starting_pairs", "tracker_of", "zero_displacement"]
 
 GeometryTracker = ObstacleTracker | CombinedObstacleTracker | SurfaceTracker | MortarTracker
@@ -55,9 +55,19 @@ Remap = Callable[[np.ndarray, np.ndarray], np.ndarray]
 layout (:func:`~dolfinx_nnqem.contact.current_geometry.remapper`)."""
 
 
-class LostContactError(ContactPairError):
+class GeometryStepError(ContactPairError):
+    """A re-evaluation of the current geometry between solves cannot go on from the state reached:
+    load stepping takes it as a failed solve and cuts the increment back."""
+
+
+class LostContactError(GeometryStepError):
     """A re-evaluation of the current geometry found no pair on an interface (the slave nodes left the
-    master surface): load stepping takes it as a failed solve and cuts the increment back."""
+    master surface)."""
+
+
+class DeepPenetrationError(GeometryStepError):
+    """A re-evaluation of the current geometry found a slave node deeper behind the master than
+    :data:`~dolfinx_nnqem.contact.surface_pairs.RUN_INTERFERENCE` × its facet size."""
 
 
 def zero_displacement(V: dolfinx.fem.FunctionSpace) -> dolfinx.fem.Function:
@@ -493,13 +503,17 @@ def _remortared(pairs: PairSet, tracker: MortarTracker, u, u_n) -> tuple[Surface
 
 
 def _pairs_or_lost(interface: TrackedInterface, tracker: GeometryTracker, u, load_factor: float) -> PairSet:
-    """The tracker's pairs at (u, ℓ); :class:`LostContactError` naming the interface if there are none."""
+    """The tracker's pairs at (u, ℓ); :class:`LostContactError` naming the interface if there are none,
+    :class:`DeepPenetrationError` if a slave node lies too deep behind the master."""
     lost = (f"contact {interface.contact.label}: no pairs in the current geometry at load factor "
             f"{load_factor:.6g}: no slave node faces the master surface any more (the bodies slid apart)")
     try:
         pairs: PairSet = tracker.pairs_at(u, load_factor)
     except NoPairsError as error:  # node-to-surface and mortar alike: one outcome, one message
         raise LostContactError(lost) from error
+    except InterferenceError as error:
+        raise DeepPenetrationError(f"contact {interface.contact.label} at load factor {load_factor:.6g}: {error}; "
+                                   "the increment is cut back") from error
     if pairs.num_global == 0:
         raise LostContactError(lost)
     return pairs

@@ -52,7 +52,7 @@ import numpy as np
 
 from dolfinx_nnqem.contact.facet_layout import node_combination
 from dolfinx_nnqem.contact.mortar_geometry import mortar_integrals
-from dolfinx_nnqem.contact.surface_pairs import SurfacePairs, facet_size, surface_pairs
+from dolfinx_nnqem.contact.surface_pairs import MAX_INTERFERENCE, SurfacePairs, facet_size, surface_pairs
 from dolfinx_nnqem.contact.surfaces import ContactPairError, GatheredSurfaces, NoPairsError, first_by_position, format_point
 
 if TYPE_CHECKING:
@@ -72,7 +72,8 @@ MAX_COVERAGE = 1.0 + 1e-6
 
 
 def mortar_pairs(V: dolfinx.fem.FunctionSpace, surfaces: GatheredSurfaces, *, tolerance: float, search_distance: float | None = None,
-                 note: str = "", supported: np.ndarray | None = None) -> SurfacePairs:
+                 note: str = "", supported: np.ndarray | None = None,
+                 max_interference: float = MAX_INTERFERENCE) -> SurfacePairs:
     """Dual mortar pairs of the second gathered surface (slave) against the first (master).
 
     Parameters
@@ -91,6 +92,8 @@ def mortar_pairs(V: dolfinx.fem.FunctionSpace, surfaces: GatheredSurfaces, *, to
     supported
         Laid out like V's local dofs, non-zero at prescribed ones (None: no support is known): the
         normals of slave nodes on symmetry planes lie in the plane (:func:`surface_pairs`).
+    max_interference
+        How deep behind the master, in its facet size, a slave node may lie (:func:`surface_pairs`).
 
     Raises
     ------
@@ -143,7 +146,7 @@ def mortar_pairs(V: dolfinx.fem.FunctionSpace, surfaces: GatheredSurfaces, *, to
         V, "mortar", tags, mi.slave_index[keep], mi.x[keep], mi.D[keep], -mi.normal[keep],
         mi.weighted_gap[keep] / m[keep], M.indptr, mi.master_index[M.indices], weights, master_x[M.indices],
         master_size=master_size, tolerance=tolerance, num_slave_nodes=len(mi.slave_index), note=note,
-        supported=supported, slave_rows=slave_rows)
+        supported=supported, slave_rows=slave_rows, max_interference=max_interference)
 
 
 def _drop_round_off(mi) -> None:

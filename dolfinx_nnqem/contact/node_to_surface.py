@@ -41,7 +41,7 @@ import numpy as np
 from dolfinx_nnqem.contact.projection import Projection, project_points
 from dolfinx_nnqem.contact.facet_layout import NodeCombination
 from dolfinx_nnqem.contact.quadratic_projection import project_onto_facets, project_points_quadratic
-from dolfinx_nnqem.contact.surface_pairs import SurfacePairs, facet_size, surface_pairs
+from dolfinx_nnqem.contact.surface_pairs import MAX_INTERFERENCE, SurfacePairs, facet_size, surface_pairs
 from dolfinx_nnqem.contact.surfaces import ContactPairError, Facets, NoPairsError, GatheredSurfaces, first_by_position, format_point
 
 if TYPE_CHECKING:
@@ -52,8 +52,8 @@ __all__ = ["keep_preferred", "node_to_surface_pairs"]
 
 def node_to_surface_pairs(V: dolfinx.fem.FunctionSpace, surfaces: GatheredSurfaces, *, tolerance: float, search_distance: float | None = None,
                           note: str = "", supported: np.ndarray | None = None,
-                          edge_allowance: float | None = None, preferred: np.ndarray | None = None
-                          ) -> SurfacePairs:
+                          edge_allowance: float | None = None, preferred: np.ndarray | None = None,
+                          max_interference: float = MAX_INTERFERENCE) -> SurfacePairs:
     """Node-to-surface pairs of the second gathered surface (slave) on the first (master).
 
     Parameters
@@ -82,6 +82,9 @@ def node_to_surface_pairs(V: dolfinx.fem.FunctionSpace, surfaces: GatheredSurfac
         (slave nodes,) a master facet per slave node (−1: none), kept where the slave node still
         projects onto it within ``edge_allowance`` (:func:`keep_preferred`): the current geometry's
         hysteresis against a slave node on a shared edge jumping between two facets.
+    max_interference
+        How deep behind the master, in its facet size, a slave node may lie
+        (:func:`~dolfinx_nnqem.contact.surface_pairs.surface_pairs`).
 
     Raises
     ------
@@ -110,7 +113,8 @@ def node_to_surface_pairs(V: dolfinx.fem.FunctionSpace, surfaces: GatheredSurfac
             V, "node-to-surface", tags, nodes.index[keep], nodes.x[keep], nodes.area[keep], p.normal[keep],
             p.g0[keep], np.arange(0, k * len(keep) + 1, k), master.nodes[p.facet[keep]].ravel(), p.N[keep].ravel(),
             master.x[p.facet[keep]].reshape(-1, 3), master_size=master_size, tolerance=tolerance,
-            num_slave_nodes=len(nodes.index), note=note, supported=supported, facet=p.facet[keep])
+            num_slave_nodes=len(nodes.index), note=note, supported=supported, facet=p.facet[keep],
+            max_interference=max_interference)
     # tri6 slave facets: pair j acts on d̂_j = Σ_i t_ji d_i, so its master side is Σ_i t_ji u_m(ξ_i)
     every = np.minimum.reduceat(inside[combination.columns].astype(np.int8), combination.indptr[:-1]) > 0
     keep = np.flatnonzero(every)
@@ -121,7 +125,7 @@ def node_to_surface_pairs(V: dolfinx.fem.FunctionSpace, surfaces: GatheredSurfac
         V, "node-to-surface", tags, nodes.index[keep], nodes.x[keep], nodes.area[keep], p.normal[keep], g0,
         master_indptr, master_index, weights, X_master_nodes, master_size=master_size, tolerance=tolerance,
         num_slave_nodes=len(nodes.index), note=note, supported=supported, facet=p.facet[keep],
-        slave_rows=(rows.indptr, nodes.index[rows.columns], rows.coefficients))
+        slave_rows=(rows.indptr, nodes.index[rows.columns], rows.coefficients), max_interference=max_interference)
 
 
 def _check_projections(p: Projection, inside: np.ndarray, x: np.ndarray, normal: np.ndarray, tags: tuple[int, int],

@@ -37,12 +37,23 @@ from dolfinx_nnqem.contact.symmetry_planes import IN_PLANE, support_rules
 if TYPE_CHECKING:
     import dolfinx
 
-__all__ = ["MAX_INTERFERENCE", "SurfacePairs", "facet_size", "surface_pairs"]
+__all__ = ["MAX_INTERFERENCE", "RUN_INTERFERENCE", "InterferenceError", "SurfacePairs", "facet_size", "surface_pairs"]
 
 MAX_INTERFERENCE = 0.1
 """A slave node may start up to this fraction of the master's mean facet size behind the master
 surface (an initial interference, e.g. where a curved interface is faceted differently on its two
 sides); a deeper one means overlapping bodies or swapped surfaces, and is refused."""
+
+RUN_INTERFERENCE = 0.5
+"""The same limit for the pairs re-evaluated during a run (``geometry = "current"``, between
+solves): a solver that holds the geometry within a solve (NNEQM1) lets a slave node pass a curved
+master surface by a fraction of a facet before the re-evaluation sees it (an edge of a die riding
+up the bulge it pushes). The next solve pushes it out; beyond this limit the closest points may be
+on the wrong facets, and load stepping cuts the increment back instead."""
+
+
+class InterferenceError(ContactPairError):
+    """A slave node lies deeper behind the master surface than the limit allows."""
 
 
 @dataclass(eq=False)
@@ -122,15 +133,18 @@ def facet_size(facets: Facets) -> float:
     return float(np.sqrt(np.mean(np.linalg.norm(facets.area, axis=1))))
 
 
-def _check_gaps(g0: np.ndarray, x: np.ndarray, master_size: float, tags: tuple[int, int]) -> None:
-    """Refuse slave nodes deeper behind the master than :data:`MAX_INTERFERENCE` × its facet size."""
-    deep = g0 < -MAX_INTERFERENCE * master_size
+def _check_gaps(g0: np.ndarray, x: np.ndarray, master_size: float, tags: tuple[int, int],
+                max_interference: float) -> None:
+    """Refuse slave nodes deeper behind the master than ``max_interference`` × its facet size
+    (:class:`InterferenceError`)."""
+    deep = g0 < -max_interference * master_size
     if np.any(deep):
         i = first_by_position(x, deep)
-        raise ContactPairError(
+        why = (": are the bodies overlapping, or are the surfaces swapped?" if max_interference == MAX_INTERFERENCE
+               else "")
+        raise InterferenceError(
             f"the node at {format_point(x[i])} of the slave surface {tags[1]} lies {-g0[i]:.6g} behind the master "
-            f"surface {tags[0]} (more than {MAX_INTERFERENCE:g} × its facet size {master_size:.4g}): are the bodies "
-            "overlapping, or are the surfaces swapped?")
+            f"surface {tags[0]} (more than {max_interference:g} × its facet size {master_size:.4g}){why}")
 
 
 def _joined_rows(slave_rows: tuple[np.ndarray, np.ndarray, np.ndarray], local: np.ndarray, indptr: np.ndarray,
@@ -160,7 +174,7 @@ def surface_pairs(V: dolfinx.fem.FunctionSpace, kind: str, tags: tuple[int, int]
                   master_size: float, tolerance: float, num_slave_nodes: int, note: str = "",
                   supported: np.ndarray | None = None,
                   slave_rows: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
-                  facet: np.ndarray | None = None) -> SurfacePairs:
+                  facet: np.ndarray | None = None, max_interference: float = MAX_INTERFERENCE) -> SurfacePairs:
     """Assemble the pair set from per-slave-node data given identically on every rank (collective).
 
     Parameters
@@ -197,8 +211,12 @@ def surface_pairs(V: dolfinx.fem.FunctionSpace, kind: str, tags: tuple[int, int]
         (:func:`~dolfinx_nnqem.contact.quadratic_facets.node_combination`). None: u_j alone.
     facet
         (p,) node-to-surface: the master facet of each slave node (kept as ``master_facet``).
+    max_interference
+        How deep behind the master, in its facet size, a slave node may lie
+        (:data:`MAX_INTERFERENCE` where a run starts, :data:`RUN_INTERFERENCE` during a run);
+        deeper: :class:`InterferenceError`.
     """
-    _check_gaps(g0, X_slave, master_size, tags)
+    _check_gaps(g0, X_slave, master_size, tags, max_interference)
     g0 = np.where(np.abs(g0) <= tolerance, 0.0, g0)  # touching within the tolerance: no gap (round-off)
     # deterministic global order for any number of ranks: the slave nodes' coordinates
     order = np.lexsort((X_slave[:, 2], X_slave[:, 1], X_slave[:, 0]))

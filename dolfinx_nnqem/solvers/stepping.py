@@ -21,9 +21,10 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
 from mpi4py import MPI
 
-from dolfinx_nnqem.contact.geometry_tracking import LostContactError
+from dolfinx_nnqem.contact.geometry_tracking import GeometryStepError
 from dolfinx_nnqem.contact.slip_check import stale_message, switch_message
 from dolfinx_nnqem.material.interface import GaussPointValues
 from dolfinx_nnqem.solvers.checks import CheckOptions, StateCheck, check_state, failure_details, values_to_commit
@@ -282,7 +283,15 @@ def _solve_and_check(problem, solver, target: float, check: CheckOptions | None,
 
 
 GEOMETRY_PASSES = 30
-"""Solves of one increment at most, each in the contact geometry of the last one's solution."""
+"""Solves of one increment at most, each in the contact geometry of the last one's solution, unless
+they are still converging (:data:`CONVERGING_PASSES`)."""
+
+CONVERGING_PASSES = 100
+"""Solves of one increment at most while each moves u less than :data:`SETTLING_FACTOR` times the
+one before on average over the last three: a slow but steady fixed point (a solver that holds the
+geometry within a solve, at large deformation) is given the solves it needs."""
+
+SETTLING_FACTOR = 0.8
 
 
 def _solve(problem, solver, target: float) -> SolveReport:
@@ -304,34 +313,59 @@ def _solve(problem, solver, target: float) -> SolveReport:
         return lost
     report = solver.solve_increment(target)
     iterations, passes = report.iterations, 1
+    moves: list[float] = []  # how far each repeated solve moved u (max norm)
     # The first solve starts from the predictor (the secant extrapolation), not from where the geometry
     # was evaluated (u_n): even with no Newton iteration its solution is not yet in its own geometry.
     while report.converged and (report.iterations > 0 or passes == 1) and not report.geometry_consistent:
-        if passes == GEOMETRY_PASSES:
+        if passes >= GEOMETRY_PASSES and (passes == CONVERGING_PASSES or _settling_factor(moves) > SETTLING_FACTOR):
             report.converged = False
-            report.message = (f"the contact geometry did not settle in {GEOMETRY_PASSES} solves of the increment "
-                              "(each re-evaluated at the last solution)")
+            report.message = _unsettled_message(moves, passes)
             break
         lost = _update_geometry(problem, target)
         if lost is not None:
             lost.iterations += iterations
             return lost
         problem.warm_start = True
+        before = problem.u.x.array.copy()
         try:
             report = solver.solve_increment(target)
         finally:
             problem.warm_start = False
+        moved = np.abs(problem.u.x.array - before).max(initial=0.0)
+        moves.append(float(problem.comm.allreduce(moved, op=MPI.MAX)))
         iterations, passes = iterations + report.iterations, passes + 1
     report.iterations, report.geometry_passes = iterations, passes
     return report
 
 
+def _settling_factor(moves: list[float]) -> float:
+    """The mean factor by which each of the last three repeated solves moved u less than the one
+    before (inf if there are fewer than four)."""
+    if len(moves) < 4 or moves[-4] <= 0.0:
+        return float("inf")
+    return (moves[-1] / moves[-4]) ** (1.0 / 3.0)
+
+
+def _unsettled_message(moves: list[float], passes: int) -> str:
+    """Why the repeated solves of an increment stopped: the geometry did not settle. Says how far
+    the last solve still moved u and by what factor the solves were converging, and what settles
+    it: the monolithic solver linearises the geometry within its Newton steps."""
+    text = f"the contact geometry did not settle in {passes} solves of the increment (each re-evaluated at the last solution)"
+    factor = _settling_factor(moves)
+    if factor < float("inf") and moves[0] > 0.0:
+        text += (f"; the last solve moved u by {moves[-1]:.3g} ({moves[-1] / moves[0]:.2g} of the second), "
+                 f"by a factor {factor:.2f} a solve over the last three: the solves in a geometry held within each "
+                 "converge too slowly or not at all here; the monolithic solver linearises the geometry")
+    return text
+
+
 def _update_geometry(problem, target: float) -> SolveReport | None:
     """Re-evaluate the current contact geometry; a failed solve's report if an interface lost all its
-    pairs (load stepping then cuts the increment back, and names the interface if it gives up)."""
+    pairs or a slave node lies too deep behind its master (:class:`GeometryStepError`: load stepping
+    then cuts the increment back, and names the interface if it gives up)."""
     try:
         problem.update_contact_geometry(target)
-    except LostContactError as error:
+    except GeometryStepError as error:
         return SolveReport(converged=False, iterations=0, message=str(error))
     return None
 
