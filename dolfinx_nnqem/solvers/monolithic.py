@@ -44,7 +44,6 @@ from dolfinx_nnqem.numerics.roundoff import floor_note, residual_floor
 from dolfinx_nnqem.problem.contact_problem import ContactProblem
 from dolfinx_nnqem.solvers.options import MonolithicOptions, SolverOptions
 from dolfinx_nnqem.solvers.prediction import lifted_residual, predict_increment
-from dolfinx_nnqem.solvers.preflight import check_iterative_contact
 from dolfinx_nnqem.solvers.surface_tangent import SurfaceTangent
 from dolfinx_nnqem.solvers.timings import Timings
 
@@ -90,7 +89,6 @@ class MonolithicSolver(ReleasesPETSc):
         self.settings = monolithic or MonolithicOptions()
         self.prefix = f"nnqem_monolithic_{id(self)}_"
         self.iterative = self._use_iterative()
-        check_iterative_contact(problem, self.settings.linear_solver, self.iterative)
         self.linear: IterativeSolver | DirectSolver = self._linear_solver()
         self._K: PETSc.Mat | None = None
         self._surface_tangent = SurfaceTangent()  # K_t − K of the node-to-surface pairs (consistent geometry)
