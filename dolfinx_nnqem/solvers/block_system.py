@@ -385,8 +385,9 @@ class AugmentedSystem:
         rows = self._blocks.rows_free
         self.B_free.setValuesCSR(rows.indptr, rows.columns, rows.values)  # type: ignore[arg-type]  # as in BlockDiagonal.fill
         self.B_free.assemble()
-        A00 = self._u_block(K, weighted_rows(dH_dw, weights), surface)
-        M = -dlam_dz + self.c * np.einsum("nki,nkj->nij", weighted_rows(dH_dw, weights), weighted_rows(dH_dz, weights))
+        D_w, D_z = weighted_rows(dH_dw, weights), weighted_rows(dH_dz, weights)  # Σ D_w, Σ D_z
+        A00 = self._u_block(K, D_w, surface)
+        M = -dlam_dz + self.c * np.einsum("nki,nkj->nij", D_w, D_z)
         A01, A10, A11 = self._blocks.fill(M, dH_dw, dH_dz, B_values)
         if self._nest is None:
             self._nest = PETSc.Mat().createNest([[A00, A01], [A10, A11]], comm=K.getComm())
@@ -395,7 +396,8 @@ class AugmentedSystem:
 
     def rhs(self, R_free: PETSc.Vec, H: np.ndarray, dH_dw: np.ndarray, weights: np.ndarray | None = None) -> PETSc.Vec:
         """−(R + c B_freeᵀ D_wᵀ Σ² H, H) in the nest's layout (a plain vector, the same one each call)."""
-        self._g.getArray()[:] = np.einsum("nki,nk->ni", weighted_rows(dH_dw, weights), weighted_rows(H, weights)).reshape(-1)
+        D_w, H_weighted = weighted_rows(dH_dw, weights), weighted_rows(H, weights)
+        self._g.getArray()[:] = np.einsum("nki,nk->ni", D_w, H_weighted).reshape(-1)
         self.B_free.multTranspose(self._g, self._Btg)
         n_u = R_free.getLocalSize()
         if self._b is None:

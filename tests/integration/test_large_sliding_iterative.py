@@ -53,7 +53,8 @@ def test_polar_law_on_degree_2_node_to_surface_pairs():
     wrong sign; the row is now weighed as the Cartesian law's row normal to the slip, and at 0 on
     open pairs (:meth:`~dolfinx_nnqem.contact.laws.PolarLaw.augmentation_weights`). Measured: 60 Newton
     iterations against the direct solver's 45 (Alart–Curnier, iterative: 58), 1 563 Krylov iterations
-    in 67 solves, the state within 1.5e-13 (u) and 1e-12 (pair forces) of the direct solver's."""
+    in 67 solves, the state within 3.6e-13 (u) and 6.4e-12 (pair forces) of the direct solver's, relative
+    to their largest values."""
     runs = {}
     for linear_solver in ("direct", "iterative"):
         problem = sliding_blocks(slide=0.4, mu_f=0.3, discretisation="node-to-surface", degree=2, law="polar")
@@ -82,10 +83,12 @@ def test_the_polar_weights_keep_the_augmented_system_exact(monkeypatch):
 
     problem = sliding_sphere(8, mu_f=0.3, shape="cylinder", law="polar")
     rhs = AugmentedSystem.rhs
+
+    def rhs_without_weights(self, R_free, H, dH_dw, weights=None):
+        return rhs(self, R_free, H, dH_dw)
+
     error, error_without = direct_step_in_augmented_system(
-        problem, OPTIONS, lambda: monkeypatch.setattr(AugmentedSystem, "rhs",
-                                                      lambda self, R_free, H, dH_dw, weights=None: rhs(self, R_free, H, dH_dw)),
-        min_sliding=3)
+        problem, OPTIONS, lambda: monkeypatch.setattr(AugmentedSystem, "rhs", rhs_without_weights), min_sliding=3)
     print(f"\n  |J_aug d_direct − b_aug|/|b_aug| = {error:.1e}, {error_without:.1e} without the weights in b_aug")
     assert error < 1e-12
     assert error_without > 100 * error
