@@ -772,18 +772,18 @@ class PolarLaw:
 
         The augmentation adds c Bᵀ D_wᵀ Σ² times the pair rows to the u rows (Σ these weights):
         a penalty c D_wᵀ Σ² D_w on the pair's relative displacement. H3 = r s×d has
-        ∂H3/∂w = r d′ whatever the state, so at weight 1 every pair's slip normal to d(θ) is
+        ∂H3/∂w = −r d′ whatever the state, so at weight 1 every pair's slip normal to d(θ) is
         penalised with stiffness r — also where nothing resists it, since θ turns with the slip
         (∂H3/∂θ = r s·d): the u block then holds a stiffness that the pair block's Schur
         complement has to take back, the difference r s·d (1 − β) of two terms of order r |s| with
         β ≈ 1, where the answer is of order |p_r|. The ``selfp`` approximation of β (diag(A00)⁻¹
         for A00⁻¹) is off by O(1) and gives that entry the wrong sign (docs/theory.md, the
         iterative linear solver). At the weights above the penalty is what the Cartesian law's
-        row normal to the slip gives: H3 times |p_r| / (|p_r| + r |s·d|) is that row,
+        row normal to the slip gives: H3 times |p_r| / (|p_r| + r |s·d|) is −1 times that row,
         r k dw⊥ + (1 − k) dq⊥ with k = ρ / |q − r s|, where the force is at the bound and
         opposes the slip; open pairs' θ moves no force, and their H3 is no constraint on u.
-        Only the iterative solver's preconditioner sees the weights: every weight gives the same
-        Newton step.
+        (Pinned rows have ∂H/∂w = 0: no weight matters there.) Only the iterative solver's
+        augmented system uses the weights, and its solution, the Newton step, is the same for any.
         """
         z = np.asarray(z, dtype=np.float64)
         weights = np.ones((z.shape[0], 3))
