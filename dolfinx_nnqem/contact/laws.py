@@ -126,11 +126,16 @@ class Linearisation(NamedTuple):
         (nc, 3, 3) ∂λ/∂y.
     cartesian
         (nc,) bool, or None: pairs whose y = (p_n, λ_t1, λ_t2).
+    augmentation
+        (nc, 3) weights of the pair rows where the Newton system is augmented with them (the
+        monolithic solver's iterative system, :class:`~dolfinx_nnqem.solvers.block_system.AugmentedSystem`),
+        or None: every row at weight 1. See :meth:`PolarLaw.augmentation_weights`.
     """
 
     dH_dy: np.ndarray
     dlam_dy: np.ndarray
     cartesian: np.ndarray | None
+    augmentation: np.ndarray | None = None
 
 
 # ---------------------------------------------------------------------------------------------
@@ -757,7 +762,37 @@ class PolarLaw:
             dH_dy[sliding, :, 1:] = np.einsum("nij,njk->nik", evaluation.dH_dz[sliding, :, 1:], dz_dq)
             dlam_dy[sliding, 1:, 1:] = np.eye(2)
             cartesian = cartesian | sliding
-        return Linearisation(dH_dy, dlam_dy, cartesian)
+        return Linearisation(dH_dy, dlam_dy, cartesian, self.augmentation_weights(z, evaluation, unbounded))
+
+    @staticmethod
+    def augmentation_weights(z: np.ndarray, evaluation: LawEvaluation, unbounded: np.ndarray) -> np.ndarray:
+        """(nc, 3) weights of the rows (H1, H2, H3) in an augmented Newton system: 1, except for H3
+        of pairs without a friction bound (``unbounded``: open or frictionless), weight 0, and of
+        pairs sliding at the bound, weight |p_r| / (|p_r| + r |s·d|).
+
+        The augmentation adds c Bᵀ D_wᵀ Σ² times the pair rows to the u rows (Σ these weights):
+        a penalty c D_wᵀ Σ² D_w on the pair's relative displacement. H3 = r s×d has
+        ∂H3/∂w = −r d′ whatever the state, so at weight 1 every pair's slip normal to d(θ) is
+        penalised with stiffness r — also where nothing resists it, since θ turns with the slip
+        (∂H3/∂θ = r s·d): the u block then holds a stiffness that the pair block's Schur
+        complement has to take back, the difference r s·d (1 − β) of two terms of order r |s| with
+        β ≈ 1, where the answer is of order |p_r|. The ``selfp`` approximation of β (diag(A00)⁻¹
+        for A00⁻¹) is off by O(1) and gives that entry the wrong sign (docs/theory.md, the
+        iterative linear solver). At the weights above the penalty is what the Cartesian law's
+        row normal to the slip gives: H3 times |p_r| / (|p_r| + r |s·d|) is −1 times that row,
+        r k dw⊥ + (1 − k) dq⊥ with k = ρ / |q − r s|, where the force is at the bound and
+        opposes the slip; open pairs' θ moves no force, and their H3 is no constraint on u.
+        (Pinned rows have ∂H/∂w = 0: no weight matters there.) Only the iterative solver's
+        augmented system uses the weights, and its solution, the Newton step, is the same for any.
+        """
+        z = np.asarray(z, dtype=np.float64)
+        weights = np.ones((z.shape[0], 3))
+        weights[unbounded, 2] = 0.0
+        bound = (evaluation.state == SLIP) & ~unbounded
+        friction = np.abs(z[bound, 1])
+        total = friction + np.abs(evaluation.dH_dz[bound, 2, 2])  # |p_r| + r |s·d|
+        weights[bound, 2] = np.divide(friction, total, out=np.ones_like(total), where=total > 0.0)
+        return weights
 
     def advance(self, z: npt.ArrayLike, dy: npt.ArrayLike, alpha: float,
                 cartesian: np.ndarray | None, force_unit: float) -> np.ndarray:

@@ -107,6 +107,7 @@ class PairLaws:
             return group.law.linearise(z, evaluation, self.constrained, group.force_unit, sliding_in_force)
         dH_dy, dlam_dy = np.zeros((self.size, 3, 3)), np.zeros((self.size, 3, 3))
         cartesian = np.zeros(self.size, dtype=bool)
+        augmentation = None
         for group in self.groups:
             i = group.index
             part = group.law.linearise(z[i], LawEvaluation(*(a[i] for a in evaluation)), self.constrained[i],
@@ -114,7 +115,10 @@ class PairLaws:
             dH_dy[i], dlam_dy[i] = part.dH_dy, part.dlam_dy
             if part.cartesian is not None:
                 cartesian[i] = part.cartesian
-        return Linearisation(dH_dy, dlam_dy, cartesian if cartesian.any() else None)
+            if part.augmentation is not None:
+                augmentation = np.ones((self.size, 3)) if augmentation is None else augmentation
+                augmentation[i] = part.augmentation
+        return Linearisation(dH_dy, dlam_dy, cartesian if cartesian.any() else None, augmentation)
 
     def advance(self, z: np.ndarray, dy: np.ndarray, alpha: float, cartesian: np.ndarray | None) -> np.ndarray:
         """The unknowns after the step α dy from z in the step coordinates of :meth:`linearise`."""

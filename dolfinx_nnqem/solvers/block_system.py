@@ -32,7 +32,7 @@ if TYPE_CHECKING:
     from dolfinx_nnqem.contact.model import ContactModel
     from dolfinx_nnqem.solvers.contract import SolvableProblem
 
-__all__ = ["AugmentedSystem", "BlockDiagonal", "MonolithicMatrix", "free_columns", "free_rows"]
+__all__ = ["AugmentedSystem", "BlockDiagonal", "MonolithicMatrix", "free_columns", "free_rows", "weighted_rows"]
 
 
 class BlockDiagonal:
@@ -96,6 +96,14 @@ def free_mask(problem: SolvableProblem) -> PETSc.Vec:
     with mask as m:  # type: ignore[attr-defined]  # petsc4py's stub lacks Vec.__enter__/__exit__; constrained_rows are global indices of owned dofs
         m[np.asarray(problem.constrained_rows(), dtype=np.int64) - start] = 0.0
     return mask
+
+
+def weighted_rows(rows: np.ndarray, weights: np.ndarray | None) -> np.ndarray:
+    """Σ ``rows``: each pair's rows (axis 1 of an (n, 3) or (n, 3, k) array) times its augmentation
+    weights ``weights`` (n, 3); ``rows`` itself where ``weights`` is None (every weight 1)."""
+    if weights is None:
+        return rows
+    return rows * (weights if rows.ndim == 2 else weights[:, :, None])
 
 
 class _ContactBlocks:
@@ -222,17 +230,22 @@ class MonolithicMatrix:
 class AugmentedSystem:
     """The Newton system with its u rows augmented, for the iterative solver.
 
-    Adding Bᵀ W times the pair rows to the u rows (W_i = c D_wᵢᵀ, c = ``augmentation`` / r,
-    D_w = ∂_wH) gives the equivalent system
+    Adding Bᵀ W times the pair rows to the u rows (W_i = c D_wᵢᵀ Σᵢ², c = ``augmentation`` / r,
+    D_w = ∂_wH, Σᵢ the diagonal of the pair's row weights, ``weights``: 1 by default) gives the
+    equivalent system
 
-        [ K_t + Bᵀ P B    Bᵀ (−Λ' + c D_wᵀ D_z) ] [du]     [ R + c Bᵀ D_wᵀ H ]
-        [ D_w B           D_z                    ] [dz] = − [ H               ],
+        [ K_t + Bᵀ P B    Bᵀ (−Λ' + c D_wᵀ Σ² D_z) ] [du]     [ R + c Bᵀ D_wᵀ Σ² H ]
+        [ D_w B           D_z                       ] [dz] = − [ H                  ],
 
-    P = c D_wᵀ D_w (per pair, symmetric positive semidefinite), D_z = ∂_zH. It has the same
+    P = c D_wᵀ Σ² D_w (per pair, symmetric positive semidefinite), D_z = ∂_zH. It has the same
     solution, but its u block is the stiffness plus a penalty of order ``augmentation`` · r on
     every closed pair direction: positive definite even for a body held only by contact, and
     a good fit for AMG, while the pair-block Schur complement becomes close to diagonal (the
-    augmented-Lagrangian preconditioning idea). B here has its constrained columns zeroed
+    augmented-Lagrangian preconditioning idea). A row that does not constrain the relative
+    displacement (the polar law's slip-direction row where θ turns with the slip) gets a
+    weight below 1 from its law (:attr:`~dolfinx_nnqem.contact.laws.Linearisation.augmentation`):
+    at weight 1 its penalty is a stiffness that the Schur complement has to take back, which
+    the ``selfp`` approximation cannot. B here has its constrained columns zeroed
     (B_free): du = 0 at constrained dofs, so the system is unchanged, and the u block stays
     symmetric with identity rows and columns there.
 
@@ -335,22 +348,25 @@ class AugmentedSystem:
         """(k, 3): 1 at the free dofs of the slave nodes of ``terms``' pairs."""
         return self._blocks.slave_free(terms)
 
-    def augmented_geometric_blocks(self, terms: GeometricTerms, dH_dw: np.ndarray) -> np.ndarray:
+    def augmented_geometric_blocks(self, terms: GeometricTerms, dH_dw: np.ndarray,
+                                   weights: np.ndarray | None = None) -> np.ndarray:
         """(k, 3, 3) c B_fᵀ D_wᵀ D_w W of each pair of ``terms``: the augmentation of the rows' geometric
         part W (the u block gets c B_freeᵀ D_wᵀ × the pair rows D_w (B + W) du + D_z dz = −H; its
         c Bᵀ P B part is :meth:`_u_block`'s). On the slave node alone: B_f and W have its columns only."""
         self._blocks.refresh_rows()
         start = self.model.rows.indptr[3 * terms.pairs]
         B_f = self._blocks.rows_free.values[start[:, None] + np.arange(9)].reshape(-1, 3, 3)
-        D = dH_dw[terms.pairs]
+        D = weighted_rows(dH_dw, weights)[terms.pairs]
         return self.c * np.einsum("kri,kqr,kqs,ksj->kij", B_f, D, D, terms.W)
 
-    def combined_blocks(self, terms: GeometricTerms, dH_dw: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]] | None:
+    def combined_blocks(self, terms: GeometricTerms, dH_dw: np.ndarray, weights: np.ndarray | None = None
+                        ) -> tuple[np.ndarray, list[np.ndarray]] | None:
         """(free, extra) for ``terms``' pairs that combine nodes (:meth:`GeometricTerms.add_to_tangent`: 1 at
         their nodes' free dofs, and :meth:`augmented_combined_blocks`), or None if it has none."""
         if terms.combined is None:
             return None
-        return self._blocks.combined_free(terms.combined), self.augmented_combined_blocks(terms.combined, dH_dw)
+        return (self._blocks.combined_free(terms.combined),
+                self.augmented_combined_blocks(terms.combined, weighted_rows(dH_dw, weights)))
 
     def augmented_combined_blocks(self, terms: CombinedTerms, dH_dw: np.ndarray) -> list[np.ndarray]:
         """Per pair of ``terms`` (pairs that combine nodes), c B_fᵀ D_wᵀ D_w W on its nodes: what
@@ -359,26 +375,29 @@ class AugmentedSystem:
         return terms.augmentation(self._blocks.rows_free.values, self.model.rows, dH_dw, self.c)
 
     def matrix(self, K: PETSc.Mat, dH_dw: np.ndarray, dH_dz: np.ndarray, dlam_dz: np.ndarray,
-               B_values: np.ndarray | None = None, surface: tuple[PETSc.Mat, np.ndarray] | None = None
-               ) -> PETSc.Mat:
+               B_values: np.ndarray | None = None, surface: tuple[PETSc.Mat, np.ndarray] | None = None,
+               weights: np.ndarray | None = None) -> PETSc.Mat:
         """The augmented Newton matrix (MatNest) at the current law evaluation (``K`` with the
         obstacles' geometric blocks already added, if any; ``B_values``: B + W for the pair rows;
-        ``surface``: (G, W_free) of the node-to-surface and mortar pairs, :meth:`surface_blocks`)."""
+        ``surface``: (G, W_free) of the node-to-surface and mortar pairs, :meth:`surface_blocks`;
+        ``weights``: the pair rows' weights Σ in the augmentation, (n, 3), or None: all 1)."""
         self._blocks.refresh_rows()
         rows = self._blocks.rows_free
         self.B_free.setValuesCSR(rows.indptr, rows.columns, rows.values)  # type: ignore[arg-type]  # as in BlockDiagonal.fill
         self.B_free.assemble()
-        A00 = self._u_block(K, dH_dw, surface)
-        M = -dlam_dz + self.c * np.einsum("nki,nkj->nij", dH_dw, dH_dz)
+        D_w, D_z = weighted_rows(dH_dw, weights), weighted_rows(dH_dz, weights)  # Σ D_w, Σ D_z
+        A00 = self._u_block(K, D_w, surface)
+        M = -dlam_dz + self.c * np.einsum("nki,nkj->nij", D_w, D_z)
         A01, A10, A11 = self._blocks.fill(M, dH_dw, dH_dz, B_values)
         if self._nest is None:
             self._nest = PETSc.Mat().createNest([[A00, A01], [A10, A11]], comm=K.getComm())
         self._nest.assemble()
         return self._nest
 
-    def rhs(self, R_free: PETSc.Vec, H: np.ndarray, dH_dw: np.ndarray) -> PETSc.Vec:
-        """−(R + c B_freeᵀ D_wᵀ H, H) in the nest's layout (a plain vector, the same one each call)."""
-        self._g.getArray()[:] = np.einsum("nki,nk->ni", dH_dw, H).reshape(-1)
+    def rhs(self, R_free: PETSc.Vec, H: np.ndarray, dH_dw: np.ndarray, weights: np.ndarray | None = None) -> PETSc.Vec:
+        """−(R + c B_freeᵀ D_wᵀ Σ² H, H) in the nest's layout (a plain vector, the same one each call)."""
+        D_w, H_weighted = weighted_rows(dH_dw, weights), weighted_rows(H, weights)
+        self._g.getArray()[:] = np.einsum("nki,nk->ni", D_w, H_weighted).reshape(-1)
         self.B_free.multTranspose(self._g, self._Btg)
         n_u = R_free.getLocalSize()
         if self._b is None:

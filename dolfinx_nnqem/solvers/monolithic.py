@@ -44,7 +44,6 @@ from dolfinx_nnqem.numerics.roundoff import floor_note, residual_floor
 from dolfinx_nnqem.problem.contact_problem import ContactProblem
 from dolfinx_nnqem.solvers.options import MonolithicOptions, SolverOptions
 from dolfinx_nnqem.solvers.prediction import lifted_residual, predict_increment
-from dolfinx_nnqem.solvers.preflight import check_iterative_contact
 from dolfinx_nnqem.solvers.surface_tangent import SurfaceTangent
 from dolfinx_nnqem.solvers.timings import Timings
 
@@ -90,7 +89,6 @@ class MonolithicSolver(ReleasesPETSc):
         self.settings = monolithic or MonolithicOptions()
         self.prefix = f"nnqem_monolithic_{id(self)}_"
         self.iterative = self._use_iterative()
-        check_iterative_contact(problem, self.settings.linear_solver, self.iterative)
         self.linear: IterativeSolver | DirectSolver = self._linear_solver()
         self._K: PETSc.Mat | None = None
         self._surface_tangent = SurfaceTangent()  # K_t − K of the node-to-surface pairs (consistent geometry)
@@ -358,21 +356,22 @@ class MonolithicSolver(ReleasesPETSc):
         t0 = time.perf_counter()
         self._follow_geometry()  # a node-to-surface or mortar pair may have changed its columns at this iterate
         assert p.contact is not None and self._augmented is not None and ev.law is not None and ev.lin is not None
+        weights = ev.lin.augmentation  # the pair rows' weights in the augmentation (the polar law's)
         B_values = None
         if ev.geometric is not None:  # on every rank, pairs or none: K's assembly in it is collective
             terms = ev.geometric
             terms.add_to_tangent(self._K, self._augmented.slave_free(terms),
-                                 self._augmented.augmented_geometric_blocks(terms, ev.law.dH_dw),
-                                 combined=self._augmented.combined_blocks(terms, ev.law.dH_dw))
+                                 self._augmented.augmented_geometric_blocks(terms, ev.law.dH_dw, weights),
+                                 combined=self._augmented.combined_blocks(terms, ev.law.dH_dw, weights))
             B_values = terms.rows_values(p.contact.rows)
         surface = None
         if ev.surface is not None:  # on every rank, pairs or none: the matrices are collective
             B_values, G, W_free = self._augmented.surface_blocks(ev.surface, self._K, B_values)
             surface = (G, W_free)
-        J = self._augmented.matrix(self._K, ev.law.dH_dw, ev.lin.dH_dy, ev.lin.dlam_dy, B_values, surface)
+        J = self._augmented.matrix(self._K, ev.law.dH_dw, ev.lin.dH_dy, ev.lin.dlam_dy, B_values, surface, weights)
         if surface is not None:
             surface[0].destroy()
-        b = self._augmented.rhs(ev.R_free, ev.H, ev.law.dH_dw)
+        b = self._augmented.rhs(ev.R_free, ev.H, ev.law.dH_dw, weights)
         self._timings.add("block_matrix", t0)
         return J, b
 

@@ -150,7 +150,7 @@ def test_iterative_linear_solver_takes_the_geometric_terms(monkeypatch):
     problem = sliding_sphere(8, mu_f=0.3, shape="cylinder")
     error, error_without = direct_step_in_augmented_system(
         problem, OPTIONS, lambda: monkeypatch.setattr(AugmentedSystem, "augmented_geometric_blocks",
-                                                      lambda self, terms, dH_dw: np.zeros_like(terms.W)),
+                                                      lambda self, terms, dH_dw, weights=None: np.zeros_like(terms.W)),
         min_sliding=3)
     print(f"\n  |J_aug d_direct − b_aug|/|b_aug| = {error:.1e}, {error_without:.1e} without the augmentation's W")
     assert error < 1e-12
