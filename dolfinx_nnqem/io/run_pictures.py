@@ -98,15 +98,6 @@ def _whole_picture(path: Path, draw: Callable[[Path], object]) -> Path:
     return path
 
 
-def _matplotlib():
-    import matplotlib
-
-    matplotlib.use("Agg")  # off-screen: no display needed
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
 def _curve_margins(fig, panels: int, *, left: float = 0.85, right: float = 0.3, gap: float = 0.85,
                    top: float = 0.55) -> None:
     """Fixed margins (inches) for a row of panels whose tick labels have a bounded width: the load
@@ -149,9 +140,9 @@ def _rows_by_interface(rows: list[dict]) -> dict[str, list[dict]]:
 
 def draw_pair_pressure(rows: list[dict], path: Path, *, title: str = "") -> Path:
     """Pair pressure (Pa) over each contact surface, one panel per interface."""
-    plt = _matplotlib()
     groups = _rows_by_interface(rows)
-    fig, axes = plt.subplots(1, len(groups), figsize=(5.5 * len(groups), 4.5), squeeze=False)
+    fig = plots.figure(5.5 * len(groups), 4.5)
+    axes = fig.subplots(1, len(groups), squeeze=False)
     for ax, (name, group) in zip(axes[0], groups.items()):
         x = np.array([[float(r["slave_x"]), float(r["slave_y"]), float(r["slave_z"])] for r in group])
         pressure = np.array([float(r["pressure"]) for r in group])
@@ -173,7 +164,6 @@ def draw_pair_pressure(rows: list[dict], path: Path, *, title: str = "") -> Path
     # the colour bar's labels on the right; both titles above (not tight_layout: a second layout pass)
     _curve_margins(fig, len(groups), left=1.0, right=0.75, gap=1.75, top=0.62)
     fig.savefig(path, dpi=120)
-    plt.close(fig)
     return path
 
 
@@ -209,8 +199,8 @@ def draw_load_curve(summary: dict, path: Path, *, title: str = "") -> Path:
                                                                for s in [displacements] if s]
     if not panels:
         raise ValueError("summary.json has no reaction_history or probe_history")
-    plt = _matplotlib()
-    fig, axes = plt.subplots(1, len(panels), figsize=(6 * len(panels), 4.5), squeeze=False)
+    fig = plots.figure(6 * len(panels), 4.5)
+    axes = fig.subplots(1, len(panels), squeeze=False)
     for ax, (series, xlabel, unit) in zip(axes[0], panels):
         for label, values in series:
             n = min(len(values), len(factors))
@@ -222,7 +212,6 @@ def draw_load_curve(summary: dict, path: Path, *, title: str = "") -> Path:
     fig.suptitle(title, fontsize=10)
     _curve_margins(fig, len(panels))  # (not tight_layout: a second layout pass)
     fig.savefig(path, dpi=120)
-    plt.close(fig)
     return path
 
 
@@ -233,11 +222,12 @@ def draw_convergence(summary: dict, path: Path, *, title: str = "") -> Path:
         raise ValueError("summary.json has no residual_histories")
     with_contact = any(np.any(h[:, 1] > 0) for h in histories)
     names = ["equilibrium ‖R‖/F"] + (["contact ‖H‖/F"] if with_contact else [])
-    plt = _matplotlib()
+    import matplotlib
     from matplotlib import ticker
 
-    fig, axes = plt.subplots(1, len(names), figsize=(6 * len(names), 4.5), squeeze=False)
-    colours = plt.get_cmap("viridis")(np.linspace(0.0, 0.9, len(histories)))
+    fig = plots.figure(6 * len(names), 4.5)
+    axes = fig.subplots(1, len(names), squeeze=False)
+    colours = matplotlib.colormaps["viridis"](np.linspace(0.0, 0.9, len(histories)))
     for column, (ax, name) in enumerate(zip(axes[0], names)):
         for k, (h, colour) in enumerate(zip(histories, colours)):
             ax.semilogy(np.arange(len(h)), np.maximum(h[:, column], 1e-17), "o-", ms=3, color=colour,
@@ -252,7 +242,6 @@ def draw_convergence(summary: dict, path: Path, *, title: str = "") -> Path:
     fig.suptitle(title, fontsize=10)
     _curve_margins(fig, len(names))  # (not tight_layout: a second layout pass)
     fig.savefig(path, dpi=120)
-    plt.close(fig)
     return path
 
 
