@@ -124,13 +124,13 @@ import numpy
 stage("NumPy")
 from dolfinx_nnqem.io import deformed_picture, picture_worker, plots, run_pictures
 stage("the package's picture modules")
-run_pictures._matplotlib()
-stage("matplotlib (pyplot, Agg)")
-from dolfinx_nnqem import pyvista_compat
-pyvista_compat.import_pyvista()
-stage("pyvista")
+import matplotlib.figure, matplotlib.backends.backend_agg
+stage("matplotlib (Figure, Agg canvas; no pyplot)")
+from dolfinx_nnqem.io import vtk_scene
+vtk_scene.vtk_modules()
+stage("VTK's modules of the 3D scenes (no pyvista)")
 picture_worker._warm_up("pictures")
-stage("VTK's render window asked, pyvista.plotting")
+stage("VTK's render window asked")
 if uncollected:
     gc.freeze()
     gc.enable()
@@ -210,12 +210,12 @@ def main() -> None:
     log: list[tuple[str, float, float]] = []
     # the stages, innermost first: each label's time includes the stages nested in it
     _timed(log, output.ResultsWriter, "_last_field_step", "fields gathered from memory")
-    _timed(log, run_pictures, "_matplotlib", "curves: matplotlib (first: imported)")
+    _timed(log, plots, "figure", "curves: a figure (first: matplotlib imported)")
     _timed(log, run_pictures, "draw_pair_pressure", "pair_pressure.png")
     _timed(log, run_pictures, "draw_load_curve", "load_curve.png")
     _timed(log, run_pictures, "draw_convergence", "convergence.png")
-    _timed(log, deformed_picture, "_field_grid", "deformed: grid (first: pyvista imported)")
-    _timed(log, deformed_picture, "offscreen_plotter", "deformed: plotter (first: pyvista.plotting, VTK)")
+    _timed(log, deformed_picture, "_field_grid", "deformed: grid (first: VTK imported)")
+    _timed(log, deformed_picture, "deformed_scene", "deformed: the scene (first: VTK's render window)")
     _timed(log, run_pictures, "draw_deformed", "deformed.png in all")
     _timed(log, plots, "plot_contact_pressure", "contact_pressure.png")  # (older versions)
     _timed(log, plots, "draw_contact_pressure", "contact_pressure.png")
