@@ -1,8 +1,9 @@
 """Picture workers: processes started with a run that draw its pictures when it ends.
 
-The pictures of a run (:mod:`dolfinx_nnqem.io.run_pictures`) need matplotlib and VTK, whose
-imports take longer than the drawing itself (neither pyvista nor ``matplotlib.pyplot``: they cost
-half the worker's CPU, :mod:`dolfinx_nnqem.io.vtk_scene`). A run uses one core; a worker started with
+The pictures of a run (:mod:`dolfinx_nnqem.io.run_pictures`) are drawn by VTK (the 3D scenes,
+:mod:`dolfinx_nnqem.io.vtk_scene`, and the curves, :mod:`dolfinx_nnqem.io.vtk_charts`), whose
+imports take about as long as the drawing itself (pyvista and matplotlib, which drew them before,
+cost the worker more than the drawing: ``docs/performance.md``). A run uses one core; a worker started with
 the run imports them on another core while the run solves, then draws what the run sends it at
 its end. One worker, ``pictures``, draws them all (:data:`ROLES`): two workers (the matplotlib
 figures and the VTK pictures drawn at the same time) saved 0.1–0.2 s of wall clock but cost
@@ -312,21 +313,18 @@ def _die_with(parent: int) -> None:
 
 
 def _warm_up(role: str) -> None:
-    """Import what the role's pictures need (raises where an import fails): matplotlib's ``Figure``
-    and Agg canvas for ``curves`` (no pyplot), and for any other role the VTK modules of the 3D
-    scenes as well (:func:`~dolfinx_nnqem.io.vtk_scene.vtk_modules`; no pyvista), and whether VTK
-    renders here asked once."""
-    from matplotlib.backends import backend_agg  # noqa: F401
-    from matplotlib import figure  # noqa: F401
+    """Import what the pictures need (raises where an import fails): the VTK modules of the 3D
+    scenes and of the charts (:func:`~dolfinx_nnqem.io.vtk_charts.chart_modules`; neither pyvista
+    nor matplotlib), and whether VTK renders here asked once. ``role`` names the worker (one role
+    draws everything, :data:`ROLES`); ``error_estimates.png`` imports matplotlib where a run has
+    estimates."""
+    from dolfinx_nnqem import pyvista_compat
+    from dolfinx_nnqem.chatter import apply_vtk_options
+    from dolfinx_nnqem.io import vtk_charts
 
-    if role != "curves":
-        from dolfinx_nnqem import pyvista_compat
-        from dolfinx_nnqem.chatter import apply_vtk_options
-        from dolfinx_nnqem.io import vtk_scene
-
-        vtk_scene.vtk_modules()
-        apply_vtk_options()
-        pyvista_compat.vtk_render_problem()
+    vtk_charts.chart_modules()
+    apply_vtk_options()
+    pyvista_compat.vtk_render_problem()
 
 
 def _warm_up_uncollected(role: str) -> None:

@@ -1,0 +1,344 @@
+"""The run's curves drawn by VTK's 2D charts (``vtkChartXY``): ``load_curve.png``,
+``convergence.png`` and ``pair_pressure.png`` (:mod:`dolfinx_nnqem.io.run_pictures`).
+
+A picture is a row of panels (:class:`ChartPanels`), each a chart of lines with markers
+(:func:`add_lines`) or of points coloured by a value with its colour legend (:func:`add_scatter`),
+under the run's title. The look follows the matplotlib figures they replace: white background,
+matplotlib's colour cycle (and viridis for the increments and the pressures), a light grid,
+axis titles, a legend in the corner the data leave freest.
+
+Why not matplotlib: a picture worker that draws the 3D pictures with VTK
+(:mod:`dolfinx_nnqem.io.vtk_scene`) has most of VTK imported already; VTK's charts add a few of its
+modules, where matplotlib's import cost the worker about as much as VTK's and its figures more than
+the charts (``docs/performance.md``, issue 43).
+"""
+
+from __future__ import annotations
+
+import os
+import types
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from dolfinx_nnqem.io import vtk_scene
+from dolfinx_nnqem.io.colour_maps import colour_table
+
+__all__ = ["CYCLE", "ChartPanels", "add_lines", "add_scatter", "chart_modules", "sequential_colours"]
+
+CYCLE = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22",
+         "#17becf")
+"""The colours of successive lines (matplotlib's default cycle, "tab10")."""
+
+DPI = 120
+"""Pixels per inch of the pictures (their matplotlib figures were saved at 120 dpi)."""
+
+TEXT = {"title": 17, "axis": 17, "labels": 15, "legend": 12}
+"""Font sizes in pixels: a figure's title, the axes' titles, the tick labels, the legend's entries
+(matplotlib's 10 pt titles and axis labels at 120 dpi, its tick labels and a small legend)."""
+
+BORDERS = (95, 60, 25, 40)
+"""Pixels (left, bottom, right, top) around a chart's plot area for the axes' tick labels and titles
+and the chart's title (fixed, as the curves' margins were: the labels have a bounded width)."""
+
+COLOUR_BAR_ROOM = 130
+"""Pixels right of a scatter chart for its colour bar and the bar's labels."""
+
+_MODULES: dict[str, Any] = {}
+
+
+def chart_modules() -> types.SimpleNamespace:
+    """The VTK classes of :mod:`vtk_scene` and those of the charts (the context view, the charts,
+    the OpenGL context they draw with), imported once."""
+    if not _MODULES:
+        import vtkmodules.vtkRenderingContextOpenGL2  # noqa: F401  (the charts' OpenGL painter)
+        from vtkmodules import vtkChartsCore, vtkRenderingContext2D, vtkViewsContext2D
+
+        _MODULES.update(vars(vtk_scene.vtk_modules()))
+        for module in (vtkChartsCore, vtkRenderingContext2D, vtkViewsContext2D):
+            _MODULES.update({name: getattr(module, name) for name in dir(module) if name.startswith("vtk")})
+    return types.SimpleNamespace(**_MODULES)
+
+
+def sequential_colours(count: int) -> list[tuple[float, float, float]]:
+    """``count`` colours of viridis from its low end to 0.9 of it (one line per increment)."""
+    table = colour_table("viridis")
+    return [tuple(float(c) / 255 for c in table[int(round(f * 255))]) for f in np.linspace(0.0, 0.9, count)]
+
+
+def _table(columns: Sequence[tuple[str, np.ndarray]]) -> Any:
+    """A vtkTable of the named columns (floats)."""
+    vtk = chart_modules()
+    table = vtk.vtkTable()
+    for name, values in columns:
+        array = vtk.numpy_to_vtk(np.ascontiguousarray(np.asarray(values, dtype=float)), deep=True)
+        array.SetName(name)
+        table.AddColumn(array)
+    return table
+
+
+def _style(text: Any, size: int, *, bold: bool = False) -> None:
+    text.SetColor(0.0, 0.0, 0.0)
+    text.SetFontFamilyToArial()
+    text.SetFontSize(size)
+    text.SetBold(bold)
+    text.ItalicOff()
+    text.ShadowOff()
+
+
+class ChartPanels:
+    """A picture of ``panels`` charts side by side, each ``width`` × ``height`` inches (at
+    :data:`DPI`), ``title`` above them all; drawn off-screen.
+
+    Raises
+    ------
+    dolfinx_nnqem.io.offscreen.PictureUnavailable
+        VTK cannot render in this process.
+    """
+
+    def __init__(self, panels: int, width: float, height: float, title: str = ""):
+        from dolfinx_nnqem.io.offscreen import check_rendering
+
+        check_rendering()
+        vtk = chart_modules()
+        self.view = vtk.vtkContextView()
+        self.window = self.view.GetRenderWindow()
+        self.window.SetOffScreenRendering(1)
+        self.window.SetMultiSamples(vtk_scene.WINDOW_SAMPLES)
+        panel_width, self.height = int(round(width * DPI)), int(round(height * DPI))
+        self.window.SetSize(panel_width * panels, self.height)
+        self.view.GetRenderer().SetBackground(1.0, 1.0, 1.0)
+        top = 2 * TEXT["title"] if title else TEXT["title"] // 2  # room for the title
+        self.panel_width, self.top = panel_width, top
+        self.charts: list[Any] = []
+        for k in range(panels):
+            chart = vtk.vtkChartXY()
+            chart.SetAutoSize(False)
+            # the plot area's rectangle: the axes on its edges, their labels outside in BORDERS
+            left, bottom, right, up = BORDERS
+            chart.SetLayoutStrategy(vtk.vtkChart.AXES_TO_RECT)
+            chart.SetSize(vtk.vtkRectf(k * panel_width + left, bottom, panel_width - left - right,
+                                       self.height - top - bottom - up))
+            _style(chart.GetTitleProperties(), TEXT["axis"])
+            for axis in range(4):
+                _style(chart.GetAxis(axis).GetTitleProperties(), TEXT["axis"])
+                _style(chart.GetAxis(axis).GetLabelProperties(), TEXT["labels"])
+                chart.GetAxis(axis).GetGridPen().SetColorF(0.85, 0.85, 0.85)
+            self.view.GetScene().AddItem(chart)
+            self.charts.append(chart)
+        if title:
+            text = vtk.vtkTextActor()
+            text.SetInput(title)
+            _style(text.GetTextProperty(), TEXT["title"])
+            text.GetTextProperty().SetJustificationToCentered()
+            text.GetTextProperty().SetVerticalJustificationToTop()
+            text.SetPosition(panel_width * panels / 2, self.height - TEXT["title"] // 2)
+            self.view.GetRenderer().AddViewProp(text)
+
+    def plot_size(self, index: int) -> tuple[float, float]:
+        """The pixels (width, height) of the plot area of chart ``index``."""
+        rect = self.charts[index].GetSize()
+        return rect.GetWidth(), rect.GetHeight()
+
+    def add_colour_bar(self, index: int, lookup: Any, title: str) -> None:
+        """A vertical colour bar of ``lookup`` right of chart ``index``, titled ``title`` (the
+        chart narrowed to leave it room)."""
+        vtk = chart_modules()
+        chart = self.charts[index]
+        rect = chart.GetSize()
+        room = COLOUR_BAR_ROOM
+        chart.SetSize(vtk.vtkRectf(rect.GetX(), rect.GetY(), rect.GetWidth() - room, rect.GetHeight()))
+        width, height = self.window.GetSize()
+        bar = vtk.vtkScalarBarActor()
+        bar.SetLookupTable(lookup)
+        bar.SetMaximumNumberOfColors(256)
+        bar.SetNumberOfLabels(5)
+        bar.SetOrientationToVertical()
+        bar.SetLabelFormat("%-#6.3g")
+        bar.SetTitle(title)
+        bar.UnconstrainedFontSizeOn()
+        bar.SetAnnotationTextScaling(False)
+        for text in (bar.GetTitleTextProperty(), bar.GetLabelTextProperty()):
+            _style(text, TEXT["labels"])
+        # the bar beside the plot area, its title above it (in the room above the plot area)
+        bar.SetPosition((rect.GetX() + rect.GetWidth() - room + BORDERS[2]) / width, rect.GetY() / height)
+        bar.SetWidth((room - BORDERS[2]) / width)
+        bar.SetHeight((rect.GetHeight() + BORDERS[3]) / height)
+        self.view.GetRenderer().AddViewProp(bar)
+
+    def save(self, path: str | os.PathLike) -> None:
+        """Render once and write the picture into the PNG file ``path``; the window is freed."""
+        vtk = chart_modules()
+        try:
+            self.window.Render()
+            image = vtk.vtkWindowToImageFilter()
+            image.SetInput(self.window)
+            image.SetInputBufferTypeToRGB()
+            image.ReadFrontBufferOff()
+            image.ShouldRerenderOff()
+            image.Update()
+            writer = vtk.vtkPNGWriter()
+            writer.SetFileName(str(path))
+            writer.SetInputConnection(image.GetOutputPort())
+            writer.Write()
+        finally:
+            self.window.Finalize()
+
+
+def _freest_corner(points: np.ndarray, box: tuple[float, float, float, float]) -> tuple[int, int]:
+    """The corner of the plot ``box`` (x0, x1, y0, y1) with the fewest of ``points`` (x, y) near
+    it: (horizontal, vertical) alignment of the legend, vtkChartLegend's LEFT/RIGHT, TOP/BOTTOM."""
+    vtk = chart_modules()
+    legend = vtk.vtkChartLegend
+    x0, x1, y0, y1 = box
+    u = (points[:, 0] - x0) / max(x1 - x0, 1e-300)
+    v = (points[:, 1] - y0) / max(y1 - y0, 1e-300)
+    corners = [((legend.RIGHT, legend.TOP), (u > 0.55) & (v > 0.55)), ((legend.LEFT, legend.TOP), (u < 0.45) & (v > 0.55)),
+               ((legend.RIGHT, legend.BOTTOM), (u > 0.55) & (v < 0.45)),
+               ((legend.LEFT, legend.BOTTOM), (u < 0.45) & (v < 0.45))]
+    counts = [int(np.count_nonzero(near)) for _, near in corners]
+    return corners[int(np.argmin(counts))][0]
+
+
+def _equal_ranges(xlim: tuple[float, float], ylim: tuple[float, float],
+                  pixels: tuple[float, float]) -> tuple[tuple[float, float], tuple[float, float]]:
+    """``xlim`` or ``ylim`` widened about its middle so that a unit is as many pixels along x as
+    along y in a plot area of ``pixels`` (width, height)."""
+    width, height = max(pixels[0], 1.0), max(pixels[1], 1.0)
+    per_pixel = max((xlim[1] - xlim[0]) / width, (ylim[1] - ylim[0]) / height)
+    centre_x, centre_y = 0.5 * (xlim[0] + xlim[1]), 0.5 * (ylim[0] + ylim[1])
+    return ((centre_x - 0.5 * per_pixel * width, centre_x + 0.5 * per_pixel * width),
+            (centre_y - 0.5 * per_pixel * height, centre_y + 0.5 * per_pixel * height))
+
+
+def _range(values: np.ndarray, *, log: bool = False, pad: float = 0.05) -> tuple[float, float]:
+    """The axis range of ``values`` with a margin of ``pad`` × their span each side (of the
+    decades, on a log axis)."""
+    finite = values[np.isfinite(values)]
+    if log:
+        finite = np.log10(finite[finite > 0])
+    low, high = (float(finite.min()), float(finite.max())) if len(finite) else (0.0, 1.0)
+    margin = pad * (high - low) if high > low else max(abs(high), 1.0) * pad
+    low, high = low - margin, high + margin
+    return (10.0 ** low, 10.0 ** high) if log else (low, high)
+
+
+def _fixed_axis(axis: Any, limits: tuple[float, float]) -> None:
+    vtk = chart_modules()
+    axis.SetBehavior(vtk.vtkAxis.FIXED)
+    axis.SetUnscaledRange(*limits) if hasattr(axis, "SetUnscaledRange") else axis.SetRange(*limits)
+
+
+def _decade_ticks(axis: Any, limits: tuple[float, float], most: int = 9) -> None:
+    """Ticks of a log axis at whole decades within ``limits``, every decade or every few so that
+    at most ``most`` are labelled, as "1e-08" (VTK's own: every decade, with minor grid lines)."""
+    vtk = chart_modules()
+    first, last = int(np.ceil(np.log10(limits[0]) - 1e-9)), int(np.floor(np.log10(limits[1]) + 1e-9))
+    step = max(1, int(np.ceil((last - first + 1) / most)))
+    positions, labels = vtk.vtkDoubleArray(), vtk.vtkStringArray()
+    for exponent in range(last - (last - first) // step * step, last + 1, step):
+        positions.InsertNextValue(float(exponent))  # (a log axis places its ticks by the exponent)
+        labels.InsertNextValue("1" if exponent == 0 else f"1e{exponent:+03d}".replace("+", ""))
+    axis.SetCustomTickPositions(positions, labels)
+
+
+def add_lines(chart: Any, series: Sequence[tuple[str | None, np.ndarray, np.ndarray, Any]], *, xlabel: str,
+              ylabel: str, log_y: bool = False, marker_size: float = 8.0, legend: bool = True,
+              title: str = "") -> None:
+    """Lines with circle markers, one per (label, x, y, colour) of ``series`` (a label None: left
+    out of the legend), on a grid; ``log_y``: a logarithmic y axis."""
+    vtk = chart_modules()
+    bottom, left = chart.GetAxis(vtk.vtkAxis.BOTTOM), chart.GetAxis(vtk.vtkAxis.LEFT)
+    points = []
+    for k, (label, x, y, colour) in enumerate(series):
+        x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+        line = chart.AddPlot(vtk.vtkChart.LINE)
+        line.SetInputData(_table([("x", x), (label or f"series {k}", y)]), 0, 1)
+        line.SetColorF(*vtk_scene.rgb(colour))
+        line.SetWidth(1.5)
+        line.SetMarkerStyle(vtk.vtkPlotPoints.CIRCLE)
+        line.SetMarkerSize(marker_size)
+        if label is None and hasattr(line, "SetLegendVisibility"):
+            line.SetLegendVisibility(False)
+        points.append(np.column_stack([x, y]))
+    data = np.concatenate(points) if points else np.zeros((0, 2))
+    xlim, ylim = _range(data[:, 0]), _range(data[:, 1], log=log_y)
+    _fixed_axis(bottom, xlim)
+    _fixed_axis(left, ylim)
+    if log_y:
+        left.SetLogScale(True)
+        _decade_ticks(left, ylim)
+    bottom.SetTitle(xlabel)
+    left.SetTitle(ylabel)
+    chart.SetTitle(title)
+    if legend and any(label is not None for label, *_ in series):
+        chart.SetShowLegend(True)
+        box = (*xlim, *(np.log10(ylim) if log_y else ylim))
+        shown = np.column_stack([data[:, 0], np.log10(np.maximum(data[:, 1], 1e-300)) if log_y else data[:, 1]])
+        horizontal, vertical = _freest_corner(shown, tuple(float(b) for b in box))
+        chart.GetLegend().SetHorizontalAlignment(horizontal)
+        chart.GetLegend().SetVerticalAlignment(vertical)
+        _style(chart.GetLegend().GetLabelProperties(), TEXT["legend"])
+        chart.GetLegend().SetLabelSize(TEXT["legend"])
+
+
+def _points_plot(chart: Any, x: np.ndarray, y: np.ndarray, label: str | None, size: float, *,
+                 colour: str = "black") -> Any:
+    """A plot of circle markers at (x, y) in ``chart``, of ``colour``; named ``label`` in the
+    legend (None: left out of it, where this VTK can)."""
+    vtk = chart_modules()
+    dots = chart.AddPlot(vtk.vtkChart.POINTS)
+    dots.SetInputData(_table([("x", x), (label or "points", y)]), 0, 1)
+    dots.SetMarkerStyle(vtk.vtkPlotPoints.CIRCLE)
+    dots.SetMarkerSize(size)
+    dots.SetColorF(*vtk_scene.rgb(colour))
+    if label is None and hasattr(dots, "SetLegendVisibility"):
+        dots.SetLegendVisibility(False)
+    return dots
+
+
+def add_scatter(panels: ChartPanels, index: int, x: np.ndarray, y: np.ndarray, values: np.ndarray, *, cmap: str = "viridis",
+                value_label: str, xlabel: str, ylabel: str, title: str = "", grey: np.ndarray | None = None,
+                grey_label: str = "", marker_size: float = 9.0, equal: bool = True) -> None:
+    """Into the chart ``index`` of ``panels``: points (x, y) coloured by ``values`` (the map ``cmap``
+    over their range) with a colour bar titled ``value_label`` on the chart's right; the points of
+    ``grey`` (a mask) drawn white with a grey edge on top, named ``grey_label`` in a legend; ``equal``: the
+    same length per pixel along both axes (the ranges widened)."""
+    vtk = chart_modules()
+    chart = panels.charts[index]
+    x, y, values = (np.asarray(a, dtype=float) for a in (x, y, values))
+    low, high = float(values.min()), float(values.max())
+    if high <= low:
+        high = low + (abs(low) if low else 1.0)
+    table = colour_table(cmap)
+    lookup = vtk.vtkLookupTable()
+    lookup.SetNumberOfTableValues(len(table))
+    for k, (red, green, blue) in enumerate(table):
+        lookup.SetTableValue(k, red / 255, green / 255, blue / 255, 1.0)
+    lookup.SetTableRange(low, high)
+    # a marker is a disc without an edge: each is drawn on a larger one of the edge's colour (black,
+    # grey for the grey points), so that touching markers stay apart
+    edges = grey if grey is not None else np.zeros(len(x), dtype=bool)
+    for mask, colour, label in ((~edges, "black", None), (edges, "grey", grey_label)):
+        if np.any(mask):
+            _points_plot(chart, x[mask], y[mask], label, marker_size + 2.0, colour=colour)
+    dots = _points_plot(chart, x, y, None, marker_size)
+    dots.SetInputData(_table([("x", x), ("y", y), ("value", values)]), 0, 1)
+    dots.SetLookupTable(lookup)
+    dots.SelectColorArray("value")
+    dots.ScalarVisibilityOn()
+    if np.any(edges):
+        _points_plot(chart, x[edges], y[edges], None, marker_size, colour="white")
+        chart.SetShowLegend(True)
+        _style(chart.GetLegend().GetLabelProperties(), TEXT["legend"])
+        chart.GetLegend().SetLabelSize(TEXT["legend"])
+    panels.add_colour_bar(index, lookup, value_label)
+    xlim, ylim = _range(x, pad=0.15), _range(y, pad=0.15)  # room for the legend beside the edge pairs
+    if equal:
+        xlim, ylim = _equal_ranges(xlim, ylim, panels.plot_size(index))
+    _fixed_axis(chart.GetAxis(vtk.vtkAxis.BOTTOM), xlim)
+    _fixed_axis(chart.GetAxis(vtk.vtkAxis.LEFT), ylim)
+    chart.GetAxis(vtk.vtkAxis.BOTTOM).SetTitle(xlabel)
+    chart.GetAxis(vtk.vtkAxis.LEFT).SetTitle(ylabel)
+    chart.SetTitle(title)
