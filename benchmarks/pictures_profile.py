@@ -124,11 +124,11 @@ import numpy
 stage("NumPy")
 from dolfinx_nnqem.io import deformed_picture, picture_worker, plots, run_pictures
 stage("the package's picture modules")
-import matplotlib.figure, matplotlib.backends.backend_agg
-stage("matplotlib (Figure, Agg canvas; no pyplot)")
-from dolfinx_nnqem.io import vtk_scene
+from dolfinx_nnqem.io import vtk_scene, vtk_charts
 vtk_scene.vtk_modules()
 stage("VTK's modules of the 3D scenes (no pyvista)")
+vtk_charts.chart_modules()
+stage("VTK's charts (no matplotlib)")
 picture_worker._warm_up("pictures")
 stage("VTK's render window asked")
 if uncollected:

@@ -25,8 +25,8 @@ import numpy as np
 
 from dolfinx_nnqem.io.colour_maps import colour_table
 
-__all__ = ["COLOURS", "Scene", "line_data", "point_data", "rgb", "surface_data", "unstructured_grid",
-           "vtk_modules"]
+__all__ = ["COLOURS", "Scene", "line_data", "offscreen_window", "point_data", "release_window", "rgb", "surface_data",
+           "unstructured_grid", "vtk_modules"]
 
 COLOURS = {"white": "#ffffff", "black": "#000000", "royalblue": "#4169e1", "crimson": "#dc143c",
            "darkorange": "#ff8c00", "steelblue": "#4682b4", "lightgrey": "#d3d3d3", "grey": "#808080",
@@ -166,6 +166,43 @@ def _lookup_table(cmap: str, clim: tuple[float, float], nan_colour: str | Sequen
     return table
 
 
+# -- the render window -------------------------------------------------------------------------
+_SPARE: list[Any] = []  # the render window the last picture freed (release_window)
+
+
+def offscreen_window(size: tuple[int, int], samples: int) -> Any:
+    """An off-screen render window of ``size`` pixels and ``samples`` a pixel, without renderers:
+    the one the last picture of this process freed (:func:`release_window`) where there is one,
+    else a new one. Its making and its OpenGL context took 0.1–0.2 s of CPU a picture with Mesa's
+    software OpenGL; made once, the pictures of a run share it.
+
+    Raises
+    ------
+    dolfinx_nnqem.io.offscreen.PictureUnavailable
+        VTK cannot render in this process.
+    """
+    from dolfinx_nnqem.io.offscreen import check_rendering
+
+    check_rendering()
+    if _SPARE:
+        window = _SPARE.pop()
+    else:
+        window = _vtk().vtkRenderWindow()
+        window.SetOffScreenRendering(1)
+    window.SetSize(*size)
+    window.SetMultiSamples(samples)
+    window.SetNumberOfLayers(1)
+    return window
+
+
+def release_window(window: Any) -> None:
+    """Give ``window`` back for the next picture (:func:`offscreen_window`): its renderers removed."""
+    renderers = window.GetRenderers()
+    for renderer in [renderers.GetItemAsObject(k) for k in range(renderers.GetNumberOfItems())]:
+        window.RemoveRenderer(renderer)
+    _SPARE[:] = [window]
+
+
 # -- the scene -----------------------------------------------------------------------------------
 class Scene:
     """An off-screen render window of ``size`` pixels with one renderer: meshes, a colour bar, a
@@ -178,14 +215,8 @@ class Scene:
     """
 
     def __init__(self, size: tuple[int, int]):
-        from dolfinx_nnqem.io.offscreen import check_rendering
-
-        check_rendering()
         vtk = _vtk()
-        self.window = vtk.vtkRenderWindow()
-        self.window.SetOffScreenRendering(1)
-        self.window.SetSize(*size)
-        self.window.SetMultiSamples(WINDOW_SAMPLES)
+        self.window: Any = offscreen_window(size, WINDOW_SAMPLES)
         self.renderer = vtk.vtkRenderer()
         self.renderer.SetBackground(1.0, 1.0, 1.0)
         self.window.AddRenderer(self.renderer)
@@ -407,7 +438,7 @@ class Scene:
         writer.Write()
 
     def close(self) -> None:
-        """Free the render window."""
+        """Give the render window back for the next picture (:func:`release_window`)."""
         if self.window is not None:
-            self.window.Finalize()
+            release_window(self.window)
             self.window = None
