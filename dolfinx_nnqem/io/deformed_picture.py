@@ -105,13 +105,14 @@ def _with_quadratic_displacement(folder: Path, step: dict) -> dict:
 
 def _read_lagrange_cells(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(points, connectivity, cell types, u at the points) of the VTK XML unstructured grid ``path``
-    (a dataset of ``fields_p2.pvd``), read by VTK's reader; a ValueError where it has no ``u``."""
+    (a dataset of ``fields_p2.pvd``: a ``.pvtu`` and its pieces, or a ``.vtu``), read by VTK's
+    reader; a ValueError where it has no ``u``."""
     if not path.is_file():
         raise OSError(f"{path.name} is missing")
     from vtkmodules.util.numpy_support import vtk_to_numpy
-    from vtkmodules.vtkIOXML import vtkXMLUnstructuredGridReader
+    from vtkmodules.vtkIOXML import vtkXMLPUnstructuredGridReader, vtkXMLUnstructuredGridReader
 
-    reader = vtkXMLUnstructuredGridReader()
+    reader = vtkXMLPUnstructuredGridReader() if path.suffix == ".pvtu" else vtkXMLUnstructuredGridReader()
     reader.SetFileName(str(path))
     reader.Update()
     grid = reader.GetOutput()

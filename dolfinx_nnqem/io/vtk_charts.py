@@ -69,7 +69,8 @@ def chart_modules() -> types.SimpleNamespace:
 def sequential_colours(count: int) -> list[tuple[float, float, float]]:
     """``count`` colours of viridis from its low end to 0.9 of it (one line per increment)."""
     table = colour_table("viridis")
-    return [tuple(float(c) / 255 for c in table[int(round(f * 255))]) for f in np.linspace(0.0, 0.9, count)]
+    rows = [table[int(round(f * 255))] / 255 for f in np.linspace(0.0, 0.9, count)]
+    return [(float(red), float(green), float(blue)) for red, green, blue in rows]
 
 
 def _table(columns: Sequence[tuple[str, np.ndarray]]) -> Any:
@@ -216,15 +217,17 @@ def _equal_ranges(xlim: tuple[float, float], ylim: tuple[float, float],
 
 
 def _range(values: np.ndarray, *, log: bool = False, pad: float = 0.05) -> tuple[float, float]:
-    """The axis range of ``values`` with a margin of ``pad`` × their span each side (of the
-    decades, on a log axis)."""
+    """The axis range of ``values``: on a linear axis with a margin of ``pad`` × their span each
+    side; on a log axis the whole decades around them (as matplotlib's: residuals that differ by
+    round-off between two runs give the same picture)."""
     finite = values[np.isfinite(values)]
     if log:
         finite = np.log10(finite[finite > 0])
+        low, high = (float(np.floor(finite.min())), float(np.ceil(finite.max()))) if len(finite) else (0.0, 1.0)
+        return 10.0 ** low, 10.0 ** max(high, low + 1.0)
     low, high = (float(finite.min()), float(finite.max())) if len(finite) else (0.0, 1.0)
     margin = pad * (high - low) if high > low else max(abs(high), 1.0) * pad
-    low, high = low - margin, high + margin
-    return (10.0 ** low, 10.0 ** high) if log else (low, high)
+    return low - margin, high + margin
 
 
 def _fixed_axis(axis: Any, limits: tuple[float, float]) -> None:
@@ -277,9 +280,9 @@ def add_lines(chart: Any, series: Sequence[tuple[str | None, np.ndarray, np.ndar
     chart.SetTitle(title)
     if legend and any(label is not None for label, *_ in series):
         chart.SetShowLegend(True)
-        box = (*xlim, *(np.log10(ylim) if log_y else ylim))
+        low, high = (float(np.log10(ylim[0])), float(np.log10(ylim[1]))) if log_y else ylim
         shown = np.column_stack([data[:, 0], np.log10(np.maximum(data[:, 1], 1e-300)) if log_y else data[:, 1]])
-        horizontal, vertical = _freest_corner(shown, tuple(float(b) for b in box))
+        horizontal, vertical = _freest_corner(shown, (xlim[0], xlim[1], low, high))
         chart.GetLegend().SetHorizontalAlignment(horizontal)
         chart.GetLegend().SetVerticalAlignment(vertical)
         _style(chart.GetLegend().GetLabelProperties(), TEXT["legend"])

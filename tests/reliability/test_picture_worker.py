@@ -244,6 +244,7 @@ def test_a_worker_draws_without_pyvista_or_matplotlib(tmp_path, monkeypatch, cap
     pictures are drawn by VTK's own classes, the curves by VTK's charts)."""
     import pickle
 
+    monkeypatch.delenv(ENV_SWITCH, raising=False)
     monkeypatch.setattr(cli, "_start_picture_workers", lambda args: _Captured())
     assert main(["-q", "run", str(EXAMPLE), "--increments", "2", "--out", str(tmp_path / "out")]) == EXIT_OK
     assert _Captured.job is not None
