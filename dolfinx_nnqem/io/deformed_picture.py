@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from dolfinx_nnqem.io.live_fields import LINEAR_VTK_CELLS
-from dolfinx_nnqem.io import vtk_scene
+import dolfinx_nnqem.io.vtk_scene as vtk_scene
 from dolfinx_nnqem.io.obstacle_shapes import add_obstacles, view_box
 
 __all__ = ["CAMERAS", "LABELS", "STATE_COLOURS", "VTK_CELLS", "DeformedScene", "deformed_plotter", "deformed_scene",

@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from dolfinx_nnqem.io import vtk_scene
+import dolfinx_nnqem.io.vtk_scene as vtk_scene
 
 if TYPE_CHECKING:
     from dolfinx_nnqem.io.vtk_scene import Scene

@@ -320,7 +320,7 @@ def _warm_up(role: str) -> None:
     estimates."""
     from dolfinx_nnqem import pyvista_compat
     from dolfinx_nnqem.chatter import apply_vtk_options
-    from dolfinx_nnqem.io import vtk_charts
+    import dolfinx_nnqem.io.vtk_charts as vtk_charts
 
     vtk_charts.chart_modules()
     apply_vtk_options()

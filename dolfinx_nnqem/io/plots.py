@@ -1,4 +1,6 @@
-"""Pictures: VTK (off-screen PNG, :mod:`dolfinx_nnqem.io.vtk_scene`) for fields, matplotlib for curves.
+"""Pictures of a live problem: VTK (off-screen PNG, :mod:`dolfinx_nnqem.io.vtk_scene`) for fields,
+matplotlib for the curves of :func:`plot_curve` and :func:`plot_convergence` (the demos' own; a
+run's curves are VTK's charts, :mod:`dolfinx_nnqem.io.run_pictures`).
 
 Collective functions gather what they draw on rank 0, which alone writes the file. The module
 imports neither DOLFINx nor MPI until a function needs them: a process that only draws
@@ -18,7 +20,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 
-from dolfinx_nnqem.io import vtk_scene
+import dolfinx_nnqem.io.vtk_scene as vtk_scene
 
 if TYPE_CHECKING:
     from dolfinx_nnqem.problem.contact_problem import ContactProblem

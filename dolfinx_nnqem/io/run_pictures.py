@@ -47,7 +47,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 
 import dolfinx_nnqem.io.plots as plots
-from dolfinx_nnqem.io import vtk_charts
+import dolfinx_nnqem.io.vtk_charts as vtk_charts
 from dolfinx_nnqem.io.deformed_picture import DeformedScene, _with_quadratic_displacement, draw_deformed  # noqa: F401
 from dolfinx_nnqem.io.estimate_pictures import ESTIMATE_PICTURE, draw_error_estimates
 from dolfinx_nnqem.io.offscreen import PictureUnavailable
@@ -81,7 +81,7 @@ def _whole_picture(path: Path, draw: Callable[[Path], object]) -> Path:
     """``draw(temporary)`` beside ``path``, then the rename: a picture is whole or absent.
 
     A SIGKILL or SIGTERM while a picture was drawn left a 0-byte PNG under its name. The
-    temporary (``.NAME.tmp-PID.png``: pyvista and matplotlib read the format from the suffix) is
+    temporary (``.NAME.tmp-PID.png``: matplotlib reads the format from the suffix) is
     removed on any error or interrupt; a killed process leaves it, and the next run in the
     folder removes it (:func:`~dolfinx_nnqem.io.safe_io.remove_stale_temporaries`). Errors are
     raised as the drawing raised them (the reason a picture is not drawn)."""

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from dolfinx_nnqem.io import vtk_scene
+import dolfinx_nnqem.io.vtk_scene as vtk_scene
 from dolfinx_nnqem.io.colour_maps import colour_table
 
 __all__ = ["CYCLE", "ChartPanels", "add_lines", "add_scatter", "chart_modules", "sequential_colours"]
