@@ -48,7 +48,7 @@ COLOUR_BAR_ROOM = 130
 CHART_SAMPLES = 0
 """Multisampling of a chart's render window: none. The lines and markers look about the same as
 with 8 samples (the 3D scenes' :data:`~dolfinx_nnqem.io.vtk_scene.WINDOW_SAMPLES`), which cost a
-chart 0.2 s more CPU with Mesa's software OpenGL (its window, render and read-back)."""
+chart more than twice its CPU with Mesa's software OpenGL (``docs/performance.md``)."""
 
 _MODULES: dict[str, Any] = {}
 
@@ -113,7 +113,6 @@ class ChartPanels:
         self.context = vtk.vtkContextActor()  # the charts' 2D scene, drawn by the renderer
         self.renderer.AddViewProp(self.context)
         top = 2 * TEXT["title"] if title else TEXT["title"] // 2  # room for the title
-        self.panel_width, self.top = panel_width, top
         self.charts: list[Any] = []
         for k in range(panels):
             chart = vtk.vtkChartXY()
@@ -231,9 +230,10 @@ def _range(values: np.ndarray, *, log: bool = False, pad: float = 0.05) -> tuple
 
 
 def _fixed_axis(axis: Any, limits: tuple[float, float]) -> None:
+    """``axis`` fixed to ``limits`` in data units (before a log axis takes their logarithms)."""
     vtk = chart_modules()
     axis.SetBehavior(vtk.vtkAxis.FIXED)
-    axis.SetUnscaledRange(*limits) if hasattr(axis, "SetUnscaledRange") else axis.SetRange(*limits)
+    axis.SetUnscaledRange(*limits)
 
 
 def _decade_ticks(axis: Any, limits: tuple[float, float], most: int = 9) -> None:

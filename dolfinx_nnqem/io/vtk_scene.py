@@ -173,8 +173,8 @@ _SPARE: list[Any] = []  # the render window the last picture freed (release_wind
 def offscreen_window(size: tuple[int, int], samples: int) -> Any:
     """An off-screen render window of ``size`` pixels and ``samples`` a pixel, without renderers:
     the one the last picture of this process freed (:func:`release_window`) where there is one,
-    else a new one. Its making and its OpenGL context took 0.1–0.2 s of CPU a picture with Mesa's
-    software OpenGL; made once, the pictures of a run share it.
+    else a new one. Its making and its OpenGL context cost a picture more than its render with
+    Mesa's software OpenGL (``docs/performance.md``); made once, the pictures of a run share it.
 
     Raises
     ------
