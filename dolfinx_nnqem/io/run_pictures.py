@@ -187,8 +187,9 @@ def draw_convergence(summary: dict, path: Path, *, title: str = "") -> Path:
     if not histories:
         raise ValueError("summary.json has no residual_histories")
     with_contact = any(np.any(h[:, 1] > 0) for h in histories)
-    # (ASCII bars: VTK's Arial has no "‖")
-    names = ["equilibrium ||R||/F"] + (["contact ||H||/F"] if with_contact else [])
+    # not "‖R‖": VTK's Arial has no "‖", and "||R||" is taken for mathematics (drawn by matplotlib's
+    # mathtext) in a process where VTK's matplotlib module is loaded (pyvista.plotting loads it)
+    names = ["equilibrium norm(R)/F"] + (["contact norm(H)/F"] if with_contact else [])
     panels = vtk_charts.ChartPanels(len(names), 6.0, 4.5, title)
     colours = vtk_charts.sequential_colours(len(histories))
     labelled = len(histories) <= 12
