@@ -24,6 +24,7 @@ import numpy as np
 
 import dolfinx_nnqem.io.vtk_scene as vtk_scene
 from dolfinx_nnqem.io.colour_maps import colour_table
+from dolfinx_nnqem.pyvista_compat import set_plot_colour
 
 __all__ = ["CYCLE", "ChartPanels", "add_lines", "add_scatter", "chart_modules", "sequential_colours"]
 
@@ -261,7 +262,7 @@ def add_lines(chart: Any, series: Sequence[tuple[str | None, np.ndarray, np.ndar
         x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
         line = chart.AddPlot(vtk.vtkChart.LINE)
         line.SetInputData(_table([("x", x), (label or f"series {k}", y)]), 0, 1)
-        line.SetColorF(*vtk_scene.rgb(colour))
+        set_plot_colour(line, *vtk_scene.rgb(colour))
         line.SetWidth(1.5)
         line.SetMarkerStyle(vtk.vtkPlotPoints.CIRCLE)
         line.SetMarkerSize(marker_size)
@@ -298,7 +299,7 @@ def _points_plot(chart: Any, x: np.ndarray, y: np.ndarray, label: str | None, si
     dots.SetInputData(_table([("x", x), (label or "points", y)]), 0, 1)
     dots.SetMarkerStyle(vtk.vtkPlotPoints.CIRCLE)
     dots.SetMarkerSize(size)
-    dots.SetColorF(*vtk_scene.rgb(colour))
+    set_plot_colour(dots, *vtk_scene.rgb(colour))
     if label is None and hasattr(dots, "SetLegendVisibility"):
         dots.SetLegendVisibility(False)
     return dots
