@@ -55,14 +55,14 @@ _MODULES: dict[str, Any] = {}
 
 
 def chart_modules() -> types.SimpleNamespace:
-    """The VTK classes of :mod:`vtk_scene` and those of the charts (the context view, the charts,
-    the OpenGL context they draw with), imported once."""
+    """The VTK classes of :mod:`vtk_scene` and those of the charts (the charts, their 2D context
+    and its OpenGL painter), imported once."""
     if not _MODULES:
         import vtkmodules.vtkRenderingContextOpenGL2  # noqa: F401  (the charts' OpenGL painter)
-        from vtkmodules import vtkChartsCore, vtkRenderingContext2D, vtkViewsContext2D
+        from vtkmodules import vtkChartsCore, vtkRenderingContext2D
 
         _MODULES.update(vars(vtk_scene.vtk_modules()))
-        for module in (vtkChartsCore, vtkRenderingContext2D, vtkViewsContext2D):
+        for module in (vtkChartsCore, vtkRenderingContext2D):  # (not vtkViewsContext2D: its views import widgets)
             _MODULES.update({name: getattr(module, name) for name in dir(module) if name.startswith("vtk")})
     return types.SimpleNamespace(**_MODULES)
 

@@ -62,13 +62,12 @@ def vtk_modules() -> types.SimpleNamespace:
     if not _MODULES:
         import vtkmodules.vtkRenderingFreeType  # noqa: F401  (text: without it no text is drawn)
         import vtkmodules.vtkRenderingOpenGL2  # noqa: F401  (the OpenGL render windows)
-        from vtkmodules import (vtkCommonCore, vtkCommonDataModel, vtkCommonTransforms, vtkFiltersCore,
-                                vtkFiltersGeneral, vtkFiltersGeometry, vtkFiltersSources, vtkIOImage,
-                                vtkRenderingAnnotation, vtkRenderingCore)
+        from vtkmodules import (vtkCommonCore, vtkCommonDataModel, vtkFiltersCore, vtkFiltersGeometry,
+                                vtkFiltersSources, vtkIOImage, vtkRenderingAnnotation, vtkRenderingCore)
         from vtkmodules.util import numpy_support
 
-        for module in (vtkCommonCore, vtkCommonDataModel, vtkCommonTransforms, vtkFiltersCore, vtkFiltersGeneral,
-                       vtkFiltersGeometry, vtkFiltersSources, vtkIOImage, vtkRenderingAnnotation, vtkRenderingCore):
+        for module in (vtkCommonCore, vtkCommonDataModel, vtkFiltersCore, vtkFiltersGeometry, vtkFiltersSources,
+                       vtkIOImage, vtkRenderingAnnotation, vtkRenderingCore):
             _MODULES.update({name: getattr(module, name) for name in dir(module) if name.startswith(("vtk", "VTK_"))})
         _MODULES["numpy_to_vtk"] = numpy_support.numpy_to_vtk
         _MODULES["vtk_to_numpy"] = numpy_support.vtk_to_numpy
