@@ -260,7 +260,8 @@ def add_lines(chart: Any, series: Sequence[tuple[str | None, np.ndarray, np.ndar
     points = []
     for k, (label, x, y, colour) in enumerate(series):
         x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
-        line = chart.AddPlot(vtk.vtkChart.LINE)
+        # a series of one point is its marker (VTK logs an error for a line of fewer than 2 points)
+        line = chart.AddPlot(vtk.vtkChart.LINE if len(x) > 1 else vtk.vtkChart.POINTS)
         line.SetInputData(_table([("x", x), (label or f"series {k}", y)]), 0, 1)
         set_plot_colour(line, *vtk_scene.rgb(colour))
         line.SetWidth(1.5)
