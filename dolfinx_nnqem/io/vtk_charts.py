@@ -190,19 +190,68 @@ class ChartPanels:
             vtk_scene.release_window(self.window)
 
 
-def _freest_corner(points: np.ndarray, box: tuple[float, float, float, float]) -> tuple[int, int]:
-    """The corner of the plot ``box`` (x0, x1, y0, y1) with the fewest of ``points`` (x, y) near
-    it: (horizontal, vertical) alignment of the legend, vtkChartLegend's LEFT/RIGHT, TOP/BOTTOM."""
+def _legend_corner(chart: Any, lines: Sequence[np.ndarray], box: tuple[float, float, float, float],
+                   labels: Sequence[str]) -> tuple[int, int]:
+    """The place in the plot area where the legend of ``labels`` covers the least of ``lines``
+    (each an (n, 2) array of its points in the axes' units, ``box`` = (x0, x1, y0, y1) the axes'
+    ranges, in logarithms on a log axis): (horizontal, vertical) alignment of vtkChartLegend
+    (LEFT/CENTER/RIGHT, TOP/CENTER/BOTTOM), the first of matplotlib's order among the equally
+    free (its "best", as far as the legend's size is known beforehand)."""
     vtk = chart_modules()
     legend = vtk.vtkChartLegend
     x0, x1, y0, y1 = box
-    u = (points[:, 0] - x0) / max(x1 - x0, 1e-300)
-    v = (points[:, 1] - y0) / max(y1 - y0, 1e-300)
-    corners = [((legend.RIGHT, legend.TOP), (u > 0.55) & (v > 0.55)), ((legend.LEFT, legend.TOP), (u < 0.45) & (v > 0.55)),
-               ((legend.RIGHT, legend.BOTTOM), (u > 0.55) & (v < 0.45)),
-               ((legend.LEFT, legend.BOTTOM), (u < 0.45) & (v < 0.45))]
-    counts = [int(np.count_nonzero(near)) for _, near in corners]
-    return corners[int(np.argmin(counts))][0]
+    rect = chart.GetSize()
+    # the legend's box as fractions of the plot area: a symbol and the longest label per entry line
+    width = (40 + 0.6 * TEXT["legend"] * max(len(label) for label in labels)) / max(rect.GetWidth(), 1.0)
+    height = (10 + 1.3 * TEXT["legend"] * len(labels)) / max(rect.GetHeight(), 1.0)
+    samples = []
+    for line in lines:  # each line sampled along its segments (a line crossing a corner covers it)
+        u = (line[:, 0] - x0) / max(x1 - x0, 1e-300)
+        v = (line[:, 1] - y0) / max(y1 - y0, 1e-300)
+        t = np.linspace(0.0, 1.0, 20)[:, None]
+        if len(u) > 1:
+            u = (u[:-1] + t * np.diff(u)).reshape(-1)
+            v = (v[:-1] + t * np.diff(v)).reshape(-1)
+        samples.append(np.column_stack([u, v]))
+    uv = np.concatenate(samples) if samples else np.zeros((0, 2))
+    # matplotlib's order of the places "best" tries: the corners, then the middles of the sides
+    places = [(legend.RIGHT, legend.TOP), (legend.LEFT, legend.TOP), (legend.LEFT, legend.BOTTOM),
+              (legend.RIGHT, legend.BOTTOM), (legend.LEFT, legend.CENTER), (legend.RIGHT, legend.CENTER),
+              (legend.CENTER, legend.BOTTOM), (legend.CENTER, legend.TOP), (legend.CENTER, legend.CENTER)]
+    start = {legend.LEFT: 0.0, legend.RIGHT: 1.0 - width, legend.BOTTOM: 0.0, legend.TOP: 1.0 - height}
+    counts = []
+    for horizontal, vertical in places:
+        u0 = start.get(horizontal, 0.5 - width / 2) if horizontal != legend.CENTER else 0.5 - width / 2
+        v0 = start.get(vertical, 0.5 - height / 2) if vertical != legend.CENTER else 0.5 - height / 2
+        covered = (uv[:, 0] >= u0) & (uv[:, 0] <= u0 + width) & (uv[:, 1] >= v0) & (uv[:, 1] <= v0 + height)
+        counts.append(int(np.count_nonzero(covered)))
+    return places[int(np.argmin(counts))]
+
+
+def _nice_ticks(axis: Any, limits: tuple[float, float], most: int) -> str:
+    """Ticks of a linear axis at round values (steps of 1, 2, 2.5 or 5 × a power of ten), at most
+    ``most``, labelled with the digits their step needs; beyond 1e5 or below 1e-3 the labels are
+    of a common power of ten, returned as the suffix of the axis's title (" [x 1e6]"), else "".
+    (VTK's own labels of large values ran into one another: "-200000-100000".)"""
+    vtk = chart_modules()
+    low, high = limits
+    raw = max(high - low, 1e-300) / most
+    magnitude = 10.0 ** np.floor(np.log10(raw))
+    step = next(f * magnitude for f in (1.0, 2.0, 2.5, 5.0, 10.0) if f * magnitude >= raw * (1 - 1e-9))
+    ticks = np.arange(np.ceil(low / step - 1e-9), np.floor(high / step + 1e-9) + 1) * step
+    biggest = float(np.abs(ticks).max()) if len(ticks) else 0.0
+    exponent = int(np.floor(np.log10(biggest))) if biggest > 0 and not 1e-3 <= biggest < 1e5 else 0
+    scaled_step = step / 10.0 ** exponent
+    decimals = max(0, -int(np.floor(np.log10(scaled_step) + 1e-9)))
+    if decimals and abs(scaled_step * 10 ** decimals - round(scaled_step * 10 ** decimals)) > 1e-6:
+        decimals += 1  # a step of 2.5 × 10^k
+    positions, labels = vtk.vtkDoubleArray(), vtk.vtkStringArray()
+    for tick in ticks:
+        text = f"{tick / 10.0 ** exponent:.{decimals}f}"
+        positions.InsertNextValue(float(tick))
+        labels.InsertNextValue("0" if float(text) == 0 else text)
+    axis.SetCustomTickPositions(positions, labels)
+    return f" [x 1e{exponent}]" if exponent else ""
 
 
 def _equal_ranges(xlim: tuple[float, float], ylim: tuple[float, float],
@@ -277,14 +326,18 @@ def add_lines(chart: Any, series: Sequence[tuple[str | None, np.ndarray, np.ndar
     if log_y:
         left.SetLogScale(True)
         _decade_ticks(left, ylim)
-    bottom.SetTitle(xlabel)
+    else:
+        ylabel += _nice_ticks(left, ylim, 8)
+    bottom.SetTitle(xlabel + _nice_ticks(bottom, xlim, 7))
     left.SetTitle(ylabel)
     chart.SetTitle(title)
     if legend and any(label is not None for label, *_ in series):
         chart.SetShowLegend(True)
         low, high = (float(np.log10(ylim[0])), float(np.log10(ylim[1]))) if log_y else ylim
-        shown = np.column_stack([data[:, 0], np.log10(np.maximum(data[:, 1], 1e-300)) if log_y else data[:, 1]])
-        horizontal, vertical = _freest_corner(shown, (xlim[0], xlim[1], low, high))
+        shown = [np.column_stack([line[:, 0], np.log10(np.maximum(line[:, 1], 1e-300)) if log_y else line[:, 1]])
+                 for line in points]
+        labels = [label for label, *_ in series if label is not None]
+        horizontal, vertical = _legend_corner(chart, shown, (xlim[0], xlim[1], low, high), labels)
         chart.GetLegend().SetHorizontalAlignment(horizontal)
         chart.GetLegend().SetVerticalAlignment(vertical)
         _style(chart.GetLegend().GetLabelProperties(), TEXT["legend"])
@@ -347,6 +400,6 @@ def add_scatter(panels: ChartPanels, index: int, x: np.ndarray, y: np.ndarray, v
         xlim, ylim = _equal_ranges(xlim, ylim, panels.plot_size(index))
     _fixed_axis(chart.GetAxis(vtk.vtkAxis.BOTTOM), xlim)
     _fixed_axis(chart.GetAxis(vtk.vtkAxis.LEFT), ylim)
-    chart.GetAxis(vtk.vtkAxis.BOTTOM).SetTitle(xlabel)
-    chart.GetAxis(vtk.vtkAxis.LEFT).SetTitle(ylabel)
+    chart.GetAxis(vtk.vtkAxis.BOTTOM).SetTitle(xlabel + _nice_ticks(chart.GetAxis(vtk.vtkAxis.BOTTOM), xlim, 6))
+    chart.GetAxis(vtk.vtkAxis.LEFT).SetTitle(ylabel + _nice_ticks(chart.GetAxis(vtk.vtkAxis.LEFT), ylim, 8))
     chart.SetTitle(title)
