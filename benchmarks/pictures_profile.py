@@ -124,13 +124,13 @@ import numpy
 stage("NumPy")
 from dolfinx_nnqem.io import deformed_picture, picture_worker, plots, run_pictures
 stage("the package's picture modules")
-run_pictures._matplotlib()
-stage("matplotlib (pyplot, Agg)")
-from dolfinx_nnqem import pyvista_compat
-pyvista_compat.import_pyvista()
-stage("pyvista")
+from dolfinx_nnqem.io import vtk_scene, vtk_charts
+vtk_scene.vtk_modules()
+stage("VTK's modules of the 3D scenes (no pyvista)")
+vtk_charts.chart_modules()
+stage("VTK's charts (no matplotlib)")
 picture_worker._warm_up("pictures")
-stage("VTK's render window asked, pyvista.plotting")
+stage("VTK's render window asked")
 if uncollected:
     gc.freeze()
     gc.enable()
@@ -210,13 +210,13 @@ def main() -> None:
     log: list[tuple[str, float, float]] = []
     # the stages, innermost first: each label's time includes the stages nested in it
     _timed(log, output.ResultsWriter, "_last_field_step", "fields gathered from memory")
-    _timed(log, run_pictures, "_matplotlib", "curves: matplotlib (first: imported)")
-    _timed(log, run_pictures, "draw_pair_pressure", "pair_pressure.png")
+    _timed(log, plots, "figure", "curves: a figure (first: matplotlib imported)")
+    _timed(log, run_pictures, "draw_pair_pressure", "pair_pressure.png (first: VTK imported)")
     _timed(log, run_pictures, "draw_load_curve", "load_curve.png")
     _timed(log, run_pictures, "draw_convergence", "convergence.png")
-    _timed(log, deformed_picture, "_field_grid", "deformed: grid (first: pyvista imported)")
-    _timed(log, deformed_picture, "offscreen_plotter", "deformed: plotter (first: pyvista.plotting, VTK)")
-    _timed(log, run_pictures, "draw_deformed", "deformed.png in all")
+    _timed(log, deformed_picture, "_field_grid", "deformed: grid")
+    _timed(log, deformed_picture, "deformed_scene", "deformed: the scene")
+    _timed(log, deformed_picture.DeformedScene, "draw", "deformed.png, error_indicator.png: each in all")
     _timed(log, plots, "plot_contact_pressure", "contact_pressure.png")  # (older versions)
     _timed(log, plots, "draw_contact_pressure", "contact_pressure.png")
     _timed(log, output.ResultsWriter, "_draw_pictures", "picture step in all")

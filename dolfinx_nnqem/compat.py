@@ -39,7 +39,7 @@ if TYPE_CHECKING:  # types of the arguments only: gmsh is imported where it is u
     import gmsh
     from mpi4py import MPI
 
-from dolfinx_nnqem.pyvista_compat import extract_outer_surface, import_pyvista, vtk_render_problem  # noqa: F401  (their home: no DOLFINx)
+from dolfinx_nnqem.pyvista_compat import extract_outer_surface, import_pyvista, set_plot_colour, vtk_render_problem  # noqa: F401  (their home: no DOLFINx)
 
 _major, _minor = dolfinx.__version__.split(".")[:2]
 DOLFINX_VERSION: tuple[int, int] = (int(_major), int(_minor))

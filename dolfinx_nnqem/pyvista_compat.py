@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:  # pyvista is imported where it is used (its import costs)
     import pyvista
 
-__all__ = ["extract_outer_surface", "import_pyvista", "vtk_render_problem"]
+__all__ = ["extract_outer_surface", "import_pyvista", "set_plot_colour", "vtk_render_problem"]
 
 
 def extract_outer_surface(dataset: pyvista.DataSet) -> pyvista.PolyData:
@@ -29,6 +29,19 @@ def extract_outer_surface(dataset: pyvista.DataSet) -> pyvista.PolyData:
     if "algorithm" in inspect.signature(type(dataset).extract_surface).parameters:
         return dataset.extract_surface(algorithm="dataset_surface")
     return dataset.extract_surface()
+
+
+def set_plot_colour(plot: Any, red: float, green: float, blue: float) -> None:
+    """The colour of a VTK chart's plot (``vtkPlot``), RGB in 0–1.
+
+    Recent VTK (9.7 here) names the call with floats ``SetColorF`` (its ``SetColor`` takes bytes);
+    older ones (Debian 13's 9.3, as far as known) took the floats in ``SetColor``. Told apart by
+    capability.
+    """
+    if hasattr(plot, "SetColorF"):
+        plot.SetColorF(red, green, blue)
+    else:
+        plot.SetColor(red, green, blue)
 
 
 def import_pyvista() -> Any:  # the pyvista module (pyvista is typed as Any here: pyproject.toml)

@@ -17,12 +17,12 @@ from typing import Any
 
 import numpy as np
 
-from dolfinx_nnqem import pyvista_compat
 from dolfinx_nnqem.io.live_fields import LINEAR_VTK_CELLS
+import dolfinx_nnqem.io.vtk_scene as vtk_scene
 from dolfinx_nnqem.io.obstacle_shapes import add_obstacles, view_box
-from dolfinx_nnqem.io.offscreen import offscreen_plotter
 
-__all__ = ["LABELS", "STATE_COLOURS", "VTK_CELLS", "DeformedScene", "deformed_plotter", "draw_deformed"]
+__all__ = ["CAMERAS", "LABELS", "STATE_COLOURS", "VTK_CELLS", "DeformedScene", "deformed_plotter", "deformed_scene",
+           "draw_deformed"]
 
 STATE_COLOURS = {"open": "white", "stick": "royalblue", "slip": "crimson"}
 _log = logging.getLogger("dolfinx_nnqem")
@@ -30,41 +30,47 @@ _log = logging.getLogger("dolfinx_nnqem")
 
 VTK_CELLS = {4: ("tetra", 4), 10: ("tetra", 4), 8: ("hexahedron", 8), 20: ("hexahedron", 8),
              27: ("hexahedron", 8)}
-"""Nodes per cell in the XDMF topology → (pyvista cell type, corner nodes): a quadratic cell
-is drawn by its corners (XDMF lists them first)."""
+"""Nodes per cell in the XDMF topology → (cell type, corner nodes): a quadratic cell is drawn by
+its corners (XDMF lists them first)."""
+
+_VTK_TYPES = {"tetra": 10, "hexahedron": 12}
+"""VTK's cell type numbers (VTK_TETRA, VTK_HEXAHEDRON)."""
+
+CELL_FIELDS = ("von_mises", "p", "plastic", "error_indicator")
+"""The cell fields of a step the picture can be coloured by."""
 
 
-def _field_grid(step: dict, scale: float | None):
-    """The pyvista grid of one field step, moved by ``scale`` × u; returns (grid, scale).
+def _field_grid(step: dict, scale: float | None) -> tuple[Any, float]:
+    """The VTK grid of one field step, moved by ``scale`` × u; returns (grid, scale).
 
     A step with ``cell_type`` (from memory, :mod:`dolfinx_nnqem.io.live_fields`, or from
     ``fields_p2.pvd``) is drawn on those VTK cells whole, a quadratic one with its edge nodes;
     a step read from ``fields.xdmf`` by the corners of its cells (:data:`VTK_CELLS`).
     """
-    pyvista = pyvista_compat.import_pyvista()
-
     topology = np.asarray(step["topology"], dtype=np.int64)
     if "cell_type" in step:
         cell_type, cells = int(step["cell_type"]), topology
     elif topology.shape[1] in VTK_CELLS:
         name, corners = VTK_CELLS[topology.shape[1]]
-        cell_type = {"tetra": pyvista.CellType.TETRA, "hexahedron": pyvista.CellType.HEXAHEDRON}[name]
-        cells = topology[:, :corners]
+        cell_type, cells = _VTK_TYPES[name], topology[:, :corners]
     else:
         raise ValueError(f"cells with {topology.shape[1]} nodes: expected one of {sorted(VTK_CELLS)}")
     x = np.asarray(step["geometry"], dtype=float).reshape(-1, 3)
     u = np.asarray(step.get("u", np.zeros_like(x)), dtype=float).reshape(len(x), -1)[:, :3]
-    # the flat [n, i0, ..., i(n-1)] layout takes every VTK cell type (Lagrange cells too)
-    flat = np.hstack([np.full((len(cells), 1), cells.shape[1]), cells]).reshape(-1)
-    grid = pyvista.UnstructuredGrid(flat, np.full(len(cells), cell_type, dtype=np.uint8), x.copy())
     if scale is None:
         umax = np.abs(u).max()
         scale = 0.1 * np.ptp(x, axis=0).max() / umax if umax > 0 else 1.0
-    grid.points = x + scale * u
-    for key in ("von_mises", "p", "plastic", "error_indicator"):
+    grid = vtk_scene.unstructured_grid(x + scale * u, cells, cell_type)
+    for key in CELL_FIELDS:
         if key in step:
-            grid.cell_data[key] = np.asarray(step[key], dtype=float).reshape(len(topology), -1)[:, 0]
+            vtk_scene.set_values(grid, key, np.asarray(step[key], dtype=float).reshape(len(topology), -1)[:, 0])
     return grid, scale
+
+
+def _cell_fields(grid: Any) -> list[str]:
+    """The names of the cell fields of ``grid`` (a VTK dataset)."""
+    data = grid.GetCellData()
+    return sorted(data.GetArrayName(k) for k in range(data.GetNumberOfArrays()))
 
 
 def _with_quadratic_displacement(folder: Path, step: dict) -> dict:
@@ -79,23 +85,42 @@ def _with_quadratic_displacement(folder: Path, step: dict) -> dict:
         datasets = list(ET.parse(index).iter("DataSet"))
         if not datasets or float(datasets[-1].attrib["timestep"]) != float(step["time"]):
             raise ValueError("its last increment is not the last of fields.xdmf")
-        grid = pyvista_compat.import_pyvista().read(str(folder / datasets[-1].attrib["file"]))
-        cell_type = int(grid.celltypes[0])
-        if cell_type not in LINEAR_VTK_CELLS or np.any(grid.celltypes != cell_type):
-            raise ValueError(f"cells of VTK types {sorted(set(grid.celltypes.tolist()))}")
-        cells = np.asarray(grid.cells).reshape(grid.n_cells, -1)[:, 1:]
-        order = _matching_cells(step, np.asarray(grid.points), cells, LINEAR_VTK_CELLS[cell_type][1])
+        points, cells, cell_types, u = _read_lagrange_cells(folder / datasets[-1].attrib["file"])
+        cell_type = int(cell_types[0]) if len(cell_types) else -1
+        if cell_type not in LINEAR_VTK_CELLS or np.any(cell_types != cell_type):
+            raise ValueError(f"cells of VTK types {sorted(set(cell_types.tolist()))}")
+        cells = cells.reshape(len(cell_types), -1)
+        order = _matching_cells(step, points, cells, LINEAR_VTK_CELLS[cell_type][1])
     except (OSError, ValueError, KeyError, IndexError, ET.ParseError) as error:
         _log.warning(f"picture deformed.png: drawn from fields.xdmf, not {index.name} ({error})")
         return step
-    quadratic = {"time": step["time"], "geometry": np.asarray(grid.points), "topology": cells,
-                 "cell_type": cell_type, "u": np.asarray(grid.point_data["u"])}
+    quadratic = {"time": step["time"], "geometry": points, "topology": cells, "cell_type": cell_type, "u": u}
     ncells = len(np.asarray(step["topology"]))
     for key, values in step.items():
         values = np.asarray(values)
         if key not in quadratic and values.ndim and len(values) == ncells:  # a cell field
             quadratic[key] = values.reshape(ncells, -1)[order]
     return quadratic
+
+
+def _read_lagrange_cells(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(points, connectivity, cell types, u at the points) of the VTK XML unstructured grid ``path``
+    (a dataset of ``fields_p2.pvd``: a ``.pvtu`` and its pieces, or a ``.vtu``), read by VTK's
+    reader; a ValueError where it has no ``u``."""
+    if not path.is_file():
+        raise OSError(f"{path.name} is missing")
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+    from vtkmodules.vtkIOXML import vtkXMLPUnstructuredGridReader, vtkXMLUnstructuredGridReader
+
+    reader = vtkXMLPUnstructuredGridReader() if path.suffix == ".pvtu" else vtkXMLUnstructuredGridReader()
+    reader.SetFileName(str(path))
+    reader.Update()
+    grid = reader.GetOutput()
+    u = grid.GetPointData().GetArray("u")
+    if grid.GetPoints() is None or u is None:
+        raise ValueError(f"{path.name} holds no grid with u")
+    return (vtk_to_numpy(grid.GetPoints().GetData()).astype(float), vtk_to_numpy(grid.GetCells().GetConnectivityArray()).astype(np.int64),
+            vtk_to_numpy(grid.GetCellTypesArray()).astype(np.int64), vtk_to_numpy(u).astype(float))
 
 
 def _matching_cells(step: dict, points: np.ndarray, cells: np.ndarray, corners: int) -> np.ndarray:
@@ -125,40 +150,67 @@ def _pair_points(rows: list[dict], scale: float) -> tuple[np.ndarray, np.ndarray
     return slave + scale * u2, np.array([r["state"] for r in rows])
 
 
-def deformed_plotter(step: dict, rows: list[dict], *, title: str = "", scale: float | None = None,
-                     field: str = "von_mises", camera: str = "iso",
-                     obstacles: Mapping[str, Mapping[str, Any]] | None = None):
+def deformed_scene(step: dict, rows: list[dict], *, title: str = "", scale: float | None = None,
+                   field: str = "von_mises", camera: str = "iso",
+                   obstacles: Mapping[str, Mapping[str, Any]] | None = None) -> vtk_scene.Scene:
     """The off-screen scene of :func:`draw_deformed`, not yet rendered: the deformed mesh coloured
-    by ``field``, the plastic zone outlined, the pairs by state, and each rigid obstacle of
-    ``obstacles`` (``summary.json``'s records, :func:`~dolfinx_nnqem.io.obstacle_shapes.obstacle_records`)
-    moved by ``scale`` × its displacement (actor ``obstacle:NAME``)."""
+    by ``field`` (actor ``bodies``), the plastic zone outlined, the pairs by state, and each rigid
+    obstacle of ``obstacles`` (``summary.json``'s records,
+    :func:`~dolfinx_nnqem.io.obstacle_shapes.obstacle_records`) moved by ``scale`` × its
+    displacement (actor ``obstacle:NAME``)."""
     grid, scale = _field_grid(step, scale)
-    if field not in grid.cell_data:
-        raise ValueError(f"field {field!r}: the results hold {sorted(grid.cell_data)}")
-    plotter = offscreen_plotter((1200, 800))
-    _add_bodies(plotter, grid, field)
-    plastic_zone = "p" in grid.cell_data and np.any(grid.cell_data["p"] > 0)
-    if plastic_zone:
-        plastic = grid.extract_cells(np.flatnonzero(grid.cell_data["p"] > 0))
-        # the outline of the plastic zone (not its inner cell faces), drawn over the colours
-        edges = pyvista_compat.extract_outer_surface(plastic).extract_feature_edges(
-            boundary_edges=True, feature_edges=True, manifold_edges=False, non_manifold_edges=False)
-        plotter.add_mesh(edges, color="darkorange", line_width=4, label="plastic zone (p > 0)")
+    if field not in _cell_fields(grid):
+        raise ValueError(f"field {field!r}: the results hold {_cell_fields(grid)}")
+    scene = vtk_scene.Scene((1200, 800))
+    _add_bodies(scene, grid, field)
+    plastic_zone = _add_plastic_zone(scene, grid)
     points, states = _pair_points(rows, scale)
     for state, colour in STATE_COLOURS.items():
         selected = states == state
         if np.any(selected):
-            plotter.add_points(points[selected], color=colour, point_size=14, render_points_as_spheres=True,
-                               label=f"{state} ({int(selected.sum())})")
-    drawn = add_obstacles(plotter, obstacles, view_box(np.asarray(grid.points)), scale) if obstacles else []
-    if plotter.legend is None and (len(points) or plastic_zone or drawn):
-        plotter.add_legend(bcolor="lightgrey", face="circle", size=(0.2, 0.15), loc="lower left")
-    plotter.add_text(f"{title}\ndisplacements x {scale:.3g}", font_size=10)
+            scene.add_mesh(f"pairs:{state}", vtk_scene.point_data(points[selected]), colour=colour, point_size=14,
+                           spheres=True, label=f"{state} ({int(selected.sum())})")
+    box = view_box(vtk_scene.vtk_modules().vtk_to_numpy(grid.GetPoints().GetData()))
+    drawn = add_obstacles(scene, obstacles, box, scale) if obstacles else []
+    if len(points) or plastic_zone or drawn:
+        scene.add_legend(size=(0.2, 0.15), background="lightgrey")
+    scene.add_text(f"{title}\ndisplacements x {scale:.3g}", font_size=10)
     # y up, as the problem files of this package have it (gravity along -y, stacks along y)
-    views = {"iso": lambda: plotter.view_vector((1.0, 0.8, 1.4), viewup=(0, 1, 0)), "xy": plotter.view_xy,
-             "xz": plotter.view_xz, "yz": plotter.view_yz}
-    views[camera]()
-    return plotter
+    scene.view_vector(CAMERAS[camera][0], viewup=CAMERAS[camera][1])
+    return scene
+
+
+deformed_plotter = deformed_scene  # (its name when it returned a pyvista plotter)
+
+CAMERAS = {"iso": ((1.0, 0.8, 1.4), (0.0, 1.0, 0.0)), "xy": ((0.0, 0.0, 1.0), (0.0, 1.0, 0.0)),
+           "xz": ((0.0, -1.0, 0.0), (0.0, 0.0, 1.0)), "yz": ((1.0, 0.0, 0.0), (0.0, 0.0, 1.0))}
+"""Camera name → (direction from the bodies to the camera, the direction up in the picture)."""
+
+
+def _add_plastic_zone(scene: vtk_scene.Scene, grid: Any) -> bool:
+    """The outline of the cells where p > 0 (their outer surface's boundary and feature edges, not
+    the inner cell faces), drawn over the colours; False where no cell is plastic."""
+    p = vtk_scene.values_of(grid, "p")
+    if p is None or not np.any(p > 0):
+        return False
+    vtk = vtk_scene.vtk_modules()
+    # the plastic cells as a grid of their own (one cell type: rows of the connectivity)
+    cells = vtk.vtk_to_numpy(grid.GetCells().GetConnectivityArray()).reshape(grid.GetNumberOfCells(), -1)
+    points = vtk.vtk_to_numpy(grid.GetPoints().GetData())
+    plastic = vtk_scene.unstructured_grid(points, cells[p > 0], grid.GetCellType(0))
+    surface = vtk.vtkDataSetSurfaceFilter()
+    surface.SetInputData(plastic)
+    edges = vtk.vtkFeatureEdges()
+    edges.SetInputConnection(surface.GetOutputPort())
+    edges.BoundaryEdgesOn()
+    edges.FeatureEdgesOn()
+    edges.ManifoldEdgesOff()
+    edges.NonManifoldEdgesOff()
+    edges.ColoringOff()
+    edges.Update()
+    scene.add_mesh("plastic zone", edges.GetOutput(), colour="darkorange", line_width=4,
+                   label="plastic zone (p > 0)")
+    return True
 
 
 LABELS = {"von_mises": "von Mises stress (Pa)", "p": "equivalent plastic strain p",
@@ -166,58 +218,53 @@ LABELS = {"von_mises": "von Mises stress (Pa)", "p": "equivalent plastic strain 
 """The colour bar's title of each cell field (any other: its name)."""
 
 
-def _add_bodies(plotter, grid, field: str) -> None:
-    """The deformed bodies coloured by the cell field ``field`` (actor ``bodies``), its colour bar.
-
-    Not rendered meanwhile (``render=False``): once a plotter has rendered, pyvista renders the
-    whole scene again at every actor added or removed unless told not to, and only the
-    screenshot's render is wanted (the scene recoloured for ``error_indicator.png`` rendered it
-    three times)."""
-    plotter.add_mesh(grid, scalars=field, show_edges=True, cmap="viridis", name="bodies",
-                     scalar_bar_args={"title": LABELS.get(field, field)}, render=False)
+def _add_bodies(scene: vtk_scene.Scene, grid: Any, field: str) -> None:
+    """The deformed bodies coloured by the cell field ``field`` (actor ``bodies``), edges shown, and
+    its colour bar (replacing those of another field)."""
+    bodies = scene.add_mesh("bodies", grid, scalars=field, cmap="viridis", show_edges=True)
+    scene.add_scalar_bar(LABELS.get(field, field), bodies)
 
 
 class DeformedScene:
-    """The scene of :func:`deformed_plotter`, made once and saved coloured by one cell field after
+    """The scene of :func:`deformed_scene`, made once and saved coloured by one cell field after
     another (``deformed.png``, then ``error_indicator.png``): only the bodies' colours and the
     colour bar change between them, not the mesh, the plastic zone, the pairs or the obstacles.
 
-    Parameters are those of :func:`deformed_plotter` but ``field``, given to :meth:`draw`.
+    Parameters are those of :func:`deformed_scene` but ``field``, given to :meth:`draw`.
     """
 
     def __init__(self, step: dict, rows: list[dict], *, title: str = "", scale: float | None = None,
                  camera: str = "iso", obstacles: Mapping[str, Mapping[str, Any]] | None = None):
         self.step, self.rows = step, rows
         self.options: dict[str, Any] = {"title": title, "scale": scale, "camera": camera, "obstacles": obstacles}
-        self.plotter: Any = None  #: the pyvista plotter, made at the first :meth:`draw`
+        self.scene: vtk_scene.Scene | None = None  #: the VTK scene, made at the first :meth:`draw`
         self.field: str | None = None  #: the field the bodies are coloured by
 
     def draw(self, field: str, path: Path) -> Path:
         """The scene coloured by ``field`` into the PNG file ``path``."""
-        if self.plotter is None:
-            self.plotter = deformed_plotter(self.step, self.rows, field=field, **self.options)
+        if self.scene is None:
+            self.scene = deformed_scene(self.step, self.rows, field=field, **self.options)
         elif field != self.field:
-            grid = self.plotter.actors["bodies"].mapper.dataset
-            if field not in grid.cell_data:
-                raise ValueError(f"field {field!r}: the results hold {sorted(grid.cell_data)}")
-            self.plotter.remove_scalar_bar(LABELS.get(self.field or "", self.field), render=False)
-            _add_bodies(self.plotter, grid, field)  # (replaces the actor of that name)
+            grid = self.scene.actors["bodies"].GetMapper().GetInput()
+            if field not in _cell_fields(grid):
+                raise ValueError(f"field {field!r}: the results hold {_cell_fields(grid)}")
+            _add_bodies(self.scene, grid, field)  # (replaces the actor and the colour bar)
         self.field = field
-        self.plotter.screenshot(str(path))
+        self.scene.screenshot(path)
         return path
 
     def close(self) -> None:
-        """Free the plotter (its render window)."""
-        if self.plotter is not None:
-            self.plotter.close()
-            self.plotter = None
+        """Free the scene (its render window)."""
+        if self.scene is not None:
+            self.scene.close()
+            self.scene = None
 
 
 def draw_deformed(step: dict, rows: list[dict], path: Path, *, title: str = "", scale: float | None = None,
                   field: str = "von_mises", camera: str = "iso",
                   obstacles: Mapping[str, Mapping[str, Any]] | None = None) -> Path:
     """The deformed shape coloured by ``field``, the plastic zone outlined, pairs by state, the
-    rigid obstacles where they stand (:func:`deformed_plotter`), into the PNG file ``path``."""
+    rigid obstacles where they stand (:func:`deformed_scene`), into the PNG file ``path``."""
     scene = DeformedScene(step, rows, title=title, scale=scale, camera=camera, obstacles=obstacles)
     try:
         return scene.draw(field, path)

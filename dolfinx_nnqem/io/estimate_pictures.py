@@ -2,7 +2,7 @@
 
 Left: every quantity's relative error estimate (%, log scale), labelled with value ± estimate;
 right, after an adaptive run: the largest relative estimate of each cycle against its dofs,
-with the target. Matplotlib only (no DOLFINx, no MPI): a picture worker draws it too.
+with the target. A matplotlib ``Figure`` without pyplot (no DOLFINx, no MPI): a picture worker draws it too.
 """
 
 from __future__ import annotations
@@ -57,20 +57,16 @@ def draw_error_estimates(summary: dict, path: Path, *, title: str = "") -> Path:
     estimates = summary.get("error_estimates")
     if not estimates:
         raise ValueError("the run made no error estimate (run --estimate, [estimate] enabled = true)")
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from dolfinx_nnqem.io.plots import figure
 
     adaptivity = summary.get("adaptivity")
     panels = 2 if adaptivity else 1
-    fig, axes = plt.subplots(1, panels, figsize=(9 * panels, 0.35 * len(estimates["quantities"]) + 2.5),
-                             squeeze=False)
+    fig = figure(9 * panels, 0.35 * len(estimates["quantities"]) + 2.5)
+    axes = fig.subplots(1, panels, squeeze=False)
     _draw_quantities(axes[0][0], estimates)
     if adaptivity:
         _draw_cycles(axes[0][1], adaptivity)
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
-    plt.close(fig)
     return path

@@ -8,8 +8,8 @@ where it stands, magnified with the displacements otherwise, so that a punch sit
 made. The surfaces are clipped to a box around the drawn bodies (:func:`view_box`): a plane or a
 cylinder is infinite, and a large sphere would hide the bodies.
 
-This module imports neither DOLFINx nor MPI at its top (a picture worker draws with it); pyvista
-is imported by the functions that draw.
+This module imports neither DOLFINx nor MPI at its top (a picture worker draws with it); the
+surfaces are VTK's own PolyData (:mod:`dolfinx_nnqem.io.vtk_scene`), made by VTK's sources.
 """
 
 from __future__ import annotations
@@ -20,10 +20,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from dolfinx_nnqem import pyvista_compat
+import dolfinx_nnqem.io.vtk_scene as vtk_scene
 
 if TYPE_CHECKING:
-    import pyvista
+    from dolfinx_nnqem.io.vtk_scene import Scene
 
 __all__ = ["OBSTACLE_COLOUR", "OBSTACLE_OPACITY", "add_obstacles", "obstacle_records", "obstacle_surfaces",
            "view_box"]
@@ -74,15 +74,47 @@ def _unit(v) -> np.ndarray:
     return v / np.linalg.norm(v)
 
 
-def _surface(record: Mapping[str, Any], shift: np.ndarray, box: tuple[float, ...]) -> pyvista.PolyData:
-    """The obstacle's whole surface moved by ``shift``, large enough to cross ``box``."""
-    pyvista = pyvista_compat.import_pyvista()
+def _turned(source: Any, axis_from: tuple[float, float, float], axis_to: np.ndarray, centre: np.ndarray) -> Any:
+    """The output of the VTK ``source`` (made about the origin) turned so that its ``axis_from``
+    points along ``axis_to``, then moved to ``centre``, in triangles (their normals left to the
+    scene, which shades it smoothly)."""
+    vtk = vtk_scene.vtk_modules()
+    source.Update()
+    data = source.GetOutput()
+    a, b = _unit(axis_from), _unit(axis_to)
+    # Rodrigues' rotation taking a to b (a half turn about any axis normal to a where b = -a)
+    v, c = np.cross(a, b), float(a @ b)
+    if c < -1.0 + 1e-12:
+        normal = _unit(np.cross(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0]))
+        rotation = 2.0 * np.outer(normal, normal) - np.eye(3)
+    else:
+        k = np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+        rotation = np.eye(3) + k + k @ k / (1.0 + c)
+    points = vtk.vtk_to_numpy(data.GetPoints().GetData()) @ rotation.T + centre
+    triangles = vtk.vtkTriangleFilter()
+    triangles.SetInputData(data)
+    triangles.Update()
+    surface = triangles.GetOutput()
+    surface.GetPointData().Initialize()  # the source's normals point the unturned way
+    moved = vtk.vtkPoints()
+    moved.SetData(vtk.numpy_to_vtk(np.ascontiguousarray(points), deep=True))
+    surface.SetPoints(moved)
+    return surface
+
+
+def _surface(record: Mapping[str, Any], shift: np.ndarray, box: tuple[float, ...]) -> Any:
+    """The obstacle's whole surface (a VTK PolyData of triangles) moved by ``shift``, large enough
+    to cross ``box``."""
+    vtk = vtk_scene.vtk_modules()
     centre = 0.5 * np.array(box[::2]) + 0.5 * np.array(box[1::2])
     reach = 2.0 * float(np.linalg.norm(np.array(box[1::2]) - np.array(box[::2])))  # beyond the box from anywhere in it
     kind = record["type"]
     if kind == "sphere":
-        return pyvista.Sphere(radius=float(record["radius"]), center=np.asarray(record["centre"], float) + shift,
-                              theta_resolution=RESOLUTION, phi_resolution=RESOLUTION)
+        sphere = vtk.vtkSphereSource()
+        sphere.SetRadius(float(record["radius"]))
+        sphere.SetThetaResolution(RESOLUTION)
+        sphere.SetPhiResolution(RESOLUTION)
+        return _turned(sphere, (0.0, 0.0, 1.0), np.array([0.0, 0.0, 1.0]), np.asarray(record["centre"], float) + shift)
     if kind == "cylinder":
         axis = _unit(record["axis"])
         point = np.asarray(record["point"], float) + shift
@@ -91,60 +123,68 @@ def _surface(record: Mapping[str, Any], shift: np.ndarray, box: tuple[float, ...
         corners = np.array(np.meshgrid(box[0:2], box[2:4], box[4:6])).reshape(3, -1).T
         along = (corners - point) @ axis
         middle = point + 0.5 * (along.min() + along.max()) * axis
-        return pyvista.Cylinder(center=middle, direction=axis, radius=float(record["radius"]),
-                                height=0.999 * float(np.ptp(along)), resolution=RESOLUTION, capping=True).triangulate()
+        cylinder = vtk.vtkCylinderSource()  # about the y axis
+        cylinder.SetRadius(float(record["radius"]))
+        cylinder.SetHeight(0.999 * float(np.ptp(along)))
+        cylinder.SetResolution(RESOLUTION)
+        cylinder.CappingOn()
+        return _turned(cylinder, (0.0, 1.0, 0.0), axis, middle)
     if kind == "plane":
         normal = _unit(record["normal"])
         point = np.asarray(record["point"], float) + shift
         foot = centre - ((centre - point) @ normal) * normal  # the plane's point nearest the box's centre
-        return pyvista.Plane(center=foot, direction=normal, i_size=reach, j_size=reach, i_resolution=8,
-                             j_resolution=8).triangulate()
+        plane = vtk.vtkPlaneSource()  # a square of side reach about the origin, normal to z
+        plane.SetOrigin(-reach / 2, -reach / 2, 0.0)
+        plane.SetPoint1(reach / 2, -reach / 2, 0.0)
+        plane.SetPoint2(-reach / 2, reach / 2, 0.0)
+        plane.SetResolution(8, 8)
+        return _turned(plane, (0.0, 0.0, 1.0), normal, foot)
     raise ValueError(f"obstacle type {kind!r}: expected 'plane', 'sphere' or 'cylinder'")
 
 
 def obstacle_surfaces(records: Mapping[str, Mapping[str, Any]], box: tuple[float, ...],
-                      scale: float = 1.0) -> dict[str, pyvista.DataSet]:
+                      scale: float = 1.0) -> dict[str, Any]:
     """Each obstacle of ``records`` (:func:`obstacle_records`) at its placement moved by ``scale`` ×
-    its displacement, clipped to ``box``; an obstacle wholly outside the box is left out."""
+    its displacement, clipped to ``box`` (a VTK PolyData of triangles); an obstacle wholly outside
+    the box is left out."""
     surfaces = {}
     for name, record in records.items():
         shift = scale * np.asarray(record.get("displacement", (0.0, 0.0, 0.0)), dtype=float)
         clipped = _clipped(_surface(record, shift, box), box)
-        if clipped.n_cells:
+        if clipped.GetNumberOfCells():
             surfaces[name] = clipped
     return surfaces
 
 
-def _clipped(surface: pyvista.PolyData, box: tuple[float, ...]) -> pyvista.PolyData:
+def _clipped(surface: Any, box: tuple[float, ...]) -> Any:
     """The part of ``surface`` inside ``box``, cut exactly along its six faces: one
     vtkClipPolyData per face, each with the face's plane (a linear function: a cut along a
     triangle's edge is exact, where one cut by the box's function, piecewise linear, lost most of
     a cylinder's end face; and ``clip_box``'s vtkBoxClipDataSet left a plane's triangles whole,
     outside the box, with Debian's VTK 9.3)."""
-    from vtkmodules.vtkCommonDataModel import vtkPlane
-    from vtkmodules.vtkFiltersCore import vtkClipPolyData
-
+    vtk = vtk_scene.vtk_modules()
     data = surface
     for axis in range(3):
         for side, bound in ((-1.0, box[2 * axis]), (1.0, box[2 * axis + 1])):
-            face = vtkPlane()
+            face = vtk.vtkPlane()
             face.SetOrigin(*[bound if k == axis else 0.0 for k in range(3)])
             face.SetNormal(*[side if k == axis else 0.0 for k in range(3)])  # outward
-            clip = vtkClipPolyData()
+            clip = vtk.vtkClipPolyData()
             clip.SetInputData(data)
             clip.SetClipFunction(face)
             clip.InsideOutOn()  # keep the side the normal points away from: inside the box
             clip.Update()
             data = clip.GetOutput()
-    return pyvista_compat.import_pyvista().wrap(data)
+    return data
 
 
-def add_obstacles(plotter: pyvista.Plotter, records: Mapping[str, Mapping[str, Any]], box: tuple[float, ...],
+def add_obstacles(scene: Scene, records: Mapping[str, Mapping[str, Any]], box: tuple[float, ...],
                   scale: float = 1.0) -> list[str]:
-    """Draw the obstacles of ``records`` into ``plotter`` (translucent, clipped to ``box``,
-    labelled for the legend); returns the names drawn."""
+    """Draw the obstacles of ``records`` into ``scene`` (a :class:`~dolfinx_nnqem.io.vtk_scene.Scene`:
+    translucent, smoothly shaded, clipped to ``box``, labelled for the legend, actor
+    ``obstacle:NAME``); returns the names drawn."""
     surfaces = obstacle_surfaces(records, box, scale)
     for name, surface in surfaces.items():
-        plotter.add_mesh(surface, color=OBSTACLE_COLOUR, opacity=OBSTACLE_OPACITY, smooth_shading=True,
-                         label=f"{name} (rigid)", name=f"obstacle:{name}")
+        scene.add_mesh(f"obstacle:{name}", surface, colour=OBSTACLE_COLOUR, opacity=OBSTACLE_OPACITY, smooth=True,
+                       label=f"{name} (rigid)")
     return list(surfaces)

@@ -1,12 +1,13 @@
 """Picture workers: processes started with a run that draw its pictures when it ends.
 
-The pictures of a run (:mod:`dolfinx_nnqem.io.run_pictures`) need matplotlib, pyvista and VTK,
-whose imports take longer than the drawing itself. A run uses one core; a worker started with
+The pictures of a run (:mod:`dolfinx_nnqem.io.run_pictures`) are drawn by VTK (the 3D scenes,
+:mod:`dolfinx_nnqem.io.vtk_scene`, and the curves, :mod:`dolfinx_nnqem.io.vtk_charts`), whose
+imports take about as long as the drawing itself (pyvista and matplotlib, which drew them before,
+cost the worker more than the drawing: ``docs/performance.md``). A run uses one core; a worker started with
 the run imports them on another core while the run solves, then draws what the run sends it at
 its end. One worker, ``pictures``, draws them all (:data:`ROLES`): two workers (the matplotlib
 figures and the VTK pictures drawn at the same time) saved 0.1–0.2 s of wall clock but cost
-0.2–0.3 s more CPU, each importing NumPy and matplotlib again (``pyvista.plotting`` imports
-matplotlib too; ``docs/performance.md``). A worker costs CPU (it imports NumPy again) and
+0.2–0.3 s more CPU, each importing NumPy and matplotlib again (``docs/performance.md``). A worker costs CPU (it imports NumPy again) and
 saves wall clock time only where a core is idle.
 
 A worker is a fresh Python process (``subprocess``, never a fork of the run: MPI and PETSc are
@@ -312,22 +313,18 @@ def _die_with(parent: int) -> None:
 
 
 def _warm_up(role: str) -> None:
-    """Import what the role's pictures need (raises where an import fails): matplotlib for
-    ``curves``, and for any other role pyvista and VTK as well."""
-    from dolfinx_nnqem.io.run_pictures import _matplotlib
+    """Import what the pictures need (raises where an import fails): the VTK modules of the 3D
+    scenes and of the charts (:func:`~dolfinx_nnqem.io.vtk_charts.chart_modules`; neither pyvista
+    nor matplotlib), and whether VTK renders here asked once. ``role`` names the worker (one role
+    draws everything, :data:`ROLES`); ``error_estimates.png`` imports matplotlib where a run has
+    estimates."""
+    from dolfinx_nnqem import pyvista_compat
+    from dolfinx_nnqem.chatter import apply_vtk_options
+    import dolfinx_nnqem.io.vtk_charts as vtk_charts
 
-    _matplotlib()  # Agg chosen before pyvista.plotting imports pyplot
-    if role != "curves":
-        from dolfinx_nnqem import pyvista_compat
-        from dolfinx_nnqem.chatter import apply_vtk_options
-
-        pyvista_compat.import_pyvista()
-        apply_vtk_options()
-        if pyvista_compat.vtk_render_problem() is None:
-            # VTK renders here: pyvista need not make a render window of its own to ask again
-            # (its Plotter does, once per process, unless ALLOW_PLOTTING says so); this process is ours
-            os.environ["ALLOW_PLOTTING"] = "true"
-        import pyvista.plotting  # noqa: F401  (the plotter's module: VTK's rendering, matplotlib)
+    vtk_charts.chart_modules()
+    apply_vtk_options()
+    pyvista_compat.vtk_render_problem()
 
 
 def _warm_up_uncollected(role: str) -> None:

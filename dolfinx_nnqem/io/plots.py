@@ -1,24 +1,26 @@
-"""Pictures: pyvista (off-screen PNG) for fields, matplotlib for curves.
+"""Pictures of a live problem: VTK (off-screen PNG, :mod:`dolfinx_nnqem.io.vtk_scene`) for fields,
+matplotlib for the curves of :func:`plot_curve` and :func:`plot_convergence` (the demos' own; a
+run's curves are VTK's charts, :mod:`dolfinx_nnqem.io.run_pictures`).
 
 Collective functions gather what they draw on rank 0, which alone writes the file. The module
 imports neither DOLFINx nor MPI until a function needs them: a process that only draws
 (:mod:`dolfinx_nnqem.io.picture_worker`) uses :func:`draw_contact_pressure`.
-Off-screen pyvista needs no X server with the PyPI VTK; Debian's VTK needs one (run under
-``xvfb-run -a``, see ``docs/install.md``): without it the pyvista pictures are skipped with that
-reason (:mod:`dolfinx_nnqem.io.offscreen`).
+Off-screen VTK needs no X server with the PyPI VTK; Debian's VTK needs one (run under
+``xvfb-run -a``, see ``docs/install.md``): without it the VTK pictures are skipped with that
+reason (:mod:`dolfinx_nnqem.io.offscreen`). The curves are matplotlib ``Figure`` objects saved by
+the Agg canvas, without ``matplotlib.pyplot`` (its import costs, and it keeps figures open).
 """
 
 from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
 
-from dolfinx_nnqem import pyvista_compat
-from dolfinx_nnqem.io.offscreen import offscreen_plotter
+import dolfinx_nnqem.io.vtk_scene as vtk_scene
 
 if TYPE_CHECKING:
     from dolfinx_nnqem.problem.contact_problem import ContactProblem
@@ -26,20 +28,22 @@ if TYPE_CHECKING:
 STATE_COLOURS = {0: "white", 1: "royalblue", 2: "crimson"}  # open, stick, slip
 
 
-def _matplotlib():
-    import matplotlib
+def figure(width: float, height: float) -> Any:
+    """A matplotlib ``Figure`` of ``width`` × ``height`` inches drawn by the Agg canvas (PNG, no
+    display), without ``matplotlib.pyplot``: nothing to close, and pyplot's import is spared."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
+    fig = Figure(figsize=(width, height))
+    FigureCanvasAgg(fig)
+    return fig
 
 
 def plot_curve(x: npt.ArrayLike, y: npt.ArrayLike, path: str | os.PathLike, *, xlabel: str, ylabel: str,
                label: str = "FE", reference: dict[str, float] | None = None, title: str = "") -> None:
     """A curve with optional horizontal reference lines (e.g. an analytical limit load)."""
-    plt = _matplotlib()
-    fig, ax = plt.subplots(figsize=(6, 4))
+    fig = figure(6, 4)
+    ax = fig.subplots()
     ax.plot(x, y, "o-", label=label)
     for name, value in (reference or {}).items():
         ax.axhline(value, color="k", ls="--", lw=1)
@@ -51,14 +55,13 @@ def plot_curve(x: npt.ArrayLike, y: npt.ArrayLike, path: str | os.PathLike, *, x
     ax.legend(loc="lower right")
     fig.tight_layout()
     fig.savefig(path, dpi=120)
-    plt.close(fig)
 
 
 def plot_convergence(histories: Sequence[Sequence[float]], path: str | os.PathLike,
                      labels: Sequence[str] | None = None, title: str = "") -> None:
     """Relative residual per iteration, one line per increment (log scale)."""
-    plt = _matplotlib()
-    fig, ax = plt.subplots(figsize=(6, 4))
+    fig = figure(6, 4)
+    ax = fig.subplots()
     for k, h in enumerate(histories):
         h = np.maximum(np.asarray(h, dtype=float), 1e-17)
         ax.semilogy(np.arange(len(h)), h, "o-", ms=3,
@@ -71,7 +74,6 @@ def plot_convergence(histories: Sequence[Sequence[float]], path: str | os.PathLi
         ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
-    plt.close(fig)
 
 
 def _gather_grid(problem, field: str):
@@ -130,47 +132,51 @@ def plot_deformed(problem: ContactProblem, path: str | os.PathLike, *, field: st
 
     grid_data = _gather_grid(problem, field)
     table = pair_table(problem) if (show_pairs and problem.has_contact) else None
+    records = obstacle_records(problem, problem.load_factor_n) if show_obstacles else {}
     if problem.comm.rank != 0:
         return
-    pyvista = pyvista_compat.import_pyvista()
-
-    plotter = offscreen_plotter((1200, 700))
+    scene = vtk_scene.Scene((1200, 700))
     topology, cell_types, x, u, values = grid_data
-    grid = pyvista.UnstructuredGrid(topology, cell_types, x)
     if scale is None:
         size = np.ptp(x, axis=0).max()
         umax = np.abs(u).max()
         scale = 0.1 * size / umax if umax > 0 else 1.0
-    grid.points = x + scale * u
-    grid.cell_data[field] = values
-    plotter.add_mesh(grid, scalars=field, show_edges=True, cmap="viridis",
-                     scalar_bar_args={"title": {"von_mises": "von Mises (Pa)", "p": "p"}[field]})
+    grid = vtk_scene.unstructured_grid(x + scale * u, topology, cell_types)
+    vtk_scene.set_values(grid, field, values)
+    bodies = scene.add_mesh("bodies", grid, scalars=field, cmap="viridis", show_edges=True)
+    scene.add_scalar_bar({"von_mises": "von Mises (Pa)", "p": "p"}[field], bodies)
     if table is not None:
         centres = table["position_b"] + scale * table["u_body2"]  # the slave nodes: on the drawn mesh
         for state, colour in STATE_COLOURS.items():
             sel = table["state"] == state
             if np.any(sel):
-                plotter.add_points(centres[sel], color=colour, point_size=14,
-                                   render_points_as_spheres=True)
-    if show_obstacles:
-        add_obstacles(plotter, obstacle_records(problem, problem.load_factor_n), view_box(x + scale * u), scale)
-    plotter.add_text(f"{title}  (displacements x {scale:.3g})", font_size=10)
-    views = {"iso": plotter.view_isometric, "xy": plotter.view_xy, "xz": plotter.view_xz,
-             "yz": plotter.view_yz, "front": lambda: plotter.view_vector((0.4, 0.5, 1.0), viewup=(0, 1, 0))}
+                scene.add_mesh(f"pairs:{state}", vtk_scene.point_data(centres[sel]), colour=colour, point_size=14,
+                               spheres=True)
+    if records:
+        add_obstacles(scene, records, view_box(x + scale * u), scale)
+    scene.add_text(f"{title}  (displacements x {scale:.3g})", font_size=10)
+    views = {"iso": ((1.0, 1.0, 1.0), (0.0, 0.0, 1.0)), "xy": ((0.0, 0.0, 1.0), (0.0, 1.0, 0.0)),
+             "xz": ((0.0, -1.0, 0.0), (0.0, 0.0, 1.0)), "yz": ((1.0, 0.0, 0.0), (0.0, 0.0, 1.0)),
+             "front": ((0.4, 0.5, 1.0), (0.0, 1.0, 0.0))}
     if isinstance(camera, str):
         if camera not in views:
             raise ValueError(f"camera {camera!r}: expected one of {sorted(views)}, a direction, or None")
-        views[camera]()
+        scene.view_vector(*views[camera])
     elif camera is not None:
-        plotter.view_vector(tuple(float(c) for c in camera), viewup=(0, 1, 0))
+        scene.view_vector(tuple(float(c) for c in camera), viewup=(0, 1, 0))
+    else:
+        scene.renderer.ResetCamera()
+    view = scene.camera()
     if focus is not None:
-        position = np.asarray(plotter.camera.position) - np.asarray(plotter.camera.focal_point)
-        plotter.camera.focal_point = tuple(focus)
-        plotter.camera.position = tuple(np.asarray(focus) + position)
+        position = np.asarray(view.GetPosition()) - np.asarray(view.GetFocalPoint())
+        view.SetFocalPoint(*focus)
+        view.SetPosition(*(np.asarray(focus) + position))
     if zoom != 1.0:
-        plotter.camera.zoom(zoom)
-    plotter.screenshot(str(path))
-    plotter.close()
+        view.Zoom(zoom)
+    try:
+        scene.screenshot(path)
+    finally:
+        scene.close()
 
 
 def _slave_triangles(problem, table: dict) -> np.ndarray | None:
@@ -273,24 +279,34 @@ def draw_contact_pressure(data: dict, path: str | os.PathLike, *, title: str = "
     points, triangles = np.asarray(data["points"]), data["triangles"]
     if select is None:
         select = np.ones(len(data["pressure"]), dtype=bool)
-    pyvista = pyvista_compat.import_pyvista()
+    scene = vtk_scene.Scene((1000, 800))
+    try:
+        _contact_pressure_scene(scene, points, triangles, np.asarray(data["pressure"], dtype=float), select,
+                                title=title, unit=unit, camera=camera, point_size=point_size, circle=circle)
+        scene.screenshot(path)
+    finally:
+        scene.close()
 
-    plotter = offscreen_plotter((1000, 800))  # two-beams -q without fields printed VTK's X warning (issue 31)
-    pressure = np.where(select, data["pressure"], np.nan)
-    bar = {"title": f"contact pressure ({unit})"}
+
+def _contact_pressure_scene(scene: vtk_scene.Scene, points: np.ndarray, triangles: np.ndarray | None,
+                            pressure: np.ndarray, select: np.ndarray, *, title: str, unit: str,
+                            camera: str | Sequence[float], point_size: float, circle: float | None) -> None:
+    """The scene of :func:`draw_contact_pressure`: the surface or the points coloured by the
+    pressure (the pairs not selected grey), its colour bar, the reference circle, the axes."""
+    pressure = np.where(select, pressure, np.nan)
     finite = pressure[np.isfinite(pressure)]
     clim = (0.0, float(finite.max()) if len(finite) and finite.max() > 0 else 1.0)
     if triangles is not None and len(triangles):
-        faces = np.hstack([np.full((len(triangles), 1), 3), triangles]).reshape(-1)
-        surface = pyvista.PolyData(points, faces)
-        surface.point_data["pressure"] = pressure
-        plotter.add_mesh(surface, scalars="pressure", cmap="plasma", show_edges=True, edge_color="grey",
-                         scalar_bar_args=bar, nan_color="lightgrey", clim=clim)
+        surface = vtk_scene.surface_data(points, np.asarray(triangles))
+        vtk_scene.set_values(surface, "pressure", pressure, on="point")
+        shown = scene.add_mesh("pressure", surface, scalars="pressure", on="point", cmap="plasma", clim=clim,
+                               nan_colour="lightgrey", show_edges=True, edge_colour="grey")
     else:
-        cloud = pyvista.PolyData(points[select])
-        cloud.point_data["pressure"] = pressure[select]
-        plotter.add_mesh(cloud, scalars="pressure", cmap="plasma", point_size=point_size,
-                         render_points_as_spheres=True, scalar_bar_args=bar, clim=clim)
+        cloud = vtk_scene.point_data(points[select])
+        vtk_scene.set_values(cloud, "pressure", pressure[select], on="point")
+        shown = scene.add_mesh("pressure", cloud, scalars="pressure", on="point", cmap="plasma", clim=clim,
+                               point_size=point_size, spheres=True)
+    scene.add_scalar_bar(f"contact pressure ({unit})", shown)
     if circle is not None:
         # only the sector the surface covers (a quarter for a quarter model), so that the camera
         # frames the surface
@@ -298,17 +314,14 @@ def draw_contact_pressure(data: dict, path: str | os.PathLike, *, title: str = "
         angle = np.linspace(covered.min(), covered.max(), 91)
         y = points[:, 1].min() - 1e-3 * max(float(np.ptp(points, axis=0).max()), 1e-300)
         ring = np.column_stack([circle * np.cos(angle), np.full_like(angle, y), circle * np.sin(angle)])
-        plotter.add_mesh(pyvista.lines_from_points(ring), color="white", line_width=3)
-    plotter.add_text(title or "contact pressure on the slave surface", font_size=11)
-    plotter.show_axes()
+        scene.add_mesh("circle", vtk_scene.line_data(ring), colour="white", line_width=3)
+    scene.add_text(title or "contact pressure on the slave surface", font_size=11)
+    scene.add_axes()
     if isinstance(camera, str):
-        views = {"bottom": lambda: plotter.view_vector((0.0, -1.0, 0.0), viewup=(0, 0, 1)),
-                 "top": lambda: plotter.view_vector((0.0, 1.0, 0.0), viewup=(0, 0, 1)),
-                 "iso": plotter.view_isometric}
+        views = {"bottom": ((0.0, -1.0, 0.0), (0.0, 0.0, 1.0)), "top": ((0.0, 1.0, 0.0), (0.0, 0.0, 1.0)),
+                 "iso": ((1.0, 1.0, 1.0), (0.0, 0.0, 1.0))}
         if camera not in views:
             raise ValueError(f"camera {camera!r}: expected one of {sorted(views)} or a direction")
-        views[camera]()
+        scene.view_vector(*views[camera])
     else:
-        plotter.view_vector(tuple(float(c) for c in camera), viewup=(0, 1, 0))
-    plotter.screenshot(str(path))
-    plotter.close()
+        scene.view_vector(tuple(float(c) for c in camera), viewup=(0, 1, 0))

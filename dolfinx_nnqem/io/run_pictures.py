@@ -47,6 +47,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 
 import dolfinx_nnqem.io.plots as plots
+import dolfinx_nnqem.io.vtk_charts as vtk_charts
 from dolfinx_nnqem.io.deformed_picture import DeformedScene, _with_quadratic_displacement, draw_deformed  # noqa: F401
 from dolfinx_nnqem.io.estimate_pictures import ESTIMATE_PICTURE, draw_error_estimates
 from dolfinx_nnqem.io.offscreen import PictureUnavailable
@@ -80,7 +81,7 @@ def _whole_picture(path: Path, draw: Callable[[Path], object]) -> Path:
     """``draw(temporary)`` beside ``path``, then the rename: a picture is whole or absent.
 
     A SIGKILL or SIGTERM while a picture was drawn left a 0-byte PNG under its name. The
-    temporary (``.NAME.tmp-PID.png``: pyvista and matplotlib read the format from the suffix) is
+    temporary (``.NAME.tmp-PID.png``: matplotlib reads the format from the suffix) is
     removed on any error or interrupt; a killed process leaves it, and the next run in the
     folder removes it (:func:`~dolfinx_nnqem.io.safe_io.remove_stale_temporaries`). Errors are
     raised as the drawing raised them (the reason a picture is not drawn)."""
@@ -96,33 +97,6 @@ def _whole_picture(path: Path, draw: Callable[[Path], object]) -> Path:
         tmp.unlink(missing_ok=True)
         raise
     return path
-
-
-def _matplotlib():
-    import matplotlib
-
-    matplotlib.use("Agg")  # off-screen: no display needed
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-def _curve_margins(fig, panels: int, *, left: float = 0.85, right: float = 0.3, gap: float = 0.85,
-                   top: float = 0.55) -> None:
-    """Fixed margins (inches) for a row of panels whose tick labels have a bounded width: the load
-    factor (0 to 1), the relative residuals of a log axis ("1e−16"), the coordinates and pressures
-    of ``pair_pressure.png`` (at most about seven characters: matplotlib's tick labels switch to an
-    offset or a power of ten beyond). ``tight_layout`` found about the same margins, but it costs a
-    second pass over the ticks and texts, a third of these figures' drawing time.
-
-    ``panels``: the figure's row of panels (a panel's colour bar, made by ``fig.colorbar(..., ax=ax)``,
-    is inside its panel; its labels stick out to the right). ``left``, ``right``, ``gap``: the room
-    left of the first panel, right of the last one and between two panels (a colour bar's labels
-    need more); ``top``: above the panels (the figure's title, the panels' own titles)."""
-    width, height = fig.get_size_inches()
-    bottom = 0.6
-    fig.subplots_adjust(left=left / width, right=1 - right / width, bottom=bottom / height, top=1 - top / height,
-                        wspace=gap / ((width - left - right - gap * (panels - 1)) / panels))
 
 
 def _title(summary: dict) -> str:
@@ -148,32 +122,19 @@ def _rows_by_interface(rows: list[dict]) -> dict[str, list[dict]]:
 
 
 def draw_pair_pressure(rows: list[dict], path: Path, *, title: str = "") -> Path:
-    """Pair pressure (Pa) over each contact surface, one panel per interface."""
-    plt = _matplotlib()
+    """Pair pressure (Pa) over each contact surface, one panel per interface (VTK's charts)."""
     groups = _rows_by_interface(rows)
-    fig, axes = plt.subplots(1, len(groups), figsize=(5.5 * len(groups), 4.5), squeeze=False)
-    for ax, (name, group) in zip(axes[0], groups.items()):
+    panels = vtk_charts.ChartPanels(len(groups), 5.5, 4.5, title)
+    for index, (name, group) in enumerate(groups.items()):
         x = np.array([[float(r["slave_x"]), float(r["slave_y"]), float(r["slave_z"])] for r in group])
         pressure = np.array([float(r["pressure"]) for r in group])
         # the surface's two longest extents name the axes (a contact plane x-z shows x and z)
         a, b = sorted(np.argsort(np.ptp(x, axis=0))[-2:])
         closed = np.array([r["state"] != "open" for r in group])
-        cloud = ax.scatter(x[:, a], x[:, b], c=pressure, cmap="viridis", s=60, edgecolors="k")
-        ax.margins(0.15)  # room for the legend beside the edge pairs
-        if np.any(~closed):
-            ax.scatter(x[~closed, a], x[~closed, b], s=60, facecolors="white", edgecolors="grey",
-                       label="open")
-            ax.legend(loc="best", fontsize=8)
-        fig.colorbar(cloud, ax=ax, label="pressure (Pa)")
-        ax.set_xlabel(f"{'xyz'[a]} (m)")
-        ax.set_ylabel(f"{'xyz'[b]} (m)")
-        ax.set_aspect("equal", adjustable="datalim")
-        ax.set_title(f"interface {name}: max {pressure.max():.3g} Pa", fontsize=9)
-    fig.suptitle(title, fontsize=10)
-    # the colour bar's labels on the right; both titles above (not tight_layout: a second layout pass)
-    _curve_margins(fig, len(groups), left=1.0, right=0.75, gap=1.75, top=0.62)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+        vtk_charts.add_scatter(panels, index, x[:, a], x[:, b], pressure, value_label="pressure (Pa)",
+                               xlabel=f"{'xyz'[a]} (m)", ylabel=f"{'xyz'[b]} (m)",
+                               title=f"interface {name}: max {pressure.max():.3g} Pa", grey=~closed, grey_label="open")
+    panels.save(path)
     return path
 
 
@@ -209,20 +170,14 @@ def draw_load_curve(summary: dict, path: Path, *, title: str = "") -> Path:
                                                                for s in [displacements] if s]
     if not panels:
         raise ValueError("summary.json has no reaction_history or probe_history")
-    plt = _matplotlib()
-    fig, axes = plt.subplots(1, len(panels), figsize=(6 * len(panels), 4.5), squeeze=False)
-    for ax, (series, xlabel, unit) in zip(axes[0], panels):
-        for label, values in series:
+    pictures = vtk_charts.ChartPanels(len(panels), 6.0, 4.5, title)
+    for chart, (series, xlabel, unit) in zip(pictures.charts, panels):
+        lines = []
+        for k, (label, values) in enumerate(series):
             n = min(len(values), len(factors))
-            ax.plot(unit * values[:n], factors[:n], "o-", ms=4, label=label)
-        ax.set_xlabel(xlabel)
-        ax.set_ylabel("load factor")
-        ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=7, loc="best")
-    fig.suptitle(title, fontsize=10)
-    _curve_margins(fig, len(panels))  # (not tight_layout: a second layout pass)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+            lines.append((label, unit * values[:n], factors[:n], vtk_charts.CYCLE[k % len(vtk_charts.CYCLE)]))
+        vtk_charts.add_lines(chart, lines, xlabel=xlabel, ylabel="load factor")
+    pictures.save(path)
     return path
 
 
@@ -232,27 +187,18 @@ def draw_convergence(summary: dict, path: Path, *, title: str = "") -> Path:
     if not histories:
         raise ValueError("summary.json has no residual_histories")
     with_contact = any(np.any(h[:, 1] > 0) for h in histories)
-    names = ["equilibrium ‖R‖/F"] + (["contact ‖H‖/F"] if with_contact else [])
-    plt = _matplotlib()
-    from matplotlib import ticker
-
-    fig, axes = plt.subplots(1, len(names), figsize=(6 * len(names), 4.5), squeeze=False)
-    colours = plt.get_cmap("viridis")(np.linspace(0.0, 0.9, len(histories)))
-    for column, (ax, name) in enumerate(zip(axes[0], names)):
-        for k, (h, colour) in enumerate(zip(histories, colours)):
-            ax.semilogy(np.arange(len(h)), np.maximum(h[:, column], 1e-17), "o-", ms=3, color=colour,
-                        label=f"increment {k + 1}" if len(histories) <= 12 else None)
-        # plain "1e−08" labels: the default ones are mathtext, whose parser cost this picture 0.5 s
-        ax.yaxis.set_major_formatter(ticker.LogFormatter())
-        ax.set_xlabel("iteration")
-        ax.set_ylabel(name)
-        ax.grid(True, which="both", alpha=0.3)
-        if len(histories) <= 12:
-            ax.legend(fontsize=7)
-    fig.suptitle(title, fontsize=10)
-    _curve_margins(fig, len(names))  # (not tight_layout: a second layout pass)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    # not "‖R‖": VTK's Arial has no "‖", and "||R||" is taken for mathematics (drawn by matplotlib's
+    # mathtext) in a process where VTK's matplotlib module is loaded (pyvista.plotting loads it)
+    names = ["equilibrium norm(R)/F"] + (["contact norm(H)/F"] if with_contact else [])
+    panels = vtk_charts.ChartPanels(len(names), 6.0, 4.5, title)
+    colours = vtk_charts.sequential_colours(len(histories))
+    labelled = len(histories) <= 12
+    for column, (chart, name) in enumerate(zip(panels.charts, names)):
+        lines = [(f"increment {k + 1}" if labelled else None, np.arange(len(h)), np.maximum(h[:, column], 1e-17), colour)
+                 for k, (h, colour) in enumerate(zip(histories, colours))]
+        vtk_charts.add_lines(chart, lines, xlabel="iteration", ylabel=name, log_y=True, marker_size=6.0,
+                             legend=labelled)
+    panels.save(path)
     return path
 
 

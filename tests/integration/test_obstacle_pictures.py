@@ -28,6 +28,21 @@ BOX = (-1.0, 1.0, -1.0, 1.0, -1.0, 1.0)
 CHORD = 1 - np.cos(np.pi / 64)  # how far a facet of the drawn sphere or cylinder lies inside it, per radius
 
 
+def _points(surface) -> np.ndarray:
+    """The points of a VTK PolyData."""
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+
+    return vtk_to_numpy(surface.GetPoints().GetData()).astype(float)
+
+
+def _triangles(surface) -> np.ndarray:
+    """The corners of a VTK PolyData's triangles, (triangles, 3, 3)."""
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+
+    triangles = vtk_to_numpy(surface.GetPolys().GetConnectivityArray()).reshape(-1, 3)
+    return _points(surface)[triangles]
+
+
 @pytest.mark.parametrize("scale", [1.0, 20.0])
 def test_each_obstacle_is_drawn_where_it_stands(scale):
     d = np.array([0.0, -0.01, 0.0])
@@ -42,22 +57,24 @@ def test_each_obstacle_is_drawn_where_it_stands(scale):
     assert sorted(surfaces) == ["ball", "floor", "roller"]  # "far" is outside the view
     shift = scale * d
     for name, surface in surfaces.items():
-        x = np.asarray(surface.points)
+        x = _points(surface)
         assert np.all(x >= np.array(BOX[::2]) - 1e-9) and np.all(x <= np.array(BOX[1::2]) + 1e-9), name
-    ball_points = np.asarray(surfaces["ball"].points)
+    ball_points = _points(surfaces["ball"])
     ball = np.linalg.norm(ball_points - (np.array([0.0, 0.9, 0.0]) + shift), axis=1)[ball_points[:, 1] < 1.0 - 1e-6]
     assert ball_points[:, 1].max() == pytest.approx(min(1.0, 1.2 + shift[1]), abs=CHORD * 0.3 + 1e-6)
-    roller = np.linalg.norm((np.asarray(surfaces["roller"].points) - (np.array([0.0, 0.5, 0.0]) + shift))[:, :2], axis=1)
-    side = np.abs(np.abs(np.asarray(surfaces["roller"].points)[:, 2]) - 0.999) > 1e-6  # not on an end face
-    floor = np.asarray(surfaces["floor"].points)[:, 1] - (-0.5 + shift[1])
-    z = np.asarray(surfaces["roller"].points)[:, 2]
+    roller = np.linalg.norm((_points(surfaces["roller"]) - (np.array([0.0, 0.5, 0.0]) + shift))[:, :2], axis=1)
+    side = np.abs(np.abs(_points(surfaces["roller"])[:, 2]) - 0.999) > 1e-6  # not on an end face
+    floor = _points(surfaces["floor"])[:, 1] - (-0.5 + shift[1])
+    z = _points(surfaces["roller"])[:, 2]
     assert np.all(np.abs(ball - 0.3) <= CHORD * 0.3 + 1e-6) and np.all(np.abs(roller[side] - 0.3) <= CHORD * 0.3 + 1e-6)
     assert np.abs(floor).max() < 1e-6  # (VTK keeps single-precision points)
     assert np.isclose(z.min(), BOX[4], atol=3e-3) and np.isclose(z.max(), BOX[5], atol=3e-3)  # crosses the view
-    centres = np.asarray(surfaces["roller"].cell_centers().points)
-    on_ends = np.abs(np.abs(centres[:, 2]) - 0.999) < 1e-6
-    assert np.any(on_ends & (np.linalg.norm(centres[:, :2] - [0.0, 0.5 + shift[1]], axis=1) < 0.1))  # closed ends
-    assert np.ptp(np.asarray(surfaces["floor"].points)[:, 0]) >= 2.0 - 1e-9  # the plane too
+    corners = _triangles(surfaces["roller"])
+    on_ends = np.all(np.abs(np.abs(corners[:, :, 2]) - 0.999) < 1e-6, axis=1) & (np.ptp(corners[:, :, 2], axis=1) < 1e-6)
+    areas = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+    polygon = 0.5 * 64 * 0.3**2 * np.sin(2 * np.pi / 64)  # the end face: a 64-gon in the circle of radius 0.3
+    assert areas[on_ends].sum() == pytest.approx(2 * polygon, rel=1e-5)  # both ends closed
+    assert np.ptp(_points(surfaces["floor"])[:, 0]) >= 2.0 - 1e-9  # the plane too
 
 
 def test_a_finite_strain_run_draws_its_obstacle_at_true_scale(tmp_path, monkeypatch):
@@ -76,7 +93,7 @@ def test_a_finite_strain_run_draws_its_obstacle_at_true_scale(tmp_path, monkeypa
     class Recorded(deformed_picture.DeformedScene):
         def draw(self, field, path):
             super().draw(field, path)
-            scenes.append((self.options, dict(self.plotter.actors)))
+            scenes.append((self.options, dict(self.scene.actors)))
             return path
 
     monkeypatch.setattr(run_pictures, "DeformedScene", Recorded)
@@ -84,8 +101,8 @@ def test_a_finite_strain_run_draws_its_obstacle_at_true_scale(tmp_path, monkeypa
     assert isinstance(done["deformed.png"], Path), done
     kwargs, actors = scenes[-1]
     assert kwargs["scale"] == 1.0 and "obstacle:sphere-201" in actors
-    drawn = actors["obstacle:sphere-201"].mapper.dataset
-    lowest = float(np.asarray(drawn.points)[:, 1].min())
+    drawn = actors["obstacle:sphere-201"].GetMapper().GetInput()
+    lowest = float(_points(drawn)[:, 1].min())
     print(f"\n  deformed.png: scale {kwargs['scale']}, actors {sorted(actors)}; the sphere's lowest point drawn at "
           f"y = {lowest:.4f} (block top 0.5, pressed 0.05)")
     assert abs(lowest - 0.45) <= CHORD * 0.5 + 1e-6  # (the facets of the drawn sphere)

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dolfinx_nnqem.io import deformed_picture
+from dolfinx_nnqem.io import deformed_picture, vtk_scene
 
 
 def _hexahedra(n: int = 2) -> dict:
@@ -27,22 +27,22 @@ def _hexahedra(n: int = 2) -> dict:
 
 @pytest.fixture
 def renders(monkeypatch) -> list[str]:
-    """The renders of every plotter the deformed picture makes (its render window's StartEvent)."""
+    """The renders of every scene the deformed picture makes (its render window's StartEvent)."""
     counted: list[str] = []
-    make = deformed_picture.offscreen_plotter
 
-    def counting(window_size):
-        plotter = make(window_size)
-        plotter.render_window.AddObserver("StartEvent", lambda *_: counted.append("render"))
-        return plotter
+    class Counting(vtk_scene.Scene):
+        def __init__(self, size):
+            super().__init__(size)
+            self.window.AddObserver("StartEvent", lambda *_: counted.append("render"))
 
-    monkeypatch.setattr(deformed_picture, "offscreen_plotter", counting)
+    monkeypatch.setattr(vtk_scene, "Scene", Counting)
     return counted
 
 
 def test_each_picture_of_the_scene_is_rendered_once(tmp_path, renders):
     """deformed.png, then error_indicator.png from the same scene recoloured: two renders, one per
-    screenshot (pyvista rendered the scene again at the actor removed and at the one added)."""
+    screenshot (pyvista, which drew it before, rendered the scene again at the actor removed and at
+    the one added)."""
     scene = deformed_picture.DeformedScene(_hexahedra(), [], title="hexahedra")
     counts = []
     try:

@@ -178,10 +178,12 @@ def test_a_degree_2_run_draws_its_quadratic_displacement(tmp_path, monkeypatch):
     vertices = read_fields(out, last_only=True)[-1]["geometry"]
     expected = _nodes_and_displacements(quadratic.points, quadratic.point_data["u"])
     for where, step in zip(("end of the run", "plot"), drawn):
-        grid, _ = deformed_picture._field_grid(step, 1.0)
-        print(f"\n  {where}: {grid.n_points} nodes, {grid.n_cells} cells of VTK type {grid.celltypes[0]} drawn "
-              f"(fields_p2.pvd: {quadratic.n_points} nodes; fields.xdmf: {len(vertices)} vertices)", end="")
-        assert grid.n_points == quadratic.n_points > len(vertices)
-        assert grid.n_cells == quadratic.n_cells and np.all(grid.celltypes == quadratic.celltypes)
+        grid, _ = deformed_picture._field_grid(step, 1.0)  # a VTK grid
+        celltypes = np.array([grid.GetCellType(k) for k in range(grid.GetNumberOfCells())])
+        print(f"\n  {where}: {grid.GetNumberOfPoints()} nodes, {grid.GetNumberOfCells()} cells of VTK type "
+              f"{celltypes[0]} drawn (fields_p2.pvd: {quadratic.n_points} nodes; fields.xdmf: {len(vertices)} "
+              "vertices)", end="")
+        assert grid.GetNumberOfPoints() == quadratic.n_points > len(vertices)
+        assert grid.GetNumberOfCells() == quadratic.n_cells and np.all(celltypes == quadratic.celltypes)
         np.testing.assert_allclose(_nodes_and_displacements(step["geometry"], step["u"]), expected, rtol=0, atol=1e-12)
         assert _inked_fraction(out / "pictures" / "deformed.png") > 0.02

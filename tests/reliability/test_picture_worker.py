@@ -219,6 +219,53 @@ def test_a_worker_imports_neither_dolfinx_nor_mpi():
     assert done.returncode == 0 and done.stdout.strip().splitlines()[-1] == "[]"
 
 
+class _Captured:
+    """In place of a run's picture workers: keeps the end-of-run job, draws nothing."""
+
+    used, pids, job = True, {}, None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc_info):
+        pass
+
+    def close(self):
+        pass
+
+    def draw(self, job):
+        _Captured.job = dict(job)
+        return {}
+
+
+def test_a_worker_draws_without_pyvista_or_matplotlib(tmp_path, monkeypatch, capsys):
+    """A run's end-of-run job (captured) drawn by a process set up as a worker is: every picture
+    drawn, and neither pyvista nor matplotlib imported (half the worker's CPU, issue 43: the 3D
+    pictures are drawn by VTK's own classes, the curves by VTK's charts)."""
+    import pickle
+
+    monkeypatch.delenv(ENV_SWITCH, raising=False)
+    monkeypatch.setattr(cli, "_start_picture_workers", lambda args: _Captured())
+    assert main(["-q", "run", str(EXAMPLE), "--increments", "2", "--out", str(tmp_path / "out")]) == EXIT_OK
+    assert _Captured.job is not None
+    job_file = tmp_path / "job.pickle"
+    job_file.write_bytes(pickle.dumps(_Captured.job))
+    code = (f"import pickle, sys, types\nfor name in {BLOCKED!r}: sys.modules[name] = None\n"
+            "package = types.ModuleType('dolfinx_nnqem')\n"
+            f"package.__path__ = [{str(ROOT / 'dolfinx_nnqem')!r}]\n"
+            "sys.modules['dolfinx_nnqem'] = package\n"
+            "from dolfinx_nnqem.io import picture_worker, run_pictures\n"
+            "picture_worker._warm_up('pictures')\n"
+            f"done = run_pictures.draw_job(pickle.load(open({str(job_file)!r}, 'rb')))\n"
+            "print(sorted(name for name, path in done.items() if isinstance(path, str)))\n"
+            "print(sorted(m for m in ('pyvista', 'matplotlib') if sys.modules.get(m) is not None))")
+    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    print(f"\n  not drawn, imported: {done.stdout.strip().splitlines()} {done.stderr[-2000:]}")
+    assert done.returncode == 0 and done.stdout.strip().splitlines()[-2:] == ["[]", "[]"]
+    drawn = sorted(p.name for p in (tmp_path / "out" / "pictures").glob("*.png"))
+    assert set(drawn) == set(ALL) - {"error_estimates.png"}, drawn  # (no estimate in this run)
+
+
 def _children(pid: int) -> list[int]:
     try:
         return [int(c) for c in Path(f"/proc/{pid}/task/{pid}/children").read_text().split()]

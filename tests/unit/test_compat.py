@@ -78,3 +78,28 @@ def test_parallel_mumps_ordering_is_chosen_by_what_petsc_has():
     assert "mat_mumps_icntl_7" not in direct_options({}, 1)
     assert direct_options({"mat_mumps_icntl_7": 0}, 2)["mat_mumps_icntl_7"] == 0
     assert "mat_mumps_icntl_7" not in direct_options({"pc_factor_mat_solver_type": "superlu_dist"}, 2)
+
+
+class _OldPlot:
+    """A chart plot of a VTK whose ``SetColor`` takes the floats (no ``SetColorF``)."""
+
+    def __init__(self):
+        self.colour = None
+
+    def SetColor(self, red, green, blue):  # noqa: N802  (VTK's name)
+        self.colour = (red, green, blue)
+
+
+def test_a_plot_colour_with_either_vtk_signature():
+    """``set_plot_colour``: ``SetColorF`` where VTK has it (the installed one), ``SetColor`` with
+    the floats where it does not."""
+    from vtkmodules.vtkChartsCore import vtkPlotLine
+
+    old = _OldPlot()
+    compat.set_plot_colour(old, 0.25, 0.5, 1.0)
+    assert old.colour == (0.25, 0.5, 1.0)
+    line = vtkPlotLine()
+    compat.set_plot_colour(line, 0.25, 0.5, 1.0)
+    colour = [0.0, 0.0, 0.0]
+    line.GetColorF(colour) if hasattr(line, "GetColorF") else line.GetColor(colour)
+    assert np.allclose(colour, (0.25, 0.5, 1.0), atol=1 / 255)  # (kept as bytes)
