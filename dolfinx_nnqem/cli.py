@@ -677,8 +677,8 @@ def _start_picture_workers(args) -> PictureWorkers | None:
     """The picture workers of a command-line ``run`` that draws its pictures, on the rank that
     draws them (:mod:`dolfinx_nnqem.io.picture_worker`); None otherwise.
 
-    Started before the imports of MPI, PETSc and DOLFINx, so that the workers import matplotlib
-    and pyvista while the run starts and solves; the rank is the launcher's (``mpiexec``) then.
+    Started before the imports of MPI, PETSc and DOLFINx, so that the workers import VTK
+    while the run starts and solves; the rank is the launcher's (``mpiexec``) then.
     Not with ``--no-pictures``, ``--check``, ``DOLFINX_NNQEM_PICTURES=0``, in a job of several
     ranks or on one core (:func:`~dolfinx_nnqem.io.picture_worker.worth_starting`), nor in a
     user's program calling :func:`main`, which draws in its own process."""
