@@ -57,6 +57,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from dolfinx_nnqem.contact.couple_complex_step import COMPLEX_STEP, couple_derivatives
 from dolfinx_nnqem.contact.mortar import MIN_COVERED
 from dolfinx_nnqem.contact.mortar_geometry import (MIN_FACING_COSINE, RELATIVE_TOLERANCE, MortarIntegrals,
                                                    _integrate_couples, candidate_couples, dual_coefficients,
@@ -70,18 +71,22 @@ from dolfinx_nnqem.contact.surfaces import GatheredSurfaces, local_frames, local
 if TYPE_CHECKING:
     import dolfinx
 
-__all__ = ["STEP", "CoupleDerivatives", "MortarPoints", "couple_derivatives", "interface_derivatives",
+__all__ = ["STEP", "CoupleDerivatives", "MortarPoints", "couple_derivatives", "couple_differences", "interface_derivatives",
            "mortar_terms", "newell_derivative", "remortared_pairs"]
 
 STEP = 1e-6
-"""The central differences of the couple integrals move a coordinate by ± this × the slave surface's
-facet size (their truncation error ~ STEP², their round-off ~ 1e-16 / STEP, relative)."""
+"""Central differences of couple integrals move a coordinate by ± this × the slave surface's facet size
+(their truncation error ~ STEP², their round-off ~ 1e-16 / STEP, relative): :func:`couple_differences`,
+and the in-plane differences of degree 2
+(:mod:`~dolfinx_nnqem.contact.quadratic_mortar_linearisation`)."""
 
 
-def couple_derivatives(xs: np.ndarray, xm: np.ndarray, ci: np.ndarray, cj: np.ndarray, step: float,
+def couple_differences(xs: np.ndarray, xm: np.ndarray, ci: np.ndarray, cj: np.ndarray, step: float,
                        relative_tolerance: float = RELATIVE_TOLERANCE,
                        min_facing_cosine: float = MIN_FACING_COSINE) -> tuple[np.ndarray, np.ndarray]:
-    """Central differences of the integrals of couples (slave facet ``ci``, master facet ``cj``).
+    """Central differences of the integrals of couples (slave facet ``ci``, master facet ``cj``): what the
+    linearisation took before the complex step (:func:`couple_derivatives`); kept as the reference its
+    test and ``benchmarks/mortar_derivatives.py`` measure it against.
 
     Parameters
     ----------
@@ -178,7 +183,7 @@ def interface_derivatives(moved: GatheredSurfaces, search_distance: float | None
     if slave_blocks is not None:
         wanted = np.isin(nodes_s[ci], slave_blocks).any(axis=1)
         ci, cj = ci[wanted], cj[wanted]
-    dM, dg = couple_derivatives(xs, xm, ci, cj, STEP * facet_size(slave))
+    dM, dg = couple_derivatives(xs, xm, ci, cj, COMPLEX_STEP * facet_size(slave))
     return CoupleDerivatives(mi, nodes_s, np.take_along_axis(master.nodes, perm_m, axis=1), xs,
                              np.column_stack([ci, cj]), dM, dg)
 
