@@ -71,14 +71,17 @@ from dolfinx_nnqem.contact.surfaces import GatheredSurfaces, local_frames, local
 if TYPE_CHECKING:
     import dolfinx
 
-__all__ = ["STEP", "CoupleDerivatives", "MortarPoints", "couple_derivatives", "couple_differences", "interface_derivatives",
+__all__ = ["DIFFERENCE_STEP", "STEP", "CoupleDerivatives", "MortarPoints", "couple_derivatives", "couple_differences", "interface_derivatives",
            "mortar_terms", "newell_derivative", "remortared_pairs"]
 
-STEP = 1e-6
-"""Central differences of couple integrals move a coordinate by ± this × the slave surface's facet size
-(their truncation error ~ STEP², their round-off ~ 1e-16 / STEP, relative): :func:`couple_differences`,
-and the in-plane differences of degree 2
-(:mod:`~dolfinx_nnqem.contact.quadratic_mortar_linearisation`)."""
+STEP = COMPLEX_STEP
+"""The couple derivatives' imaginary step, relative to the slave surface's facet size: a vertex coordinate
+(:func:`couple_derivatives`) or, on quadratic facets, an in-plane point
+(:mod:`~dolfinx_nnqem.contact.quadratic_mortar_linearisation`) moved by i × this × the facet size."""
+
+DIFFERENCE_STEP = 1e-6
+"""The step of :func:`couple_differences` (relative to the facet size) the linearisation took before the
+complex step: its truncation error ~ DIFFERENCE_STEP², its round-off ~ 1e-16 / DIFFERENCE_STEP, relative."""
 
 
 def couple_differences(xs: np.ndarray, xm: np.ndarray, ci: np.ndarray, cj: np.ndarray, step: float,
@@ -183,7 +186,7 @@ def interface_derivatives(moved: GatheredSurfaces, search_distance: float | None
     if slave_blocks is not None:
         wanted = np.isin(nodes_s[ci], slave_blocks).any(axis=1)
         ci, cj = ci[wanted], cj[wanted]
-    dM, dg = couple_derivatives(xs, xm, ci, cj, COMPLEX_STEP * facet_size(slave))
+    dM, dg = couple_derivatives(xs, xm, ci, cj, STEP * facet_size(slave))
     return CoupleDerivatives(mi, nodes_s, np.take_along_axis(master.nodes, perm_m, axis=1), xs,
                              np.column_stack([ci, cj]), dM, dg)
 

@@ -14,7 +14,7 @@ import pytest
 
 from dolfinx_nnqem.contact.couple_complex_step import COMPLEX_STEP, couple_derivatives
 from dolfinx_nnqem.contact.mortar_geometry import couple_integrals, dual_coefficients
-from dolfinx_nnqem.contact.mortar_linearisation import STEP, couple_differences
+from dolfinx_nnqem.contact.mortar_linearisation import DIFFERENCE_STEP, couple_differences
 
 H = 1e-3  #: the sixth-order differences' step (no vertex comes within 3 H of the other facet's edges)
 
@@ -93,7 +93,7 @@ def test_complex_step_couple_derivatives_match_sixth_order_differences(name):
     one = np.zeros(1, dtype=np.int64)
     size = 1.0  # the facets' size: the steps are relative to it
     exact = _as_rows(*(d[0] for d in couple_derivatives(xs[None], xm[None], one, one, COMPLEX_STEP * size)))
-    central = _as_rows(*(d[0] for d in couple_differences(xs[None], xm[None], one, one, STEP * size)))
+    central = _as_rows(*(d[0] for d in couple_differences(xs[None], xm[None], one, one, DIFFERENCE_STEP * size)))
     scale = np.abs(reference).max()
     error, before = np.abs(exact - reference).max() / scale, np.abs(central - reference).max() / scale
     print(f"\n  {name}: |d − FD6|/|FD6| complex step {error:.1e}, central differences (before) {before:.1e}")
