@@ -47,13 +47,72 @@ COMPLEX_STEP = 1e-30
 (relative h² ≈ 1e-60) are far below round-off, large enough that nothing underflows."""
 
 
-def _moved_dual_coefficients(xs: np.ndarray, facets: np.ndarray, step: float) -> np.ndarray:
-    """(len(facets), 3 ks, ks, ks) the complex dual coefficients A_e of the slave facets ``facets`` with
-    each of their 3 ks coordinates moved by i ``step`` in turn."""
-    ks = xs.shape[1]
-    S = 3 * ks
-    moved = xs[facets].reshape(-1, 1, S) + (1j * step) * np.eye(S)[None]
-    return dual_coefficients(moved.reshape(-1, ks, 3))[0].reshape(len(facets), S, ks, ks)
+def _directions(x: np.ndarray, ks: int) -> np.ndarray:
+    """(c, Q, ks + km, 3) the Q = 3 (ks + km) − 5 directions each couple's vertices x (c, ks + km, 3) are
+    moved in: every coordinate of the slave vertices and of the master vertices but the last two (K, L),
+    and K along the unit vector from L to K (:func:`_rigid_motion_completion` gives the rest)."""
+    c, nv = x.shape[:2]
+    Q = 3 * (nv - 2) + 1
+    d = np.zeros((c, Q, nv, 3))
+    d[:, :Q - 1, :nv - 2] = np.eye(3 * (nv - 2)).reshape(Q - 1, nv - 2, 3)
+    e = x[:, nv - 2] - x[:, nv - 1]
+    d[:, Q - 1, nv - 2] = e / np.linalg.norm(e, axis=1)[:, None]
+    return d
+
+
+def _rigid_motion_completion(x: np.ndarray, columns: np.ndarray) -> np.ndarray:
+    """(c, outputs, ks + km, 3) the derivatives of a couple's integrals with respect to all its vertex
+    coordinates from the Q of :func:`_directions` (``columns`` (c, outputs, Q)).
+
+    The integrals do not change when both facets move rigidly together (the auxiliary plane, its axes,
+    the clip and the gap move with them), so that with d_a = ∂F/∂x_a Σ_a d_a = 0 (translation) and
+    Σ_a (x_a − x_L) × d_a = 0 (rotation). With e = x_K − x_L and R = Σ_{a ≠ K, L} (x_a − x_L) × d_a, the
+    rotation gives e × d_K = −R (R ⊥ e), so d_K = (−R) × e / |e|² + (d_K · ê) ê, and then
+    d_L = −Σ_{a ≠ L} d_a."""
+    c, outputs, Q = columns.shape
+    nv = x.shape[1]
+    d = np.empty((c, outputs, nv, 3))
+    d[:, :, :nv - 2] = columns[:, :, :Q - 1].reshape(c, outputs, nv - 2, 3)
+    arm = x[:, :nv - 2] - x[:, None, nv - 1]  # (c, nv − 2, 3): x_a − x_L
+    R = np.cross(arm[:, None], d[:, :, :nv - 2]).sum(axis=2)  # (c, outputs, 3)
+    e = x[:, nv - 2] - x[:, nv - 1]
+    length = np.linalg.norm(e, axis=1)
+    d[:, :, nv - 2] = (np.cross(-R, e[:, None]) / (length ** 2)[:, None, None]
+                       + columns[:, :, Q - 1, None] * (e / length[:, None])[:, None])
+    d[:, :, nv - 1] = -d[:, :, :nv - 1].sum(axis=2)
+    return d
+
+
+def _moved_dual_coefficients(xs: np.ndarray, step: float) -> np.ndarray:
+    """(m, 3 ks, ks, ks) the complex dual coefficients A_e of the slave facets xs (m, ks, 3) with each of their
+    3 ks coordinates moved by i ``step`` in turn (the first 3 ks of :func:`_directions`)."""
+    m, ks = xs.shape[:2]
+    moved = xs.reshape(m, 1, 3 * ks) + (1j * step) * np.eye(3 * ks)[None]
+    return dual_coefficients(moved.reshape(-1, ks, 3))[0].reshape(m, 3 * ks, ks, ks)
+
+
+def _complex_step_columns(xs: np.ndarray, A: np.ndarray, at: np.ndarray, xm: np.ndarray, step: float,
+                          relative_tolerance: float, min_facing_cosine: float) -> tuple[np.ndarray, np.ndarray]:
+    """(x (c, ks + km, 3), columns (c, ks·km + ks, Q)): the couples (slave facet xs[at[c]], master facet xm[c]),
+    A (ms, ks, ks) the slave facets' dual coefficients, and the derivatives of their (M, g̃) along the
+    :func:`_directions`."""
+    c, ks, km = len(at), xs.shape[1], xm.shape[1]
+    x = np.concatenate([xs[at], xm], axis=1)
+    directions = _directions(x, ks)
+    Q = directions.shape[1]
+    moved = (x[:, None] + (1j * step) * directions).reshape(-1, ks + km, 3)
+    slave = 3 * ks  # the directions that move a slave vertex (the first 3 ks) move its dual coefficients
+    A_p = np.empty((c, Q, ks, ks), dtype=np.complex128)
+    A_p[:, slave:] = A[at][:, None]
+    A_p[:, :slave] = _moved_dual_coefficients(xs, step)[at]
+    every = np.arange(len(moved), dtype=np.int64)
+    qb, qw = triangle_rule()
+    M, g, _, _, _ = _integrate_couples(every, every, np.ascontiguousarray(moved[:, :ks]),
+                                       np.ascontiguousarray(A_p.reshape(-1, ks, ks)),
+                                       np.ascontiguousarray(moved[:, ks:]), qb, qw, relative_tolerance,
+                                       min_facing_cosine)
+    columns = np.concatenate([M.imag.reshape(c, Q, ks * km), g.imag.reshape(c, Q, ks)], axis=2) / step
+    return x, columns.transpose(0, 2, 1)
 
 
 def couple_derivatives(xs: np.ndarray, xm: np.ndarray, ci: np.ndarray, cj: np.ndarray, step: float,
@@ -76,13 +135,15 @@ def couple_derivatives(xs: np.ndarray, xm: np.ndarray, ci: np.ndarray, cj: np.nd
     Returns
     -------
     (dM (c, ks, km, P), dg (c, ks, P)): ∂M_c and ∂g̃_c with respect to the P = 3 (ks + km) vertex
-    coordinates (the slave facet's vertices, then the master's, each x, y, z); the dual coefficients
-    move with the slave facet's coordinates (once per slave facet and coordinate). A couple that does
-    not count at x (no overlap, or facets that do not face each other) has zero derivatives: the
-    complex step would take its branch too, so it is not evaluated.
+    coordinates (the slave facet's vertices, then the master's, each x, y, z). P − 5 complex
+    evaluations per couple (:func:`_directions`; the dual coefficients move with the slave facet's
+    coordinates), the other 5 derivatives from the integrals' invariance under rigid motions
+    (:func:`_rigid_motion_completion`). A couple that does not count at x (no overlap, or facets that
+    do not face each other) has zero derivatives: the complex step would take its branch too, so it is
+    not evaluated.
     """
     ks, km = xs.shape[1], xm.shape[1]
-    P, S = 3 * (ks + km), 3 * ks
+    P = 3 * (ks + km)
     ci, cj = np.asarray(ci, dtype=np.int64), np.asarray(cj, dtype=np.int64)
     dM, dg = np.zeros((len(ci), ks, km, P)), np.zeros((len(ci), ks, P))
     facets, at = np.unique(ci, return_inverse=True)
@@ -93,19 +154,10 @@ def couple_derivatives(xs: np.ndarray, xm: np.ndarray, ci: np.ndarray, cj: np.nd
     counted = np.flatnonzero(area > 0.0)
     if len(counted) == 0:
         return dM, dg
-    c, at, cj = len(counted), at[counted], cj[counted]
-    x = np.concatenate([xs[facets][at], xm[cj]], axis=1).reshape(c, 1, P)
-    moved = (x + (1j * step) * np.eye(P)[None]).reshape(-1, ks + km, 3)  # (c·P): coordinate p moved by i h
-    xs_p, xm_p = np.ascontiguousarray(moved[:, :ks]), np.ascontiguousarray(moved[:, ks:])
-    A_p = np.empty((c, P, ks, ks), dtype=np.complex128)
-    A_p[:, S:] = A[at][:, None]  # a master coordinate leaves A_e alone
-    used = np.unique(at)
-    A_moved = np.empty((len(facets), S, ks, ks), dtype=np.complex128)
-    A_moved[used] = _moved_dual_coefficients(xs[facets], used, step)
-    A_p[:, :S] = A_moved[at]
-    every = np.arange(len(moved), dtype=np.int64)
-    M, g, _, _, _ = _integrate_couples(every, every, xs_p, np.ascontiguousarray(A_p.reshape(-1, ks, ks)), xm_p, qb,
-                                       qw, relative_tolerance, min_facing_cosine)
-    dM[counted] = M.imag.reshape(c, P, ks, km).transpose(0, 2, 3, 1) / step
-    dg[counted] = g.imag.reshape(c, P, ks).transpose(0, 2, 1) / step
+    used, at = np.unique(at[counted], return_inverse=True)  # the counted couples' slave facets
+    x, columns = _complex_step_columns(xs[facets[used]], A[used], at, xm[cj[counted]], step, relative_tolerance,
+                                       min_facing_cosine)
+    d = _rigid_motion_completion(x, columns).reshape(len(counted), ks * km + ks, P)
+    dM[counted] = d[:, :ks * km].reshape(-1, ks, km, P)
+    dg[counted] = d[:, ks * km:]
     return dM, dg

@@ -48,6 +48,12 @@ Rules (documented choices):
 * Facet vertices may come in any order; they are reordered cyclically (outward, counter-
   clockwise) by :func:`dolfinx_nnqem.contact.projection.cyclic_order`, and local coordinates
   refer to that order (see :mod:`~dolfinx_nnqem.contact.projection`).
+
+The couple kernels below, :func:`dual_coefficients` and :func:`couple_integrals` take real or complex
+coordinates from one source: every decision (facing, clipping, the inverse maps' convergence, empty
+sub-triangles) on the real part and no modulus of a complex value (√(c · c), the real part's sign), so
+that complex coordinates x + i h e_p give the complex-step derivatives of
+:mod:`~dolfinx_nnqem.contact.couple_complex_step`; a real evaluation is the arithmetic it always was.
 """
 
 from __future__ import annotations

@@ -25,20 +25,23 @@ the consistent Newton matrix adds the motion of a_i, g and n with the nodes x = 
 
     ∂g/∂x = (∂g̃_j − g ∂m_j) / m_j,   ∂c_jk/∂x = (∂M_jk − c_jk ∂m_j) / m_j,   ∂m_j = Σ_k ∂M_jk.
 
-Which parts are analytic and which are differenced:
+Which parts are analytic and which are complex steps:
 
 * analytic: the chain rule above (the coefficients, the gap, the rows, the forces, the frame on n),
   and the nodal normal: δa_e = ½ Σ_i δx_i × (x_{i+1} − x_{i−1}) over the cyclic vertices of facet e,
   δn = −(I − n nᵀ) δν / |ν|; turned into a symmetry plane (the master held on it too,
   :mod:`~dolfinx_nnqem.contact.symmetry_planes`), n = P n_f / |P n_f| moves by
   (I − n nᵀ) P δn_f / |P n_f|;
-* central differences of the LOCAL couple integrals: ∂M_c and ∂g̃_c of every candidate couple c
-  (slave facet e, master facet f) with respect to the 3 (k_e + k_f) coordinates of its vertices,
-  each coordinate moved by ± :data:`STEP` × the slave surface's facet size and the couple integrated
-  again, its dual coefficients A_e included (:func:`couple_derivatives`). This replaces the analytic
-  derivatives of the clip polygon's vertices, the Gauss points' inverse maps and the dual
-  coefficients (Popp, Gee and Wall 2009); every couple is differenced, those with an empty overlap
-  too, so that an overlap that appears at ±h (an edge of the master on one of the slave) counts.
+* the complex step of the LOCAL couple integrals: ∂M_c and ∂g̃_c of every candidate couple c (slave
+  facet e, master facet f) with respect to the 3 (k_e + k_f) coordinates of its vertices, each
+  coordinate moved by i :data:`STEP` × the slave surface's facet size and the couple integrated
+  again in complex arithmetic, its dual coefficients A_e included
+  (:func:`~dolfinx_nnqem.contact.couple_complex_step.couple_derivatives`): exact to round-off, where
+  Popp, Gee and Wall (2009) differentiate the clip polygon's vertices, the Gauss points' inverse maps
+  and the dual coefficients by hand. A couple that does not count at x has zero derivatives (the
+  branch the real evaluation takes; at an edge of the master exactly on one of the slave the
+  derivative is that branch's, one-sided). Before, central differences (:func:`couple_differences`,
+  ± :data:`DIFFERENCE_STEP` × the facet size) stood in for them, to ~1e-10 relative.
 
 A pair whose node is covered less than :data:`~dolfinx_nnqem.contact.mortar.MIN_COVERED` at an
 iterate keeps its pair within the solve (the pair unknowns' layout is fixed) with the gap g = the
