@@ -211,39 +211,123 @@ def _holds(nodes, node):
 
 
 @numba.njit(cache=True)
+def _eliminated_nodes(sub_m, ks, km):
+    """The two master nodes (K, L, as indices a of both facets' nodes) whose in-plane derivatives
+    :func:`_rigid_motion_completion` gives: those in most master sub-facets (the dearest to integrate again)."""
+    count = np.zeros(km, np.int64)
+    for i in range(sub_m.shape[0]):
+        for j in range(sub_m.shape[1]):
+            count[sub_m[i, j]] += 1
+    L = int(np.argmax(count))
+    count[L] = -1
+    return ks + int(np.argmax(count)), ks + L
+
+
+@numba.njit(cache=True)
+def _moved_integrals(Sc, Pc, a, direction, sub_s, sub_m, ref_s, ref_m, xs, xm, T, n0, tol, relative_tolerance, qb,
+                     qw, step, K, G, none):
+    """K, G (complex) with node a's in-plane point moved by i ``step`` ``direction``: the pairs of sub-facets
+    holding the node integrated again."""
+    ks = Sc.shape[0]
+    slave = a < ks
+    points = Sc if slave else Pc
+    node = a if slave else a - ks
+    at0, at1 = points[node, 0], points[node, 1]
+    K[:] = 0.0
+    G[:] = 0.0
+    points[node, 0] = at0 + 1j * step * direction[0]
+    points[node, 1] = at1 + 1j * step * direction[1]
+    for i in range(sub_s.shape[0]):
+        if slave and not _holds(sub_s[i], node):
+            continue
+        for j in range(sub_m.shape[0]):
+            if not slave and not _holds(sub_m[j], node):
+                continue
+            _sub_pair(Sc, Pc, sub_s[i], sub_m[j], ref_s, ref_m, xs, xm, T, n0, tol, relative_tolerance, qb, qw, K, G,
+                      none)
+    points[node, 0] = at0
+    points[node, 1] = at1
+
+
+@numba.njit(cache=True)
+def _rigid_motion_completion(points, Kn, Ln, along, dK, dG):
+    """Fill the in-plane derivatives of nodes Kn and Ln (dK (ks + km, 2, ks, km), dG (ks + km, 2, ks)) from
+    the others' and Kn's along ê = (p_K − p_L)/|p_K − p_L| (``along``: (ks, km) of K, then (ks,) of G). K and
+    G do not change when every in-plane point moves rigidly (translation: Σ_a d_a = 0; rotation:
+    Σ_a (p_a − p_L) × d_a = 0, × the 2D cross product), so with e = p_K − p_L and
+    R = Σ_{a ≠ K, L} (p_a − p_L) × d_a, d_K = (d_K · ê) ê − R / |e| ê⊥ (ê⊥ = ê turned by +90°), and
+    d_L = −Σ_{a ≠ L} d_a. ``points`` (ks + km, 2): every node's in-plane point."""
+    n, _, ks, km = dK.shape
+    e0 = points[Kn, 0] - points[Ln, 0]
+    e1 = points[Kn, 1] - points[Ln, 1]
+    length = np.sqrt(e0 * e0 + e1 * e1)
+    u0, u1 = e0 / length, e1 / length
+    for i in range(ks):
+        for k in range(km + 1):  # the column km: G
+            R = 0.0
+            total0 = 0.0
+            total1 = 0.0
+            for a in range(n):
+                if a == Kn or a == Ln:
+                    continue
+                d0, d1 = (dK[a, 0, i, k], dK[a, 1, i, k]) if k < km else (dG[a, 0, i], dG[a, 1, i])
+                R += (points[a, 0] - points[Ln, 0]) * d1 - (points[a, 1] - points[Ln, 1]) * d0
+                total0 += d0
+                total1 += d1
+            alpha = along[i, k]
+            beta = -R / length
+            k0 = alpha * u0 - beta * u1
+            k1 = alpha * u1 + beta * u0
+            if k < km:
+                dK[Kn, 0, i, k], dK[Kn, 1, i, k] = k0, k1
+                dK[Ln, 0, i, k], dK[Ln, 1, i, k] = -(total0 + k0), -(total1 + k1)
+            else:
+                dG[Kn, 0, i], dG[Kn, 1, i] = k0, k1
+                dG[Ln, 0, i], dG[Ln, 1, i] = -(total0 + k0), -(total1 + k1)
+
+
+@numba.njit(cache=True)
 def _in_plane_derivatives(S, P, sub_s, sub_m, ref_s, ref_m, xs, xm, T, n0, tol, relative_tolerance, qb, qw, step,
                           dK, dG):
     """Fill dK (ks + km, 2, ks, km) and dG (ks + km, 2, ks) with ∂K/∂S_a, ∂G/∂S_a (slave nodes a, then the
     master's P_b): the complex step of the in-plane points (S_a + i ``step`` e_d; the pairs of sub-facets
-    holding the node integrated again in complex arithmetic, Im / step)."""
+    holding the node integrated again in complex arithmetic, Im / step), but for two master nodes, whose
+    derivatives follow from the integrals' invariance under rigid motions in the plane
+    (:func:`_rigid_motion_completion`)."""
     ks = S.shape[0]
     km = P.shape[0]
     Sc, Pc = S.astype(np.complex128), P.astype(np.complex128)
     K, G = np.empty((ks, km), np.complex128), np.empty(ks, np.complex128)
     none = (np.empty((0, 0, 0), np.complex128), np.empty((0, 0), np.complex128), np.empty((0, 0), np.complex128),
             np.empty((0, 0), np.complex128))
+    Kn, Ln = _eliminated_nodes(sub_m, ks, km)
+    points = np.empty((ks + km, 2))
+    points[:ks] = S
+    points[ks:] = P
+    direction = np.empty(2)
     for a in range(ks + km):
-        slave = a < ks
-        points = Sc if slave else Pc
-        node = a if slave else a - ks
+        if a == Kn or a == Ln:
+            continue
         for d in range(2):
-            at = points[node, d]
-            K[:] = 0.0
-            G[:] = 0.0
-            points[node, d] = at + 1j * step
-            for i in range(sub_s.shape[0]):
-                if slave and not _holds(sub_s[i], node):
-                    continue
-                for j in range(sub_m.shape[0]):
-                    if not slave and not _holds(sub_m[j], node):
-                        continue
-                    _sub_pair(Sc, Pc, sub_s[i], sub_m[j], ref_s, ref_m, xs, xm, T, n0, tol, relative_tolerance,
-                              qb, qw, K, G, none)
-            points[node, d] = at
+            direction[0] = 1.0 if d == 0 else 0.0
+            direction[1] = 1.0 - direction[0]
+            _moved_integrals(Sc, Pc, a, direction, sub_s, sub_m, ref_s, ref_m, xs, xm, T, n0, tol, relative_tolerance,
+                             qb, qw, step, K, G, none)
             for i in range(ks):
                 for k in range(km):
                     dK[a, d, i, k] = K[i, k].imag / step
                 dG[a, d, i] = G[i].imag / step
+    length = np.sqrt((points[Kn, 0] - points[Ln, 0]) ** 2 + (points[Kn, 1] - points[Ln, 1]) ** 2)
+    direction[0] = (points[Kn, 0] - points[Ln, 0]) / length
+    direction[1] = (points[Kn, 1] - points[Ln, 1]) / length
+    _moved_integrals(Sc, Pc, Kn, direction, sub_s, sub_m, ref_s, ref_m, xs, xm, T, n0, tol, relative_tolerance, qb,
+                     qw, step, K, G, none)
+    along = np.empty((ks, km + 1))
+    for i in range(ks):
+        for k in range(km):
+            along[i, k] = K[i, k].imag / step
+        along[i, km] = G[i].imag / step
+    _rigid_motion_completion(points, Kn, Ln, along, dK, dG)
 
 
 @numba.njit(cache=True)
