@@ -74,8 +74,8 @@ from dolfinx_nnqem.contact.surfaces import GatheredSurfaces, local_frames, local
 if TYPE_CHECKING:
     import dolfinx
 
-__all__ = ["DIFFERENCE_STEP", "STEP", "CoupleDerivatives", "MortarPoints", "couple_derivatives", "couple_differences", "interface_derivatives",
-           "mortar_terms", "newell_derivative", "remortared_pairs"]
+__all__ = ["DIFFERENCE_STEP", "STEP", "CoupleDerivatives", "MortarPoints", "couple_derivatives", "couple_differences",
+           "interface_derivatives", "mortar_terms", "newell_derivative", "remortared_pairs"]
 
 STEP = COMPLEX_STEP
 """The couple derivatives' imaginary step, relative to the slave surface's facet size: a vertex coordinate

@@ -44,18 +44,20 @@ def _couples() -> dict[str, tuple[np.ndarray, np.ndarray]]:
     square = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]])
     warped = square + 0.04 * rng.standard_normal((4, 3))
     tilt = _rotation(0, 20.0) @ _rotation(1, -12.0)
+    tilt_m = _rotation(1, 9.0) @ tilt
+    master_over_warped = square + [0.31, -0.27, 0.12] + 0.04 * rng.standard_normal((4, 3))
+    triangle = _polygon(3, [0.0, 0.0, 0.0], 0.6, 5.0)
     return {
         "quads, partial overlap": (square.copy(), _master(square + [0.37, 0.21, 0.1])),
-        "quads, master vertices inside the slave": (square.copy(), _master(_polygon(4, [0.83, 0.71, 0.08], 0.45, 17.0))),
+        "quads, master vertices inside the slave": (square.copy(),
+                                                    _master(_polygon(4, [0.83, 0.71, 0.08], 0.45, 17.0))),
         "quads, slave inside the master": (_polygon(4, [0.5, 0.5, 0.0], 0.4, 9.0),
                                            _master(_polygon(4, [0.46, 0.53, 0.07], 0.9, 31.0))),
-        "quads, tilted and warped": (warped @ tilt.T, _master((square + [0.31, -0.27, 0.12]
-                                                                + 0.04 * rng.standard_normal((4, 3))) @ (_rotation(1, 9.0) @ tilt).T)),
-        "triangles, partial overlap": (_polygon(3, [0.0, 0.0, 0.0], 0.6, 5.0),
-                                       _master(_polygon(3, [0.23, 0.17, 0.09], 0.55, 41.0))),
-        "triangles, tilted, a vertex inside": (_polygon(3, [0.0, 0.0, 0.0], 0.6, 5.0) @ tilt.T,
-                                               _master(_polygon(3, [0.13, -0.08, 0.1], 0.4, 77.0) @ (_rotation(0, -7.0) @ tilt).T)),
-        "triangle against a quadrilateral": (_polygon(3, [0.0, 0.0, 0.0], 0.6, 5.0) + 0.02 * rng.standard_normal((3, 3)),
+        "quads, tilted and warped": (warped @ tilt.T, _master(master_over_warped @ tilt_m.T)),
+        "triangles, partial overlap": (triangle, _master(_polygon(3, [0.23, 0.17, 0.09], 0.55, 41.0))),
+        "triangles, tilted, a vertex inside": (triangle @ tilt.T, _master(_polygon(3, [0.13, -0.08, 0.1], 0.4, 77.0)
+                                                                          @ (_rotation(0, -7.0) @ tilt).T)),
+        "triangle against a quadrilateral": (triangle + 0.02 * rng.standard_normal((3, 3)),
                                              _master(_polygon(4, [0.31, 0.12, 0.1], 0.5, 22.0))),
     }
 

@@ -166,7 +166,8 @@ def _one_couple(triangles: bool, tilt: float):
 
 
 def _sixth_order(xs, sign_s, xm, sign_m):
-    """(outputs, P) sixth-order central differences of the couple (0, 0)'s (M, g̃), whole (error ~ H6⁶ + 1e-16 / H6)."""
+    """(outputs, P) sixth-order central differences of the couple (0, 0)'s (M, g̃), whole (error ~ H6⁶ + 1e-16 /
+    H6)."""
     ks = xs.shape[1]
     x = np.concatenate([xs[0], xm[0]])
 
