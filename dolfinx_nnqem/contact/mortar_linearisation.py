@@ -176,7 +176,7 @@ def interface_derivatives(moved: GatheredSurfaces, search_distance: float | None
     """The mortar integrals of the moved surfaces (master, slave) and their couples' derivatives (the
     same candidate couples and search distance as :func:`~dolfinx_nnqem.contact.mortar.mortar_pairs`);
     only the couples whose slave facet holds one of the nodes ``slave_blocks`` (a rank's pairs) are
-    differenced and kept (None: every couple)."""
+    differentiated and kept (None: every couple)."""
     master, slave = moved.facets_of(0), moved.facets_of(1)
     if search_distance is None:
         search_distance = 2.0 * max(facet_size(master), facet_size(slave))

@@ -332,7 +332,7 @@ def _in_plane_derivatives(S, P, sub_s, sub_m, ref_s, ref_m, xs, xm, T, n0, tol, 
 
 @numba.njit(cache=True)
 def _chain_rule(S, P, xs, xm, frame, dn, dK_plane, dG_plane, fixed, dK, dG):
-    """dK (P, ks, km), dG (P, ks) of the node coordinates from the in-plane differences, the normal's
+    """dK (P, ks, km), dG (P, ks) of the node coordinates from the in-plane derivatives, the normal's
     derivative ``dn`` and the derivatives at fixed points (module docstring)."""
     dKs, dGs, dGm, dGn = fixed
     ks = xs.shape[0]
