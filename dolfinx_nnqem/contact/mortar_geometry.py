@@ -97,6 +97,10 @@ within 1e-12 × the slave facet's diameter of a clip line as on it."""
 
 _NEWTON_MAX_ITERATIONS = 30
 
+_NEARLY_ALONG = 1e6
+"""A clipped edge spanning less than this × the clip tolerance (1e-6 of the slave facet's diameter) across
+the clip line lies nearly along it: :func:`_crossing` holds its crossing parameter under a complex step."""
+
 # Note on numba's on-disk cache: the kernels below call projection._shape; numba invalidates a
 # cached kernel when ITS file changes, not when a callee's file does. After editing _shape,
 # clear __pycache__/*.nbi / *.nbc of this module.
@@ -350,7 +354,7 @@ def _clip(subject, n, clipper, kc, tol, out):
                 buf[m, 1] = p1
                 m += 1
             if inside_p != inside_q and m < 16:
-                t = _clamped_to_unit(dp / (dp - dq))
+                t = _crossing(dp, dq, tol)
                 buf[m, 0] = p0 + t * (q0 - p0)
                 buf[m, 1] = p1 + t * (q1 - p1)
                 m += 1
@@ -369,6 +373,19 @@ def _clip(subject, n, clipper, kc, tol, out):
     while m > 1 and abs((out[m - 1, 0] - out[0, 0]).real) <= tol and abs((out[m - 1, 1] - out[0, 1]).real) <= tol:
         m -= 1
     return m
+
+
+@numba.njit(cache=True)
+def _crossing(dp, dq, tol):
+    """The parameter t = dp / (dp − dq) in [0, 1] where an edge with signed distances dp, dq crosses a clip
+    line (:func:`_clamped_to_unit`). An edge that spans less than :data:`_NEARLY_ALONG` × tol across the
+    line lies nearly along it (coincident edges): its crossing's place is ill-conditioned, and so is its
+    derivative (∝ 1 / (dp − dq)); there t is held fixed under a complex step (its real part alone), so
+    the vertex moves with the edge's end points. A real t is the same either way."""
+    t = _clamped_to_unit(dp / (dp - dq))
+    if abs((dp - dq).real) <= _NEARLY_ALONG * tol:
+        return t.real + 0.0 * t
+    return t
 
 
 @numba.njit(cache=True)
