@@ -97,9 +97,11 @@ within 1e-12 × the slave facet's diameter of a clip line as on it."""
 
 _NEWTON_MAX_ITERATIONS = 30
 
-_NEARLY_ALONG = 1e6
-"""A clipped edge spanning less than this × the clip tolerance (1e-6 of the slave facet's diameter) across
-the clip line lies nearly along it: :func:`_crossing` holds its crossing parameter under a complex step."""
+_NEARLY_ALONG = 10.0
+"""A clipped edge spanning less than this × the clip tolerance (1e-11 of the slave facet's diameter) across
+the clip line lies along it, within the tolerance band's round-off: :func:`_crossing` holds its crossing
+parameter under a complex step. (1e6, spans below 1e-6 of the diameter, changed the Newton path of the P2
+mortar slide's first sliding increment, one step no longer quadratic; 10 is the band's own scale.)"""
 
 # Note on numba's on-disk cache: the kernels below call projection._shape; numba invalidates a
 # cached kernel when ITS file changes, not when a callee's file does. After editing _shape,
