@@ -62,6 +62,7 @@ import scipy.sparse
 
 from dolfinx_nnqem.contact.mortar_geometry import (MIN_FACING_COSINE, RELATIVE_TOLERANCE, MortarIntegrals,
                                                     _clip, _cross, _dot, _inverse_map_into, _plane_axes, _polygon_area,
+                                                    _real_sign_abs,
                                                     candidate_couples)
 from dolfinx_nnqem.contact.projection import _cyclic, _shape
 from dolfinx_nnqem.contact.quadratic_facets import (NUM_VERTICES, facet_geometry, nodal_integrals, outward_signs,
@@ -214,14 +215,14 @@ def _sub_polygon(P, ref, nodes):
     """A sub-facet's projected polygon (nv, 2) and its nodes' reference coordinates (nv, 2),
     counter-clockwise in the plane (reversed if needed; a reversed quadrilateral stays cyclic)."""
     nv = nodes.shape[0]
-    poly = np.empty((nv, 2))
+    poly = np.empty((nv, 2), P.dtype)
     r = np.empty((nv, 2))
     for a in range(nv):
         poly[a, 0] = P[nodes[a], 0]
         poly[a, 1] = P[nodes[a], 1]
         r[a, 0] = ref[nodes[a], 0]
         r[a, 1] = ref[nodes[a], 1]
-    if _polygon_area(poly, nv) < 0.0:
+    if _polygon_area(poly, nv).real < 0.0:
         for a in range(nv // 2):
             b = nv - 1 - a
             for c in range(2):
@@ -237,10 +238,12 @@ def _sub_polygon(P, ref, nodes):
 @numba.njit(cache=True)
 def _to_parent(poly, r, y0, y1, zeta, xi, N, dN):
     """ξ of the parent facet at the plane point y through the sub-facet (poly, r); returns
-    |det ∂ξ/∂ζ| / |det ∂y/∂ζ| (0 on failure of the inverse map). N (4,), dN (4, 2): work arrays."""
+    |det ∂ξ/∂ζ| / |det ∂y/∂ζ| (0 on failure of the inverse map). N (4,), dN (4, 2): work arrays.
+    Complex poly and y (complex-step derivatives): the moduli are the real part's sign
+    (:func:`~dolfinx_nnqem.contact.mortar_geometry._real_sign_abs`)."""
     nv = poly.shape[0]
     if not _inverse_map_into(poly, nv, y0, y1, zeta, N, dN):
-        return 0.0
+        return 0.0 * y0
     _shape(nv, zeta[0], zeta[1], N, dN)
     xi[0] = 0.0
     xi[1] = 0.0
@@ -263,10 +266,10 @@ def _to_parent(poly, r, y0, y1, zeta, xi, N, dN):
         b01 += dN[a, 1] * poly[a, 0]
         b10 += dN[a, 0] * poly[a, 1]
         b11 += dN[a, 1] * poly[a, 1]
-    det_y = abs(b00 * b11 - b01 * b10)
-    if det_y == 0.0:
-        return 0.0
-    return abs(a00 * a11 - a01 * a10) / det_y
+    det_y = _real_sign_abs(b00 * b11 - b01 * b10)
+    if det_y.real == 0.0:
+        return det_y * 0.0
+    return _real_sign_abs(a00 * a11 - a01 * a10) / det_y
 
 
 @numba.njit(cache=True)

@@ -48,6 +48,12 @@ Rules (documented choices):
 * Facet vertices may come in any order; they are reordered cyclically (outward, counter-
   clockwise) by :func:`dolfinx_nnqem.contact.projection.cyclic_order`, and local coordinates
   refer to that order (see :mod:`~dolfinx_nnqem.contact.projection`).
+
+The couple kernels below, :func:`dual_coefficients` and :func:`couple_integrals` take real or complex
+coordinates from one source: every decision (facing, clipping, the inverse maps' convergence, empty
+sub-triangles) on the real part and no modulus of a complex value (√(c · c), the real part's sign), so
+that complex coordinates x + i h e_p give the complex-step derivatives of
+:mod:`~dolfinx_nnqem.contact.couple_complex_step`; a real evaluation is the arithmetic it always was.
 """
 
 from __future__ import annotations
@@ -90,6 +96,12 @@ RELATIVE_TOLERANCE = 1e-10
 within 1e-12 × the slave facet's diameter of a clip line as on it."""
 
 _NEWTON_MAX_ITERATIONS = 30
+
+_NEARLY_ALONG = 10.0
+"""A clipped edge spanning less than this × the clip tolerance (1e-11 of the slave facet's diameter) across
+the clip line lies along it, within the tolerance band's round-off: :func:`_crossing` holds its crossing
+parameter under a complex step. (1e6, spans below 1e-6 of the diameter, changed the Newton path of the P2
+mortar slide's first sliding increment, one step no longer quadratic; 10 is the band's own scale.)"""
 
 # Note on numba's on-disk cache: the kernels below call projection._shape; numba invalidates a
 # cached kernel when ITS file changes, not when a callee's file does. After editing _shape,
@@ -146,10 +158,14 @@ def facet_rule(k: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _area_elements(x_cyclic: np.ndarray, xi: np.ndarray) -> np.ndarray:
-    """|∂x/∂ξ × ∂x/∂η|, shape (m, q), of facets (m, k, 3) at reference points (q, 2)."""
+    """|∂x/∂ξ × ∂x/∂η|, shape (m, q), of facets (m, k, 3) at reference points (q, 2).
+
+    √(c · c) without the modulus (np.linalg.norm's arithmetic for real c, bit for bit): analytic in
+    complex coordinates, for the complex-step derivatives (:mod:`~dolfinx_nnqem.contact.couple_derivatives`)."""
     dN = shape_derivatives(x_cyclic.shape[1], xi)  # (q, k, 2)
     J = np.einsum("qka,mkj->mqaj", dN, x_cyclic)
-    return np.linalg.norm(np.cross(J[:, :, 0], J[:, :, 1]), axis=2)
+    c = np.cross(J[:, :, 0], J[:, :, 1])
+    return np.sqrt(np.add.reduce(c * c, axis=2))
 
 
 def dual_coefficients(x_cyclic: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
@@ -158,7 +174,8 @@ def dual_coefficients(x_cyclic: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     Parameters
     ----------
     x_cyclic
-        (m, k, 3) facet vertices in cyclic order (:func:`~dolfinx_nnqem.contact.projection.cyclic_order`).
+        (m, k, 3) facet vertices in cyclic order (:func:`~dolfinx_nnqem.contact.projection.cyclic_order`);
+        real, or complex for complex-step derivatives (the results are then complex).
 
     Returns
     -------
@@ -173,7 +190,8 @@ def dual_coefficients(x_cyclic: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     quadrilaterals; for warped quadrilaterals, biorthogonality holds for that rule. Since
     Σ_k N_k = 1, D_e is M_e's row sum. For a triangle, Φ_j = 3 N_j − N_{j+1} − N_{j+2}.
     """
-    x_cyclic = np.asarray(x_cyclic, dtype=np.float64)
+    x_cyclic = np.asarray(x_cyclic)
+    x_cyclic = x_cyclic.astype(np.result_type(x_cyclic.dtype, np.float64), copy=False)
     k = x_cyclic.shape[1]
     xi, w = facet_rule(k)
     N = shape_functions(k, xi)
@@ -211,18 +229,18 @@ def _centre_frame(x, k):
     dN = np.empty((k, 2))
     c = 1.0 / 3.0 if k == 3 else 0.0
     _shape(k, c, c, N, dN)
-    centre = np.zeros(3)
-    xs = np.zeros(3)
-    xt = np.zeros(3)
+    centre = np.zeros(3, x.dtype)
+    xs = np.zeros(3, x.dtype)
+    xt = np.zeros(3, x.dtype)
     for a in range(k):
         for j in range(3):
             centre[j] += N[a] * x[a, j]
             xs[j] += dN[a, 0] * x[a, j]
             xt[j] += dN[a, 1] * x[a, j]
-    n = np.empty(3)
+    n = np.empty(3, x.dtype)
     _cross(xs, xt, n)
     length = np.sqrt(_dot(n, n))
-    if length > 0.0:
+    if length.real > 0.0:
         n /= length
     return centre, n, length
 
@@ -236,7 +254,7 @@ def _inverse_map(P, k, y0, y1, xi):
     """
     if k == 3:
         return _inverse_map_triangle(P, y0, y1, xi)
-    return _inverse_map_quadrilateral(P, y0, y1, xi, np.empty(4), np.empty((4, 2)))
+    return _inverse_map_quadrilateral(P, y0, y1, xi, np.empty(4, P.dtype), np.empty((4, 2), P.dtype))
 
 
 @numba.njit(cache=True)
@@ -258,7 +276,7 @@ def _inverse_map_triangle(P, y0, y1, xi):
     r0 = y0 - P[0, 0]
     r1 = y1 - P[0, 1]
     det = a0 * b1 - a1 * b0
-    if det == 0.0:
+    if det.real == 0.0:
         return False
     xi[0] = (r0 * b1 - r1 * b0) / det
     xi[1] = (a0 * r1 - a1 * r0) / det
@@ -287,13 +305,13 @@ def _inverse_map_quadrilateral(P, y0, y1, xi, N, dN):
             J10 += dN[a, 0] * P[a, 1]
             J11 += dN[a, 1] * P[a, 1]
         det = J00 * J11 - J01 * J10
-        if det == 0.0:
+        if det.real == 0.0:
             return False
         d0 = -(J11 * F0 - J01 * F1) / det
         d1 = -(-J10 * F0 + J00 * F1) / det
         xi[0] += d0
         xi[1] += d1
-        size = max(abs(d0), abs(d1))
+        size = max(abs(d0.real), abs(d1.real))  # complex ξ: its imaginary part converges with it
         if size < 1e-13:
             return True
     return size < 1e-9
@@ -308,11 +326,11 @@ def _clip(subject, n, clipper, kc, tol, out):
     are kept (not clipped away by round-off); crossing parameters are clamped to [0, 1];
     consecutive vertices closer than ``tol`` are merged afterwards.
     """
-    poly = np.empty((16, 2))
+    poly = np.empty((16, 2), subject.dtype)
     for i in range(n):
         poly[i, 0] = subject[i, 0]
         poly[i, 1] = subject[i, 1]
-    buf = np.empty((16, 2))
+    buf = np.empty((16, 2), subject.dtype)
     for e in range(kc):
         if n == 0:
             break
@@ -321,7 +339,7 @@ def _clip(subject, n, clipper, kc, tol, out):
         ex = clipper[(e + 1) % kc, 0] - a0
         ey = clipper[(e + 1) % kc, 1] - a1
         L = np.sqrt(ex * ex + ey * ey)
-        if L == 0.0:
+        if L.real == 0.0:
             continue
         m = 0
         for i in range(n):
@@ -331,14 +349,14 @@ def _clip(subject, n, clipper, kc, tol, out):
             q1 = poly[(i + 1) % n, 1]
             dp = (ex * (p1 - a1) - ey * (p0 - a0)) / L  # signed distance, > 0 on the inner (left) side
             dq = (ex * (q1 - a1) - ey * (q0 - a0)) / L
-            inside_p = dp >= -tol
-            inside_q = dq >= -tol
+            inside_p = dp.real >= -tol  # decisions on the real part (complex step: the same branch)
+            inside_q = dq.real >= -tol
             if inside_p and m < 16:
                 buf[m, 0] = p0
                 buf[m, 1] = p1
                 m += 1
             if inside_p != inside_q and m < 16:
-                t = min(1.0, max(0.0, dp / (dp - dq)))
+                t = _crossing(dp, dq, tol)
                 buf[m, 0] = p0 + t * (q0 - p0)
                 buf[m, 1] = p1 + t * (q1 - p1)
                 m += 1
@@ -349,14 +367,38 @@ def _clip(subject, n, clipper, kc, tol, out):
     # merge near-coincident consecutive vertices (clipping along a shared edge duplicates them)
     m = 0
     for i in range(n):
-        if m > 0 and abs(poly[i, 0] - out[m - 1, 0]) <= tol and abs(poly[i, 1] - out[m - 1, 1]) <= tol:
+        if m > 0 and abs((poly[i, 0] - out[m - 1, 0]).real) <= tol and abs((poly[i, 1] - out[m - 1, 1]).real) <= tol:
             continue
         out[m, 0] = poly[i, 0]
         out[m, 1] = poly[i, 1]
         m += 1
-    while m > 1 and abs(out[m - 1, 0] - out[0, 0]) <= tol and abs(out[m - 1, 1] - out[0, 1]) <= tol:
+    while m > 1 and abs((out[m - 1, 0] - out[0, 0]).real) <= tol and abs((out[m - 1, 1] - out[0, 1]).real) <= tol:
         m -= 1
     return m
+
+
+@numba.njit(cache=True)
+def _crossing(dp, dq, tol):
+    """The parameter t = dp / (dp − dq) in [0, 1] where an edge with signed distances dp, dq crosses a clip
+    line (:func:`_clamped_to_unit`). An edge that spans less than :data:`_NEARLY_ALONG` × tol across the
+    line lies nearly along it (coincident edges): its crossing's place is ill-conditioned, and so is its
+    derivative (∝ 1 / (dp − dq)); there t is held fixed under a complex step (its real part alone), so
+    the vertex moves with the edge's end points. A real t is the same either way."""
+    t = _clamped_to_unit(dp / (dp - dq))
+    if abs((dp - dq).real) <= _NEARLY_ALONG * tol:
+        return t.real + 0.0 * t
+    return t
+
+
+@numba.njit(cache=True)
+def _clamped_to_unit(t):
+    """t clamped to [0, 1] by its real part (min(1, max(0, t)) for a real t; a clamped complex t is
+    constant, its imaginary part 0)."""
+    if t.real < 0.0:
+        return t * 0.0 + 0.0
+    if t.real > 1.0:
+        return t * 0.0 + 1.0
+    return t
 
 
 @numba.njit(cache=True)
@@ -373,8 +415,8 @@ def _polygon_area(P, n):
 def _plane_axes(xs, n0):
     """The in-plane axes of a couple's plane normal to n0: t1 along the first slave edge (its
     in-plane part, normalised), t2 = n0 × t1 (right-handed with n0)."""
-    t1 = np.empty(3)
-    t2 = np.empty(3)
+    t1 = np.empty(3, xs.dtype)
+    t2 = np.empty(3, xs.dtype)
     for j in range(3):
         t1[j] = xs[1, j] - xs[0, j]
     tn = _dot(t1, n0)
@@ -393,9 +435,9 @@ def _in_plane(xs, ks, xm, km, x0, n0):
     and Pm (km, 2), the heights hs (ks,) and hm (km,) above the plane, and the slave facet's
     diameter. In-plane axes: :func:`_plane_axes`."""
     t1, t2 = _plane_axes(xs, n0)
-    d = np.empty(3)
-    S = np.empty((ks, 2))
-    hs = np.empty(ks)
+    d = np.empty(3, xs.dtype)
+    S = np.empty((ks, 2), xs.dtype)
+    hs = np.empty(ks, xs.dtype)
     diameter = 0.0
     for a in range(ks):
         for j in range(3):
@@ -403,9 +445,9 @@ def _in_plane(xs, ks, xm, km, x0, n0):
         S[a, 0] = _dot(d, t1)
         S[a, 1] = _dot(d, t2)
         hs[a] = _dot(d, n0)
-        diameter = max(diameter, 2.0 * np.sqrt(S[a, 0] ** 2 + S[a, 1] ** 2))
-    Pm = np.empty((km, 2))
-    hm = np.empty(km)
+        diameter = max(diameter, 2.0 * np.sqrt(S[a, 0].real ** 2 + S[a, 1].real ** 2))  # a tolerance: real
+    Pm = np.empty((km, 2), xs.dtype)
+    hm = np.empty(km, xs.dtype)
     for a in range(km):
         for j in range(3):
             d[j] = xm[a, j] - x0[j]
@@ -426,27 +468,34 @@ def _couple(xs, A, xm, qb, qw, relative_tolerance, min_cos, M, g, cov):
     km = xm.shape[0]
     x0, n0, js = _centre_frame(xs, ks)
     _, nm, jm = _centre_frame(xm, km)
-    if js == 0.0 or jm == 0.0 or _dot(nm, n0) > -min_cos:
+    if js.real == 0.0 or jm.real == 0.0 or _dot(nm, n0).real > -min_cos:
         return 0.0, 0
     S, hs, Pm, hm, diameter = _in_plane(xs, ks, xm, km, x0, n0)
-    slave_area = _polygon_area(S, ks)
+    slave_area = _polygon_area(S, ks).real
     if slave_area <= 0.0:
         return 0.0, 0
     # the master facet turns counter-clockwise about its own (opposite) normal: reverse it
-    subject = np.empty((16, 2))
-    reverse = _polygon_area(Pm, km) < 0.0
+    subject = np.empty((16, 2), xs.dtype)
+    reverse = _polygon_area(Pm, km).real < 0.0
     for a in range(km):
         b = km - 1 - a if reverse else a
         subject[a, 0] = Pm[b, 0]
         subject[a, 1] = Pm[b, 1]
     tol = 1e-12 * diameter
-    poly = np.empty((16, 2))
+    poly = np.empty((16, 2), xs.dtype)
     n = _clip(subject, km, S, ks, tol, poly)
     if n < 3:
         return 0.0, 0
-    if _polygon_area(poly, n) <= relative_tolerance * slave_area:
+    if _polygon_area(poly, n).real <= relative_tolerance * slave_area:
         return 0.0, 0
     return _integrate_overlap(poly, n, xs, S, hs, Pm, hm, A, qb, qw, M, g, cov)
+
+
+@numba.njit(cache=True)
+def _real_sign_abs(d):
+    """|d| for a real d; d times the sign of its real part for a complex d (analytic, unlike the
+    modulus: the complex step differentiates it)."""
+    return d if d.real >= 0.0 else -d
 
 
 @numba.njit(cache=True)
@@ -461,27 +510,30 @@ def _integrate_overlap(poly, n, xs, S, hs, Pm, hm, A, qb, qw, M, g, cov):
     for i in range(n):
         c0 += poly[i, 0] / n
         c1 += poly[i, 1] / n
-    Ns = np.empty(ks)
-    dNs = np.empty((ks, 2))
-    Nm = np.empty(km)
-    dNm = np.empty((km, 2))
-    xi_s = np.empty(2)
-    xi_m = np.empty(2)
-    phi = np.empty(ks)
-    xa = np.empty(3)
-    xb = np.empty(3)
-    cr = np.empty(3)
+    dtype = S.dtype
+    Ns = np.empty(ks, dtype)
+    dNs = np.empty((ks, 2), dtype)
+    Nm = np.empty(km, dtype)
+    dNm = np.empty((km, 2), dtype)
+    xi_s = np.empty(2, dtype)
+    xi_m = np.empty(2, dtype)
+    phi = np.empty(ks, dtype)
+    xa = np.empty(3, dtype)
+    xb = np.empty(3, dtype)
+    cr = np.empty(3, dtype)
     total = 0.0
     failed = 0
     for i in range(n):
         j = (i + 1) % n  # the sub-triangle (centroid, poly[i], poly[j])
         cell = 0.5 * ((poly[i, 0] - c0) * (poly[j, 1] - c1) - (poly[j, 0] - c0) * (poly[i, 1] - c1))
-        if cell <= 0.0:
+        if cell.real <= 0.0:
             continue
         for q in range(qw.shape[0]):
             y0 = qb[q, 0] * c0 + qb[q, 1] * poly[i, 0] + qb[q, 2] * poly[j, 0]
             y1 = qb[q, 0] * c1 + qb[q, 1] * poly[i, 1] + qb[q, 2] * poly[j, 1]
-            if not (_inverse_map(S, ks, y0, y1, xi_s) and _inverse_map(Pm, km, y0, y1, xi_m)):
+            # Ns, dNs and Nm, dNm are the quad4 Newton's work arrays (no allocation per point)
+            if not (_inverse_map_into(S, ks, y0, y1, xi_s, Ns, dNs)
+                    and _inverse_map_into(Pm, km, y0, y1, xi_m, Nm, dNm)):
                 failed += 1
                 continue
             _shape(ks, xi_s[0], xi_s[1], Ns, dNs)
@@ -504,7 +556,7 @@ def _integrate_overlap(poly, n, xs, S, hs, Pm, hm, A, qb, qw, M, g, cov):
                 J11 += dNs[a, 1] * S[a, 1]
                 h_s += Ns[a] * hs[a]
             _cross(xa, xb, cr)
-            ratio = np.sqrt(_dot(cr, cr)) / abs(J00 * J11 - J01 * J10)
+            ratio = np.sqrt(_dot(cr, cr)) / _real_sign_abs(J00 * J11 - J01 * J10)
             h_m = 0.0
             for b in range(km):
                 h_m += Nm[b] * hm[b]
@@ -520,7 +572,7 @@ def _integrate_overlap(poly, n, xs, S, hs, Pm, hm, A, qb, qw, M, g, cov):
                     M[a, b] += w * phi[a] * Nm[b]
                 g[a] += w * phi[a] * gap
                 cov[a] += w * Ns[a]
-    return total, failed
+    return total.real, failed
 
 
 @numba.njit(cache=True)
@@ -529,9 +581,9 @@ def _integrate_couples(ci, cj, xs, A, xm, qb, qw, relative_tolerance, min_cos):
     nc = ci.shape[0]
     ks = xs.shape[1]
     km = xm.shape[1]
-    M = np.zeros((nc, ks, km))
-    g = np.zeros((nc, ks))
-    cov = np.zeros((nc, ks))
+    M = np.zeros((nc, ks, km), xs.dtype)
+    g = np.zeros((nc, ks), xs.dtype)
+    cov = np.zeros((nc, ks), xs.dtype)
     area = np.zeros(nc)
     failed = np.zeros(nc, np.int64)
     for c in range(nc):
@@ -553,6 +605,11 @@ def couple_integrals(xs_cyclic: npt.ArrayLike, A: npt.ArrayLike, xm_cyclic: npt.
         (ks, ks) the slave facet's dual coefficients (:func:`dual_coefficients`).
     xm_cyclic
         (km, 3) master facet vertices, cyclic and counter-clockwise about ITS outward normal.
+    relative_tolerance, min_facing_cosine
+        As for :func:`mortar_integrals`.
+
+    All real, or any of them complex (complex-step derivatives,
+    :mod:`~dolfinx_nnqem.contact.couple_complex_step`): M, weighted_gap and covered are then complex.
 
     Returns
     -------
@@ -565,11 +622,12 @@ def couple_integrals(xs_cyclic: npt.ArrayLike, A: npt.ArrayLike, xm_cyclic: npt.
     area
         The overlap's area on the slave facet (0: no overlap, or the master does not face the slave).
     """
-    xs = np.ascontiguousarray(xs_cyclic, dtype=np.float64)
-    xm = np.ascontiguousarray(xm_cyclic, dtype=np.float64)
+    dtype = np.result_type(np.asarray(xs_cyclic).dtype, np.asarray(A).dtype, np.asarray(xm_cyclic).dtype, np.float64)
+    xs = np.ascontiguousarray(xs_cyclic, dtype=dtype)
+    xm = np.ascontiguousarray(xm_cyclic, dtype=dtype)
     qb, qw = triangle_rule()
     M, g, cov, area, _ = _integrate_couples(np.zeros(1, np.int64), np.zeros(1, np.int64), xs[None],
-                                            np.ascontiguousarray(A, dtype=np.float64)[None], xm[None], qb, qw,
+                                            np.ascontiguousarray(A, dtype=dtype)[None], xm[None], qb, qw,
                                             relative_tolerance, min_facing_cosine)
     return M[0], g[0], cov[0], float(area[0])
 

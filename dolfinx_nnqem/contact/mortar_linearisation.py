@@ -25,20 +25,23 @@ the consistent Newton matrix adds the motion of a_i, g and n with the nodes x = 
 
     ∂g/∂x = (∂g̃_j − g ∂m_j) / m_j,   ∂c_jk/∂x = (∂M_jk − c_jk ∂m_j) / m_j,   ∂m_j = Σ_k ∂M_jk.
 
-Which parts are analytic and which are differenced:
+Which parts are analytic and which are complex steps:
 
 * analytic: the chain rule above (the coefficients, the gap, the rows, the forces, the frame on n),
   and the nodal normal: δa_e = ½ Σ_i δx_i × (x_{i+1} − x_{i−1}) over the cyclic vertices of facet e,
   δn = −(I − n nᵀ) δν / |ν|; turned into a symmetry plane (the master held on it too,
   :mod:`~dolfinx_nnqem.contact.symmetry_planes`), n = P n_f / |P n_f| moves by
   (I − n nᵀ) P δn_f / |P n_f|;
-* central differences of the LOCAL couple integrals: ∂M_c and ∂g̃_c of every candidate couple c
-  (slave facet e, master facet f) with respect to the 3 (k_e + k_f) coordinates of its vertices,
-  each coordinate moved by ± :data:`STEP` × the slave surface's facet size and the couple integrated
-  again, its dual coefficients A_e included (:func:`couple_derivatives`). This replaces the analytic
-  derivatives of the clip polygon's vertices, the Gauss points' inverse maps and the dual
-  coefficients (Popp, Gee and Wall 2009); every couple is differenced, those with an empty overlap
-  too, so that an overlap that appears at ±h (an edge of the master on one of the slave) counts.
+* the complex step of the LOCAL couple integrals: ∂M_c and ∂g̃_c of every candidate couple c (slave
+  facet e, master facet f) with respect to the 3 (k_e + k_f) coordinates of its vertices, each
+  coordinate moved by i :data:`STEP` × the slave surface's facet size and the couple integrated
+  again in complex arithmetic, its dual coefficients A_e included
+  (:func:`~dolfinx_nnqem.contact.couple_complex_step.couple_derivatives`): exact to round-off, where
+  Popp, Gee and Wall (2009) differentiate the clip polygon's vertices, the Gauss points' inverse maps
+  and the dual coefficients by hand. A couple that does not count at x has zero derivatives (the
+  branch the real evaluation takes; at an edge of the master exactly on one of the slave the
+  derivative is that branch's, one-sided). Before, central differences (:func:`couple_differences`,
+  ± :data:`DIFFERENCE_STEP` × the facet size) stood in for them, to ~1e-10 relative.
 
 A pair whose node is covered less than :data:`~dolfinx_nnqem.contact.mortar.MIN_COVERED` at an
 iterate keeps its pair within the solve (the pair unknowns' layout is fixed) with the gap g = the
@@ -57,6 +60,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from dolfinx_nnqem.contact.couple_complex_step import COMPLEX_STEP, couple_derivatives
 from dolfinx_nnqem.contact.mortar import MIN_COVERED
 from dolfinx_nnqem.contact.mortar_geometry import (MIN_FACING_COSINE, RELATIVE_TOLERANCE, MortarIntegrals,
                                                    _integrate_couples, candidate_couples, dual_coefficients,
@@ -70,18 +74,25 @@ from dolfinx_nnqem.contact.surfaces import GatheredSurfaces, local_frames, local
 if TYPE_CHECKING:
     import dolfinx
 
-__all__ = ["STEP", "CoupleDerivatives", "MortarPoints", "couple_derivatives", "interface_derivatives",
-           "mortar_terms", "newell_derivative", "remortared_pairs"]
+__all__ = ["DIFFERENCE_STEP", "STEP", "CoupleDerivatives", "MortarPoints", "couple_derivatives", "couple_differences",
+           "interface_derivatives", "mortar_terms", "newell_derivative", "remortared_pairs"]
 
-STEP = 1e-6
-"""The central differences of the couple integrals move a coordinate by ± this × the slave surface's
-facet size (their truncation error ~ STEP², their round-off ~ 1e-16 / STEP, relative)."""
+STEP = COMPLEX_STEP
+"""The couple derivatives' imaginary step, relative to the slave surface's facet size: a vertex coordinate
+(:func:`couple_derivatives`) or, on quadratic facets, an in-plane point
+(:mod:`~dolfinx_nnqem.contact.quadratic_mortar_linearisation`) moved by i × this × the facet size."""
+
+DIFFERENCE_STEP = 1e-6
+"""The step of :func:`couple_differences` (relative to the facet size) the linearisation took before the
+complex step: its truncation error ~ DIFFERENCE_STEP², its round-off ~ 1e-16 / DIFFERENCE_STEP, relative."""
 
 
-def couple_derivatives(xs: np.ndarray, xm: np.ndarray, ci: np.ndarray, cj: np.ndarray, step: float,
+def couple_differences(xs: np.ndarray, xm: np.ndarray, ci: np.ndarray, cj: np.ndarray, step: float,
                        relative_tolerance: float = RELATIVE_TOLERANCE,
                        min_facing_cosine: float = MIN_FACING_COSINE) -> tuple[np.ndarray, np.ndarray]:
-    """Central differences of the integrals of couples (slave facet ``ci``, master facet ``cj``).
+    """Central differences of the integrals of couples (slave facet ``ci``, master facet ``cj``): what the
+    linearisation took before the complex step (:func:`couple_derivatives`); kept as the reference its
+    test and ``benchmarks/mortar_derivatives.py`` measure it against.
 
     Parameters
     ----------
@@ -165,7 +176,7 @@ def interface_derivatives(moved: GatheredSurfaces, search_distance: float | None
     """The mortar integrals of the moved surfaces (master, slave) and their couples' derivatives (the
     same candidate couples and search distance as :func:`~dolfinx_nnqem.contact.mortar.mortar_pairs`);
     only the couples whose slave facet holds one of the nodes ``slave_blocks`` (a rank's pairs) are
-    differenced and kept (None: every couple)."""
+    differentiated and kept (None: every couple)."""
     master, slave = moved.facets_of(0), moved.facets_of(1)
     if search_distance is None:
         search_distance = 2.0 * max(facet_size(master), facet_size(slave))

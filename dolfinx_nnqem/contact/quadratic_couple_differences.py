@@ -21,8 +21,10 @@ and the plane's normal n_0. With a node coordinate x_p the chain rule is
 
 over the nodes a of both facets:
 
-* ∂K/∂S_a, ∂G/∂S_a: central differences of the in-plane point S_a (2 directions), where only the
-  pairs of sub-facets that hold node a are integrated again (:func:`_in_plane_differences`);
+* ∂K/∂S_a, ∂G/∂S_a: the complex step of the in-plane point S_a (2 directions: S_a + i h e_d, the
+  derivative Im K / h, exact to round-off; :mod:`~dolfinx_nnqem.contact.couple_complex_step` says why
+  and what the kernels need), where only the pairs of sub-facets that hold node a are integrated
+  again, in complex arithmetic (:func:`_in_plane_derivatives`);
 * dS_a/dx_p = (t_1, t_2) · (δ_ap e_p − h_a dn_0/dx_p), h_a the height of node a above the plane:
   moving node a, and turning the plane's normal (its axes by the least rotation; the plane's centre
   and the axes' turn within the plane move every projected point rigidly, which changes no
@@ -35,7 +37,8 @@ over the nodes a of both facets:
 
 Against central differences of the whole couple (every node coordinate moved, every pair of
 sub-facets integrated again: what ``quadratic_mortar_linearisation`` did before) the result differs
-by the differences' round-off, at a fraction of the integrations (``tests/unit/test_quadratic_couple_differences.py``).
+by the differences' round-off, at a fraction of the integrations; against sixth-order differences by
+their own error (``tests/unit/test_quadratic_couple_differences.py``).
 A couple whose facets do not face each other (or a degenerate facet) has zero derivatives.
 """
 
@@ -95,8 +98,8 @@ def _fixed_point_derivatives(base, W, gap, length, xa, xb, cr, x_gap, Ns, dNs, N
     dKs, dGs, dGm, dGn = fixed
     ks = Ns.shape[0]
     km = Nm.shape[0]
-    u = np.empty(3)
-    v = np.empty(3)
+    u = np.empty(3, xa.dtype)
+    v = np.empty(3, xa.dtype)
     _cross(xb, cr, u)
     _cross(cr, xa, v)
     for b in range(ks):
@@ -132,22 +135,23 @@ def _segment(poly, n, Ss, rs, Pm, rm, xs, xm, T, n0, qb, qw, K, G, fixed):
     for i in range(n):
         c0 += poly[i, 0] / n
         c1 += poly[i, 1] / n
-    Ns, dNs, d2Ns = np.empty(ks), np.empty((ks, 2)), np.empty((ks, 3))
-    Nm, dNm, d2Nm = np.empty(km), np.empty((km, 2)), np.empty((km, 3))
-    Nhat = np.empty(ks)
-    zeta, xi_s, xi_m = np.empty(2), np.empty(2), np.empty(2)
-    xa, xb, cr, x_gap = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
-    N4, dN4 = np.empty(4), np.empty((4, 2))
+    dtype = poly.dtype  # complex in the complex step of the in-plane points
+    Ns, dNs, d2Ns = np.empty(ks, dtype), np.empty((ks, 2), dtype), np.empty((ks, 3), dtype)
+    Nm, dNm, d2Nm = np.empty(km, dtype), np.empty((km, 2), dtype), np.empty((km, 3), dtype)
+    Nhat = np.empty(ks, dtype)
+    zeta, xi_s, xi_m = np.empty(2, dtype), np.empty(2, dtype), np.empty(2, dtype)
+    xa, xb, cr, x_gap = np.empty(3, dtype), np.empty(3, dtype), np.empty(3, dtype), np.empty(3, dtype)
+    N4, dN4 = np.empty(4, dtype), np.empty((4, 2), dtype)
     for i in range(n):
         j = (i + 1) % n
         cell = 0.5 * ((poly[i, 0] - c0) * (poly[j, 1] - c1) - (poly[j, 0] - c0) * (poly[i, 1] - c1))
-        if cell <= 0.0:
+        if cell.real <= 0.0:
             continue
         for q in range(qw.shape[0]):
             y0 = qb[q, 0] * c0 + qb[q, 1] * poly[i, 0] + qb[q, 2] * poly[j, 0]
             y1 = qb[q, 0] * c1 + qb[q, 1] * poly[i, 1] + qb[q, 2] * poly[j, 1]
             ratio = _to_parent(Ss, rs, y0, y1, zeta, xi_s, N4, dN4)
-            if ratio == 0.0 or _to_parent(Pm, rm, y0, y1, zeta, xi_m, N4, dN4) == 0.0:
+            if ratio.real == 0.0 or _to_parent(Pm, rm, y0, y1, zeta, xi_m, N4, dN4).real == 0.0:
                 continue
             shape_at(ks, xi_s[0], xi_s[1], Ns, dNs, d2Ns)
             shape_at(km, xi_m[0], xi_m[1], Nm, dNm, d2Nm)
@@ -175,7 +179,7 @@ def _segment(poly, n, Ss, rs, Pm, rm, xs, xm, T, n0, qb, qw, K, G, fixed):
                 for b in range(km):
                     K[a, b] += W * Nhat[a] * Nm[b]
                 G[a] += W * Nhat[a] * gap
-            if fixed[0].size and length > 0.0:
+            if fixed[0].size and length.real > 0.0:
                 _fixed_point_derivatives(base, W, gap, length, xa, xb, cr, x_gap, Ns, dNs, Nm, Nhat, n0, fixed)
 
 
@@ -184,15 +188,15 @@ def _sub_pair(S, P, sub_s, sub_m, ref_s, ref_m, xs, xm, T, n0, tol, relative_tol
     """:func:`_segment` over the overlap of the slave sub-facet ``sub_s`` and the master sub-facet ``sub_m``
     (their node positions), clipped as :func:`~dolfinx_nnqem.contact.dual_quadratic._quadratic_couple` does."""
     Ss, rs = _sub_polygon(S, ref_s, sub_s)
-    sub_area = _polygon_area(Ss, Ss.shape[0])
+    sub_area = _polygon_area(Ss, Ss.shape[0]).real
     if sub_area <= 0.0:
         return
     Pm, rm = _sub_polygon(P, ref_m, sub_m)
-    subject = np.empty((16, 2))
-    poly = np.empty((16, 2))
+    subject = np.empty((16, 2), S.dtype)
+    poly = np.empty((16, 2), S.dtype)
     subject[:Pm.shape[0]] = Pm
     n = _clip(subject, Pm.shape[0], Ss, Ss.shape[0], tol, poly)
-    if n < 3 or _polygon_area(poly, n) <= relative_tolerance * sub_area:
+    if n < 3 or _polygon_area(poly, n).real <= relative_tolerance * sub_area:
         return
     _segment(poly, n, Ss, rs, Pm, rm, xs, xm, T, n0, qb, qw, K, G, fixed)
 
@@ -207,41 +211,128 @@ def _holds(nodes, node):
 
 
 @numba.njit(cache=True)
-def _in_plane_differences(S, P, sub_s, sub_m, ref_s, ref_m, xs, xm, T, n0, tol, relative_tolerance, qb, qw, step,
+def _eliminated_nodes(sub_m, ks, km):
+    """The two master nodes (K, L, as indices a of both facets' nodes) whose in-plane derivatives
+    :func:`_rigid_motion_completion` gives: those in most master sub-facets (the dearest to integrate again)."""
+    count = np.zeros(km, np.int64)
+    for i in range(sub_m.shape[0]):
+        for j in range(sub_m.shape[1]):
+            count[sub_m[i, j]] += 1
+    L = int(np.argmax(count))
+    count[L] = -1
+    return ks + int(np.argmax(count)), ks + L
+
+
+@numba.njit(cache=True)
+def _moved_integrals(Sc, Pc, a, direction, sub_s, sub_m, ref_s, ref_m, xs, xm, T, n0, tol, relative_tolerance, qb,
+                     qw, step, K, G, none):
+    """K, G (complex) with node a's in-plane point moved by i ``step`` ``direction``: the pairs of sub-facets
+    holding the node integrated again."""
+    ks = Sc.shape[0]
+    slave = a < ks
+    points = Sc if slave else Pc
+    node = a if slave else a - ks
+    at0, at1 = points[node, 0], points[node, 1]
+    K[:] = 0.0
+    G[:] = 0.0
+    points[node, 0] = at0 + 1j * step * direction[0]
+    points[node, 1] = at1 + 1j * step * direction[1]
+    for i in range(sub_s.shape[0]):
+        if slave and not _holds(sub_s[i], node):
+            continue
+        for j in range(sub_m.shape[0]):
+            if not slave and not _holds(sub_m[j], node):
+                continue
+            _sub_pair(Sc, Pc, sub_s[i], sub_m[j], ref_s, ref_m, xs, xm, T, n0, tol, relative_tolerance, qb, qw, K, G,
+                      none)
+    points[node, 0] = at0
+    points[node, 1] = at1
+
+
+@numba.njit(cache=True)
+def _rigid_motion_completion(points, Kn, Ln, along, dK, dG):
+    """Fill the in-plane derivatives of nodes Kn and Ln (dK (ks + km, 2, ks, km), dG (ks + km, 2, ks)) from
+    the others' and Kn's along ê = (p_K − p_L)/|p_K − p_L| (``along``: (ks, km) of K, then (ks,) of G). K and
+    G do not change when every in-plane point moves rigidly (translation: Σ_a d_a = 0; rotation:
+    Σ_a (p_a − p_L) × d_a = 0, × the 2D cross product), so with e = p_K − p_L and
+    R = Σ_{a ≠ K, L} (p_a − p_L) × d_a, d_K = (d_K · ê) ê − R / |e| ê⊥ (ê⊥ = ê turned by +90°), and
+    d_L = −Σ_{a ≠ L} d_a. ``points`` (ks + km, 2): every node's in-plane point."""
+    n, _, ks, km = dK.shape
+    e0 = points[Kn, 0] - points[Ln, 0]
+    e1 = points[Kn, 1] - points[Ln, 1]
+    length = np.sqrt(e0 * e0 + e1 * e1)
+    u0, u1 = e0 / length, e1 / length
+    for i in range(ks):
+        for k in range(km + 1):  # the column km: G
+            R = 0.0
+            total0 = 0.0
+            total1 = 0.0
+            for a in range(n):
+                if a == Kn or a == Ln:
+                    continue
+                d0, d1 = (dK[a, 0, i, k], dK[a, 1, i, k]) if k < km else (dG[a, 0, i], dG[a, 1, i])
+                R += (points[a, 0] - points[Ln, 0]) * d1 - (points[a, 1] - points[Ln, 1]) * d0
+                total0 += d0
+                total1 += d1
+            alpha = along[i, k]
+            beta = -R / length
+            k0 = alpha * u0 - beta * u1
+            k1 = alpha * u1 + beta * u0
+            if k < km:
+                dK[Kn, 0, i, k], dK[Kn, 1, i, k] = k0, k1
+                dK[Ln, 0, i, k], dK[Ln, 1, i, k] = -(total0 + k0), -(total1 + k1)
+            else:
+                dG[Kn, 0, i], dG[Kn, 1, i] = k0, k1
+                dG[Ln, 0, i], dG[Ln, 1, i] = -(total0 + k0), -(total1 + k1)
+
+
+@numba.njit(cache=True)
+def _in_plane_derivatives(S, P, sub_s, sub_m, ref_s, ref_m, xs, xm, T, n0, tol, relative_tolerance, qb, qw, step,
                           dK, dG):
     """Fill dK (ks + km, 2, ks, km) and dG (ks + km, 2, ks) with ∂K/∂S_a, ∂G/∂S_a (slave nodes a, then the
-    master's P_b): central differences of the in-plane points, the pairs of sub-facets holding the node
-    integrated again."""
+    master's P_b): the complex step of the in-plane points (S_a + i ``step`` e_d; the pairs of sub-facets
+    holding the node integrated again in complex arithmetic, Im / step), but for two master nodes, whose
+    derivatives follow from the integrals' invariance under rigid motions in the plane
+    (:func:`_rigid_motion_completion`)."""
     ks = S.shape[0]
     km = P.shape[0]
-    Kp, Gp, Km, Gm = np.empty((ks, km)), np.empty(ks), np.empty((ks, km)), np.empty(ks)
-    none = (np.empty((0, 0, 0)), np.empty((0, 0)), np.empty((0, 0)), np.empty((0, 0)))
+    Sc, Pc = S.astype(np.complex128), P.astype(np.complex128)
+    K, G = np.empty((ks, km), np.complex128), np.empty(ks, np.complex128)
+    none = (np.empty((0, 0, 0), np.complex128), np.empty((0, 0), np.complex128), np.empty((0, 0), np.complex128),
+            np.empty((0, 0), np.complex128))
+    Kn, Ln = _eliminated_nodes(sub_m, ks, km)
+    points = np.empty((ks + km, 2))
+    points[:ks] = S
+    points[ks:] = P
+    direction = np.empty(2)
     for a in range(ks + km):
-        slave = a < ks
-        points = S if slave else P
-        node = a if slave else a - ks
+        if a == Kn or a == Ln:
+            continue
         for d in range(2):
-            at = points[node, d]
-            for K, G, h in ((Kp, Gp, step), (Km, Gm, -step)):
-                K[:] = 0.0
-                G[:] = 0.0
-                points[node, d] = at + h
-                for i in range(sub_s.shape[0]):
-                    if slave and not _holds(sub_s[i], node):
-                        continue
-                    for j in range(sub_m.shape[0]):
-                        if not slave and not _holds(sub_m[j], node):
-                            continue
-                        _sub_pair(S, P, sub_s[i], sub_m[j], ref_s, ref_m, xs, xm, T, n0, tol, relative_tolerance,
-                                  qb, qw, K, G, none)
-            points[node, d] = at
-            dK[a, d] = (Kp - Km) / (2.0 * step)
-            dG[a, d] = (Gp - Gm) / (2.0 * step)
+            direction[0] = 1.0 if d == 0 else 0.0
+            direction[1] = 1.0 - direction[0]
+            _moved_integrals(Sc, Pc, a, direction, sub_s, sub_m, ref_s, ref_m, xs, xm, T, n0, tol, relative_tolerance,
+                             qb, qw, step, K, G, none)
+            for i in range(ks):
+                for k in range(km):
+                    dK[a, d, i, k] = K[i, k].imag / step
+                dG[a, d, i] = G[i].imag / step
+    length = np.sqrt((points[Kn, 0] - points[Ln, 0]) ** 2 + (points[Kn, 1] - points[Ln, 1]) ** 2)
+    direction[0] = (points[Kn, 0] - points[Ln, 0]) / length
+    direction[1] = (points[Kn, 1] - points[Ln, 1]) / length
+    _moved_integrals(Sc, Pc, Kn, direction, sub_s, sub_m, ref_s, ref_m, xs, xm, T, n0, tol, relative_tolerance, qb,
+                     qw, step, K, G, none)
+    along = np.empty((ks, km + 1))
+    for i in range(ks):
+        for k in range(km):
+            along[i, k] = K[i, k].imag / step
+        along[i, km] = G[i].imag / step
+    _rigid_motion_completion(points, Kn, Ln, along, dK, dG)
 
 
 @numba.njit(cache=True)
 def _chain_rule(S, P, xs, xm, frame, dn, dK_plane, dG_plane, fixed, dK, dG):
-    """dK (P, ks, km), dG (P, ks) of the node coordinates from the in-plane differences, the normal's
+    """dK (P, ks, km), dG (P, ks) of the node coordinates from the in-plane derivatives, the normal's
     derivative ``dn`` and the derivatives at fixed points (module docstring)."""
     dKs, dGs, dGm, dGn = fixed
     ks = xs.shape[0]
@@ -288,7 +379,7 @@ def _couple_derivatives(xs, sign_s, xm, sign_m, T, sub_s, sub_m, ref_s, ref_m, q
             _sub_pair(S, P, sub_s[i], sub_m[j], ref_s, ref_m, xs, xm, T, n0, tol, relative_tolerance, qb, qw, K, G,
                       fixed)
     dK_plane, dG_plane = np.empty((ks + km, 2, ks, km)), np.empty((ks + km, 2, ks))
-    _in_plane_differences(S, P, sub_s, sub_m, ref_s, ref_m, xs, xm, T, n0, tol, relative_tolerance, qb, qw, step,
+    _in_plane_derivatives(S, P, sub_s, sub_m, ref_s, ref_m, xs, xm, T, n0, tol, relative_tolerance, qb, qw, step,
                           dK_plane, dG_plane)
     dn = np.empty((3, 3 * ks))
     _normal_derivative(xs, sign_s, n0, dn)
@@ -355,8 +446,8 @@ def quadratic_couple_derivatives(xs: np.ndarray, sign_s: np.ndarray, xm: np.ndar
     ci, cj
         (c,) the couples.
     step
-        The length an in-plane point (and, for the dual coefficients, a slave node coordinate) is
-        moved by, each way.
+        The imaginary step of the in-plane points (a length: ``mortar_linearisation.STEP`` × the facet
+        size).
     relative_tolerance, min_facing_cosine
         As for :func:`~dolfinx_nnqem.contact.dual_quadratic.integrate_quadratic_couples`.
 
