@@ -9,8 +9,8 @@ shares; what differs is where the pieces come from:
   facet split into four linear sub-facets, the quadratic maps evaluated at the Gauss points); their
   derivatives with respect to the 3 (k_e + k_f) coordinates of ALL the nodes of the two quadratic
   facets (vertices, edge nodes, quad9 centres) are those of
-  :func:`~dolfinx_nnqem.contact.quadratic_couple_differences.quadratic_couple_derivatives`: central
-  differences in the nodes' projected in-plane points (each re-integrating the pairs of sub-facets
+  :func:`~dolfinx_nnqem.contact.quadratic_couple_differences.quadratic_couple_derivatives`: the complex
+  step (exact to round-off) in the nodes' projected in-plane points (each re-integrating the pairs of sub-facets
   that hold the node), the rest of the chain rule (the node's motion, the turn of the auxiliary
   plane, the integrands at fixed Gauss points, the dual coefficients A_e) exact;
 * the nodal normal is n = −ν/|ν| with ν = Σ_e ∫_e N̂_j n dA, the moments of
