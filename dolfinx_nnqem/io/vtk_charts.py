@@ -173,19 +173,8 @@ class ChartPanels:
     def save(self, path: str | os.PathLike) -> None:
         """Render once and write the picture into the PNG file ``path``; the window is given back
         for the next picture (:func:`~dolfinx_nnqem.io.vtk_scene.release_window`)."""
-        vtk = chart_modules()
         try:
-            self.window.Render()
-            image = vtk.vtkWindowToImageFilter()
-            image.SetInput(self.window)
-            image.SetInputBufferTypeToRGB()
-            image.ReadFrontBufferOff()
-            image.ShouldRerenderOff()
-            image.Update()
-            writer = vtk.vtkPNGWriter()
-            writer.SetFileName(str(path))
-            writer.SetInputConnection(image.GetOutputPort())
-            writer.Write()
+            vtk_scene.write_png(self.window, path)
         finally:
             vtk_scene.release_window(self.window)
 

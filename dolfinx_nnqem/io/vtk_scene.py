@@ -194,6 +194,23 @@ def offscreen_window(size: tuple[int, int], samples: int) -> Any:
     return window
 
 
+def write_png(window: Any, path: str | os.PathLike) -> None:
+    """Render ``window`` once and write its pixels (RGB, the back buffer) into the PNG file ``path``:
+    the last step of every picture, 3D scenes and charts alike."""
+    vtk = _vtk()
+    window.Render()
+    image = vtk.vtkWindowToImageFilter()
+    image.SetInput(window)
+    image.SetInputBufferTypeToRGB()
+    image.ReadFrontBufferOff()
+    image.ShouldRerenderOff()
+    image.Update()
+    writer = vtk.vtkPNGWriter()
+    writer.SetFileName(str(path))
+    writer.SetInputConnection(image.GetOutputPort())
+    writer.Write()
+
+
 def release_window(window: Any) -> None:
     """Give ``window`` back for the next picture (:func:`offscreen_window`): its renderers removed."""
     renderers = window.GetRenderers()
@@ -421,20 +438,9 @@ class Scene:
 
     def screenshot(self, path: str | os.PathLike) -> None:
         """Render once and write the window into the PNG file ``path``."""
-        vtk = _vtk()
         self._turn_axes()
         self.renderer.ResetCameraClippingRange()
-        self.window.Render()
-        image = vtk.vtkWindowToImageFilter()
-        image.SetInput(self.window)
-        image.SetInputBufferTypeToRGB()
-        image.ReadFrontBufferOff()
-        image.ShouldRerenderOff()
-        image.Update()
-        writer = vtk.vtkPNGWriter()
-        writer.SetFileName(str(path))
-        writer.SetInputConnection(image.GetOutputPort())
-        writer.Write()
+        write_png(self.window, path)
 
     def close(self) -> None:
         """Give the render window back for the next picture (:func:`release_window`)."""

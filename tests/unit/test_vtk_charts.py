@@ -4,6 +4,7 @@ one point, and the same picture for residuals that differ by round-off."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from dolfinx_nnqem.io import run_pictures, vtk_charts
 
@@ -27,3 +28,17 @@ def test_a_log_axis_ends_on_whole_decades():
     first = vtk_charts._range(np.array([1.0, 1e-4, 1.0e-16]), log=True)
     second = vtk_charts._range(np.array([1.0, 1e-4, 1.3e-16]), log=True)
     assert first == second == (1e-16, 1.0)
+
+
+def test_offscreen_plotter_is_still_public():
+    """``dolfinx_nnqem.io.offscreen.offscreen_plotter`` (in docs/api.md) still gives a pyvista off-screen plotter."""
+    from dolfinx_nnqem import pyvista_compat
+    from dolfinx_nnqem.io.offscreen import PictureUnavailable, offscreen_plotter
+
+    if pyvista_compat.vtk_render_problem() is not None:
+        with pytest.raises(PictureUnavailable):
+            offscreen_plotter((40, 30))
+        return
+    plotter = offscreen_plotter((40, 30))
+    assert plotter.off_screen and tuple(plotter.window_size) == (40, 30)
+    plotter.close()
