@@ -10,9 +10,10 @@ Written files: ``two_beams.msh`` (the seed benchmark, ``benchmark-two-beams.md``
 each: two contact interfaces), ``die_on_slab.msh`` (the Neo-Hookean ironing's mesh at r = 1: the
 slab 2 × 0.25 × 0.25 in 16 × 2 × 2 hexahedra, the die over 0.25 ≤ x ≤ 0.5 on its top in 4 × 2 × 2,
 which ``demos/neo_hooke_ironing.toml`` reads) and ``indenter_block.msh`` (the half block |x| ≤ 6 mm,
-0 ≤ z ≤ 6 mm, −6 ≤ y ≤ 0 mm, graded to h = 0.25 mm at the top point x = z = 0, for a rigid indenter). They hold the physical groups
-(tags) documented in ``TwoBeamsTags``, ``StackedBlocksTags``, ``ThickCylinderTags`` and
-``BlockStackTags``; read them back with ``dolfinx_nnqem.compat.read_from_msh``.
+0 ≤ z ≤ 6 mm, −6 ≤ y ≤ 0 mm, graded to h = 0.25 mm at the top point x = z = 0, for a rigid
+indenter). They hold the physical groups (tags) documented in ``TwoBeamsTags``,
+``StackedBlocksTags``, ``ThickCylinderTags`` and ``BlockStackTags``; read them back with
+``dolfinx_nnqem.compat.read_from_msh``.
 """
 
 from __future__ import annotations
