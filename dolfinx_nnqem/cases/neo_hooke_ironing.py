@@ -21,7 +21,8 @@ The measures (:func:`die_force`): the contact force on the die, Σ R_jᵀ λ_j, 
 and y (the press) at every increment. Sharp die edges, a slab sheared by a fifth of its thickness
 and friction at the Coulomb limit make it a hard large-deformation case: no closed form exists,
 so the benchmark compares the methods, the laws and the discretisations with each other and the
-meshes r = 1, 2, 3 with each other.
+meshes r = 1, 2, 3 with each other. The mesh: :func:`~dolfinx_nnqem.cases.geometries.build_die_on_slab`;
+the problem at r = 1 as a problem file: ``demos/neo_hooke_ironing.toml`` (``meshes/die_on_slab.msh``).
 """
 
 from __future__ import annotations
