@@ -7,10 +7,13 @@ Written files: ``two_beams.msh`` (the seed benchmark, ``benchmark-two-beams.md``
 ``--refine n``: ``two_beams_refine{n}.msh``) and the same mesh as ``two_beams.xdmf`` + ``.h5``
 (DOLFINx's format, which ``demos/two_beams.toml`` reads), ``stacked_blocks.msh``, ``thick_cylinder.msh``,
 ``three_blocks.msh`` (three unit blocks of height 0.5 stacked along y, 4 × 2 × 4 hexahedra
-each: two contact interfaces) and ``indenter_block.msh`` (the half block |x| ≤ 6 mm, 0 ≤ z ≤ 6 mm,
-−6 ≤ y ≤ 0 mm, graded to h = 0.25 mm at the top point x = z = 0, for a rigid indenter). They hold the physical groups
-(tags) documented in ``TwoBeamsTags``, ``StackedBlocksTags``, ``ThickCylinderTags`` and
-``BlockStackTags``; read them back with ``dolfinx_nnqem.compat.read_from_msh``.
+each: two contact interfaces), ``die_on_slab.msh`` (the Neo-Hookean ironing's mesh at r = 1: the
+slab 2 × 0.25 × 0.25 in 16 × 2 × 2 hexahedra, the die over 0.25 ≤ x ≤ 0.5 on its top in 4 × 2 × 2,
+which ``demos/neo_hooke_ironing.toml`` reads) and ``indenter_block.msh`` (the half block |x| ≤ 6 mm,
+0 ≤ z ≤ 6 mm, −6 ≤ y ≤ 0 mm, graded to h = 0.25 mm at the top point x = z = 0, for a rigid
+indenter). They hold the physical groups (tags) documented in ``TwoBeamsTags``,
+``StackedBlocksTags``, ``ThickCylinderTags`` and ``BlockStackTags``; read them back with
+``dolfinx_nnqem.compat.read_from_msh``.
 """
 
 from __future__ import annotations
@@ -23,7 +26,7 @@ from dolfinx_nnqem.cases import geometries
 from dolfinx_nnqem.problem import meshing
 from mpi4py import MPI
 
-MODELS = ("two_beams", "stacked_blocks", "thick_cylinder", "three_blocks", "indenter_block")
+MODELS = ("two_beams", "stacked_blocks", "thick_cylinder", "three_blocks", "die_on_slab", "indenter_block")
 
 
 def main(argv: list[str] | None = None) -> list[pathlib.Path]:
@@ -61,6 +64,11 @@ def main(argv: list[str] | None = None) -> list[pathlib.Path]:
         elif model == "three_blocks":
             path = args.output_dir / "three_blocks.msh"
             mesh, _, _ = geometries.build_block_stack(comm, 1.0, 1.0, [0.5] * 3, [(4, 2, 4)] * 3, msh_file=path)
+        elif model == "die_on_slab":  # the die where the ironing case puts it (neo_hooke_ironing.DIE_X)
+            from dolfinx_nnqem.cases.neo_hooke_ironing import DIE_X
+
+            path = args.output_dir / "die_on_slab.msh"
+            mesh, _, _ = geometries.build_die_on_slab(comm, 1, DIE_X, msh_file=path)
         else:
             path = args.output_dir / "indenter_block.msh"
             mesh, _, _ = geometries.build_graded_block(comm, 0.25, half=True, msh_file=path)

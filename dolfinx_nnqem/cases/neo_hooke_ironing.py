@@ -21,7 +21,8 @@ The measures (:func:`die_force`): the contact force on the die, Σ R_jᵀ λ_j, 
 and y (the press) at every increment. Sharp die edges, a slab sheared by a fifth of its thickness
 and friction at the Coulomb limit make it a hard large-deformation case: no closed form exists,
 so the benchmark compares the methods, the laws and the discretisations with each other and the
-meshes r = 1, 2, 3 with each other.
+meshes r = 1, 2, 3 with each other. The mesh: :func:`~dolfinx_nnqem.cases.geometries.build_die_on_slab`;
+the problem at r = 1 as a problem file: ``demos/neo_hooke_ironing.toml`` (``meshes/die_on_slab.msh``).
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ from mpi4py import MPI
 from dolfinx_nnqem.material import NeoHooke
 from dolfinx_nnqem.problem import Contact, ContactProblem, Dirichlet
 from dolfinx_nnqem.cases.geometries import BlockStackTags as T
-from dolfinx_nnqem.cases.geometries import build_block_stack
+from dolfinx_nnqem.cases.geometries import build_die_on_slab
 from dolfinx_nnqem.cases.large_sliding import slave_force
 
 __all__ = ["DEPTH", "E_DIE", "E_SLAB", "PRESSED_AT", "SLIDE", "die_force", "neo_hooke_ironing"]
@@ -63,11 +64,7 @@ def neo_hooke_ironing(refine: int = 1, *, depth: float = DEPTH, law: str = "alar
     :data:`SLIDE`; ``discretisation``: "mortar" or "node-to-surface"."""
     if isinstance(refine, bool) or not isinstance(refine, int) or refine < 1:
         raise ValueError(f"neo_hooke_ironing: refine = {refine!r}; expected an integer >= 1")
-    r = refine
-    mesh, ct, ft = build_block_stack(comm, 2.0, 0.25, [0.25, 0.25], [(16 * r, 2 * r, 2 * r), (4 * r, 2 * r, 2 * r)])
-    die_nodes = np.unique(compat.geometry_dofmap(mesh)[ct.indices[ct.values == T.body(2)]])
-    x = mesh.geometry.x
-    x[die_nodes, 0] = DIE_X[0] + (DIE_X[1] - DIE_X[0]) / 2.0 * x[die_nodes, 0]  # the stack's x in [0, 2]
+    mesh, ct, ft = build_die_on_slab(comm, refine, DIE_X)  # also meshes/die_on_slab.msh at refine = 1
     dirichlet = [Dirichlet(T.bottom(1)), Dirichlet(T.top(2), -depth, [1], amplitude=_press),
                  Dirichlet(T.top(2), SLIDE, [0], amplitude=_drag)]
     dirichlet += [Dirichlet(face(body), 0.0, [2]) for body in (1, 2) for face in (T.zmin, T.zmax)]

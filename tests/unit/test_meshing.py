@@ -128,6 +128,27 @@ def test_committed_two_beams_msh_matches_builder():
     np.testing.assert_array_equal(a, b)
 
 
+def test_committed_die_on_slab_msh_is_the_ironing_mesh():
+    """meshes/die_on_slab.msh (what demos/neo_hooke_ironing.toml reads) read back is the mesh the
+    Neo-Hookean ironing builds at r = 1, to the bit: its nodes (the die's moved to 0.25 <= x <= 0.5),
+    cells and tags, in the same order."""
+    from dolfinx_nnqem.cases.geometries import build_die_on_slab
+    from dolfinx_nnqem.cases.neo_hooke_ironing import DIE_X
+
+    read = compat.read_from_msh(str(ROOT / "meshes" / "die_on_slab.msh"), MPI.COMM_SELF, 0, gdim=3)
+    built = build_die_on_slab(MPI.COMM_SELF, 1, DIE_X)
+    die = np.unique(compat.geometry_dofmap(read[0])[read[1].indices[read[1].values == 2]])
+    die_x = (read[0].geometry.x[die, 0].min(), read[0].geometry.x[die, 0].max())
+    print(f"\n  die_on_slab.msh: {num_cells(read[0])} cells, {read[0].geometry.x.shape[0]} nodes, the die's x in "
+          f"{die_x}; facets {tag_counts(read[0], read[2])}")
+    np.testing.assert_array_equal(read[0].geometry.x, built.mesh.geometry.x)
+    np.testing.assert_array_equal(compat.geometry_dofmap(read[0]), compat.geometry_dofmap(built.mesh))
+    for a, b in ((read[1], built.cell_tags), (read[2], built.facet_tags)):
+        np.testing.assert_array_equal(a.indices, b.indices)
+        np.testing.assert_array_equal(a.values, b.values)
+    assert die_x == DIE_X
+
+
 def _cells_by_tag(mesh, tags) -> dict[int, list]:
     """Per tag value, each tagged entity as its sorted node positions: tags compared by geometry,
     whatever the numbering of the nodes and cells."""
@@ -168,8 +189,8 @@ def test_generate_script(tmp_path):
     written = generate.main(["--output-dir", str(tmp_path)])
     names = sorted(p.name for p in written)
     print(f"\n  generate.py wrote {names}")
-    assert names == ["indenter_block.msh", "stacked_blocks.msh", "thick_cylinder.msh", "three_blocks.msh",
-                     "two_beams.msh", "two_beams.xdmf"]
+    assert names == ["die_on_slab.msh", "indenter_block.msh", "stacked_blocks.msh", "thick_cylinder.msh",
+                     "three_blocks.msh", "two_beams.msh", "two_beams.xdmf"]
     assert all((tmp_path / n).stat().st_size > 0 for n in names)
     # the graded block is written with its graded nodes: it reads back as the builder's mesh
     from dolfinx_nnqem import compat

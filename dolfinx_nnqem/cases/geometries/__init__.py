@@ -1,9 +1,9 @@
 """The benchmark geometries: gmsh model builders returning distributed DOLFINx meshes with cell and
 facet tags, one module each: the seed's two beams (:mod:`.two_beams`), two stacked blocks
-(:mod:`.stacked_blocks`), a stack of blocks (:mod:`.block_stack`), a thick-walled cylinder
-(:mod:`.thick_cylinder`), blocks graded towards a contact point (:mod:`.graded_blocks`) and a
-sphere on a block (:mod:`.sphere_on_block`). The problems built on them are the modules of
-:mod:`dolfinx_nnqem.cases`.
+(:mod:`.stacked_blocks`), a stack of blocks (:mod:`.block_stack`), a die on a slab (:mod:`.die_on_slab`),
+a thick-walled cylinder (:mod:`.thick_cylinder`), blocks graded towards a contact point
+(:mod:`.graded_blocks`) and a sphere on a block (:mod:`.sphere_on_block`). The problems built on
+them are the modules of :mod:`dolfinx_nnqem.cases`.
 
 Every builder constructs its gmsh model on rank 0 only, optionally writes it to a ``.msh`` file,
 and distributes it with :func:`dolfinx_nnqem.problem.meshing.mesh_from_gmsh`. The meshes are
@@ -16,6 +16,7 @@ numbers of each model are the class attributes of its ``*Tags`` class. The build
 """
 
 from dolfinx_nnqem.cases.geometries.block_stack import BlockStackTags, build_block_stack
+from dolfinx_nnqem.cases.geometries.die_on_slab import build_die_on_slab
 from dolfinx_nnqem.cases.geometries.graded_blocks import build_graded_block, build_graded_contact_blocks, graded_nodes
 from dolfinx_nnqem.cases.geometries.sphere_on_block import SphereOnBlockTags, build_sphere_on_block
 from dolfinx_nnqem.cases.geometries.stacked_blocks import StackedBlocksTags, build_stacked_blocks
@@ -23,5 +24,5 @@ from dolfinx_nnqem.cases.geometries.thick_cylinder import ThickCylinderTags, bui
 from dolfinx_nnqem.cases.geometries.two_beams import TwoBeamsTags, build_two_beams
 
 __all__ = ["BlockStackTags", "SphereOnBlockTags", "StackedBlocksTags", "ThickCylinderTags", "TwoBeamsTags",
-           "build_block_stack", "build_graded_block", "build_graded_contact_blocks", "build_sphere_on_block",
-           "build_stacked_blocks", "build_thick_cylinder", "build_two_beams", "graded_nodes"]
+           "build_block_stack", "build_die_on_slab", "build_graded_block", "build_graded_contact_blocks",
+           "build_sphere_on_block", "build_stacked_blocks", "build_thick_cylinder", "build_two_beams", "graded_nodes"]
