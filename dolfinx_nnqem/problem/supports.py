@@ -20,7 +20,7 @@ from dolfinx_nnqem import compat
 from dolfinx_nnqem.problem.loads import check_finite, load_amplitude
 from dolfinx_nnqem.problem.validation import check_components
 
-__all__ = ["Dirichlet", "Supports", "check_facet_tags"]
+__all__ = ["Dirichlet", "Supports", "check_facet_tags", "check_no_conflicts"]
 
 
 @dataclass(frozen=True)
@@ -109,6 +109,7 @@ class Supports:
             self.dofs, self.values = np.concatenate(dofs_all), np.concatenate(values_all)
         else:
             self.dofs, self.values = np.zeros(0, np.int32), np.zeros(0)
+        check_no_conflicts(V.mesh.comm, self.dofs, self.values, self.amplitudes, self._labels())
 
     def revalue(self, dirichlet: Sequence[Dirichlet]) -> None:
         """New values and amplitudes of the same conditions (the same tags and components, in order):
@@ -140,7 +141,14 @@ class Supports:
                 n = next(counts)
                 values.append(np.full(n, val))
                 amplitudes.append((new.amplitude, n))
-        return (np.concatenate(values) if values else np.zeros(0)), amplitudes
+        values_all = np.concatenate(values) if values else np.zeros(0)
+        check_no_conflicts(self.V.mesh.comm, self.dofs, values_all, amplitudes, self._labels(dirichlet))
+        return values_all, amplitudes
+
+    def _labels(self, dirichlet: Sequence[Dirichlet] | None = None) -> list[str]:
+        """"Dirichlet(tag=…, component …)" of every constrained component, in the order of :attr:`amplitudes`."""
+        return [f"Dirichlet(tag={d.tag}, component {c})"
+                for d in (self.conditions if dirichlet is None else dirichlet) for c in _components_and_values(d)[0]]
 
     def prescribed(self, load_factor: float) -> np.ndarray:
         """The values a(ℓ) · value of the constrained dofs at ``load_factor``."""
@@ -164,6 +172,49 @@ class Supports:
             local.set(0.0)
             local.array[self.dofs] = 1.0
         return flags
+
+
+def check_no_conflicts(comm: MPI.Comm, dofs: np.ndarray, values: np.ndarray,
+                       amplitudes: Sequence[tuple[Callable[[float], float] | None, int]], labels: Sequence[str]) -> None:
+    """No dof is prescribed two different displacements (collective).
+
+    A dof constrained by several conditions (facets of two tags sharing an edge, two entries of
+    one tag) must get the same value from each at every load factor: a zero from all of them (a
+    clamp and a symmetry plane meeting at an edge), or the same value with the same amplitude.
+    Otherwise which one holds would depend on the order of the conditions.
+
+    Parameters
+    ----------
+    dofs, values
+        The constrained dofs (local, unrolled) and their values at a unit amplitude, in the order of
+        ``amplitudes``.
+    amplitudes
+        ``[(amplitude, number of dofs)]``: each constrained component of each condition, in order.
+    labels
+        The name of each entry of ``amplitudes``, for the message.
+
+    Raises
+    ------
+    ValueError
+        On every rank, naming the two conditions and the values of the first conflict found.
+    """
+    entry = np.repeat(np.arange(len(amplitudes)), [n for _, n in amplitudes]) if amplitudes else np.zeros(0, int)
+    message = ""
+    order = np.argsort(dofs, kind="stable")
+    sorted_dofs = dofs[order]
+    repeated = np.flatnonzero(sorted_dofs[1:] == sorted_dofs[:-1])
+    for k in repeated:
+        i, j = order[k], order[k + 1]
+        a_i, a_j = amplitudes[entry[i]][0], amplitudes[entry[j]][0]
+        if (values[i] == 0.0 and values[j] == 0.0) or (values[i] == values[j] and a_i is a_j):
+            continue
+        message = (f"{labels[entry[i]]} and {labels[entry[j]]} prescribe different displacements to the same dof "
+                   f"({values[i]:g} and {values[j]:g} at a unit amplitude"
+                   f"{'' if a_i is a_j else ', with different amplitudes'}); give each dof one condition")
+        break
+    messages = [m for m in comm.allgather(message) if m]
+    if messages:
+        raise ValueError(f"dirichlet: {messages[0]}")
 
 
 def _components_and_values(d: Dirichlet) -> tuple[tuple[int, ...], np.ndarray]:

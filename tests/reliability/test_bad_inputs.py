@@ -103,6 +103,11 @@ CASES = {
         lambda b: _api(b, contact=[Contact(21, 22, mu_f=0.3), Contact(22, 21, mu_f=0.3)]), "both join"),
     "dirichlet component twice": (("tag = 12", "tag = 12\ncomponents = [0, 0]"),
                                   lambda b: _api(b, dirichlet=[Dirichlet(11), Dirichlet(12, 0.0, [0, 0])]), "twice"),
+    # a dof given two different displacements: which held depended on the order of the entries
+    "dirichlet values in conflict": (("tag = 12\n", "tag = 12\n[[dirichlet]]\ntag = 12\nvalue = 0.001\ncomponents = [1]\n"),
+                                     lambda b: _api(b, dirichlet=[Dirichlet(11), Dirichlet(12),
+                                                                  Dirichlet(12, 0.001, [1])]),
+                                     "prescribe different displacements to the same dof"),
     "load factor above 1": (("increments = 2", 'increments = "auto"\n[solver.auto]\nload_factors = [0.5, 1.5]'),
                             "steps:increments=AutomaticIncrements(load_factors=(0.5, 1.5))", "1.5"),
     "load factor below 0": (("increments = 2", 'increments = "auto"\n[solver.auto]\nload_factors = [-0.5]'),
@@ -363,3 +368,19 @@ def test_numpy_values_are_shown_as_numbers():
         print(f"\n  {error.value}", end="")
         assert "np." not in str(error.value) and ("nan" in str(error.value) or "= 0" in str(error.value)
                                                  or "= -1" in str(error.value))
+
+
+def test_conditions_that_agree_on_shared_dofs_are_accepted(beams):
+    """A clamp and a zero displacement meeting on the same dofs, and one value given twice with the
+    same amplitude, prescribe each dof one displacement: accepted."""
+    ramp = lambda load_factor: load_factor  # noqa: E731  (one amplitude object for both entries)
+    problem = _api(beams, dirichlet=[Dirichlet(11), Dirichlet(11, 0.0, [2]), Dirichlet(12),
+                                     Dirichlet(12, 0.0, [1], amplitude=ramp)])
+    assert problem.supports.dofs.size > 0
+
+
+def test_a_new_value_in_conflict_is_refused_by_update(beams):
+    """``revalued`` (what ``problem.update`` uses) checks the new values as the build does."""
+    problem = _api(beams, dirichlet=[Dirichlet(11), Dirichlet(12), Dirichlet(12, 0.0, [1])])
+    with pytest.raises(ValueError, match="prescribe different displacements to the same dof"):
+        problem.supports.revalued([Dirichlet(11), Dirichlet(12), Dirichlet(12, 0.002, [1])])
