@@ -29,7 +29,8 @@ class Dirichlet:
 
     ``components=None`` constrains all three components (``value`` a 3-vector or a scalar
     used for all); otherwise only the listed ones (``value`` one number per listed component).
-    The default is a clamp (u = 0).
+    The default is a clamp (u = 0). A dof that several conditions constrain must get the same
+    displacement from each (:func:`check_no_conflicts`).
     """
 
     tag: int
