@@ -207,15 +207,26 @@ def check_no_conflicts(comm: MPI.Comm, dofs: np.ndarray, values: np.ndarray,
     for k in repeated:
         i, j = order[k], order[k + 1]
         a_i, a_j = amplitudes[entry[i]][0], amplitudes[entry[j]][0]
-        if (values[i] == 0.0 and values[j] == 0.0) or (values[i] == values[j] and a_i is a_j):
+        same_amplitude = _same_amplitude(a_i, a_j)
+        if (values[i] == 0.0 and values[j] == 0.0) or (values[i] == values[j] and same_amplitude):
             continue
         message = (f"{labels[entry[i]]} and {labels[entry[j]]} prescribe different displacements to the same dof "
                    f"({values[i]:g} and {values[j]:g} at a unit amplitude"
-                   f"{'' if a_i is a_j else ', with different amplitudes'}); give each dof one condition")
+                   f"{'' if same_amplitude else ', with different amplitudes'}); give each dof one condition")
         break
     messages = [m for m in comm.allgather(message) if m]
     if messages:
         raise ValueError(f"dirichlet: {messages[0]}")
+
+
+def _same_amplitude(a, b) -> bool:
+    """The same amplitude: one object, or equal ones (two tables of the same rows)."""
+    if a is b:
+        return True
+    try:
+        return bool(a == b)
+    except (TypeError, ValueError):  # an object whose == is elementwise: not known to be the same
+        return False
 
 
 def _components_and_values(d: Dirichlet) -> tuple[tuple[int, ...], np.ndarray]:

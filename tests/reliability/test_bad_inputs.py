@@ -373,9 +373,16 @@ def test_numpy_values_are_shown_as_numbers():
 def test_conditions_that_agree_on_shared_dofs_are_accepted(beams):
     """A clamp and a zero displacement meeting on the same dofs, and one value given twice with the
     same amplitude, prescribe each dof one displacement: accepted."""
+    from dolfinx_nnqem.problem import PiecewiseLinear
+
     ramp = lambda load_factor: load_factor  # noqa: E731  (one amplitude object for both entries)
     problem = _api(beams, dirichlet=[Dirichlet(11), Dirichlet(11, 0.0, [2]), Dirichlet(12),
                                      Dirichlet(12, 0.0, [1], amplitude=ramp)])
+    assert problem.supports.dofs.size > 0
+    # the same value with two equal tables (two entries of a problem file each get their own object)
+    table = [[0.0, 0.0], [1.0, 2.0]]
+    problem = _api(beams, dirichlet=[Dirichlet(11), Dirichlet(12, 1e-3, [1], PiecewiseLinear(table)),
+                                     Dirichlet(12, 1e-3, [1], PiecewiseLinear([list(row) for row in table]))])
     assert problem.supports.dofs.size > 0
 
 
