@@ -67,10 +67,11 @@ def main() -> None:
         "internal force": cpu_seconds(lambda: problem.assemble_internal_force(F), args.repeat, comm),
     }
     cells = comm.allreduce(V.mesh.topology.index_map(3).size_local, op=MPI.SUM)
+    nonzeros = K_t.getInfo()["nz_used"]  # collective: the sum over the ranks
     if comm.rank == 0:
         dofs = V.dofmap.index_map.size_global * V.dofmap.index_map_bs
         print(f"pressed blocks, level {args.level}: {dofs} dofs, {cells} cells, {comm.size} rank(s); "
-              f"K_t has {K_t.getInfo()['nz_used']:.0f} nonzeros on rank 0")
+              f"K_t has {nonzeros:.0f} nonzeros")
         for name, seconds in figures.items():
             share = seconds / figures["tangent K_t"]
             print(f"  {name:36s} {seconds:7.3f} s CPU ({1e6 * seconds * comm.size / cells:5.1f} µs a cell, "

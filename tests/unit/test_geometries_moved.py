@@ -35,9 +35,11 @@ def test_the_old_import_statement_still_works_and_the_warning_points_at_it():
     assert {w.filename for w in record} == {__file__}  # the user's line, not the package's
 
 
-def test_every_geometry_has_its_old_name():
+def test_every_geometry_of_release_0_1_is_still_there():
+    """The old names (above) all live on in ``cases.geometries``; a geometry added since (e.g.
+    ``build_die_on_slab``) has no old name to keep."""
     geometries = importlib.import_module("dolfinx_nnqem.cases.geometries")
-    assert sorted(geometries.__all__) == sorted(OLD_NAMES)
+    assert set(OLD_NAMES) <= set(geometries.__all__)
 
 
 def test_mesh_reading_and_writing_stay_in_meshing_without_a_warning():
