@@ -44,8 +44,10 @@ over the rendered picture, before the text, the colour bar and the legend are dr
 leaves untouched). Without multisampling or FXAA the plastic-zone outline and the mesh edges come
 out jagged; FXAA draws them as 8 samples a pixel did to the eye, for a fraction of the CPU."""
 
-LEGEND_DISC_PIXELS = 64
-"""Side of a legend disc's image (:func:`legend_disc`), scaled down to the legend's symbol box."""
+LEGEND_DISC_PIXELS = 16
+"""Side of a legend disc's image (:func:`legend_disc`). About the size the legend draws it at (12
+to 17 pixels in the run's pictures): scaled by linear interpolation, a much larger image's soft
+edge, one of its pixels wide, would fall between the samples and the disc's edge come out jagged."""
 
 PNG_COMPRESSION = 3
 """zlib's compression level of the PNG files (libpng's default is 6): the six pictures of a run
@@ -239,8 +241,8 @@ def legend_disc(colour: str | Sequence[float], pixels: int = LEGEND_DISC_PIXELS)
     edge's pixels as opaque as the disc covers them.
 
     An image rather than a polygon: the legend is drawn after the scene's FXAA pass
-    (:data:`SMOOTHED_EDGES`), so a polygon's edge would stay jagged; the image is scaled down to
-    the legend's symbol box with linear interpolation, which smooths its edge.
+    (:data:`SMOOTHED_EDGES`), so a polygon's edge would stay jagged; the image is scaled to the
+    legend's symbol box with linear interpolation, which keeps its edge soft.
     """
     vtk = _vtk()
     centre = 0.5 * pixels
