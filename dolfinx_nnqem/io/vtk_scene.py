@@ -35,14 +35,14 @@ COLOURS = {"white": "#ffffff", "black": "#000000", "royalblue": "#4169e1", "crim
 
 WINDOW_SAMPLES = 0
 """Multisampling of a scene's render window: none. Its edges are smoothed by FXAA instead
-(:data:`SMOOTHED_EDGES`): with Mesa's software OpenGL, 8 samples a pixel made a scene's render
-cost about three times its CPU (``docs/performance.md``, "The pictures' CPU")."""
+(:data:`SMOOTHED_EDGES`): with Mesa's software OpenGL, the run's three 3D pictures took half as
+much CPU again with 8 samples a pixel (``docs/performance.md``, "The pictures' CPU")."""
 
 SMOOTHED_EDGES = True
 """A scene's renderer smooths its edges with VTK's fast approximate antialiasing (FXAA: one pass
 over the rendered picture, before the text, the colour bar and the legend are drawn, which it
 leaves untouched). Without multisampling or FXAA the plastic-zone outline and the mesh edges come
-out jagged; FXAA draws them as 8 samples a pixel did to the eye, for a fraction of the CPU."""
+out jagged; FXAA draws them as 8 samples a pixel did to the eye."""
 
 LEGEND_DISC_PIXELS = 16
 """Side of a legend disc's image (:func:`legend_disc`). About the size the legend draws it at (12
