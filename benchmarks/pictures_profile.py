@@ -156,6 +156,12 @@ for label, seconds in stages:
 def _worker_stages(job_file: Path) -> dict[str, float]:
     """Stage → CPU seconds of one fresh process drawing the job in ``job_file`` (:data:`_STAGES`)."""
     env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    try:  # the worker's environment (OpenBLAS held to one thread), where this tree sets one
+        from dolfinx_nnqem.io.picture_worker import worker_environment
+    except ImportError:
+        pass
+    else:
+        env = worker_environment(env)
     done = subprocess.run([sys.executable, "-c", _STAGES, str(ROOT), str(job_file)], env=env, check=True,
                           capture_output=True, text=True)
     stages: dict[str, float] = {}

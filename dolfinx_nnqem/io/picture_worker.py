@@ -37,7 +37,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import IO, Any
 
-__all__ = ["ROLES", "PictureWorkers", "launcher_rank", "launcher_size", "serve", "worth_starting"]
+__all__ = ["ROLES", "PictureWorkers", "launcher_rank", "launcher_size", "serve", "worker_environment", "worth_starting"]
 
 ROLES: dict[str, tuple[tuple[str, ...], bool]] = {
     "pictures": (("deformed.png", "pair_pressure.png", "load_curve.png", "convergence.png", "error_indicator.png",
@@ -98,6 +98,13 @@ def launcher_rank() -> int | None:
     return None
 
 
+def worker_environment(environment: Mapping[str, str]) -> dict[str, str]:
+    """A worker's environment: the run's, with NumPy's OpenBLAS held to one thread. A worker does
+    no linear algebra; OpenBLAS starts a thread a core when NumPy is imported, which took a
+    sixth of the import's CPU (``docs/performance.md``, "The pictures' CPU")."""
+    return {**environment, "OPENBLAS_NUM_THREADS": "1"}
+
+
 # -- the run's side ------------------------------------------------------------------------------
 class _Worker:
     """One worker process of a role, seen from the run (its pipes and its process)."""
@@ -122,7 +129,8 @@ class _Worker:
         command = [sys.executable, "-c", _BOOT, root, role, str(os.getpid()), "1" if shown else "0", str(level)]
         blocked = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
         try:
-            process = subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.PIPE, close_fds=True)
+            process = subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.PIPE, close_fds=True,
+                                       env=worker_environment(os.environ))
         except (OSError, ValueError, subprocess.SubprocessError) as error:  # no usable interpreter
             _log.info(f"picture worker {role}: not started ({error}); the pictures are drawn in the run")
             return None

@@ -48,8 +48,8 @@ COLOUR_BAR_ROOM = 130
 
 CHART_SAMPLES = 0
 """Multisampling of a chart's render window: none. The lines and markers look about the same as
-with 8 samples (the 3D scenes' :data:`~dolfinx_nnqem.io.vtk_scene.WINDOW_SAMPLES`), which cost a
-chart more than twice its CPU with Mesa's software OpenGL (``docs/performance.md``)."""
+with 8 samples, which cost a chart more than twice its CPU with Mesa's software OpenGL
+(``docs/performance.md``)."""
 
 _MODULES: dict[str, Any] = {}
 

@@ -5,7 +5,7 @@
 obstacles in them (:mod:`dolfinx_nnqem.io.obstacle_shapes`) are made of a :class:`Scene`: meshes
 coloured by a field or by one colour, a colour bar, a legend, a title, the axes, a camera, a PNG
 file. It is styled as pyvista's default theme drew the same pictures before: a white background,
-VTK's light kit, 8 samples a pixel, black Arial text, the colour bar at the bottom and the legend
+VTK's light kit, edges smoothed by FXAA, black Arial text, the colour bar at the bottom and the legend
 in the lower left corner.
 
 Why not pyvista: a picture worker imported pyvista and ``pyvista.plotting`` (which imports
@@ -25,7 +25,7 @@ import numpy as np
 
 from dolfinx_nnqem.io.colour_maps import colour_table
 
-__all__ = ["COLOURS", "Scene", "line_data", "offscreen_window", "point_data", "release_window", "rgb", "surface_data",
+__all__ = ["COLOURS", "Scene", "legend_disc", "line_data", "offscreen_window", "point_data", "release_window", "rgb", "surface_data",
            "unstructured_grid", "vtk_modules"]
 
 COLOURS = {"white": "#ffffff", "black": "#000000", "royalblue": "#4169e1", "crimson": "#dc143c",
@@ -33,9 +33,25 @@ COLOURS = {"white": "#ffffff", "black": "#000000", "royalblue": "#4169e1", "crim
            "darkgray": "#a9a9a9", "tomato": "#ff6347", "seagreen": "#2e8b57", "mediumblue": "#0000cd"}
 """The named colours the pictures use (CSS names, as matplotlib and pyvista spell them)."""
 
-WINDOW_SAMPLES = 8
-"""Multisampling of the render window: without it the plastic-zone outline and the mesh edges
-come out jagged (``docs/performance.md``)."""
+WINDOW_SAMPLES = 0
+"""Multisampling of a scene's render window: none. Its edges are smoothed by FXAA instead
+(:data:`SMOOTHED_EDGES`): with Mesa's software OpenGL, the run's three 3D pictures took half as
+much CPU again with 8 samples a pixel (``docs/performance.md``, "The pictures' CPU")."""
+
+SMOOTHED_EDGES = True
+"""A scene's renderer smooths its edges with VTK's fast approximate antialiasing (FXAA: one pass
+over the rendered picture, before the text, the colour bar and the legend are drawn, which it
+leaves untouched). Without multisampling or FXAA the plastic-zone outline and the mesh edges come
+out jagged; FXAA draws them as 8 samples a pixel did to the eye."""
+
+LEGEND_DISC_PIXELS = 16
+"""Side of a legend disc's image (:func:`legend_disc`). About the size the legend draws it at (12
+to 17 pixels in the run's pictures): scaled by linear interpolation, a much larger image's soft
+edge, one of its pixels wide, would fall between the samples and the disc's edge come out jagged."""
+
+PNG_COMPRESSION = 3
+"""zlib's compression level of the PNG files (libpng's default is 6): the six pictures of a run
+written in 0.7 of the CPU, the files a fifth larger (``docs/performance.md``)."""
 
 FONT_SIZE = 18
 """Font size of the colour bar's title and labels (pyvista's default theme)."""
@@ -206,6 +222,7 @@ def write_png(window: Any, path: str | os.PathLike) -> None:
     image.ShouldRerenderOff()
     image.Update()
     writer = vtk.vtkPNGWriter()
+    writer.SetCompressionLevel(PNG_COMPRESSION)
     writer.SetFileName(str(path))
     writer.SetInputConnection(image.GetOutputPort())
     writer.Write()
@@ -217,6 +234,28 @@ def release_window(window: Any) -> None:
     for renderer in [renderers.GetItemAsObject(k) for k in range(renderers.GetNumberOfItems())]:
         window.RemoveRenderer(renderer)
     _SPARE[:] = [window]
+
+
+def legend_disc(colour: str | Sequence[float], pixels: int = LEGEND_DISC_PIXELS) -> Any:
+    """A legend's symbol: a disc of ``colour`` as an RGBA image of ``pixels`` × ``pixels``, its
+    edge's pixels as opaque as the disc covers them.
+
+    An image rather than a polygon: the legend is drawn after the scene's FXAA pass
+    (:data:`SMOOTHED_EDGES`), so a polygon's edge would stay jagged; the image is scaled to the
+    legend's symbol box with linear interpolation, which keeps its edge soft.
+    """
+    vtk = _vtk()
+    centre = 0.5 * pixels
+    y, x = np.mgrid[0:pixels, 0:pixels] + 0.5
+    coverage = np.clip(centre - np.hypot(x - centre, y - centre), 0.0, 1.0)
+    rgba = np.empty((pixels, pixels, 4), dtype=np.uint8)
+    rgba[..., :3] = np.round(255 * np.asarray(rgb(colour)))
+    rgba[..., 3] = np.round(255 * coverage)
+    image = vtk.vtkImageData()
+    image.SetDimensions(pixels, pixels, 1)
+    image.GetPointData().SetScalars(vtk.numpy_to_vtk(rgba.reshape(-1, 4), deep=True,
+                                                     array_type=vtk.VTK_UNSIGNED_CHAR))
+    return image
 
 
 # -- the scene -----------------------------------------------------------------------------------
@@ -235,6 +274,7 @@ class Scene:
         self.window: Any = offscreen_window(size, WINDOW_SAMPLES)
         self.renderer = vtk.vtkRenderer()
         self.renderer.SetBackground(1.0, 1.0, 1.0)
+        self.renderer.SetUseFXAA(SMOOTHED_EDGES)
         self.window.AddRenderer(self.renderer)
         vtk.vtkLightKit().AddLightsToRenderer(self.renderer)
         self.actors: dict[str, Any] = {}  #: name → the VTK prop added under it
@@ -338,14 +378,14 @@ class Scene:
         return self.add(name, bar)
 
     def add_legend(self, *, size: tuple[float, float] = (0.2, 0.15), background: str = "lightgrey") -> Any:
-        """The legend of the meshes added with a ``label``, in the lower left corner: a circle of
+        """The legend of the meshes added with a ``label``, in the lower left corner: a disc of
         each one's colour and its label, on a ``background`` box of ``size`` (of the window)."""
         vtk = _vtk()
         legend = vtk.vtkLegendBoxActor()
         legend.SetNumberOfEntries(len(self.legend))
-        circle = self._legend_circle()
         for k, (label, colour) in enumerate(self.legend):
-            legend.SetEntry(k, circle, label, colour)
+            # the disc's box ends where the label begins: the space keeps them apart
+            legend.SetEntry(k, legend_disc(colour), f" {label}", colour)
         legend.SetPosition(0.05, 0.05)
         legend.SetPosition2(*size)
         legend.UseBackgroundOn()
@@ -354,16 +394,6 @@ class Scene:
         legend.BorderOff()
         legend.GetEntryTextProperty().SetFontFamilyToArial()
         return self.add("legend", legend)
-
-    @staticmethod
-    def _legend_circle() -> Any:
-        """The legend's symbol: a disc of diameter 1 raised by 0.6 (the symbol beside its text)."""
-        angle = np.linspace(0.0, 2.0 * np.pi, 100, endpoint=False)
-        ring = np.column_stack([0.5 * np.cos(angle), 0.5 * np.sin(angle) + 0.6, np.zeros_like(angle)])
-        disc = _vtk().vtkPolyData()
-        disc.SetPoints(_points(ring))
-        disc.SetPolys(_cells(np.arange(len(ring)).reshape(1, -1)))
-        return disc
 
     def add_text(self, text: str, font_size: int = 10) -> Any:
         """``text`` in the upper left corner, black, its size following the window's as pyvista's
@@ -401,6 +431,7 @@ class Scene:
         corner.SetViewport(0.0, 0.0, 0.2, 0.2)
         corner.SetLayer(1)
         corner.InteractiveOff()
+        corner.SetUseFXAA(SMOOTHED_EDGES)
         corner.AddViewProp(axes)
         self.window.SetNumberOfLayers(2)
         self.window.AddRenderer(corner)
