@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:  # pyvista is imported where it is used (its import costs)
     import pyvista
 
-__all__ = ["extract_outer_surface", "import_pyvista", "set_plot_colour", "vtk_render_problem"]
+__all__ = ["extract_outer_surface", "import_pyvista", "legend_takes_images", "set_plot_colour", "vtk_render_problem"]
 
 
 def extract_outer_surface(dataset: pyvista.DataSet) -> pyvista.PolyData:
@@ -29,6 +29,17 @@ def extract_outer_surface(dataset: pyvista.DataSet) -> pyvista.PolyData:
     if "algorithm" in inspect.signature(type(dataset).extract_surface).parameters:
         return dataset.extract_surface(algorithm="dataset_surface")
     return dataset.extract_surface()
+
+
+def legend_takes_images(vtk_version: str) -> bool:
+    """Whether ``vtkLegendBoxActor`` draws an entry given an image alone without printing.
+
+    VTK 9.3 (Debian 13) prints "Symbol is not defined: " to standard output for every such entry,
+    and an empty polygon set given beside the image makes its transform filter log an error; VTK
+    9.7 (the PyPI wheel) does neither. Where it prints, the legend's symbols are polygons.
+    """
+    major, minor = (int(part) for part in vtk_version.split(".")[:2])
+    return (major, minor) >= (9, 4)
 
 
 def set_plot_colour(plot: Any, red: float, green: float, blue: float) -> None:

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from dolfinx_nnqem.io.colour_maps import colour_table
+from dolfinx_nnqem.pyvista_compat import legend_takes_images
 
 __all__ = ["COLOURS", "Scene", "legend_disc", "line_data", "offscreen_window", "point_data", "release_window", "rgb", "surface_data",
            "unstructured_grid", "vtk_modules"]
@@ -258,6 +259,17 @@ def legend_disc(colour: str | Sequence[float], pixels: int = LEGEND_DISC_PIXELS)
     return image
 
 
+def _legend_polygon_disc() -> Any:
+    """A legend's symbol where images cannot be (:func:`~dolfinx_nnqem.pyvista_compat.legend_takes_images`):
+    a polygon disc of diameter 1 raised by 0.6 (the symbol beside its text)."""
+    angle = np.linspace(0.0, 2.0 * np.pi, 100, endpoint=False)
+    ring = np.column_stack([0.5 * np.cos(angle), 0.5 * np.sin(angle) + 0.6, np.zeros_like(angle)])
+    disc = _vtk().vtkPolyData()
+    disc.SetPoints(_points(ring))
+    disc.SetPolys(_cells(np.arange(len(ring)).reshape(1, -1)))
+    return disc
+
+
 # -- the scene -----------------------------------------------------------------------------------
 class Scene:
     """An off-screen render window of ``size`` pixels with one renderer: meshes, a colour bar, a
@@ -383,9 +395,12 @@ class Scene:
         vtk = _vtk()
         legend = vtk.vtkLegendBoxActor()
         legend.SetNumberOfEntries(len(self.legend))
+        images = legend_takes_images(vtk.vtkVersion.GetVTKVersion())
         for k, (label, colour) in enumerate(self.legend):
-            # the disc's box ends where the label begins: the space keeps them apart
-            legend.SetEntry(k, legend_disc(colour), f" {label}", colour)
+            if images:  # the disc's box ends where the label begins: the space keeps them apart
+                legend.SetEntry(k, legend_disc(colour), f" {label}", colour)
+            else:  # a polygon: drawn after the FXAA pass, its edge stays jagged
+                legend.SetEntry(k, _legend_polygon_disc(), label, colour)
         legend.SetPosition(0.05, 0.05)
         legend.SetPosition2(*size)
         legend.UseBackgroundOn()

@@ -64,7 +64,12 @@ def test_a_sloping_line_is_drawn_with_smoothed_edges(tmp_path, renders):
 
 def test_the_legend_discs_have_soft_edges(tmp_path, renders):
     """The legend is drawn after the scene's FXAA pass: its discs are images whose edge pixels blend
-    the disc's colour into the legend's background."""
+    the disc's colour into the legend's background (where VTK draws a legend's images quietly)."""
+    from dolfinx_nnqem.pyvista_compat import legend_takes_images
+
+    version = vtk_scene.vtk_modules().vtkVersion.GetVTKVersion()
+    if not legend_takes_images(version):
+        pytest.skip(f"VTK {version} prints a line for every legend entry drawn as an image: polygon discs there")
     disc = vtk_scene.vtk_modules().vtk_to_numpy(vtk_scene.legend_disc("crimson").GetPointData().GetScalars())
     alpha = disc[:, 3]
     assert alpha.max() == 255 and alpha.min() == 0 and ((alpha > 0) & (alpha < 255)).any()
