@@ -204,11 +204,15 @@ def check_no_conflicts(comm: MPI.Comm, dofs: np.ndarray, values: np.ndarray,
     order = np.argsort(dofs, kind="stable")
     sorted_dofs = dofs[order]
     repeated = np.flatnonzero(sorted_dofs[1:] == sorted_dofs[:-1])
-    for k in repeated:
-        i, j = order[k], order[k + 1]
+    first, second = order[repeated], order[repeated + 1]
+    shared = ~((values[first] == 0.0) & (values[second] == 0.0))  # zero from both: no conflict
+    first, second = first[shared], second[shared]
+    # each condition's value is one number: one dof per pair of conditions tells all (the first, in dof order)
+    _, representative = np.unique(np.column_stack([entry[first], entry[second]]), axis=0, return_index=True)
+    for i, j in zip(first[np.sort(representative)], second[np.sort(representative)]):
         a_i, a_j = amplitudes[entry[i]][0], amplitudes[entry[j]][0]
         same_amplitude = _same_amplitude(a_i, a_j)
-        if (values[i] == 0.0 and values[j] == 0.0) or (values[i] == values[j] and same_amplitude):
+        if values[i] == values[j] and same_amplitude:
             continue
         message = (f"{labels[entry[i]]} and {labels[entry[j]]} prescribe different displacements to the same dof "
                    f"({values[i]:g} and {values[j]:g} at a unit amplitude"
